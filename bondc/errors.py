@@ -1,0 +1,182 @@
+"""Diagnostics, typed errors per stage, and the one renderer of source context.
+
+Every stage reports problems as :class:`Diagnostic` values (a stable code, a
+message, the span it is about, related spans and a hint) and collects them, so
+one run reports every problem it can. A stage that cannot go on raises the
+:class:`BondcError` subclass named after it, carrying all its diagnostics.
+
+>>> from bondc.source import Source
+>>> src = Source("m.bg", "param M = 31.7 [kgg]\\n")
+>>> d = Diagnostic("error", "E201", "unknown unit 'kgg'", src.span(16, 19), hint="did you mean 'kg'?")
+>>> print(render(d, {"m.bg": src}))
+m.bg:1:17: error[E201]: unknown unit 'kgg'
+  |
+1 | param M = 31.7 [kgg]
+  |                 ^^^
+  = hint: did you mean 'kg'?
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Mapping
+
+from bondc.source import NO_SPAN, Source, Span
+
+SEVERITIES = ("error", "warning", "info")
+
+
+@dataclass(frozen=True)
+class Related:
+    """A second location a diagnostic is about, with a short label."""
+
+    span: Span
+    label: str
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    severity: str
+    code: str
+    message: str
+    span: Span = NO_SPAN
+    hint: str | None = None
+    related: tuple[Related, ...] = ()
+
+    @property
+    def is_error(self) -> bool:
+        return self.severity == "error"
+
+    def to_json(self) -> dict:
+        return {
+            "severity": self.severity,
+            "code": self.code,
+            "message": self.message,
+            "file": self.span.file,
+            "line": self.span.line,
+            "column": self.span.column,
+            "end_line": self.span.end_line,
+            "end_column": self.span.end_column,
+            "hint": self.hint,
+            "related": [
+                {
+                    "message": rel.label,
+                    "file": rel.span.file,
+                    "line": rel.span.line,
+                    "column": rel.span.column,
+                    "end_line": rel.span.end_line,
+                    "end_column": rel.span.end_column,
+                }
+                for rel in self.related
+            ],
+        }
+
+
+class BondcError(Exception):
+    """Base of every error bondc reports to a user; carries its diagnostics."""
+
+    stage = "bondc"
+
+    def __init__(self, diagnostics: Iterable[Diagnostic] | Diagnostic | str):
+        if isinstance(diagnostics, str):
+            diagnostics = [Diagnostic("error", "E000", diagnostics)]
+        elif isinstance(diagnostics, Diagnostic):
+            diagnostics = [diagnostics]
+        self.diagnostics: list[Diagnostic] = list(diagnostics)
+        super().__init__("; ".join(d.message for d in self.diagnostics))
+
+
+class UsageError(BondcError):
+    stage = "usage"
+
+
+class ParseError(BondcError):
+    stage = "parse"
+
+
+class ModelError(BondcError):
+    stage = "model"
+
+
+class CausalityError(BondcError):
+    stage = "causality"
+
+
+class EquationError(BondcError):
+    stage = "equations"
+
+
+class SimulationError(BondcError):
+    stage = "simulation"
+
+
+class AnalysisError(BondcError):
+    stage = "analysis"
+
+
+class DataError(BondcError):
+    stage = "data"
+
+
+def sort_key(diagnostic: Diagnostic) -> tuple:
+    span = diagnostic.span
+    return (span.file, span.line, span.column, diagnostic.code, diagnostic.message)
+
+
+def has_errors(diagnostics: Iterable[Diagnostic]) -> bool:
+    return any(d.is_error for d in diagnostics)
+
+
+def _source_for(name: str, sources: Mapping[str, Source]) -> Source | None:
+    if name in sources:
+        return sources[name]
+    try:
+        return Source.from_path(Path(name))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+
+
+def _excerpt(span: Span, source: Source | None, label: str = "") -> list[str]:
+    """The source line of a span with a caret line under it."""
+    if source is None or span.line < 1:
+        return []
+    text = source.line_text(span.line).expandtabs(1)
+    gutter = " " * len(str(span.line))
+    start = max(span.column, 1)
+    if span.end_line == span.line and span.end_column > span.column:
+        width = span.end_column - span.column
+    elif span.end_line > span.line:
+        width = max(len(text) - start + 1, 1)
+    else:
+        width = 1
+    caret = " " * (start - 1) + "^" * width
+    if label:
+        caret += " " + label
+    return [f"{gutter} |", f"{span.line} | {text}", f"{gutter} | {caret}"]
+
+
+def render(diagnostic: Diagnostic, sources: Mapping[str, Source] | None = None) -> str:
+    """Render one diagnostic as ``file:line:col: severity[code]: message`` with context."""
+    sources = sources or {}
+    span = diagnostic.span
+    if span.line > 0:
+        head = f"{span.file}:{span.line}:{span.column}: "
+    elif span.file and span.file != NO_SPAN.file:
+        head = f"{span.file}: "
+    else:
+        head = ""
+    lines = [f"{head}{diagnostic.severity}[{diagnostic.code}]: {diagnostic.message}"]
+    lines += _excerpt(span, _source_for(span.file, sources))
+    for rel in diagnostic.related:
+        where = f"{rel.span.file}:{rel.span.line}:{rel.span.column}"
+        lines.append(f"  note: {rel.label} ({where})")
+        lines += ["  " + row for row in _excerpt(rel.span, _source_for(rel.span.file, sources))]
+    if diagnostic.hint:
+        gutter = " " * len(str(span.line)) if span.line > 0 else ""
+        lines.append(f"{gutter} = hint: {diagnostic.hint}")
+    return "\n".join(lines)
+
+
+def render_all(diagnostics: Iterable[Diagnostic], sources: Mapping[str, Source] | None = None) -> str:
+    return "\n\n".join(render(d, sources) for d in diagnostics)

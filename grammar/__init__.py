@@ -1,0 +1,1 @@
+"""The .bg grammar, shipped inside the wheel as ``bondc.grammar``."""
