@@ -1,0 +1,28 @@
+# The two quickstart commands (README): `make report` and `make test`.
+# Both create the virtual environment on first use and install bondc into it.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+FLAGSHIP := models/electro_pneumatic_hybrid.bg
+
+.PHONY: install report test check clean
+
+$(BIN)/bondc: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e ".[test]"
+	@touch $@
+
+install: $(BIN)/bondc
+
+report: install
+	$(BIN)/bondc check $(FLAGSHIP) --causality
+
+check: install
+	@for f in models/*.bg; do $(BIN)/bondc check $$f || exit 1; done
+
+test: install
+	$(BIN)/python -m pytest
+
+clean:
+	rm -rf $(VENV) build *.egg-info

@@ -1,0 +1,178 @@
+"""Command line: argument parsing, dispatch to the stages, and exit codes only.
+
+Exit status: 0 success, 1 the model (or the data, or a validation) has errors,
+2 usage or I/O error. Every problem is printed as a diagnostic (``file:line:col``,
+the source line, a caret, a hint); a Python traceback is printed only for an
+internal error, and only with ``--debug``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import traceback
+from pathlib import Path
+
+from bondc import __version__
+from bondc.errors import BondcError, Diagnostic, UsageError, render_all
+
+EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    """argparse that raises UsageError instead of exiting, so main() owns exit codes."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        raise UsageError(Diagnostic("error", "E001", f"{self.prog}: {message}",
+                                    hint=f"see '{self.prog} --help'"))
+
+
+def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
+    if diagnostics:
+        print(render_all(diagnostics, sources or {}), file=stream or sys.stderr)
+
+
+def _parse_sets(values) -> list:
+    from bondc.parse import parse_set_value
+
+    return [parse_set_value(text) for text in values or ()]
+
+
+def _load(args, *, experiment=None):
+    from bondc import semantic
+
+    return semantic.load(Path(args.file), model=getattr(args, "model", None), experiment=experiment,
+                         sets=_parse_sets(getattr(args, "set", None)))
+
+
+# ------------------------------------------------------------------ commands
+
+def _cmd_check(args) -> int:
+    from bondc import semantic
+    from bondc.errors import ModelError
+
+    diagnostics: list[Diagnostic] = []
+    graph = None
+    sources = {}
+    causal = None
+    try:
+        graph, warnings = semantic.load(Path(args.file), model=args.model, sets=_parse_sets(args.set))
+        diagnostics += warnings
+        sources = graph.sources
+        from bondc.causality import assign_causality
+
+        causal = assign_causality(graph)
+        diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
+    except ModelError as error:
+        diagnostics += error.diagnostics
+    except BondcError as error:
+        if error.stage in ("usage",):
+            raise
+        diagnostics += error.diagnostics
+    ok = not any(d.is_error for d in diagnostics)
+    if args.json:
+        summary = graph.summary() if graph is not None else None
+        if summary is not None and causal is not None:
+            summary["causality"] = causal.summary()
+        print(json.dumps({"ok": ok, "diagnostics": [d.to_json() for d in diagnostics], "model": summary},
+                         indent=2))
+        return EXIT_OK if ok else EXIT_ERRORS
+    _print_diagnostics(diagnostics, sources)
+    if graph is not None:
+        counts = graph.summary()
+        line = (f"{graph.name}: {counts['elements']} elements, {counts['junctions']} junctions, "
+                f"{counts['bonds']} bonds, {counts['storage_elements']} storage elements, "
+                f"{counts['states']} states")
+        if causal is not None:
+            line += f"; {causal.summary_text()}"
+        print(line)
+        if args.causality and causal is not None:
+            from bondc.causality import format_table
+
+            print()
+            print(format_table(causal))
+    errors = sum(d.is_error for d in diagnostics)
+    if errors:
+        print(f"{args.file}: {errors} error{'s' if errors != 1 else ''}", file=sys.stderr)
+    return EXIT_OK if ok else EXIT_ERRORS
+
+
+def _cmd_fmt(args) -> int:
+    from bondc.fmt import format_path
+    from bondc.io import atomic_write_text
+
+    original, formatted = format_path(Path(args.file))
+    if args.check:
+        if original != formatted:
+            print(f"{args.file}: would be reformatted", file=sys.stderr)
+            return EXIT_ERRORS
+        return EXIT_OK
+    if args.write:
+        if original != formatted:
+            atomic_write_text(Path(args.file), formatted)
+        return EXIT_OK
+    sys.stdout.write(formatted)
+    return EXIT_OK
+
+
+# ------------------------------------------------------------------- parser
+
+def _add_model_args(parser, *, sets=True) -> None:
+    parser.add_argument("file", help="the .bg model file")
+    parser.add_argument("--model", help="the model to use when the file holds several")
+    if sets:
+        parser.add_argument("--set", action="append", metavar="NAME=VALUE",
+                            help='override a parameter, e.g. --set M=40 or --set "M=40 [kg]" (repeatable)')
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _ArgumentParser(prog="bondc", description="bondc — a bond-graph modelling compiler")
+    parser.add_argument("--version", action="version", version=f"bondc {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show a traceback on an internal error")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_ArgumentParser)
+
+    check = commands.add_parser("check", help="parse and check a model; report every problem")
+    _add_model_args(check)
+    check.add_argument("--json", action="store_true", help="machine-readable diagnostics")
+    check.add_argument("--causality", action="store_true", help="print the causality table")
+    check.set_defaults(run=_cmd_check)
+
+    fmt = commands.add_parser("fmt", help="print a model in the canonical layout")
+    fmt.add_argument("file")
+    group = fmt.add_mutually_exclusive_group()
+    group.add_argument("--check", action="store_true", help="exit 1 if the file is not formatted")
+    group.add_argument("--write", action="store_true", help="rewrite the file in place")
+    fmt.set_defaults(run=_cmd_fmt)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    debug = "--debug" in argv
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        if not getattr(args, "run", None):
+            parser.print_help(sys.stderr)
+            return EXIT_USAGE
+        return args.run(args)
+    except UsageError as error:
+        _print_diagnostics(error.diagnostics)
+        return EXIT_USAGE
+    except BondcError as error:
+        _print_diagnostics(error.diagnostics)
+        return EXIT_ERRORS
+    except KeyboardInterrupt:
+        print("bondc: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return EXIT_OK
+    except SystemExit as exit_:  # --help / --version
+        return int(exit_.code or 0)
+    except Exception as error:  # an internal error: a bug in bondc, not in the model
+        print(f"bondc: internal error: {type(error).__name__}: {error}", file=sys.stderr)
+        print("This is a bug in bondc; please report it with the model file.", file=sys.stderr)
+        if debug:
+            traceback.print_exc()
+        return 3

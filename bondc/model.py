@@ -1,0 +1,227 @@
+"""The checked bond graph: what ``semantic.build`` returns and later stages read.
+
+A :class:`BondGraph` is one model of a file with every name resolved, every
+bond numbered and oriented, every two-port's ports assigned, parameters in SI,
+and element kinds described by data (:data:`KINDS`). Laws, inputs and outputs
+stay AST expressions (``bondc.ast``); the equations stage turns them into sympy
+by walking the AST, never by evaluating text.
+
+Variable naming used throughout bondc (reports, CSV columns, JSON):
+
+- bond variables: ``b3.e``/``b3.f`` or, for a labelled bond, ``label.e``;
+- states: ``element.state`` (``mass.p``, ``spring.q``, ``chamber.P``) and
+  model-level states by their own name (``x``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from bondc import ast
+from bondc.source import NO_SPAN, Source, Span
+
+
+@dataclass(frozen=True)
+class Kind:
+    """What an element kind is: ports, laws it may/must have, its storage state."""
+
+    name: str
+    ports: int                      # 1 for one-ports, 2 for TF/GY
+    laws: frozenset[str]            # law targets allowed: "e", "f", "r"
+    required: tuple[frozenset[str], ...]  # each set: at least one of these laws must be given
+    state: str | None = None        # default energy state of a storage element: "q" or "p"
+    storage: str | None = None      # "C" or "I" for storage elements
+    source: str | None = None       # "effort" or "flow" for sources
+    modulated: bool = False
+    description: str = ""
+
+
+def _kind(name, ports, laws, required=(), **extra) -> Kind:
+    return Kind(name, ports, frozenset(laws), tuple(frozenset(r) for r in required), **extra)
+
+
+KINDS: Mapping[str, Kind] = {
+    "Se": _kind("Se", 1, "e", ["e"], source="effort", description="effort source"),
+    "MSe": _kind("MSe", 1, "e", ["e"], source="effort", modulated=True, description="modulated effort source"),
+    "Sf": _kind("Sf", 1, "f", ["f"], source="flow", description="flow source"),
+    "MSf": _kind("MSf", 1, "f", ["f"], source="flow", modulated=True, description="modulated flow source"),
+    "R": _kind("R", 1, "ef", ["ef"], description="resistor"),
+    "C": _kind("C", 1, "e", ["e"], state="q", storage="C", description="capacitor (effort store)"),
+    "I": _kind("I", 1, "f", ["f"], state="p", storage="I", description="inertia (flow store)"),
+    "TF": _kind("TF", 2, "r", ["r"], description="transformer"),
+    "MTF": _kind("MTF", 2, "r", ["r"], modulated=True, description="modulated transformer"),
+    "GY": _kind("GY", 2, "r", ["r"], description="gyrator"),
+    "MGY": _kind("MGY", 2, "r", ["r"], modulated=True, description="modulated gyrator"),
+}
+
+JUNCTION_KINDS = ("0", "1")
+PORT_NAMES = ("p1", "p2")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    value: float                    # SI
+    expr: ast.Expr
+    unit_text: str | None           # as written, for display
+    description: str | None
+    span: Span = NO_SPAN
+    display_factor: float = 1.0     # SI value / display_factor = value in unit_text
+
+
+@dataclass(frozen=True)
+class Function:
+    name: str
+    params: tuple[str, ...]
+    body: ast.Expr
+    description: str | None
+    span: Span = NO_SPAN
+
+
+@dataclass(frozen=True)
+class Signal:
+    """An ``input``: a named signal of ``t`` and parameters, in SI."""
+
+    name: str
+    expr: ast.Expr
+    unit_text: str | None
+    description: str | None
+    span: Span = NO_SPAN
+
+
+@dataclass(frozen=True)
+class OutputDef:
+    name: str
+    expr: ast.Expr
+    unit_text: str | None
+    description: str | None
+    span: Span = NO_SPAN
+    display_factor: float = 1.0     # value in unit_text = SI value / display_factor
+
+
+@dataclass(frozen=True)
+class StateVar:
+    """An integrated quantity: a storage element's state or a model-level state.
+
+    ``rate`` is None for a storage element's default state (``der(q) = f``,
+    ``der(p) = e``); a custom or model-level state gives its own rate law.
+    """
+
+    name: str                       # local name: "q", "p", "P", "x"
+    qualified: str                  # "spring.q", "chamber.P", "x"
+    owner: str | None               # element name, or None for a model-level state
+    unit_text: str | None
+    initial: ast.Expr | None        # None means 0
+    rate: ast.Expr | None
+    description: str | None
+    span: Span = NO_SPAN
+
+
+@dataclass(frozen=True)
+class Bond:
+    number: int                     # 1, 2, 3, ... in order of appearance
+    tail: str                       # element or junction name power leaves
+    head: str                       # element or junction name power enters
+    tail_port: str | None = None    # "p1"/"p2" where the tail is a two-port
+    head_port: str | None = None
+    label: str | None = None
+    span: Span = NO_SPAN
+
+    @property
+    def name(self) -> str:
+        """``label`` if the bond has one, else ``b<number>``."""
+        return self.label or f"b{self.number}"
+
+
+@dataclass(frozen=True)
+class ElementNode:
+    kind: str
+    name: str
+    description: str | None
+    laws: Mapping[str, ast.Expr]    # "e", "f", "r" -> expression
+    law_spans: Mapping[str, Span]
+    states: tuple[StateVar, ...]    # storage elements: their states (default q/p or custom)
+    bonds: tuple[int, ...]          # one-port: (bond,); two-port: (p1 bond, p2 bond)
+    port_signs: tuple[int, ...]     # +1 where the bond is drawn "through" (into p1, out of p2), else -1
+    span: Span = NO_SPAN
+    name_span: Span = NO_SPAN
+
+    @property
+    def kind_info(self) -> Kind:
+        return KINDS[self.kind]
+
+    @property
+    def bond(self) -> int:
+        """The bond of a one-port element."""
+        return self.bonds[0]
+
+
+@dataclass(frozen=True)
+class JunctionNode:
+    kind: str                       # "0" (common effort) or "1" (common flow)
+    name: str
+    bonds: tuple[int, ...]
+    span: Span = NO_SPAN
+
+
+@dataclass(frozen=True)
+class ExperimentDef:
+    name: str
+    description: str | None
+    t_end: float | None = None
+    solver: str | None = None
+    rtol: float | None = None
+    atol: float | None = None
+    max_step: float | None = None
+    cycle: float | None = None
+    outputs: tuple[str, ...] = ()
+    parameters: Mapping[str, float] = field(default_factory=dict)   # overrides, SI
+    inputs: Mapping[str, Signal] = field(default_factory=dict)      # replaced inputs
+    settings: Mapping[str, object] = field(default_factory=dict)    # any further setting, SI
+    span: Span = NO_SPAN
+
+
+@dataclass(frozen=True)
+class BondGraph:
+    name: str
+    description: str | None
+    file: str
+    parameters: Mapping[str, Parameter]
+    functions: Mapping[str, Function]
+    inputs: Mapping[str, Signal]
+    outputs: Mapping[str, OutputDef]
+    elements: Mapping[str, ElementNode]
+    junctions: Mapping[str, JunctionNode]
+    bonds: tuple[Bond, ...]
+    model_states: tuple[StateVar, ...]
+    experiments: Mapping[str, ExperimentDef]
+    sources: Mapping[str, Source] = field(default_factory=dict, compare=False)
+    span: Span = NO_SPAN
+
+    def bond(self, number: int) -> Bond:
+        return self.bonds[number - 1]
+
+    @property
+    def states(self) -> tuple[StateVar, ...]:
+        """Every state in declaration order: storage elements' first, then model-level."""
+        out = [s for element in self.elements.values() for s in element.states]
+        return tuple(out) + self.model_states
+
+    @property
+    def storage_elements(self) -> tuple[ElementNode, ...]:
+        return tuple(e for e in self.elements.values() if KINDS[e.kind].storage)
+
+    def summary(self) -> dict:
+        return {
+            "name": self.name,
+            "elements": len(self.elements),
+            "junctions": len(self.junctions),
+            "bonds": len(self.bonds),
+            "storage_elements": len(self.storage_elements),
+            "states": len(self.states),
+            "parameters": len(self.parameters),
+            "inputs": len(self.inputs),
+            "outputs": len(self.outputs),
+            "experiments": len(self.experiments),
+        }

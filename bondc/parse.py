@@ -1,0 +1,530 @@
+"""Parse stage: ``.bg`` text -> :class:`bondc.ast.File`, or every syntax error.
+
+The grammar lives in ``grammar/bondgraph.lark`` (shipped as ``bondc.grammar``);
+the LALR parser is built once and cached. A post-lexer implements the line
+rules of the language: a statement ends at the end of its line, continues after
+a trailing ``,`` and anywhere inside ``( )`` or ``[ ]``; comments are collected
+for ``bondc fmt``.
+
+On a syntax error the parser records a diagnostic, blanks the offending
+statement (keeping every other character where it was, so later positions stay
+exact) and parses again, so one run reports every syntax error.
+
+>>> f = parse_text("model M\\n  I mass : f = p/m\\nend\\n", "m.bg")
+>>> f.models[0].body[0].kind, f.models[0].body[0].laws[0].target
+('I', 'f')
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from fractions import Fraction
+from importlib import resources
+from pathlib import Path
+
+from lark import Lark, Token, Transformer, v_args
+from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, UnexpectedToken, VisitError
+
+from bondc import ast
+from bondc.errors import Diagnostic, ParseError
+from bondc.source import Source, Span
+
+MAX_SYNTAX_ERRORS = 20
+
+KEYWORDS = frozenset(
+    "model end param input output state fn experiment import if then else and or not".split()
+)
+
+# What an expected terminal means to a user.
+TERMINAL_NAMES = {
+    "NAME": "a name",
+    "NUMBER": "a number",
+    "STRING": "a string",
+    "_NL": "end of line",
+    "$END": "end of file",
+    "COMP_OP": "a comparison",
+    "ADD_OP": "'+' or '-'",
+    "MUL_OP": "'*' or '/'",
+    "LPAR": "'('",
+    "RPAR": "')'",
+    "LSQB": "'['",
+    "RSQB": "']'",
+    "COMMA": "','",
+    "COLON": "':'",
+    "EQUAL": "'='",
+    "DOT": "'.'",
+    "CIRCUMFLEX": "'^'",
+    "__ANON_0": "'->'",
+}
+
+
+def _grammar_text() -> str:
+    return resources.files("bondc.grammar").joinpath("bondgraph.lark").read_text(encoding="utf-8")
+
+
+class _LinePostLexer:
+    """Drops newlines inside brackets, after a trailing comma, and repeated ones.
+
+    Comments are taken out of the token stream and kept in ``comments`` for fmt.
+    """
+
+    always_accept = ("_NL", "COMMENT")
+
+    def __init__(self) -> None:
+        self.comments: list[Token] = []
+
+    def process(self, stream):
+        self.comments = []
+        depth = 0
+        previous = None
+        for token in stream:
+            kind = token.type
+            if kind == "COMMENT":
+                self.comments.append(token)
+                continue
+            if kind == "NAME" and token.value in KEYWORDS:
+                # The contextual lexer reads a keyword as a NAME where no keyword fits
+                # (``param end = 5``); keywords are reserved, so hand it on as one.
+                kind = token.value.upper()
+                token = Token.new_borrow_pos(kind, token.value, token)
+            if kind == "_NL":
+                if depth > 0 or previous is None or previous.type in ("_NL", "COMMA"):
+                    continue
+            elif kind in ("LPAR", "LSQB"):
+                depth += 1
+            elif kind in ("RPAR", "RSQB"):
+                depth = max(0, depth - 1)
+            previous = token
+            yield token
+        if previous is not None and previous.type != "_NL":
+            yield Token.new_borrow_pos("_NL", "\n", previous)
+
+
+@functools.lru_cache(maxsize=1)
+def _parser() -> tuple[Lark, _LinePostLexer]:
+    postlex = _LinePostLexer()
+    parser = Lark(
+        _grammar_text(),
+        parser="lalr",
+        lexer="contextual",
+        postlex=postlex,
+        propagate_positions=True,
+        maybe_placeholders=True,
+        start=["start", "set_value"],
+    )
+    return parser, postlex
+
+
+def _unquote(token: Token) -> str:
+    body = str(token)[1:-1]
+    out = []
+    index = 0
+    while index < len(body):
+        char = body[index]
+        if char == "\\" and index + 1 < len(body):
+            nxt = body[index + 1]
+            out.append({"n": "\n", "t": "\t"}.get(nxt, nxt))
+            index += 2
+        else:
+            out.append(char)
+            index += 1
+    return "".join(out)
+
+
+def _opt_str(token: Token | None) -> str | None:
+    return None if token is None else _unquote(token)
+
+
+class _ToAst(Transformer):
+    """Lark tree -> frozen AST nodes with spans (one method per rule alias)."""
+
+    def __init__(self, source: Source):
+        super().__init__()
+        self.source = source
+
+    # spans -----------------------------------------------------------------
+    def _tok(self, token: Token) -> Span:
+        return self.source.span(token.start_pos, token.end_pos)
+
+    def _meta(self, meta) -> Span:
+        if getattr(meta, "empty", True):
+            return self.source.span(0, 0)
+        return self.source.span(meta.start_pos, meta.end_pos)
+
+    # expressions -----------------------------------------------------------
+    @v_args(meta=True)
+    def number(self, meta, children):
+        (token,) = children
+        return ast.Num(float(token), str(token), self._tok(token))
+
+    @v_args(meta=True)
+    def string(self, meta, children):
+        (token,) = children
+        return ast.Str(_unquote(token), self._tok(token))
+
+    @v_args(meta=True)
+    def name(self, meta, children):
+        (token,) = children
+        return ast.Name(str(token), self._tok(token))
+
+    @v_args(meta=True)
+    def ref(self, meta, children):
+        return ast.Ref(tuple(str(t) for t in children), self._meta(meta))
+
+    @v_args(meta=True)
+    def call(self, meta, children):
+        func, args = children
+        return ast.Call(str(func), tuple(args or ()), self._meta(meta), self._tok(func))
+
+    @v_args(meta=True)
+    def list(self, meta, children):
+        (args,) = children
+        return ast.ListExpr(tuple(args or ()), self._meta(meta))
+
+    def args(self, children):
+        return list(children)
+
+    @v_args(meta=True)
+    def if_expr(self, meta, children):
+        cond, then, orelse = children
+        return ast.If(cond, then, orelse, self._meta(meta))
+
+    @v_args(meta=True)
+    def or_op(self, meta, children):
+        return ast.Binary("or", children[0], children[1], self._meta(meta))
+
+    @v_args(meta=True)
+    def and_op(self, meta, children):
+        return ast.Binary("and", children[0], children[1], self._meta(meta))
+
+    @v_args(meta=True)
+    def not_op(self, meta, children):
+        return ast.Unary("not", children[0], self._meta(meta))
+
+    @v_args(meta=True)
+    def compare(self, meta, children):
+        left, op, right = children
+        return ast.Binary(str(op), left, right, self._meta(meta))
+
+    @v_args(meta=True)
+    def binop(self, meta, children):
+        left, op, right = children
+        return ast.Binary(str(op), left, right, self._meta(meta))
+
+    @v_args(meta=True)
+    def unary_op(self, meta, children):
+        op, operand = children
+        return ast.Unary(str(op), operand, self._meta(meta))
+
+    @v_args(meta=True)
+    def pow(self, meta, children):
+        base, exponent = children
+        return ast.Binary("^", base, exponent, self._meta(meta))
+
+    # units -----------------------------------------------------------------
+    @v_args(meta=True)
+    def unit(self, meta, children):
+        (factors,) = children
+        span = self._meta(meta)
+        text = self.source.text[span.start + 1:span.end - 1]
+        # Layout-free text (no spaces, newlines or comments), so that it compares
+        # equal however the unit was laid out and fmt can print it as it stands.
+        text = "".join(re.sub(r"#[^\n]*", "", text).split())
+        return ast.Unit(tuple(factors), text, span)
+
+    def unit_product(self, children):
+        factors = list(children[0])
+        for op, operand in zip(children[1::2], children[2::2]):
+            sign = 1 if str(op) == "*" else -1
+            factors += [ast.UnitFactor(f.name, sign * f.exponent, f.span) for f in operand]
+        return factors
+
+    def unit_power(self, children):
+        base, exponent = children
+        if exponent is None:
+            return base
+        return [ast.UnitFactor(f.name, f.exponent * exponent, f.span) for f in base]
+
+    def unit_name(self, children):
+        (token,) = children
+        return [ast.UnitFactor(str(token), Fraction(1), self._tok(token))]
+
+    def unit_number(self, children):
+        (token,) = children
+        # Only "1" is meaningful ([1], [1/s]); anything else is reported by the units stage.
+        return [ast.UnitFactor(str(token), Fraction(1), self._tok(token))]
+
+    def unit_exponent(self, children):
+        sign, numerator = children[0], children[1]
+        value = Fraction(str(numerator))
+        if len(children) > 2 and children[3] is not None:
+            value = value / Fraction(str(children[3]))
+        return -value if sign is not None and str(sign) == "-" else value
+
+    # laws ------------------------------------------------------------------
+    def laws(self, children):
+        return tuple(children)
+
+    @v_args(meta=True)
+    def law_assign(self, meta, children):
+        target, value = children
+        return ast.LawAssign(str(target), value, self._meta(meta), self._tok(target))
+
+    @v_args(meta=True)
+    def law_call(self, meta, children):
+        func, arg, value = children
+        return ast.LawCall(str(func), arg, value, self._meta(meta), self._tok(func))
+
+    @v_args(meta=True)
+    def law_state(self, meta, children):
+        name, unit, description = children
+        return ast.LawState(str(name), unit, _opt_str(description), self._meta(meta), self._tok(name))
+
+    # statements ------------------------------------------------------------
+    @v_args(meta=True)
+    def import_stmt(self, meta, children):
+        (path,) = children
+        return ast.Import(_unquote(path), self._meta(meta))
+
+    def fn_params(self, children):
+        return tuple(str(t) for t in children)
+
+    @v_args(meta=True)
+    def fn_def(self, meta, children):
+        name, params, body, description = children
+        return ast.FnDef(str(name), params or (), body, _opt_str(description), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def param(self, meta, children):
+        name, value, unit, description = children
+        return ast.Param(str(name), value, unit, _opt_str(description), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def input(self, meta, children):
+        name, unit, value, description = children
+        return ast.Input(str(name), unit, value, _opt_str(description), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def output(self, meta, children):
+        name, unit, value, description = children
+        return ast.Output(str(name), unit, value, _opt_str(description), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def state_decl(self, meta, children):
+        name, unit, description, laws = children
+        return ast.StateDecl(str(name), unit, _opt_str(description), laws or (), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def element(self, meta, children):
+        kind, name, description, laws = children
+        return ast.Element(str(kind), str(name), _opt_str(description), laws or (), self._meta(meta),
+                           self._tok(kind), self._tok(name))
+
+    @v_args(meta=True)
+    def junction(self, meta, children):
+        kind, *names = children
+        return ast.Junction(str(kind), tuple(str(n) for n in names), self._meta(meta), self._tok(kind),
+                            tuple(self._tok(n) for n in names))
+
+    @v_args(meta=True)
+    def endpoint(self, meta, children):
+        name, port = children
+        return ast.Endpoint(str(name), None if port is None else str(port), self._meta(meta))
+
+    @v_args(meta=True)
+    def bond(self, meta, children):
+        label, *endpoints = children
+        label_span = self._tok(label) if label is not None else self._meta(meta)
+        return ast.BondChain(None if label is None else str(label), tuple(endpoints), self._meta(meta), label_span)
+
+    @v_args(meta=True)
+    def setting(self, meta, children):
+        name, value, unit = children
+        return ast.Setting(str(name), value, unit, self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def experiment(self, meta, children):
+        name, description, *body = children
+        return ast.Experiment(str(name), _opt_str(description), tuple(body), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def model(self, meta, children):
+        name, description, *body = children
+        return ast.Model(str(name), _opt_str(description), tuple(body), self._meta(meta), self._tok(name))
+
+    def start(self, children):
+        return tuple(children)
+
+    @v_args(meta=True)
+    def set_value(self, meta, children):
+        name, value, unit = children
+        return ast.SetValue(str(name), value, unit, self._meta(meta))
+
+
+# ------------------------------------------------------------ error recovery
+
+def _describe_expected(expected) -> str:
+    names = []
+    for terminal in sorted(set(expected) - {"COMMENT"}):
+        if terminal in TERMINAL_NAMES:
+            names.append(TERMINAL_NAMES[terminal])
+        elif terminal.isupper() and terminal.lower() in KEYWORDS:
+            names.append(f"'{terminal.lower()}'")
+        else:
+            names.append(terminal)
+    names = sorted(set(names))
+    if len(names) > 6:
+        return "one of " + ", ".join(names[:6]) + ", ..."
+    return names[0] if len(names) == 1 else "one of " + ", ".join(names)
+
+
+def _token_text(token: Token) -> str:
+    if token.type == "_NL":
+        return "end of line"
+    if token.type == "$END":
+        return "end of file"
+    return f"'{token}'"
+
+
+def _statement_extent(text: str, offset: int) -> tuple[int, int]:
+    """The [start, end) of the logical statement (line rules applied) holding offset."""
+    starts = [0]
+    depth = 0
+    in_string = False
+    last_significant = ""
+    index = 0
+    while index < len(text):
+        char = text[index]
+        if in_string:
+            if char == "\\":
+                index += 2
+                continue
+            if char == '"' or char == "\n":
+                in_string = False
+        elif char == "#":
+            end = text.find("\n", index)
+            index = len(text) if end < 0 else end
+            continue
+        elif char == '"':
+            in_string = True
+        elif char in "([":
+            depth += 1
+        elif char in ")]":
+            depth = max(0, depth - 1)
+        if char == "\n" and not in_string:
+            if depth == 0 and last_significant != ",":
+                starts.append(index + 1)
+        elif not char.isspace():
+            last_significant = char
+        index += 1
+    starts.append(len(text) + 1)
+    for start, end in zip(starts, starts[1:]):
+        if start <= offset < end:
+            return start, min(end - 1, len(text))
+    return offset, len(text)
+
+
+def _blank(text: str, start: int, end: int, replacement: str = "") -> str:
+    """Replace text[start:end] by ``replacement`` padded with spaces, keeping newlines."""
+    chunk = "".join(c if c == "\n" else " " for c in text[start:end])
+    if replacement and "\n" not in chunk[: len(replacement)] and len(replacement) <= len(chunk):
+        chunk = replacement + chunk[len(replacement):]
+    return text[:start] + chunk + text[end:]
+
+
+def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnostic, int]:
+    """A diagnostic for one lark error, and the offset it is at."""
+    if isinstance(error, UnexpectedCharacters):
+        offset = error.pos_in_stream
+        char = source.text[offset] if offset < len(source.text) else ""
+        span = source.span(offset, offset + 1)
+        if char == '"':
+            end = source.text.find("\n", offset)
+            end = len(source.text) if end < 0 else end
+            return Diagnostic("error", "E102", "unterminated string", source.span(offset, end),
+                              hint='close the string with " on the same line'), offset
+        return Diagnostic("error", "E101", f"unexpected character {char!r}", span,
+                          hint="names are letters, digits and '_'; comments start with '#'"), offset
+    token = getattr(error, "token", None)
+    expected = getattr(error, "expected", None) or getattr(error, "accepts", None) or set()
+    if token is None or token.type == "$END" or isinstance(error, UnexpectedEOF):
+        offset = len(source.text)
+        span = source.span(max(offset - 1, 0), offset)
+        hint = "every 'model' and 'experiment' block is closed by 'end'" if "END" in expected else None
+        return Diagnostic("error", "E103", f"unexpected end of file; expected {_describe_expected(expected)}",
+                          span, hint=hint), offset
+    offset = token.start_pos if token.start_pos is not None else 0
+    end = token.end_pos if token.end_pos is not None and token.type != "_NL" else offset + 1
+    span = source.span(offset, end)
+    if str(token) in KEYWORDS and "NAME" in expected:
+        return Diagnostic("error", "E104", f"'{token}' is a keyword and cannot be used as a name", span,
+                          hint=f"choose another name, e.g. '{token}_'"), offset
+    hint = None
+    if token.type == "_NL":
+        hint = "a statement ends at the end of its line; continue it after a trailing ',' or inside ( )"
+    elif token.type == "EQUAL" and "COLON" in expected:
+        hint = "element laws follow a ':' (e.g. R damper : e = b*f)"
+    return Diagnostic("error", "E100", f"unexpected {_token_text(token)}; expected {_describe_expected(expected)}",
+                      span, hint=hint), offset
+
+
+def _parse_tree(text: str, start: str):
+    parser, postlex = _parser()
+    tree = parser.parse(text, start=start)
+    return tree, list(postlex.comments)
+
+
+def parse_source(source: Source) -> ast.File:
+    """Parse one source; raise :class:`ParseError` with every syntax error found."""
+    text = source.text
+    diagnostics: list[Diagnostic] = []
+    tree = comments = None
+    for _ in range(MAX_SYNTAX_ERRORS + 1):
+        try:
+            tree, comments = _parse_tree(text, "start")
+            break
+        except UnexpectedInput as error:
+            diagnostic, offset = _syntax_diagnostic(error, source)
+            if diagnostics and diagnostics[-1].span == diagnostic.span:
+                break  # no progress: stop rather than report the same place twice
+            diagnostics.append(diagnostic)
+            if diagnostic.code == "E103" or len(diagnostics) >= MAX_SYNTAX_ERRORS:
+                break
+            start, end = _statement_extent(text, offset)
+            header = text[start:end].lstrip()
+            # Keep a block header's shape, so its body is not reported again statement by statement.
+            replacement = ""
+            for keyword in ("model", "experiment"):
+                if header.startswith(keyword + " ") or header == keyword:
+                    replacement = keyword + " _"
+            text = _blank(text, start, end, replacement)
+    if diagnostics:
+        raise ParseError(diagnostics)
+    try:
+        items = _ToAst(source).transform(tree)
+    except VisitError as error:  # a bug in a transformer method, not in the model
+        raise ParseError(Diagnostic("error", "E199", f"internal error while reading the model: {error.orig_exc}",
+                                    source.span(0, 0))) from error
+    file_comments = tuple(ast.Comment(str(tok), source.span(tok.start_pos, tok.end_pos)) for tok in comments)
+    return ast.File(tuple(items), source.name, file_comments)
+
+
+def parse_text(text: str, name: str = "<text>") -> ast.File:
+    return parse_source(Source(name, text))
+
+
+def parse_file(path: str | Path) -> tuple[ast.File, Source]:
+    source = Source.from_path(path)
+    return parse_source(source), source
+
+
+def parse_set_value(text: str) -> ast.SetValue:
+    """Parse a command-line ``NAME=VALUE [unit]`` assignment."""
+    source = Source("--set", text)
+    try:
+        tree, _ = _parse_tree(text, "set_value")
+    except UnexpectedInput as error:
+        diagnostic, _ = _syntax_diagnostic(error, source)
+        raise ParseError(diagnostic) from None
+    return _ToAst(source).transform(tree)
