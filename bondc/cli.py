@@ -116,6 +116,16 @@ def _cmd_fmt(args) -> int:
     return EXIT_OK
 
 
+def _cmd_fit_friction(args) -> int:
+    from bondc.analysis.friction import run_fit_friction
+
+    text, code = run_fit_friction(args.file, lead=args.lead, area=args.area, mass=args.mass,
+                                  gravity=args.gravity, patm=args.patm, json=args.json)
+    stream = sys.stdout if code == EXIT_OK or args.json else sys.stderr
+    print(text, file=stream)
+    return code
+
+
 # ------------------------------------------------------------------- parser
 
 def _add_model_args(parser, *, sets=True) -> None:
@@ -144,6 +154,18 @@ def build_parser() -> argparse.ArgumentParser:
     group.add_argument("--check", action="store_true", help="exit 1 if the file is not formatted")
     group.add_argument("--write", action="store_true", help="rewrite the file in place")
     fmt.set_defaults(run=_cmd_fmt)
+
+    fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
+                                                   "(the paper's eqs. 17-20)")
+    fit.add_argument("file", help="CSV with velocity [m/s], torque [N*m], pressure [Pa] columns")
+    fit.add_argument("--lead", type=float, default=5.0e-3, help="ball screw lead per revolution, m (default 5e-3)")
+    fit.add_argument("--area", type=float, default=2.63e-3, help="rod-side piston area, m^2 (default 2.63e-3)")
+    fit.add_argument("--mass", type=float, default=31.7, help="moving mass, kg (default 31.7)")
+    fit.add_argument("--gravity", type=float, default=9.81, help="m/s^2 (default 9.81)")
+    fit.add_argument("--patm", type=float, default=101325.0,
+                     help="atmospheric pressure, Pa, subtracted from absolute chamber pressure (0 for gauge data)")
+    fit.add_argument("--json", action="store_true")
+    fit.set_defaults(run=_cmd_fit_friction)
     return parser
 
 

@@ -457,6 +457,9 @@ def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnost
     offset = token.start_pos if token.start_pos is not None else 0
     end = token.end_pos if token.end_pos is not None and token.type != "_NL" else offset + 1
     span = source.span(offset, end)
+    if str(token) in ("if", "not") and "LPAR" in expected:  # an operand, not a name, was meant
+        return Diagnostic("error", "E100", f"unexpected '{token}' here; an operand of an operator cannot start with it",
+                          span, hint=f"put the '{token}' expression in parentheses, e.g. 2*({token} ...)"), offset
     if str(token) in KEYWORDS and "NAME" in expected:
         return Diagnostic("error", "E104", f"'{token}' is a keyword and cannot be used as a name", span,
                           hint=f"choose another name, e.g. '{token}_'"), offset
@@ -506,7 +509,8 @@ def parse_source(source: Source) -> ast.File:
     except VisitError as error:  # a bug in a transformer method, not in the model
         raise ParseError(Diagnostic("error", "E199", f"internal error while reading the model: {error.orig_exc}",
                                     source.span(0, 0))) from error
-    file_comments = tuple(ast.Comment(str(tok), source.span(tok.start_pos, tok.end_pos)) for tok in comments)
+    # Trailing blanks (and the \r of a CRLF file) are layout, not part of a comment.
+    file_comments = tuple(ast.Comment(str(tok).rstrip(), source.span(tok.start_pos, tok.end_pos)) for tok in comments)
     return ast.File(tuple(items), source.name, file_comments)
 
 

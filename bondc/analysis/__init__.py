@@ -1,0 +1,1 @@
+"""Analyses of compiled models: linearisation (``linearize``), and more to come."""

@@ -1,0 +1,292 @@
+"""Linearisation: :class:`~bondc.statespace.StateSpace` -> :class:`Linearization`.
+
+``dx/dt = f(x, u, t)``, ``y = g(x, u, t)`` are linearised at an operating
+point: ``A = df/dx``, ``B = df/du``, ``C = dg/dx``, ``D = dg/du``. The inputs
+``u`` are the model's ``input`` signals, treated as independent variables and
+held at their value at time ``time``; ``t`` itself is held at ``time``.
+
+Operating point (``at``):
+
+- ``"initial"``: the initial state;
+- ``"equilibrium"``: ``f(x, u(time), time) = 0`` solved from the initial state
+  with ``scipy.optimize.least_squares``. States on which no derivative depends
+  (a zero column of ``A``: pure integrators such as a position ``x`` with
+  ``der(x) = mass.f``) make ``A`` singular and leave the equilibrium
+  undetermined along them; they are *held* at their initial value (listed in
+  ``held``) and the other states are solved for, with every state equation
+  (theirs included, e.g. ``mass.f = 0``) as a residual. They stay in A, B, C,
+  D and contribute zero eigenvalues. If the residual cannot be driven to zero
+  (a constant force on a free mass) :class:`~bondc.errors.AnalysisError`
+  ``E706`` is raised.
+
+The Jacobians are computed in forward mode over the assignment sequence: each
+assignment's symbolic partial derivatives (sympy), evaluated numerically at
+the operating point and chained, so sizes stay linear in the model; algebraic
+blocks are differentiated implicitly. Dirac impulses of derivatives of
+``sign``/``step`` are dropped (a kink's derivative is taken from one side).
+
+>>> import numpy  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+import sympy
+
+from bondc.errors import AnalysisError, Diagnostic
+from bondc.statespace import StateSpace
+from bondc.symbolic import strip_impulses
+
+AT = ("initial", "equilibrium")
+
+
+@dataclass(frozen=True)
+class Linearization:
+    states: tuple[str, ...]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    eigenvalues: np.ndarray             # complex, sorted by real part, then imaginary part
+    natural_frequencies: np.ndarray     # |lambda| [rad/s]
+    damping_ratios: np.ndarray          # -Re(lambda)/|lambda|; nan for lambda = 0
+    time: float
+    at: str
+    x0: np.ndarray                      # operating point: states
+    u0: np.ndarray                      # operating point: inputs
+    held: tuple[str, ...] = ()          # states held at their initial value (equilibrium)
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def to_json(self) -> dict:
+        def number(value):
+            value = float(value)
+            return value if math.isfinite(value) else None
+
+        def matrix(m):
+            return [[number(v) for v in row] for row in np.asarray(m)]
+
+        return {
+            "states": list(self.states),
+            "inputs": list(self.inputs),
+            "outputs": list(self.outputs),
+            "A": matrix(self.A),
+            "B": matrix(self.B),
+            "C": matrix(self.C),
+            "D": matrix(self.D),
+            "eigenvalues": [[number(v.real), number(v.imag)] for v in self.eigenvalues],
+            "natural_frequencies": [number(v) for v in self.natural_frequencies],
+            "damping_ratios": [number(v) for v in self.damping_ratios],
+            "time": self.time,
+            "at": self.at,
+            "operating_point": {
+                "states": {name: number(v) for name, v in zip(self.states, self.x0)},
+                "inputs": {name: number(v) for name, v in zip(self.inputs, self.u0)},
+            },
+            "held": list(self.held),
+            "notes": list(self.notes),
+        }
+
+    def to_text(self) -> str:
+        lines = [f"linearised at {self.at} point, t = {self.time:g} s"]
+        lines += ["", "operating point"]
+        lines += [f"  {name} = {value:.6g}" for name, value in zip(self.states, self.x0)]
+        lines += [f"  {name} = {value:.6g}  (input)" for name, value in zip(self.inputs, self.u0)]
+        if self.held:
+            lines.append(f"  held at initial value: {', '.join(self.held)}")
+        for title, m, rows, cols in (("A", self.A, self.states, self.states), ("B", self.B, self.states, self.inputs),
+                                     ("C", self.C, self.outputs, self.states), ("D", self.D, self.outputs, self.inputs)):
+            lines += ["", f"{title} ({len(rows)} x {len(cols)})"]
+            if not rows or not cols:
+                lines.append("  (empty)")
+                continue
+            width = max(12, *(len(c) for c in cols))
+            rwidth = max(len(r) for r in rows)
+            lines.append(" " * (rwidth + 2) + "".join(c.rjust(width + 2) for c in cols))
+            for name, row in zip(rows, np.asarray(m)):
+                lines.append(f"  {name.ljust(rwidth)}" + "".join(f"{v:.6g}".rjust(width + 2) for v in row))
+        lines += ["", "eigenvalues            natural frequency  damping ratio"]
+        for value, wn, zeta in zip(self.eigenvalues, self.natural_frequencies, self.damping_ratios):
+            text = f"{value.real:.6g}" + (f" {'+' if value.imag >= 0 else '-'} {abs(value.imag):.6g}j"
+                                          if value.imag else "")
+            zeta_text = f"{zeta:.4g}" if math.isfinite(zeta) else "-"
+            lines.append(f"  {text.ljust(22)} {wn:.6g} rad/s".ljust(45) + f"  {zeta_text}")
+        lines += [f"note: {note}" for note in self.notes]
+        return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------- jacobians
+
+class _Jacobian:
+    """Forward-mode derivatives of the assignments w.r.t. states and inputs."""
+
+    def __init__(self, ss: StateSpace, parameter_values: Mapping):
+        self.ss = ss
+        self.parameter_values = {s: sympy.Float(v) for s, v in parameter_values.items()}
+        self.state_symbols = ss.state_symbols
+        self.input_symbols = ss.input_symbols
+        self.partials: list = []
+        for symbol, rhs in ss.assignments:
+            self.partials.append(self._partials(rhs) if symbol not in self.input_symbols else ())
+        self.block_partials = [
+            [self._partials(r) for r in block.residuals] for block in ss.algebraic_blocks]
+        self.derivative_partials = [self._partials(ss.derivatives[name]) for name in ss.state_names]
+        self.output_partials = [self._partials(expr) for expr in ss.outputs.values()]
+
+    def _partials(self, expr):
+        expr = sympy.sympify(expr)
+        symbols = sorted((s for s in expr.free_symbols if s not in self.parameter_values and s != self.ss.time),
+                         key=lambda s: s.name)
+        return tuple((s, strip_impulses(sympy.diff(expr, s))) for s in symbols)
+
+    def _value(self, expr, values) -> float:
+        number = sympy.sympify(expr).xreplace(values).xreplace(self.parameter_values)
+        number = sympy.sympify(number).evalf()
+        try:
+            return float(number)
+        except TypeError as error:
+            raise AnalysisError(Diagnostic("error", "E707", f"cannot evaluate the derivative {expr} "
+                                                            f"at the operating point ({number})")) from error
+
+    def __call__(self, values: Mapping) -> tuple[np.ndarray, np.ndarray]:
+        """[A B] and [C D] at a point given by ``values`` (symbol -> float, incl. t)."""
+        ss = self.ss
+        n, m = len(self.state_symbols), len(self.input_symbols)
+        gradient: dict = {}
+        for i, symbol in enumerate(self.state_symbols):
+            gradient[symbol] = np.eye(n + m)[i]
+        for j, symbol in enumerate(self.input_symbols):
+            gradient[symbol] = np.eye(n + m)[n + j]
+        zero = np.zeros(n + m)
+        numeric = {s: sympy.Float(v) for s, v in values.items()}
+
+        def chain(partials):
+            total = np.zeros(n + m)
+            for symbol, partial in partials:
+                g = gradient.get(symbol, zero)
+                if g.any():
+                    total += self._value(partial, numeric) * g
+            return total
+
+        blocks = {}
+        for number, block in enumerate(ss.algebraic_blocks):
+            blocks.setdefault(block.index, []).append(number)
+
+        def solve_blocks(position):
+            for number in blocks.get(position, ()):
+                block = ss.algebraic_blocks[number]
+                unknowns = list(block.unknowns)
+                jac_u = np.zeros((len(unknowns), len(unknowns)))
+                rhs = np.zeros((len(unknowns), n + m))
+                for row, partials in enumerate(self.block_partials[number]):
+                    for symbol, partial in partials:
+                        if symbol in unknowns:
+                            jac_u[row, unknowns.index(symbol)] = self._value(partial, numeric)
+                        elif gradient.get(symbol, zero).any():
+                            rhs[row] -= self._value(partial, numeric) * gradient[symbol]
+                solution = np.linalg.solve(jac_u, rhs)
+                for k, unknown in enumerate(unknowns):
+                    gradient[unknown] = solution[k]
+
+        for position, ((symbol, _), partials) in enumerate(zip(ss.assignments, self.partials)):
+            solve_blocks(position)
+            if symbol in gradient:      # an input, held as an independent variable
+                continue
+            gradient[symbol] = chain(partials)
+        solve_blocks(len(ss.assignments))
+        f_rows = np.array([chain(p) for p in self.derivative_partials]).reshape(n, n + m)
+        g_rows = np.array([chain(p) for p in self.output_partials]).reshape(len(self.output_partials), n + m)
+        return f_rows, g_rows
+
+
+# --------------------------------------------------------------------- stage
+
+def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
+              parameters: Mapping[str, float] | None = None) -> Linearization:
+    """Linearise ``ss`` at its initial state or an equilibrium, inputs held at their value at ``time``."""
+    if at not in AT:
+        raise ValueError(f"at must be one of {', '.join(AT)}, not {at!r}")
+    numeric = ss.numeric(parameters)
+    parameter_values = ss.parameter_values(parameters)
+    jacobian = _Jacobian(ss, parameter_values)
+    n, m = len(ss.states), len(ss.inputs)
+    x0 = numeric.initial_state()
+    first = numeric.values(time, x0)
+    inputs = {name: first[name] for name in ss.inputs}
+    u0 = np.array([inputs[name] for name in ss.inputs], dtype=float)
+
+    def point(x):
+        values = numeric.values(time, x, inputs)
+        out = {ss.symbols[name]: value for name, value in values.items() if name in ss.symbols}
+        for block in ss.algebraic_blocks:
+            for unknown in block.unknowns:
+                out[unknown] = values[unknown.name]
+        out.update({symbol: float(v) for symbol, v in zip(ss.state_symbols, x)})
+        out[ss.time] = float(time)
+        return out
+
+    held: tuple[str, ...] = ()
+    notes: list[str] = []
+    x = x0
+    if at == "equilibrium" and n:
+        x, held = _equilibrium(ss, numeric, jacobian, point, x0, time, inputs)
+        if held:
+            notes.append(f"no state equation depends on {', '.join(held)}: held at the initial value")
+    f_rows, g_rows = jacobian(point(x))
+    A, B = f_rows[:, :n], f_rows[:, n:]
+    C, D = g_rows[:, :n], g_rows[:, n:]
+    eigenvalues = np.sort_complex(np.linalg.eigvals(A)) if n else np.zeros(0, dtype=complex)
+    magnitude = np.abs(eigenvalues)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        damping = np.where(magnitude > 0, -eigenvalues.real / np.where(magnitude > 0, magnitude, 1), np.nan)
+    return Linearization(
+        states=ss.state_names, inputs=tuple(ss.inputs), outputs=tuple(ss.outputs),
+        A=A, B=B.reshape(n, m), C=C, D=D.reshape(len(ss.outputs), m),
+        eigenvalues=eigenvalues, natural_frequencies=magnitude, damping_ratios=damping,
+        time=float(time), at=at, x0=np.asarray(x, dtype=float), u0=u0, held=held, notes=tuple(notes))
+
+
+def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
+    from scipy.optimize import least_squares
+
+    n = len(x0)
+    A0 = jacobian(point(x0))[0][:, :n]
+    free = [i for i in range(n) if np.any(A0[:, i] != 0)]
+    held = tuple(ss.state_names[i] for i in range(n) if i not in free)
+
+    def full(z):
+        x = np.array(x0, dtype=float)
+        x[free] = z
+        return x
+
+    def residual(z):
+        return numeric.derivatives(time, full(z), inputs)
+
+    def jac(z):
+        return jacobian(point(full(z)))[0][:, :n][:, free]
+
+    start = np.asarray(x0, dtype=float)[free]
+    scale0 = float(np.max(np.abs(residual(start)))) if free else 0.0
+    if free:
+        result = least_squares(residual, start, jac=jac, method="lm",
+                               xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
+        z = result.x
+    else:
+        z = start
+    remaining = float(np.max(np.abs(residual(z)))) if n else 0.0
+    start_size = float(np.max(np.abs(start))) if free else 0.0
+    runaway = free and not (np.all(np.isfinite(z)) and np.max(np.abs(z - start)) <= 1e9 * (1.0 + start_size))
+    if remaining > 1e-8 * max(1.0, scale0) or runaway:
+        raise AnalysisError(Diagnostic(
+            "error", "E706",
+            f"no equilibrium found near the initial state with the inputs held at t = {time:g} s "
+            f"(largest remaining state derivative {remaining:.3g}"
+            f"{', the solver ran away' if runaway else ''})",
+            hint="the system may have no equilibrium (e.g. a constant force on a free mass); "
+                 "linearise at the initial point instead"))
+    return full(z), held

@@ -1,0 +1,252 @@
+"""Freezing discontinuities: laws with if/abs/sign/min/max/step/table -> smooth laws of mode symbols.
+
+:class:`Freezer` takes the expressions of a StateSpace in causal order and
+returns them with every discontinuous construct replaced by a smooth piece
+selected by a *mode symbol* ``_m<k>`` (-1, 0 or +1: the sign of the switching
+function ``g_k``), and the list of :class:`Switch` es it found:
+
+=========================  =====================  ==================================
+construct                  switching function g   frozen form
+=========================  =====================  ==================================
+``if a < b then u else v``  ``a - b``             ``Piecewise((u, m < 0), (v, True))``
+``abs(a)``                 ``a``                  ``m*a``
+``sign(a)``                ``a``                  ``m``
+``min(a, b)``              ``a - b``              ``Piecewise((a, m <= 0), (b, True))``
+``step(x, x0)``            ``x - x0``             ``Piecewise((1, m >= 0), (0, True))``
+``table(x, xs, vs)``       ``x - xs[i]`` each     the linear piece of the segment
+=========================  =====================  ==================================
+
+Identical switching functions (or opposite ones) share one mode. A switching
+function is itself frozen (``abs(f) < v0`` has ``g = m1*f - v0``), so it is
+smooth along a frozen segment and its zero is found by root finding.
+
+Switches of time only are *known in advance*: when ``g`` (with the inputs it
+uses substituted) is linear in ``t``, its zero is a parameter expression, a
+segment boundary rather than an event; a ``table`` of such an argument is left
+as it is (``np.interp`` is continuous, its corners are segment boundaries),
+and the sample times of a ``csv`` signal are listed the same way.
+
+>>> import sympy
+>>> t, f, v0 = sympy.symbols("t f v0", real=True)
+>>> freezer = Freezer(t, states={f}, parameters={v0})
+>>> freezer.freeze(sympy.Piecewise((f, sympy.Abs(f) < v0), (2*f, True)), "R.e")
+Piecewise((f, _m0*f - v0 < 0), (2*f, True))
+>>> [(s.g, s.label) for s in freezer.switches]
+[(f, 'abs(f) in R.e'), (_m0*f - v0, 'if Abs(f) < v0 in R.e')]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy
+from sympy.core.relational import Relational
+
+from bondc.symbolic import Csv, Step, Table
+
+_LABEL_LIMIT = 120
+
+
+@dataclass
+class Switch:
+    """One switching function ``g`` and the mode symbol that freezes it."""
+
+    index: int
+    g: sympy.Expr                   # frozen switching function
+    mode: sympy.Symbol
+    label: str
+    event: bool = True              # located by root finding; False: changes only at known times
+    breaks: list = field(default_factory=list)   # [(time expr, label)] when known in advance
+
+
+@dataclass
+class TimeBreak:
+    """A time known in advance at which a law changes: a segment boundary."""
+
+    time: sympy.Expr | None          # a parameter expression, or None for csv samples
+    label: str
+    kind: str                       # "step", "table", "if", "csv", ...
+    csv: Csv | None = None
+
+
+def _short(expr) -> str:
+    text = sympy.sstr(expr)
+    return text if len(text) <= _LABEL_LIMIT else text[: _LABEL_LIMIT - 3] + "..."
+
+
+class Freezer:
+    """Replaces discontinuous constructs by mode-selected smooth pieces; collects the switches.
+
+    ``states`` and ``parameters`` are sets of symbols; :meth:`define` tells the
+    freezer the frozen law of each assigned symbol in causal order, so it
+    knows which switches are of time only.
+    """
+
+    def __init__(self, time: sympy.Symbol, states=(), parameters=()):
+        self.time = time
+        self.states = frozenset(states)
+        self.parameters = frozenset(parameters)
+        self.switches: list[Switch] = []
+        self.time_breaks: list[TimeBreak] = []
+        self._by_g: dict = {}
+        self._explicit: dict = {}        # time-only assigned symbol -> expression of t and parameters
+        self._time_only: set = set(self.parameters) | {time}
+        self._time_modes: set = set()
+        self._owner = ""
+
+    # -- bookkeeping
+
+    def define(self, symbol: sympy.Symbol, frozen: sympy.Expr) -> None:
+        """Record the frozen law of an assigned symbol (call in causal order)."""
+        if frozen.free_symbols <= (self._time_only | self._time_modes):
+            self._time_only.add(symbol)
+            if not (frozen.free_symbols & self._time_modes):
+                self._explicit[symbol] = frozen.xreplace(self._explicit)
+
+    def is_time_only(self, expr) -> bool:
+        return expr.free_symbols <= (self._time_only | self._time_modes)
+
+    def _linear_time_root(self, g):
+        """The time where ``g`` vanishes when ``g`` is a linear function of t alone, else None."""
+        if not (g.free_symbols <= (self._time_only | self._time_modes)):
+            return None
+        explicit = g.xreplace(self._explicit)
+        if not (explicit.free_symbols <= (self.parameters | {self.time})) or self.time not in explicit.free_symbols:
+            return None
+        slope = sympy.diff(explicit, self.time)
+        if slope.free_symbols & {self.time} or slope.has(sympy.Derivative) or slope == 0:
+            return None
+        offset = explicit.xreplace({self.time: sympy.Integer(0)})
+        if sympy.expand(explicit - (slope * self.time + offset)) != 0:
+            return None
+        return -offset / slope
+
+    def switch(self, g, label: str, kind: str):
+        """The mode expression (``m`` or ``-m``) of switching function ``g``, registering it if new."""
+        g = sympy.sympify(g)
+        if g.is_number:
+            value = float(g)
+            return sympy.Integer(0 if value == 0 else (1 if value > 0 else -1))
+        if g in self._by_g:
+            return self._by_g[g].mode
+        if -g in self._by_g:
+            return -self._by_g[-g].mode
+        index = len(self.switches)
+        mode = sympy.Symbol(f"_m{index}", real=True)
+        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label)
+        root = self._linear_time_root(g)
+        if root is not None:
+            switch.event = False
+            switch.breaks.append((root, switch.label))
+            self.time_breaks.append(TimeBreak(root, switch.label, kind))
+        if self.is_time_only(g):
+            self._time_modes.add(mode)
+        self.switches.append(switch)
+        self._by_g[g] = switch
+        return mode
+
+    @property
+    def mode_symbols(self) -> list[sympy.Symbol]:
+        return [s.mode for s in self.switches]
+
+    # -- freezing
+
+    def freeze(self, expr, owner: str = ""):
+        """``expr`` with every discontinuity frozen; ``owner`` names it in switch labels."""
+        self._owner = owner
+        return self._freeze(sympy.sympify(expr))
+
+    def _freeze(self, expr):
+        if expr.is_Atom:
+            return expr
+        method = getattr(self, "_freeze_" + type(expr).__name__, None)
+        if method is not None:
+            return method(expr)
+        if isinstance(expr, Relational):
+            return self._condition(expr)
+        if isinstance(expr, sympy.Piecewise):
+            return self._freeze_Piecewise(expr)
+        args = [self._freeze(arg) if isinstance(arg, sympy.Basic) else arg for arg in expr.args]
+        if all(a is b for a, b in zip(args, expr.args)):
+            return expr
+        return expr.func(*args)
+
+    def _freeze_Piecewise(self, expr):
+        pieces = [(self._freeze(value), self._condition(cond)) for value, cond in expr.args]
+        return sympy.Piecewise(*pieces)
+
+    def _condition(self, cond):
+        if cond in (sympy.true, sympy.false):
+            return cond
+        if isinstance(cond, Relational):
+            lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
+            mode = self.switch(lhs - rhs, f"if {_short(cond)}", "if")
+            return type(cond)(mode, 0) if not isinstance(cond, (sympy.Eq, sympy.Ne)) else \
+                type(cond)(mode, 0, evaluate=False)
+        if isinstance(cond, (sympy.And, sympy.Or, sympy.Not, sympy.Xor)):
+            return cond.func(*[self._condition(arg) for arg in cond.args])
+        if isinstance(cond, sympy.Symbol):
+            raise TypeError(f"boolean symbol {cond} in a condition")
+        return self._freeze(cond)
+
+    def _freeze_Abs(self, expr):
+        arg = self._freeze(expr.args[0])
+        return self.switch(arg, f"abs({_short(expr.args[0])})", "abs") * arg
+
+    def _freeze_sign(self, expr):
+        arg = self._freeze(expr.args[0])
+        return self.switch(arg, f"sign({_short(expr.args[0])})", "sign")
+
+    def _freeze_Heaviside(self, expr):
+        arg = self._freeze(expr.args[0])
+        h0 = expr.args[1] if len(expr.args) > 1 else sympy.S.Half
+        mode = self.switch(arg, f"heaviside({_short(expr.args[0])})", "heaviside")
+        return sympy.Piecewise((1, sympy.StrictGreaterThan(mode, 0)), (h0, sympy.Eq(mode, 0, evaluate=False)),
+                               (0, True))
+
+    def _min_max(self, expr, name, relation):
+        args = [self._freeze(arg) for arg in expr.args]
+        originals = list(expr.args)
+        value, text = args[0], _short(originals[0])
+        for arg, original in zip(args[1:], originals[1:]):
+            text = f"{name}({text}, {_short(original)})"
+            mode = self.switch(value - arg, text, name)
+            value = sympy.Piecewise((value, relation(mode, 0)), (arg, True))
+        return value
+
+    def _freeze_Min(self, expr):
+        return self._min_max(expr, "min", sympy.LessThan)
+
+    def _freeze_Max(self, expr):
+        return self._min_max(expr, "max", sympy.GreaterThan)
+
+    def _freeze_Step(self, expr):
+        arg, x0 = self._freeze(expr.args[0]), self._freeze(expr.args[1])
+        mode = self.switch(arg - x0, f"step({_short(expr.args[0])}, {_short(expr.args[1])})", "step")
+        return sympy.Piecewise((sympy.Integer(1), sympy.GreaterThan(mode, 0)), (sympy.Integer(0), True))
+
+    def _freeze_Table(self, expr):
+        arg = self._freeze(expr.args[0])
+        xs = [self._freeze(v) for v in expr.breakpoints]
+        vs = [self._freeze(v) for v in expr.values]
+        if len(xs) == 1:
+            return vs[0]
+        roots = [self._linear_time_root(arg - x) for x in xs]
+        if all(root is not None for root in roots):
+            # np.interp is continuous; its corners are known times: leave it, split there
+            for root, x in zip(roots, xs):
+                self.time_breaks.append(TimeBreak(root, f"table corner {_short(expr.args[0])} = {_short(x)}"
+                                                  + (f" in {self._owner}" if self._owner else ""), "table"))
+            return Table(arg, sympy.Tuple(*xs), sympy.Tuple(*vs))
+        modes = [self.switch(arg - x, f"table corner {_short(expr.args[0])} = {_short(x)}", "table")
+                 for x in xs]
+        pieces = [(vs[0], sympy.StrictLessThan(modes[0], 0))]
+        for i in range(len(xs) - 1):
+            slope = (vs[i + 1] - vs[i]) / (xs[i + 1] - xs[i])
+            pieces.append((vs[i] + slope * (arg - xs[i]), sympy.StrictLessThan(modes[i + 1], 0)))
+        pieces.append((vs[-1], True))
+        return sympy.Piecewise(*pieces)
+
+    def _freeze_Csv(self, expr):
+        self.time_breaks.append(TimeBreak(None, f"csv sample of {expr.column}", "csv", csv=expr))
+        return expr

@@ -1,0 +1,222 @@
+"""The sympy printer of generated modules: sympy expression -> numpy source text.
+
+:class:`BondcPrinter` is a :class:`sympy.printing.numpy.NumPyPrinter` that
+
+- prints every symbol through a name map (a state ``mass.p`` is the local
+  variable ``mass_p``, a mode ``m[3]``) and refuses a symbol it does not know;
+- prints floats exactly (``repr``), ``numpy`` as ``np``;
+- prints powers as ``x**2``, ``1/x``, ``np.sqrt(x)`` and, for a non-integer
+  exponent, ``np.power(x, a)`` (nan for a negative base, never a complex number);
+- prints the bondc signals ``Table``/``Step``/``Csv`` as calls of
+  ``bondc.runtime``'s ``table``/``step``/``csv_signal``;
+- prints a ``Piecewise`` whose conditions only test modes (the frozen laws)
+  as a Python conditional expression, so only the active branch is evaluated;
+  any other ``Piecewise`` as nested ``np.where``; ``Min``/``Max`` as
+  ``np.minimum``/``np.maximum``.
+
+Dispatch is by sympy's ``_print_<Class>`` methods; an expression the printer
+does not know raises ``unsupported`` instead of printing something wrong.
+
+>>> import sympy
+>>> x = sympy.Symbol("mass.p", real=True)
+>>> BondcPrinter({x: "mass_p"}).doprint(sympy.sqrt(x) + x**2 / 3)
+'(1/3)*mass_p**2 + np.sqrt(mass_p)'
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import sympy
+from sympy.core.relational import Relational
+from sympy.printing.numpy import NumPyPrinter
+from sympy.printing.precedence import precedence
+
+from bondc.symbolic import Csv, Step, Table
+
+
+class UnsupportedExpression(Exception):
+    """An expression the code generator cannot print."""
+
+
+class BondcPrinter(NumPyPrinter):
+    """numpy printer with bondc's names, exact floats, signals and frozen conditionals."""
+
+    printmethod = "_bondccode"
+    _default_settings = {**NumPyPrinter._default_settings, "allow_unknown_functions": False}
+
+    def __init__(self, names: Mapping[sympy.Symbol, str], *, mode_symbols=frozenset(),
+                 data_paths: Mapping[str, str] | None = None, settings=None):
+        super().__init__(settings or {})
+        self.names = dict(names)
+        self.mode_symbols = frozenset(mode_symbols)
+        self.data_paths = dict(data_paths or {})
+
+    # -- names and numbers
+
+    def _module_format(self, fqn, register=True):
+        text = super()._module_format(fqn, register)
+        return "np." + text[len("numpy."):] if text.startswith("numpy.") else text
+
+    def _print_Symbol(self, expr):
+        try:
+            return self.names[expr]
+        except KeyError:
+            raise UnsupportedExpression(f"unknown symbol {expr.name!r} in generated code") from None
+
+    _print_Dummy = _print_Symbol
+
+    def _print_Float(self, expr):
+        value = float(expr)
+        if value != value:
+            return "np.nan"
+        if value in (float("inf"), float("-inf")):
+            return "np.inf" if value > 0 else "(-np.inf)"
+        return repr(value)
+
+    def _print_Integer(self, expr):
+        return str(int(expr))
+
+    def _print_Rational(self, expr):
+        return f"{expr.p}/{expr.q}"
+
+    def _print_NaN(self, expr):
+        return "np.nan"
+
+    def _print_Infinity(self, expr):
+        return "np.inf"
+
+    def _print_NegativeInfinity(self, expr):
+        return "(-np.inf)"
+
+    def _print_BooleanTrue(self, expr):
+        return "True"
+
+    def _print_BooleanFalse(self, expr):
+        return "False"
+
+    # -- powers
+
+    def _print_Pow(self, expr, rational=False):
+        base, exponent = expr.args
+        if exponent.is_Integer:
+            n = int(exponent)
+            if n >= 0:
+                return f"{self.parenthesize(base, precedence(expr), strict=False)}**{n}"
+            denominator = base if n == -1 else sympy.Pow(base, -n, evaluate=False)
+            return f"1/{self.parenthesize(denominator, precedence(sympy.Mul(2, 3, evaluate=False)) + 1, strict=True)}"
+        if exponent == sympy.S.Half:
+            return f"np.sqrt({self._print(base)})"
+        if exponent == -sympy.S.Half:
+            return f"1/np.sqrt({self._print(base)})"
+        return f"np.power({self._print(base)}, {self._print(exponent)})"
+
+    # -- discontinuous functions (unfrozen forms; frozen laws do not contain them)
+
+    def _print_Abs(self, expr):
+        return f"np.abs({self._print(expr.args[0])})"
+
+    def _print_sign(self, expr):
+        return f"np.sign({self._print(expr.args[0])})"
+
+    def _print_Heaviside(self, expr):
+        x = self._print(expr.args[0])
+        h0 = self._print(expr.args[1]) if len(expr.args) > 1 else "0.5"
+        return f"np.heaviside({x}, {h0})"
+
+    def _fold(self, function, args):
+        args = [self._print(arg) for arg in args]
+        text = args[0]
+        for arg in args[1:]:
+            text = f"{function}({text}, {arg})"
+        return text
+
+    def _print_Min(self, expr):
+        return self._fold("np.minimum", expr.args)
+
+    def _print_Max(self, expr):
+        return self._fold("np.maximum", expr.args)
+
+    # -- conditions
+
+    def _is_frozen(self, condition) -> bool:
+        return condition.free_symbols <= self.mode_symbols
+
+    def _print_Piecewise(self, expr):
+        pieces = list(expr.args)
+        if all(self._is_frozen(cond) for _, cond in pieces):
+            text = "np.nan"
+            if pieces and pieces[-1][1] == sympy.true:
+                text = self._print(pieces.pop()[0])
+            for value, cond in reversed(pieces):
+                text = f"({self._print(value)} if {self._print(cond)} else {text})"
+            return text
+        text = "np.nan"
+        if pieces and pieces[-1][1] == sympy.true:
+            text = self._print(pieces.pop()[0])
+        for value, cond in reversed(pieces):
+            text = f"np.where({self._vector_condition(cond)}, {self._print(value)}, {text})"
+        return text
+
+    def _vector_condition(self, cond):
+        if isinstance(cond, (sympy.And, sympy.Or)):
+            function = "np.logical_and" if isinstance(cond, sympy.And) else "np.logical_or"
+            parts = [self._vector_condition(arg) for arg in cond.args]
+            text = parts[0]
+            for part in parts[1:]:
+                text = f"{function}({text}, {part})"
+            return text
+        if isinstance(cond, sympy.Not):
+            return f"np.logical_not({self._vector_condition(cond.args[0])})"
+        return self._print(cond)
+
+    def _print_Relational(self, expr):
+        op = {"==": "==", "!=": "!=", "<": "<", "<=": "<=", ">": ">", ">=": ">="}[expr.rel_op]
+        return f"({self._print(expr.lhs)} {op} {self._print(expr.rhs)})"
+
+    def _print_And(self, expr):
+        return "(" + " and ".join(self._print(arg) for arg in expr.args) + ")"
+
+    def _print_Or(self, expr):
+        return "(" + " or ".join(self._print(arg) for arg in expr.args) + ")"
+
+    def _print_Not(self, expr):
+        return f"(not {self._print(expr.args[0])})"
+
+    # -- bondc signals
+
+    def _print_Table(self, expr):
+        xs = ", ".join(self._print(v) for v in expr.breakpoints)
+        vs = ", ".join(self._print(v) for v in expr.values)
+        comma = "," if len(expr.breakpoints) == 1 else ""
+        return f"table({self._print(expr.argument)}, ({xs}{comma}), ({vs}{comma}))"
+
+    def _print_Step(self, expr):
+        return f"step({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+
+    def _print_Csv(self, expr):
+        path = self.data_paths.get(expr.path, expr.path)
+        return f"csv_signal({self._print(expr.args[0])}, DATA_DIR, {path!r}, {expr.column!r})"
+
+    # -- refuse the rest
+
+    def _print_Function(self, expr):
+        raise UnsupportedExpression(f"unsupported function {type(expr).__name__} in generated code")
+
+    def _print_Derivative(self, expr):
+        raise UnsupportedExpression(f"unsupported derivative {expr} in generated code")
+
+    def _print_DiracDelta(self, expr):
+        raise UnsupportedExpression("an impulse (DiracDelta) cannot be simulated")
+
+    def emptyPrinter(self, expr):
+        raise UnsupportedExpression(f"unsupported expression {type(expr).__name__} in generated code")
+
+
+def relative_data_path(path: str, module_dir: str | Path) -> str:
+    """A csv path as the generated module refers to it: relative to the module, '/'-separated."""
+    import os
+
+    relative = os.path.relpath(path, module_dir)
+    return relative.replace(os.sep, "/")

@@ -1,0 +1,273 @@
+"""Numeric evaluation of constant expressions: an AST expression -> a float.
+
+The semantic stage uses this to compute parameters, experiment settings,
+initial values and table breakpoints in SI. It walks the AST (one method per
+node class) and never evaluates text: no ``eval``, ``exec`` or ``sympify``.
+
+Values of names come from a mapping (parameters already evaluated, function
+arguments, optionally ``t``); ``pi`` is always known. Calls may name the
+built-ins of the language (including ``step`` and ``table``) or ``fn``
+functions. Truth values are 1.0 and 0.0; ``and``, ``or`` and ``if`` evaluate
+only what they need, so ``if x > 0 then log(x) else 0`` is fine for ``x = 0``.
+
+A math domain error (log of a negative number, division by zero, overflow)
+raises :class:`EvaluationError` carrying one ``E311`` diagnostic whose span is
+the sub-expression that failed, never a bare Python exception.
+
+>>> from bondc.parse import parse_set_value
+>>> round(evaluate(parse_set_value("x = pi/4*(D^2 - d^2)").value, {"D": 0.05, "d": 0.02}), 10)
+0.0016493361
+>>> try:
+...     evaluate(parse_set_value("x = log(a - 1)").value, {"a": 1.0})
+... except EvaluationError as error:
+...     print(error.diagnostic.code, error.diagnostic.message)
+E311 cannot evaluate: log of 0 (its argument must be positive)
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from typing import Callable, Mapping, Protocol, Sequence
+
+from bondc import ast
+from bondc.errors import Diagnostic, ModelError, Related
+from bondc.source import Span
+
+CODE = "E311"
+
+# Deeper nesting of function calls than this is a runaway (recursion is
+# reported by the semantic stage; this only keeps the evaluator safe).
+MAX_CALL_DEPTH = 100
+
+
+class FunctionLike(Protocol):
+    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function`."""
+
+    name: str
+    params: tuple[str, ...]
+    body: ast.Expr
+    span: Span
+
+
+class EvaluationError(ModelError):
+    """An expression that has no value: carries one E311 diagnostic."""
+
+    def __init__(self, diagnostic: Diagnostic):
+        super().__init__(diagnostic)
+        self.diagnostic = diagnostic
+
+
+def _number(value: float) -> str:
+    return f"{value:g}"
+
+
+def _fail(node, reason: str, hint: str | None = None) -> EvaluationError:
+    return EvaluationError(Diagnostic("error", CODE, f"cannot evaluate: {reason}", node.span, hint=hint))
+
+
+# ------------------------------------------------------------------ built-ins
+
+def _log(x: float) -> float:
+    if x <= 0:
+        raise ValueError(f"log of {_number(x)} (its argument must be positive)")
+    return math.log(x)
+
+
+def _sqrt(x: float) -> float:
+    if x < 0:
+        raise ValueError(f"sqrt of the negative number {_number(x)}")
+    return math.sqrt(x)
+
+
+def _sign(x: float) -> float:
+    return float((x > 0) - (x < 0))
+
+
+def _step(x: float, x0: float) -> float:
+    return 1.0 if x >= x0 else 0.0
+
+
+MATH_BUILTINS: Mapping[str, Callable[..., float]] = {
+    "abs": abs,
+    "sign": _sign,
+    "sqrt": _sqrt,
+    "exp": math.exp,
+    "log": _log,
+    "sin": math.sin,
+    "cos": math.cos,
+    "tan": math.tan,
+    "tanh": math.tanh,
+    "atan": math.atan,
+    "atan2": math.atan2,
+    "min": min,
+    "max": max,
+}
+
+_BINARY: Mapping[str, Callable[[float, float], float]] = {
+    "+": operator.add,
+    "-": operator.sub,
+    "*": operator.mul,
+    "<": lambda a, b: float(a < b),
+    "<=": lambda a, b: float(a <= b),
+    ">": lambda a, b: float(a > b),
+    ">=": lambda a, b: float(a >= b),
+    "==": lambda a, b: float(a == b),
+    "!=": lambda a, b: float(a != b),
+}
+
+
+def interpolate(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
+    """Piecewise-linear ``table``: linear between breakpoints, held at the ends.
+
+    >>> interpolate(1.5, [0, 1, 2], [0, 10, 10]), interpolate(-1, [0, 1], [5, 6]), interpolate(9, [0, 1], [5, 6])
+    (10.0, 5, 6)
+    """
+    if x <= xs[0]:
+        return ys[0]
+    if x >= xs[-1]:
+        return ys[-1]
+    for index in range(1, len(xs)):
+        if x <= xs[index]:
+            x0, x1, y0, y1 = xs[index - 1], xs[index], ys[index - 1], ys[index]
+            if x1 == x0:
+                return y1
+            return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
+    return ys[-1]
+
+
+# ------------------------------------------------------------------ evaluator
+
+class _Evaluator:
+    """Walks an expression; one ``_eval_<Class>`` method per AST node class."""
+
+    def __init__(self, values: Mapping[str, float], functions: Mapping[str, FunctionLike], depth: int = 0):
+        self.values = values
+        self.functions = functions
+        self.depth = depth
+
+    def __call__(self, node) -> float:
+        method = getattr(self, f"_eval_{type(node).__name__}", None)
+        if method is None:
+            raise _fail(node, f"unsupported expression node {type(node).__name__}")
+        value = method(node)
+        if isinstance(value, complex) or not math.isfinite(value):
+            raise _fail(node, "the result is not a finite number (overflow)")
+        return value
+
+    def _eval_Num(self, node: ast.Num) -> float:
+        return node.value
+
+    def _eval_Str(self, node: ast.Str) -> float:
+        raise _fail(node, f'the string "{node.value}" is not a number')
+
+    def _eval_ListExpr(self, node: ast.ListExpr) -> float:
+        raise _fail(node, "a list is not a number")
+
+    def _eval_Name(self, node: ast.Name) -> float:
+        if node.name in self.values:
+            return float(self.values[node.name])
+        if node.name == "pi":
+            return math.pi
+        raise _fail(node, f"'{node.name}' has no value here")
+
+    def _eval_Ref(self, node: ast.Ref) -> float:
+        raise _fail(node, f"'{node.dotted}' is a variable of the simulation and has no constant value")
+
+    def _eval_Unary(self, node: ast.Unary) -> float:
+        value = self(node.operand)
+        if node.op == "-":
+            return -value
+        if node.op == "not":
+            return float(not value)
+        return value
+
+    def _eval_Binary(self, node: ast.Binary) -> float:
+        if node.op == "and":
+            return float(bool(self(node.left)) and bool(self(node.right)))
+        if node.op == "or":
+            return float(bool(self(node.left)) or bool(self(node.right)))
+        left, right = self(node.left), self(node.right)
+        if node.op == "/":
+            if right == 0:
+                raise _fail(node, f"division by zero ({_number(left)}/0)")
+            return left / right
+        if node.op == "^":
+            return self._power(node, left, right)
+        try:
+            return _BINARY[node.op](left, right)
+        except KeyError:
+            raise _fail(node, f"unsupported operator '{node.op}'") from None
+        except OverflowError:
+            raise _fail(node, "the result is too large (overflow)") from None
+
+    def _power(self, node: ast.Binary, base: float, exponent: float) -> float:
+        if base == 0 and exponent < 0:
+            raise _fail(node, f"0 raised to the negative power {_number(exponent)}")
+        if base < 0 and exponent != int(exponent):
+            raise _fail(node, f"the negative number {_number(base)} raised to the non-integer power "
+                              f"{_number(exponent)}")
+        try:
+            return base ** exponent
+        except OverflowError:
+            raise _fail(node, f"{_number(base)}^{_number(exponent)} is too large (overflow)") from None
+
+    def _eval_If(self, node: ast.If) -> float:
+        return self(node.then) if self(node.cond) else self(node.orelse)
+
+    def _eval_Call(self, node: ast.Call) -> float:
+        if node.func in self.functions:
+            return self._call_function(node, self.functions[node.func])
+        if node.func == "table":
+            return self._table(node)
+        if node.func == "csv":
+            raise _fail(node, "csv(...) is a measured signal and has no constant value")
+        args = [self(arg) for arg in node.args]
+        if node.func == "step":
+            builtin: Callable[..., float] | None = _step
+        else:
+            builtin = MATH_BUILTINS.get(node.func)
+        if builtin is None:
+            raise _fail(node, f"unknown function '{node.func}'")
+        try:
+            return float(builtin(*args))
+        except ValueError as error:
+            reason = str(error)
+            if reason == "math domain error":
+                reason = f"{node.func}({', '.join(_number(a) for a in args)}) is outside the function's domain"
+            raise _fail(node, reason) from None
+        except OverflowError:
+            raise _fail(node, f"{node.func}({', '.join(_number(a) for a in args)}) is too large (overflow)") from None
+        except TypeError:
+            raise _fail(node, f"wrong number of arguments to {node.func}()") from None
+
+    def _call_function(self, node: ast.Call, function: FunctionLike) -> float:
+        if len(node.args) != len(function.params):
+            raise _fail(node, f"'{function.name}' takes {len(function.params)} arguments, {len(node.args)} given")
+        if self.depth >= MAX_CALL_DEPTH:
+            raise _fail(node, f"calls nested more than {MAX_CALL_DEPTH} deep (is '{function.name}' recursive?)")
+        args = {name: self(arg) for name, arg in zip(function.params, node.args)}
+        inner = _Evaluator(args, self.functions, self.depth + 1)
+        try:
+            return inner(function.body)
+        except EvaluationError as error:
+            # Point at the call the user wrote, and show where in the function it failed.
+            cause = error.diagnostic
+            related = (Related(cause.span, f"in function '{function.name}'"),) + cause.related
+            raise EvaluationError(Diagnostic("error", CODE, cause.message, node.span, hint=cause.hint,
+                                             related=related)) from None
+
+    def _table(self, node: ast.Call) -> float:
+        if len(node.args) != 3 or not all(isinstance(a, ast.ListExpr) for a in node.args[1:]):
+            raise _fail(node, "table() takes a value and two lists")
+        xs = [self(item) for item in node.args[1].items]
+        ys = [self(item) for item in node.args[2].items]
+        if len(xs) != len(ys) or not xs:
+            raise _fail(node, "table() needs two lists of the same, non-zero length")
+        return float(interpolate(self(node.args[0]), xs, ys))
+
+
+def evaluate(expr: ast.Expr, values: Mapping[str, float] | None = None,
+             functions: Mapping[str, FunctionLike] | None = None) -> float:
+    """The value of ``expr`` given the values of its names; raises :class:`EvaluationError` (E311)."""
+    return _Evaluator(values or {}, functions or {})(expr)

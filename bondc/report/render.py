@@ -1,0 +1,518 @@
+"""Render stage: :class:`ReportContext` -> one self-contained HTML report.
+
+Everything a report shows is gathered into a :class:`ReportContext` by the
+caller (header, highlighted source, parameters, diagram, causality, equations,
+plots, power/energy tables, optional motor and validation sections);
+:func:`render_report` fills ``templates/report.html`` with it.
+
+The HTML is self-contained: CSS inline, figures as inline SVG, equations as
+MathML, no scripts, no external fonts, images or links. Templates are files
+loaded by one Jinja :func:`environment` with autoescaping forced on and
+``StrictUndefined``; the only strings that reach the page unescaped are the
+``Markup`` values made by bondc itself (:func:`~bondc.report.lexer.highlight_bg`,
+:func:`~bondc.report.diagram.bond_graph_svg`, :func:`plot_svg`,
+:func:`math_markup`), each of which escapes the text it contains.
+
+Helpers that build the pieces: :func:`plot_svg` (matplotlib, Agg/SVG),
+:func:`math_markup` / :func:`equation_markup` (sympy presentation MathML),
+:func:`parameter_rows` (a BondGraph's parameters in their display units),
+:func:`causality_rows` / :func:`causality_notes` (a CausalGraph as a table),
+:meth:`Table.from_dicts`, :meth:`ReportHeader.for_graph`.
+
+>>> html = render_report(ReportContext(ReportHeader("M", "m.bg", "0" * 64, date="2024-01-01"),
+...                                    source_html=Markup("<pre>model M</pre>")))
+>>> html.startswith("<!DOCTYPE html>") and "<script" not in html
+True
+"""
+
+from __future__ import annotations
+
+import datetime
+import functools
+import hashlib
+import html
+import io
+import math
+import numbers
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping, NamedTuple, Sequence
+
+import numpy as np
+from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
+from markupsafe import Markup, escape
+
+import bondc
+from bondc.model import BondGraph
+from bondc.report.lexer import lexer_css
+
+__all__ = [
+    "ReportHeader", "ParameterRow", "CausalityRow", "Table", "Equation", "Plot", "ValidationSection",
+    "ReportContext", "render_report", "environment", "plot_svg", "math_markup", "equation_markup",
+    "parameter_rows", "causality_rows", "causality_notes", "source_sha256", "format_number", "format_unit",
+]
+
+
+# ---------------------------------------------------------------- context
+
+@dataclass(frozen=True)
+class ReportHeader:
+    """What the report is about: model, source, tool version, date, experiment and solver."""
+
+    model_name: str
+    source_file: str
+    source_sha256: str
+    description: str | None = None
+    bondc_version: str = bondc.__version__
+    date: str = ""
+    experiment_name: str | None = None
+    experiment_description: str | None = None
+    solver_settings: Mapping[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def for_graph(cls, graph: BondGraph, source_text: str, experiment: str | None = None,
+                  date: str | None = None, solver_settings: Mapping[str, Any] | None = None) -> "ReportHeader":
+        """The header of a report on ``graph`` (built from ``source_text``), for one experiment.
+
+        Solver settings default to the experiment's (``t_end``, ``solver``,
+        ``rtol``, ``atol``, ``max_step``, ``cycle``, as written in the model).
+        """
+        definition = graph.experiments.get(experiment) if experiment else None
+        if solver_settings is None:
+            solver_settings = {}
+            if definition is not None:
+                for name in ("t_end", "solver", "rtol", "atol", "max_step", "cycle"):
+                    value = getattr(definition, name)
+                    if value is not None:
+                        solver_settings[name] = value
+        return cls(
+            model_name=graph.name,
+            source_file=graph.file,
+            source_sha256=source_sha256(source_text),
+            description=graph.description,
+            date=date or datetime.date.today().isoformat(),
+            experiment_name=experiment,
+            experiment_description=definition.description if definition is not None else None,
+            solver_settings=dict(solver_settings),
+        )
+
+
+@dataclass(frozen=True)
+class ParameterRow:
+    name: str
+    value: Any                      # a number (shown with 6 significant digits) or text
+    unit: str | None = None
+    description: str | None = None
+
+
+@dataclass(frozen=True)
+class CausalityRow:
+    bond: int
+    label: str | None
+    tail: str                       # power goes from tail ...
+    head: str                       # ... to head
+    effort_from: str                # the node that sets the effort (the stroke is at the other end)
+    flow_from: str
+    element_causality: str = ""     # e.g. "C spring: integral", "R damper: resistance"
+
+
+@dataclass(frozen=True)
+class Table:
+    """A generic table: column headings and rows of cells (numbers are formatted, text escaped)."""
+
+    title: str
+    columns: tuple[str, ...]
+    rows: tuple[tuple[Any, ...], ...]
+    caption: str = ""
+    notes: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "columns", tuple(self.columns))
+        object.__setattr__(self, "rows", tuple(tuple(row) for row in self.rows))
+        object.__setattr__(self, "notes", tuple(self.notes))
+        for number, row in enumerate(self.rows, start=1):
+            if len(row) != len(self.columns):
+                raise ValueError(f"table '{self.title}': row {number} has {len(row)} cells "
+                                 f"for {len(self.columns)} columns")
+
+    @classmethod
+    def from_dicts(cls, title: str, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None,
+                   caption: str = "", notes: Sequence[str] = ()) -> "Table":
+        """A table from rows of dicts; columns default to the keys in order of first appearance."""
+        rows = list(rows)
+        if columns is None:
+            columns = []
+            for row in rows:
+                columns += [key for key in row if key not in columns]
+        return cls(title, tuple(columns), tuple(tuple(row.get(c) for c in columns) for row in rows),
+                   caption, tuple(notes))
+
+
+@dataclass(frozen=True)
+class Equation:
+    mathml: Markup                  # from math_markup / equation_markup
+    label: str = ""                 # e.g. "mass.p" or "(3)"
+
+
+class Plot(NamedTuple):
+    title: str
+    svg: Markup                     # from plot_svg
+    caption: str = ""
+
+
+@dataclass(frozen=True)
+class ValidationSection:
+    """Validation against measured data: the results of :func:`bondc.report.validate.compare`."""
+
+    results: Sequence[Any]          # SignalResult
+    data_file: str
+    plots: Sequence[Plot] = ()
+    junit_file: str | None = None
+
+
+_TRUSTED = ("source_html", "diagram_svg")
+
+#: SI units of the experiment settings that have one (the model stores them in SI).
+SETTING_UNITS: Mapping[str, str] = {"t_end": "s", "max_step": "s", "cycle": "s", "first_step": "s", "dt": "s"}
+
+
+@dataclass(frozen=True)
+class ReportContext:
+    """Everything one report shows. ``None`` or empty hides an optional section."""
+
+    header: ReportHeader
+    source_html: Markup                         # highlight_bg(source text)
+    parameters: Sequence[ParameterRow] = ()
+    diagram_svg: Markup | None = None           # bond_graph_svg(graph, causal)
+    causality: Sequence[CausalityRow] = ()
+    causality_notes: Sequence[str] = ()
+    equations: Sequence[Equation] = ()
+    plots: Sequence[Plot] = ()
+    power_tables: Sequence[Table] = ()
+    motor_requirements: Table | None = None
+    motor_candidates: Table | None = None
+    validation: ValidationSection | None = None
+    warnings: Sequence[str] = ()                # diagnostics worth a reader's attention
+
+    def __post_init__(self) -> None:
+        # Trusted HTML must come from bondc's own producers, which return Markup; a
+        # plain str here is a mistake that would otherwise show as escaped markup.
+        for name in _TRUSTED:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, Markup):
+                raise TypeError(f"ReportContext.{name} must be markupsafe.Markup (made by bondc), "
+                                f"not {type(value).__name__}")
+        plots = tuple(p if isinstance(p, Plot) else Plot(*p) for p in self.plots)
+        for plot in plots:
+            if not isinstance(plot.svg, Markup):
+                raise TypeError(f"plot '{plot.title}': svg must be Markup from plot_svg")
+        object.__setattr__(self, "plots", plots)
+        for equation in self.equations:
+            if not isinstance(equation.mathml, Markup):
+                raise TypeError("Equation.mathml must be Markup from math_markup")
+
+
+# ---------------------------------------------------------------- environment and rendering
+
+def format_number(value: Any, digits: int = 4) -> Markup:
+    """A number for a table: ``digits`` significant digits, powers of ten as ``×10<sup>n</sup>``.
+
+    >>> str(format_number(224000.0)), str(format_number(0.005)), str(format_number(None))
+    ('2.24×10<sup>5</sup>', '0.005', '—')
+    """
+    if value is None:
+        return Markup("—")
+    if isinstance(value, bool):
+        return Markup("yes" if value else "no")
+    if isinstance(value, numbers.Integral):
+        return escape(str(int(value)))
+    if isinstance(value, numbers.Real):
+        value = float(value)
+        if math.isnan(value):
+            return Markup("n/a")
+        if math.isinf(value):
+            return Markup("∞" if value > 0 else "−∞")
+        text = f"{value:.{digits}g}"
+        if "e" in text:
+            mantissa, exponent = text.split("e")
+            mantissa = mantissa.replace("-", "−")
+            return Markup("{}×10<sup>{}</sup>").format(mantissa, str(int(exponent)).replace("-", "−"))
+        return escape(text.replace("-", "−"))
+    return escape(value)
+
+
+def format_unit(text: str | None) -> Markup:
+    """A unit as written, typeset: ``N*m/s^2`` -> ``N·m/s<sup>2</sup>``.
+
+    >>> str(format_unit("kg*m^2/s^-1"))
+    'kg·m<sup>2</sup>/s<sup>−1</sup>'
+    """
+    if not text:
+        return Markup("")
+    out = Markup("")
+    for part in re.split(r"(\^(?:\([-+]?[0-9./]+\)|[-+]?[0-9.]+))", text):
+        if part.startswith("^"):
+            out += Markup("<sup>{}</sup>").format(part[1:].strip("()").replace("-", "−"))
+        else:
+            out += escape(part.replace("*", "·"))
+    return out
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+@functools.lru_cache(maxsize=1)
+def environment() -> Environment:
+    """The one Jinja environment of bondc's reports (templates in ``bondc/report/templates``)."""
+    env = Environment(
+        loader=PackageLoader("bondc.report", "templates"),
+        # On for .html as select_autoescape would have it, and forced on for
+        # everything else too: nothing is ever rendered unescaped by accident.
+        autoescape=select_autoescape(enabled_extensions=("html",), default_for_string=True, default=True),
+        undefined=StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+    )
+    env.filters["num"] = format_number
+    env.filters["unit"] = format_unit
+    env.tests["number"] = _is_number
+    return env
+
+
+def _sections(context: ReportContext) -> list[tuple[str, str]]:
+    """(id, title) of the sections the report will show, in order."""
+    sections = []
+    if context.diagram_svg is not None:
+        sections.append(("bond-graph", "Bond graph"))
+    if context.parameters:
+        sections.append(("parameters", "Parameters"))
+    if context.causality or context.causality_notes:
+        sections.append(("causality", "Causality"))
+    if context.equations:
+        sections.append(("equations", "State equations"))
+    if context.plots:
+        sections.append(("results", "Simulation results"))
+    if context.power_tables:
+        sections.append(("power", "Power and energy"))
+    if context.motor_requirements is not None:
+        sections.append(("motor-requirements", "Motor requirements"))
+    if context.motor_candidates is not None:
+        sections.append(("motor-candidates", "Motor candidates"))
+    if context.validation is not None:
+        sections.append(("validation", "Validation against measurements"))
+    sections.append(("source", "Model source"))
+    return sections
+
+
+def render_report(context: ReportContext) -> str:
+    """The report as one HTML document (a string)."""
+    sections = _sections(context)
+    numbers_ = {section_id: index for index, (section_id, _) in enumerate(sections, start=1)}
+    template = environment().get_template("report.html")
+    return template.render(
+        ctx=context,
+        header=context.header,
+        sections=[(section_id, numbers_[section_id], title) for section_id, title in sections],
+        number=numbers_,
+        setting_units=SETTING_UNITS,
+        lexer_css=Markup(lexer_css()),
+    )
+
+
+# ---------------------------------------------------------------- builders of the pieces
+
+def source_sha256(text: str) -> str:
+    """Hex SHA-256 of a source text (UTF-8)."""
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def parameter_rows(graph: BondGraph) -> list[ParameterRow]:
+    """The graph's parameters, each in the unit it was written in."""
+    return [ParameterRow(p.name, p.value / p.display_factor, p.unit_text, p.description)
+            for p in graph.parameters.values()]
+
+
+def causality_rows(causal: Any) -> list[CausalityRow]:
+    """A :class:`bondc.causality.CausalGraph` as table rows, one per bond."""
+    graph = causal.graph
+    rows = []
+    for bond in graph.bonds:
+        notes = []
+        for name in (bond.tail, bond.head):
+            if name in causal.storage:
+                notes.append(f"{graph.elements[name].kind} {name}: {causal.storage[name]}")
+            elif name in causal.resistors:
+                notes.append(f"R {name}: {causal.resistors[name]}")
+        effort = causal.effort_setter[bond.number]
+        flow = bond.head if effort == bond.tail else bond.tail
+        rows.append(CausalityRow(bond.number, bond.label, bond.tail, bond.head, effort, flow, "; ".join(notes)))
+    return rows
+
+
+def causality_notes(causal: Any) -> list[str]:
+    """The causality stage's warnings and notes (derivative causality, algebraic loops) as text."""
+    return [f"{d.code}: {d.message}" + (f" ({d.hint})" if d.hint else "") for d in causal.diagnostics]
+
+
+# -- plots
+
+def _svg_ids_prefixed(svg: str, prefix: str) -> str:
+    """Prefix every id (and reference to it) so several inline SVGs never share one."""
+    ids = re.findall(r'\bid="([^"]+)"', svg)
+    if not ids:
+        return svg
+    pattern = re.compile(r'(\bid="|href="#|url\(#)(%s)(?=[")])' % "|".join(re.escape(i) for i in sorted(ids, key=len, reverse=True)))
+    return pattern.sub(lambda m: f"{m.group(1)}{prefix}-{m.group(2)}", svg)
+
+
+def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: str, ylabel: str,
+             xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = (7.0, 2.9)) -> Markup:
+    """A line plot of ``series`` (label -> values over ``t``) as an inline SVG element.
+
+    Drawn with matplotlib's object-oriented API and its SVG canvas, never
+    through pyplot, so no GUI backend is selected whatever ``MPLBACKEND`` says
+    and no global figure state is touched. Text stays text (``svg.fonttype = none``), ids are deterministic and
+    unique to the plot's content, there is no XML prolog, DOCTYPE, metadata
+    or external reference, and the document-wide ``<style>`` matplotlib adds
+    is replaced by attributes. The title goes into ``<title>`` (and is drawn
+    only with ``show_title``; a report's caption shows it).
+    """
+    import matplotlib
+    from matplotlib.figure import Figure
+
+    t = np.asarray(t, dtype=float)
+    digest = hashlib.sha256(repr((title, ylabel, xlabel)).encode())
+    digest.update(t.tobytes())
+    arrays = {}
+    for label, values in series.items():
+        values = np.asarray(values, dtype=float)
+        if values.shape != t.shape:
+            raise ValueError(f"plot '{title}': series '{label}' has {values.size} values for {t.size} times")
+        arrays[label] = values
+        digest.update(str(label).encode())
+        digest.update(values.tobytes())
+    key = digest.hexdigest()
+
+    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": key, "axes.spines.top": False,
+                                "axes.spines.right": False, "axes.grid": True, "grid.color": "#dddddd",
+                                "grid.linewidth": 0.6, "font.size": 9, "axes.titlesize": 10,
+                                "legend.frameon": False, "lines.linewidth": 1.4}):
+        figure = Figure(figsize=size, layout="constrained")
+        axes = figure.add_subplot()
+        for label, values in arrays.items():
+            axes.plot(t, values, label=str(label))
+        axes.set_xlabel(xlabel)
+        axes.set_ylabel(ylabel)
+        if t.size:
+            axes.set_xlim(float(t.min()), float(t.max()))
+        if show_title:
+            axes.set_title(title, loc="left")
+        if len(arrays) > 1:
+            axes.legend(loc="best")
+        buffer = io.StringIO()
+        figure.savefig(buffer, format="svg",
+                       metadata={"Date": None, "Creator": None, "Format": None, "Type": None})
+    svg = buffer.getvalue()
+    svg = svg[svg.index("<svg"):]
+    svg = re.sub(r"<metadata>.*?</metadata>\s*", "", svg, flags=re.S)
+    svg = re.sub(r'\s*<defs>\s*<style type="text/css">[^<]*</style>\s*</defs>', "", svg, count=1)
+    svg = svg.replace("<svg ", '<svg class="plot" role="img" stroke-linejoin="round" stroke-linecap="butt" ', 1)
+    svg = _svg_ids_prefixed(svg, "plot" + key[:8])
+    # A <title> as the first child names the figure for screen readers and tooltips.
+    head_end = svg.index(">", svg.index("<svg")) + 1
+    svg = svg[:head_end] + f"\n <title>{html.escape(title, quote=False)}</title>" + svg[head_end:]
+    return Markup(svg.strip())
+
+
+# -- MathML
+
+def _presentation_printer():
+    from sympy.printing.mathml import MathMLPresentationPrinter
+
+    class Printer(MathMLPresentationPrinter):
+        """sympy's presentation printer with ``Piecewise`` as a brace over cases."""
+
+        def _print_Piecewise(self, expr):
+            row = self.dom.createElement("mrow")
+            brace = self.dom.createElement("mo")
+            brace.setAttribute("stretchy", "true")
+            brace.appendChild(self.dom.createTextNode("{"))
+            row.appendChild(brace)
+            table = self.dom.createElement("mtable")
+            table.setAttribute("columnalign", "left left")
+            for value, condition in expr.args:
+                line = self.dom.createElement("mtr")
+                cell = self.dom.createElement("mtd")
+                cell.appendChild(self._print(value))
+                line.appendChild(cell)
+                cell = self.dom.createElement("mtd")
+                if condition is True or getattr(condition, "is_Boolean", False) and str(condition) == "True":
+                    text = self.dom.createElement("mtext")
+                    text.appendChild(self.dom.createTextNode("otherwise"))
+                    cell.appendChild(text)
+                else:
+                    inner = self.dom.createElement("mrow")
+                    text = self.dom.createElement("mtext")
+                    text.appendChild(self.dom.createTextNode("if\u2002"))
+                    inner.appendChild(text)
+                    inner.appendChild(self._print(condition))
+                    cell.appendChild(inner)
+                line.appendChild(cell)
+                table.appendChild(line)
+            row.appendChild(table)
+            return row
+
+    return Printer
+
+
+_ENTITY = re.compile(r"&(#x[0-9A-Fa-f]+|#[0-9]+|[A-Za-z][A-Za-z0-9]*);")
+
+
+def _decode_entities(text: str) -> str:
+    """sympy writes some symbols as entity text (``&pi;``, ``&dd;``); make them characters."""
+    return _ENTITY.sub(lambda m: html.unescape(m.group(0)), text)
+
+
+def _to_etree(node) -> ET.Element:
+    """A minidom element -> ElementTree, so that serialisation escapes every text."""
+    element = ET.Element(node.tagName, {k: v for k, v in node.attributes.items()})
+    last = None
+    for child in node.childNodes:
+        if child.nodeType == child.TEXT_NODE:
+            text = _decode_entities(child.data)
+            if last is None:
+                element.text = (element.text or "") + text
+            else:
+                last.tail = (last.tail or "") + text
+        elif child.nodeType == child.ELEMENT_NODE:
+            last = _to_etree(child)
+            element.append(last)
+    return element
+
+
+def math_markup(expr: Any, display: str = "block") -> Markup:
+    """A sympy expression as a ``<math>`` element (presentation MathML), every text escaped.
+
+    sympy's own serialiser writes text unescaped (a symbol ``a<b`` would become
+    markup), so the printer's DOM is re-serialised with ElementTree.
+
+    >>> import sympy
+    >>> str(math_markup(sympy.Symbol("a<b"), display="inline"))
+    '<math display="inline"><mi>a&lt;b</mi></math>'
+    """
+    printer = _presentation_printer()({})
+    tree = _to_etree(printer._print(expr))
+    root = ET.Element("math", {"display": display})
+    root.append(tree)
+    return Markup(ET.tostring(root, encoding="unicode", short_empty_elements=False))
+
+
+def equation_markup(lhs: Any, rhs: Any, display: str = "block") -> Markup:
+    """``lhs = rhs`` as MathML (no evaluation of the equality)."""
+    import sympy
+
+    return math_markup(sympy.Eq(lhs, rhs, evaluate=False), display=display)
+

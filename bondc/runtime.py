@@ -1,0 +1,1052 @@
+"""What bondc-generated modules run on: signals, switching modes, events, integration.
+
+Takes a *model*: a generated module's namespace (its ``globals()``, the module
+itself, or any object) with these names, all written by ``bondc.codegen``:
+
+- ``STATE_NAMES``, ``OUTPUT_NAMES``, ``VARIABLE_NAMES`` (every assigned
+  variable in causal order), ``VARIABLE_LAWS`` (their laws as text, for
+  diagnostics), ``PARAMETERS`` (name -> SI default, in the order of ``p``),
+  ``SWITCHES`` (one label per switching function), ``EVENT_SWITCHES`` (the
+  indices of switches located as events; the others only change at known
+  times), ``DEFAULTS`` (solver settings of the experiment);
+- ``x0(p)``; ``_rhs(t, x, p, m)``, ``_jac(t, x, p, m)``, ``_outputs(t, x, p, m)``,
+  ``_variables(t, x, p, m)``: the model with every discontinuous choice frozen
+  by the mode vector ``m``; ``_switches(t, x, p, m)``: the switching functions;
+  ``_time_breaks(p)``: ``(time, label, kind)`` of switches known in advance.
+
+Returns :class:`Result` from :func:`simulate_model`.
+
+This file imports only numpy, scipy and the standard library: bondc copies it
+verbatim into every generated module, so a generated module runs where bondc
+is not installed, and ``bondc simulate`` runs the same code in-process.
+
+How discontinuities are handled
+-------------------------------
+Every ``if`` condition, ``abs``, ``sign``, ``min``/``max``, ``step`` and
+``table`` corner of a model is a *switch*: a continuous switching function
+``g`` (``lhs - rhs`` of a condition, the argument of abs/sign, ``a - b`` of a
+min/max, ``x - x_i`` of a table corner) whose sign selects a smooth piece of
+the law. The integrator never steps across a switch blindly:
+
+1. A *segment* is integrated with every switch frozen in its mode
+   ``m = sign(g)`` (-1, 0 or +1), so the right-hand side and the analytic
+   Jacobian the solver sees are smooth (``abs(v)`` is ``m*v``, an ``if`` takes
+   one branch, a table one linear piece).
+2. The switching functions that depend on the state are event functions:
+   after each step, a switch whose ``m*g`` went from positive to non-positive
+   has crossed (a mode-0 switch, sitting exactly on its surface, fires when
+   ``|g|`` leaves zero); the crossing time is found with ``brentq`` on the
+   solver's dense output, the segment ends there and is recorded as an event.
+3. Switches of time only (``step(t, t0)``, table corners in ``t``, conditions
+   like ``t < t1``, csv sample times when there are few) are known in advance:
+   segments simply end at those times; nothing is root-found.
+4. At every restart the modes are chosen *just after* the restart point: the
+   state is advanced by a probe ``h = 1e-8 * span`` along the frozen law and
+   ``m = sign(g)`` is taken there, iterated until the modes agree with the law
+   they select.
+5. Chattering guard. If no mode vector agrees with itself at a restart (the
+   new law pushes the state straight back across the surface, as friction
+   does when it sticks at a velocity threshold: a sliding mode), or events
+   come faster than ``max_event_rate`` per 1/1000 of the run, or several
+   events fire without time advancing, the next short interval ``tau`` is
+   integrated with the *unfrozen* law (modes recomputed at every evaluation,
+   no events; the adaptive solver's error control then bounds the chatter).
+   ``tau`` starts at 1e-6 of the run and doubles while chattering continues
+   (at most 1/100 of the run), so a long sliding phase costs a logarithmic
+   number of restarts; normal frozen segments resume as soon as the modes are
+   consistent again. Each chattering episode is listed in ``Result.events``.
+
+A non-finite state or derivative ends the run: the result keeps every point
+computed before it, ``complete`` is False and ``failure`` names the time, the
+variable that first became nan or inf (in causal order) and its law.
+"""
+
+import math
+import os
+import sys
+import time as _time_module
+
+import numpy as np
+from scipy import integrate as _integrate
+from scipy import optimize as _optimize
+
+RUNTIME_VERSION = 1
+
+# ------------------------------------------------------------------ signals
+
+
+def table(x, breakpoints, values):
+    """``table(x, [x0, x1, ...], [v0, v1, ...])``: piecewise linear, held at the ends.
+
+    >>> float(table(0.5, (0.0, 1.0), (0.0, 10.0))), float(table(2.0, (0.0, 1.0), (0.0, 10.0)))
+    (5.0, 10.0)
+    """
+    return np.interp(x, np.asarray(breakpoints, dtype=float), np.asarray(values, dtype=float))
+
+
+def step(x, x0):
+    """``step(x, x0)``: 0 before ``x0``, 1 from it.
+
+    >>> step(0.1, 0.1), step(0.0999, 0.1)
+    (1.0, 0.0)
+    """
+    if np.ndim(x) == 0 and np.ndim(x0) == 0:
+        return 1.0 if x >= x0 else 0.0
+    return np.where(np.asarray(x) >= x0, 1.0, 0.0)
+
+
+def as_time(t):
+    """``t`` as a numpy float (or float array), so that arithmetic on it follows numpy rules (1/0 is inf)."""
+    return np.float64(t) if np.ndim(t) == 0 else np.asarray(t, dtype=float)
+
+
+_CSV_CACHE = {}
+
+
+def load_csv(path, column):
+    """Time and value arrays of ``column`` in a csv file (loaded once per path and column).
+
+    The time is the column named ``t`` or ``time`` (any case), else the first
+    column; lines starting with ``#`` and blank lines are skipped; the first
+    remaining line is the header. Times must not decrease.
+    """
+    path = os.path.abspath(path)
+    key = (path, column)
+    if key in _CSV_CACHE:
+        return _CSV_CACHE[key]
+    with open(path, encoding="utf-8") as handle:
+        lines = [line.strip() for line in handle]
+    lines = [line for line in lines if line and not line.startswith("#")]
+    if not lines:
+        raise ValueError(f"{path}: empty csv file")
+    header = [cell.strip().strip('"').strip() for cell in lines[0].split(",")]
+    lowered = [name.lower() for name in header]
+    time_index = lowered.index("t") if "t" in lowered else (lowered.index("time") if "time" in lowered else 0)
+    if column not in header:
+        raise ValueError(f"{path}: no column {column!r} (columns: {', '.join(header)})")
+    value_index = header.index(column)
+    times, values = [], []
+    for number, line in enumerate(lines[1:], start=2):
+        cells = line.split(",")
+        try:
+            times.append(float(cells[time_index]))
+            values.append(float(cells[value_index]))
+        except (ValueError, IndexError):
+            raise ValueError(f"{path}: row {number} is not numeric: {line!r}") from None
+    times, values = np.array(times), np.array(values)
+    if times.size == 0:
+        raise ValueError(f"{path}: no data rows")
+    if np.any(np.diff(times) < 0):
+        raise ValueError(f"{path}: the time column must not decrease")
+    _CSV_CACHE[key] = (times, values)
+    return times, values
+
+
+def csv_signal(x, base_dir, path, column):
+    """A measured signal: ``column`` of the csv file at ``x``, linearly interpolated, held at the ends."""
+    times, values = load_csv(os.path.join(base_dir, path), column)
+    return np.interp(x, times, values)
+
+
+def csv_times(base_dir, path, column):
+    return load_csv(os.path.join(base_dir, path), column)[0]
+
+
+# -------------------------------------------------------- algebraic loops
+
+_BLOCK_SOLUTIONS = {}
+
+
+def solve_block(residual, number, guess):
+    """Solve ``residual(z) = 0`` (a nonlinear algebraic loop), warm-started from its last solution.
+
+    Returns nan for every unknown when it does not converge, so the caller's
+    non-finite check names the loop's unknowns.
+    """
+    start = _BLOCK_SOLUTIONS.get(number)
+    if start is None or not np.all(np.isfinite(start)):
+        start = np.asarray(guess, dtype=float)
+    solution = _optimize.root(lambda z: np.asarray(residual(z), dtype=float), start, method="hybr",
+                              options={"xtol": 1e-12})
+    if not solution.success or not np.all(np.isfinite(solution.x)):
+        retry = _optimize.root(lambda z: np.asarray(residual(z), dtype=float), np.asarray(guess, dtype=float),
+                               method="hybr", options={"xtol": 1e-12})
+        if not retry.success:
+            return tuple(np.full(len(start), np.nan))
+        solution = retry
+    _BLOCK_SOLUTIONS[number] = solution.x
+    return tuple(solution.x)
+
+
+# ------------------------------------------------------------ model access
+
+_MODEL_NAMES = ("STATE_NAMES", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "PARAMETERS",
+                "SWITCHES", "EVENT_SWITCHES", "x0", "_rhs", "_jac", "_outputs", "_variables",
+                "_switches", "_time_breaks")
+
+
+class _Model:
+    """The names :func:`simulate_model` needs, from a namespace dict or any object."""
+
+    def __init__(self, source):
+        if isinstance(source, _Model):
+            self.__dict__.update(source.__dict__)
+            return
+        get = source.__getitem__ if isinstance(source, dict) else (lambda name: getattr(source, name))
+        for name in _MODEL_NAMES:
+            setattr(self, name.lstrip("_"), get(name))
+        try:
+            self.DEFAULTS = dict(get("DEFAULTS"))
+        except (KeyError, AttributeError):
+            self.DEFAULTS = {}
+        try:
+            self.VECTORIZED = bool(get("VECTORIZED"))
+        except (KeyError, AttributeError):
+            self.VECTORIZED = True
+        self.parameter_names = tuple(self.PARAMETERS)
+
+
+def param_array(parameters, p=None):
+    """Parameter vector from ``None`` (the defaults), a dict of overrides or an array.
+
+    >>> param_array({"m": 2.0, "k": 800.0}, {"k": 100})
+    array([  2., 100.])
+    """
+    names = tuple(parameters)
+    if p is None:
+        return np.array([float(parameters[name]) for name in names], dtype=float)
+    if isinstance(p, dict):
+        unknown = sorted(set(p) - set(names))
+        if unknown:
+            raise KeyError(f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
+                           f"the parameters are: {', '.join(names)}")
+        return np.array([float(p.get(name, parameters[name])) for name in names], dtype=float)
+    array = np.asarray(p, dtype=float)
+    if array.shape != (len(names),):
+        raise ValueError(f"p must have {len(names)} entries ({', '.join(names)}), got shape {array.shape}")
+    return array
+
+
+def _sign(values):
+    modes = np.sign(np.asarray(values, dtype=float))
+    modes[np.isnan(modes)] = 0.0
+    return modes
+
+
+def modes_at(model, t, x, p, guess=None):
+    """The mode vector of the unfrozen law at one point: ``m = sign(g(t, x, m))``.
+
+    Switching functions of nested switches depend on inner modes only, so the
+    fixed point is reached in at most depth + 1 evaluations.
+    """
+    count = len(model.SWITCHES)
+    if count == 0:
+        return np.zeros(0)
+    modes = np.ones(count) if guess is None else np.array(guess, dtype=float)
+    for _ in range(count + 1):
+        new = _sign(model.switches(t, x, p, modes))
+        if np.array_equal(new, modes):
+            break
+        modes = new
+    return modes
+
+
+def _columns_by_mode(model, t, x, p):
+    """Group the columns of a trajectory by their modes: {modes tuple: column indices}."""
+    groups = {}
+    guess = None
+    for j in range(t.size):
+        guess = modes_at(model, t[j], x[:, j], p, guess)
+        groups.setdefault(tuple(guess), []).append(j)
+    return groups
+
+
+def evaluate(model, what, t, x, p=None):
+    """Evaluate ``outputs``/``variables``/``rhs``/``jacobian`` with the unfrozen law.
+
+    ``t`` a number and ``x`` a state vector, or ``t`` of shape (N,) and ``x``
+    of shape (n, N) for ``outputs`` and ``variables``.
+    """
+    model = model if isinstance(model, _Model) else _Model(model)
+    p = param_array(model.PARAMETERS, p)
+    function = {"outputs": model.outputs, "variables": model.variables,
+                "rhs": model.rhs, "jacobian": model.jac, "switches": model.switches}[what]
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 1:
+        modes = modes_at(model, t, x, p)
+        value = function(t, x, p, modes)
+        return np.asarray(value, dtype=float) if what in ("rhs", "jacobian", "switches") else \
+            tuple(float(v) for v in value)
+    t = np.broadcast_to(np.asarray(t, dtype=float), x.shape[1:])
+    names = model.OUTPUT_NAMES if what == "outputs" else model.VARIABLE_NAMES
+    out = np.full((len(names), t.size), np.nan)
+    for modes, columns in _columns_by_mode(model, t, x, p).items():
+        columns = np.asarray(columns)
+        values = function(t[columns], x[:, columns], p, np.array(modes))
+        for i, value in enumerate(values):
+            out[i, columns] = value
+    return tuple(out)
+
+
+# ------------------------------------------------------------------ result
+
+
+class Result:
+    """A simulation: ``t``, dicts ``states``, ``outputs``, ``variables`` of arrays by name.
+
+    ``complete`` is False when the run stopped early; ``message`` says why and
+    ``failure`` (a dict: time, variable, law, cause, hint) gives the details.
+    ``events`` lists ``(time, label)`` of every mode change, known-time break
+    and chattering episode; ``stats`` the solver's counts.
+    """
+
+    def __init__(self, t, states, outputs, variables, events, complete, message, failure, stats,
+                 parameters):
+        self.t = t
+        self.states = states
+        self.outputs = outputs
+        self.variables = variables
+        self.events = events
+        self.complete = complete
+        self.message = message
+        self.failure = failure
+        self.stats = stats
+        self.parameters = parameters
+
+    def __repr__(self):
+        end = f"{self.t[-1]:.6g}" if self.t.size else "-"
+        return (f"<Result {'complete' if self.complete else 'INCOMPLETE'}: {self.t.size} points to t={end}, "
+                f"{len(self.events)} events>")
+
+
+def write_csv(result, path, variables=False):
+    """Write ``t``, the outputs, the states (and with ``variables`` every variable) as csv.
+
+    ``path`` may be a file name or an open text file; each value is the shortest text that
+    reads back to the same float.
+    """
+    names = ["t"] + list(result.outputs) + list(result.states)
+    columns = [result.t] + list(result.outputs.values()) + list(result.states.values())
+    if variables:
+        extra = [name for name in result.variables if name not in names]
+        names += extra
+        columns += [result.variables[name] for name in extra]
+    data = np.column_stack(columns).tolist() if columns[0].size else []
+    close = False
+    if isinstance(path, (str, os.PathLike)):
+        handle, close = open(path, "w", encoding="utf-8", newline=""), True
+    else:
+        handle = path
+    try:
+        handle.write(",".join(names) + "\n")
+        for row in data:
+            handle.write(",".join(map(repr, row)) + "\n")
+    finally:
+        if close:
+            handle.close()
+
+
+# --------------------------------------------------------------- integrator
+
+_METHODS = {"rk45": "RK45", "rk23": "RK23", "dop853": "DOP853", "radau": "Radau", "bdf": "BDF",
+            "lsoda": "LSODA"}
+_IMPLICIT = ("Radau", "BDF", "LSODA")
+_EPS = np.finfo(float).eps
+
+
+def solver_class(method):
+    """The scipy ``OdeSolver`` class for a ``solve_ivp`` method name (any case)."""
+    if isinstance(method, type):
+        return method
+    name = _METHODS.get(str(method).lower())
+    if name is None:
+        raise ValueError(f"unknown solver {method!r}; use one of {', '.join(_METHODS.values())}")
+    return getattr(_integrate, name)
+
+
+class _Stop(Exception):
+    """Ends the run early; carries the failure dict."""
+
+    def __init__(self, failure):
+        super().__init__(failure["message"])
+        self.failure = failure
+
+
+class _Run:
+    """One simulation run of a model: segments between events, recorded points."""
+
+    def __init__(self, model, p, t_start, t_end, t_eval, method, rtol, atol, max_step, first_step,
+                 progress, max_events, max_event_rate):
+        self.model = model
+        self.p = p
+        self.t_start, self.t_end = float(t_start), float(t_end)
+        self.span = self.t_end - self.t_start
+        self.t_eval = None if t_eval is None else np.asarray(t_eval, dtype=float)
+        self.eval_index = 0
+        self.method = solver_class(method)
+        self.options = {"rtol": rtol, "atol": atol, "max_step": max_step}
+        if first_step is not None:
+            self.options["first_step"] = first_step
+        self.implicit = self.method.__name__ in _IMPLICIT
+        self.progress = progress
+        self.max_events = max_events
+        self.max_event_rate = max_event_rate
+        self.switch_count = len(model.SWITCHES)
+        self.event_switches = np.asarray(model.EVENT_SWITCHES, dtype=int)
+        self.probe = 1e-8 * max(self.span, abs(self.t_end), 1e-300)
+        self.tau_min = 1e-6 * self.span
+        self.tau = self.tau_min
+        self.chattering_since = None
+        self.recent_events = []
+        # recorded points: lists of time arrays, state blocks (n, k) and mode ids
+        self.blocks_t, self.blocks_x, self.blocks_mode = [], [], []
+        self.mode_table = {}
+        self.events = []
+        self.stats = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "segments": 0, "events": 0,
+                      "chattering_intervals": 0}
+        self.bad = None
+
+    # -- evaluation helpers
+
+    def rhs(self, t, x, modes):
+        self.stats["nfev"] += 1
+        value = np.asarray(self.model.rhs(t, x, self.p, modes), dtype=float)
+        if not np.isfinite(np.sum(value)) and (self.bad is None or np.isfinite(np.sum(x))):
+            # the latest non-finite evaluation at a finite state: where a law left its domain
+            self.bad = (t, np.array(x, dtype=float), np.array(modes))
+        return value
+
+    def jac(self, t, x, modes):
+        return np.asarray(self.model.jac(t, x, self.p, modes), dtype=float)
+
+    def modes_at(self, t, x, guess=None):
+        return modes_at(self.model, t, x, self.p, guess)
+
+    def mode_id(self, modes):
+        key = tuple(modes)
+        return self.mode_table.setdefault(key, len(self.mode_table))
+
+    # -- recording
+
+    def record(self, t_old, t_new, y_new, dense, mode):
+        """Record the points of (t_old, t_new]: solver steps, or the t_eval points there."""
+        if self.t_eval is None:
+            self.blocks_t.append(np.array([t_new]))
+            self.blocks_x.append(np.array(y_new, dtype=float).reshape(-1, 1))
+            self.blocks_mode.append(mode)
+            return
+        start = self.eval_index
+        stop = np.searchsorted(self.t_eval, t_new, side="right")
+        if stop > start:
+            times = self.t_eval[start:stop]
+            if dense is None:
+                dense = self.dense_source()
+            states = np.column_stack([y_new if ti == t_new else dense(ti) for ti in times])
+            self.blocks_t.append(times)
+            self.blocks_x.append(states)
+            self.blocks_mode.append(mode)
+            self.eval_index = stop
+
+    def record_start(self, t, y, mode):
+        if self.t_eval is None:
+            self.record(t, t, y, None, mode)
+        elif self.eval_index < self.t_eval.size and self.t_eval[self.eval_index] <= t:
+            stop = np.searchsorted(self.t_eval, t, side="right")
+            self.blocks_t.append(self.t_eval[self.eval_index:stop])
+            self.blocks_x.append(np.repeat(np.asarray(y, dtype=float).reshape(-1, 1), stop - self.eval_index, 1))
+            self.blocks_mode.append(mode)
+            self.eval_index = stop
+
+    # -- failures
+
+    def diagnose(self, t, x, modes, context):
+        """Name the first non-finite quantity at (t, x): a state, a variable in causal order, a derivative."""
+        model = self.model
+        variable, law, value = None, None, None
+        for name, xi in zip(model.STATE_NAMES, x):
+            if not np.isfinite(xi):
+                variable, value = name, xi
+                break
+        if variable is None:
+            with np.errstate(all="ignore"):
+                values = model.variables(t, x, self.p, modes)
+            for name, text, vi in zip(model.VARIABLE_NAMES, model.VARIABLE_LAWS, values):
+                if not np.all(np.isfinite(vi)):
+                    variable, law, value = name, text, float(np.asarray(vi).ravel()[0])
+                    break
+        if variable is None:
+            with np.errstate(all="ignore"):
+                derivatives = np.asarray(model.rhs(t, x, self.p, modes), dtype=float)
+            for name, di in zip(model.STATE_NAMES, derivatives):
+                if not np.isfinite(di):
+                    variable, value = f"der({name})", di
+                    break
+        what = "nan" if value is None or np.isnan(value) else "inf"
+        where = f"'{variable}' became {what} at t={t:.6g}" if variable else f"a {what} appeared at t={t:.6g}"
+        if law:
+            where += f" (its law: {variable} = {law})"
+        if what == "nan":
+            cause = ("a law was evaluated outside its domain: the square root or logarithm of a negative "
+                     "number, 0/0 or inf - inf")
+        else:
+            cause = "a division by zero or an overflow (a quantity growing without bound)"
+        states = ", ".join(f"{name}={float(xi):.6g}" for name, xi in zip(model.STATE_NAMES, x))
+        hint = (f"check the law of '{variable or '?'}' for the states at t={t:.6g} ({states}); a state that "
+                "left its physical range (a negative pressure, a closed gap) is the usual reason")
+        return {"message": f"{context}{where}", "time": float(t), "variable": variable,
+                "law": law, "cause": cause, "hint": hint, "kind": "nonfinite"}
+
+    def solver_failure(self, t, message):
+        failure = None
+        if self.bad is not None and self.bad[0] >= t - 1e-6 * max(self.span, 1e-300):
+            failure = self.diagnose(*self.bad, context=f"the solver could not go past t={t:.6g}: ")
+            failure["time"] = float(t)
+            failure["solver_message"] = message
+            return failure
+        method = self.method.__name__
+        hint = ("try a stiff solver (solver = \"Radau\" or \"BDF\" in the experiment)" if not self.implicit
+                else "check the laws near that time for a singularity or a switch bondc cannot see "
+                     "(a discontinuity hidden in a smooth-looking function), or loosen rtol/atol")
+        return {"message": f"the solver ({method}) failed at t={t:.6g}: {message}", "time": float(t),
+                "variable": None, "law": None,
+                "cause": "the step size became too small: the model is stiffer than the method can "
+                         "handle, a variable grows without bound, or the right-hand side is discontinuous",
+                "hint": hint, "kind": "solver", "solver_message": message}
+
+    # -- the run
+
+    def breaks(self):
+        """Known switching times inside (t_start, t_end) with their labels, merged when equal."""
+        found = []
+        csv = [(float(tb), label) for tb, label, kind in self.model.time_breaks(self.p) if kind == "csv"]
+        other = [(float(tb), label) for tb, label, kind in self.model.time_breaks(self.p) if kind != "csv"]
+        inside = lambda items: [(tb, label) for tb, label in items if self.t_start < tb < self.t_end]
+        csv = inside(csv)
+        if len(csv) > 200:       # a dense measured signal: its corners are left to the error control
+            csv = []
+        found = sorted(inside(other) + csv)
+        merged = []
+        tolerance = 4 * _EPS * max(abs(self.t_end), abs(self.t_start), 1.0)
+        for tb, label in found:
+            if merged and tb - merged[-1][0] <= tolerance:
+                if label not in merged[-1][1]:
+                    merged[-1][1].append(label)
+            else:
+                merged.append((tb, [label]))
+        return [(tb, "; ".join(labels)) for tb, labels in merged]
+
+    def restart_modes(self, t, y, guess):
+        """Modes just after (t, y), and the switches that chatter there.
+
+        The modes are probed a step ``h`` ahead along the law they select and
+        re-chosen until they agree with it. When they cycle instead (each law
+        pushes the state back across the surface of the other), the switches
+        that flip within the cycle are returned: a sliding mode.
+        """
+        if self.switch_count == 0:
+            return np.zeros(0), []
+        modes = self.modes_at(t, y, guess)
+        seen = [tuple(modes)]
+        for _ in range(8):
+            with np.errstate(all="ignore"):
+                slope = np.asarray(self.model.rhs(t, y, self.p, modes), dtype=float)
+                ahead = self.modes_at(t + self.probe, y + self.probe * slope, modes)
+            if np.array_equal(ahead, modes) or not np.all(np.isfinite(slope)):
+                return modes, []
+            if tuple(ahead) in seen:
+                cycle = np.array(seen[seen.index(tuple(ahead)):])
+                flipping = [k for k in range(self.switch_count) if np.any(cycle[:, k] != cycle[0, k])]
+                return ahead, flipping or list(range(self.switch_count))
+            seen.append(tuple(ahead))
+            modes = ahead
+        return modes, [k for k in range(self.switch_count) if len({row[k] for row in seen}) > 1]
+
+    def note_event(self, t, label):
+        self.events.append((float(t), label))
+
+    def run(self):
+        model = self.model
+        started = _time_module.perf_counter()
+        t, y = self.t_start, np.asarray(model.x0(self.p), dtype=float).reshape(-1)
+        complete, failure = True, None
+        breaks = self.breaks()
+        break_index = 0
+        modes, chattering = self.restart_modes(t, y, None)
+        self.record_start(t, y, self.mode_id(modes))
+        zero_progress = 0
+        try:
+            if not np.all(np.isfinite(y)):
+                raise _Stop(self.diagnose(t, y, modes, "the initial state is not finite: "))
+            with np.errstate(all="ignore"):
+                if not np.all(np.isfinite(self.rhs(t, y, modes))):
+                    raise _Stop(self.diagnose(t, y, modes, "at the start, "))
+            with np.errstate(all="ignore"):
+                while t < self.t_end:
+                    while break_index < len(breaks) and breaks[break_index][0] <= t:
+                        break_index += 1
+                    t_stop = breaks[break_index][0] if break_index < len(breaks) else self.t_end
+                    sliding = None
+                    if len(chattering) == 1 and zero_progress <= 8:
+                        sliding = chattering[0]
+                        t_new, y_new = self.sliding_segment(t, y, modes, sliding, t_stop)
+                    elif chattering or zero_progress > 8 or self.too_many_events(t):
+                        t_new, y_new = self.unfrozen_interval(t, y, modes, min(t_stop, t + self.tau))
+                        zero_progress = 0
+                    else:
+                        t_new, y_new, hit = self.segment(t, y, modes, t_stop)
+                        if hit is None and t_new - t > self.tau:
+                            self.tau, self.chattering_since = self.tau_min, None
+                    if sliding is None:
+                        progress_made = t_new - t > 64 * _EPS * max(abs(t), 1.0)
+                        zero_progress = 0 if progress_made else zero_progress + 1
+                    old_modes = modes
+                    t, y = t_new, y_new
+                    at_break = break_index < len(breaks) and t >= breaks[break_index][0]
+                    if t >= self.t_end:
+                        if at_break:
+                            self.note_event(breaks[break_index][0], breaks[break_index][1])
+                        break
+                    modes, chattering = self.restart_modes(t, y, old_modes)
+                    changed = [k for k in range(self.switch_count) if modes[k] != old_modes[k]
+                               and k not in chattering]
+                    if at_break:
+                        labels = {model.SWITCHES[k] for k in changed}
+                        if breaks[break_index][1] not in labels:
+                            self.note_event(breaks[break_index][0], breaks[break_index][1])
+                    if self.chattering_since is None and sliding is None:
+                        for k in changed:
+                            self.note_event(t, f"{model.SWITCHES[k]} -> {int(modes[k]):+d}")
+                    if changed:
+                        self.stats["events"] += 1
+                        self.recent_events.append(t)
+                    if self.stats["events"] > self.max_events:
+                        raise _Stop({"message": f"more than {self.max_events} events by t={t:.6g}",
+                                     "time": float(t), "variable": None, "law": None, "kind": "events",
+                                     "cause": "a switch keeps changing mode (chattering) faster than the "
+                                              "chattering guard can absorb",
+                                     "hint": "smooth the law near its switching surface (a small linear band "
+                                             "around zero velocity, for instance) or raise max_events"})
+        except _Stop as stop:
+            complete, failure = False, stop.failure
+        except KeyboardInterrupt:
+            complete = False
+            failure = {"message": f"interrupted at t={t:.6g}", "time": float(t), "variable": None,
+                       "law": None, "cause": "interrupted by the user", "hint": "", "kind": "interrupted"}
+        self.stats["wall_time"] = _time_module.perf_counter() - started
+        return self.result(complete, failure)
+
+    def too_many_events(self, t):
+        window = self.span / 1000.0
+        self.recent_events = [te for te in self.recent_events if te > t - window]
+        return len(self.recent_events) > self.max_event_rate
+
+    def dense_source(self):
+        return self._dense
+
+    def new_solver(self, fun, jac, t, y, t_stop):
+        options = dict(self.options)
+        if self.implicit:
+            options["jac"] = jac
+        if "first_step" in options and options["first_step"] > t_stop - t:
+            del options["first_step"]
+        return self.method(fun, t, y, t_stop, **options)
+
+    def segment(self, t, y, modes, t_stop):
+        """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
+        self.stats["segments"] += 1
+        mode = self.mode_id(modes)
+        modes = np.array(modes)
+        fun = lambda tt, yy: self.rhs(tt, yy, modes)
+        jac = lambda tt, yy: self.jac(tt, yy, modes)
+        solver = self.new_solver(fun, jac, t, y, t_stop)
+        index = self.event_switches
+        signs = modes[index] if index.size else np.zeros(0)
+        values_old = self.switches_at(t, y, modes, index)
+        while True:
+            message = solver.step()
+            self.stats["steps"] += 1
+            if solver.status == "failed":
+                self.collect(solver)
+                raise _Stop(self.solver_failure(solver.t, message))
+            t_new, y_new = solver.t, solver.y
+            derivative = getattr(solver, "f", None)
+            if derivative is None or self.method.__name__ == "LSODA":
+                with np.errstate(all="ignore"):
+                    derivative = self.rhs(t_new, y_new, modes)
+            if not (np.all(np.isfinite(y_new)) and np.all(np.isfinite(derivative))):
+                self.collect(solver)
+                self.stop_nonfinite(solver, lambda tt, yy: self.rhs(tt, yy, modes), lambda tt, yy: modes, mode)
+            self._dense = None
+            if index.size:
+                values_new = self.switches_at(t_new, y_new, modes, index)
+                hit = self.crossing(solver, modes, index, signs, values_old, values_new)
+                if hit is not None:
+                    t_event, k = hit
+                    y_event = self._dense(t_event)
+                    self.record(solver.t_old, t_event, y_event, self._dense, mode)
+                    self.collect(solver)
+                    return t_event, y_event, k
+                values_old = values_new
+            if self.t_eval is not None and self._dense is None:
+                self._dense = solver.dense_output()
+            self.record(solver.t_old, t_new, y_new, self._dense, mode)
+            if self.progress is not None:
+                self.progress(t_new)
+            if solver.status == "finished":
+                self.collect(solver)
+                return t_new, np.array(y_new), None
+
+    def stop_nonfinite(self, solver, derivative, modes_of, mode):
+        """The last step produced a nan or inf: bisect its dense output for the first non-finite point,
+        record the trajectory up to just before it and stop with a diagnosis there."""
+        dense = solver.dense_output()
+        lo, hi = solver.t_old, solver.t
+
+        def finite(tt):
+            yy = dense(tt)
+            return bool(np.all(np.isfinite(yy)) and np.all(np.isfinite(derivative(tt, yy))))
+
+        for _ in range(80):
+            if hi - lo <= 4 * _EPS * max(abs(hi), 1.0):
+                break
+            middle = 0.5 * (lo + hi)
+            if finite(middle):
+                lo = middle
+            else:
+                hi = middle
+        if lo > solver.t_old:
+            y_lo = dense(lo)
+            self.record(solver.t_old, lo, y_lo, dense,
+                        mode if mode is not None else self.mode_id(modes_of(lo, y_lo)))
+        y_hi = dense(hi)
+        failure = self.diagnose(hi, y_hi, modes_of(hi, y_hi), "")
+        if failure["variable"] in self.model.STATE_NAMES and self.bad is not None:
+            # the solver's own state went bad: name the law that produced the nan it saw
+            cause = self.diagnose(*self.bad, context="")
+            cause["message"] = (f"the solver's state became non-finite at t={hi:.6g} after the right-hand side "
+                                f"was evaluated at a trial point where {cause['message']}")
+            cause["time"] = float(hi)
+            failure = cause
+        raise _Stop(failure)
+
+    def switches_at(self, t, y, modes, index):
+        with np.errstate(all="ignore"):
+            return np.asarray(self.model.switches(t, y, self.p, modes), dtype=float)[index]
+
+    def crossing(self, solver, modes, index, signs, old, new):
+        """The earliest switch crossing in the last step: (time, switch index), or None."""
+        t_old, t_new = solver.t_old, solver.t
+        found = []
+        for j, k in enumerate(index):
+            sign = signs[j]
+            if sign != 0:
+                before, after = sign * old[j], sign * new[j]
+                if not (after <= 0 and before >= 0 and (after < 0 or before > 0)):
+                    continue
+                if before == 0:
+                    found.append((t_old, k))
+                    continue
+                if after == 0:
+                    found.append((t_new, k))
+                    continue
+                level = 0.0
+            else:
+                if not (new[j] != 0 and np.isfinite(new[j])):
+                    continue
+                sign, level = -1.0, 1e-6 * abs(new[j])   # leaving the surface: |g| reaches a small level
+            if self._dense is None:
+                self._dense = solver.dense_output()
+            dense = self._dense
+            if level == 0.0:
+                function = lambda tt, k=k, s=sign: s * self.model.switches(tt, dense(tt), self.p, modes)[k]
+            else:
+                function = lambda tt, k=k, lv=level: lv - abs(self.model.switches(tt, dense(tt), self.p, modes)[k])
+            with np.errstate(all="ignore"):
+                try:
+                    root = _optimize.brentq(function, t_old, t_new, xtol=4 * _EPS, rtol=4 * _EPS)
+                except ValueError:      # no sign change on the interpolant: take the step end
+                    root = t_new
+            found.append((root, k))
+        if not found:
+            return None
+        return min(found)
+
+    def collect(self, solver):
+        self.stats["njev"] += int(getattr(solver, "njev", 0) or 0)
+        self.stats["nlu"] += int(getattr(solver, "nlu", 0) or 0)
+
+    def switch_rate(self, t, y, slope, modes, k):
+        """d g_k / dt along ``slope`` with the modes frozen (central difference over the probe step)."""
+        h = self.probe
+        ahead = self.model.switches(t + h, y + h * slope, self.p, modes)[k]
+        behind = self.model.switches(t - h, y - h * slope, self.p, modes)[k]
+        return (ahead - behind) / (2 * h)
+
+    def sliding_segment(self, t, y, modes, k, t_stop):
+        """Integrate a sliding mode on switch ``k`` (Filippov): the convex combination
+        ``a*f(m_k=+1) + (1-a)*f(m_k=-1)`` that keeps ``g_k`` constant, until one side stops
+        pushing towards the surface, another switch crosses, or ``t_stop``."""
+        self.stats["segments"] += 1
+        self.stats["sliding_segments"] = self.stats.get("sliding_segments", 0) + 1
+        plus = np.array(modes, dtype=float)
+        plus[k] = 1.0
+        minus = plus.copy()
+        minus[k] = -1.0
+        id_plus, id_minus = self.mode_id(plus), self.mode_id(minus)
+        label = self.model.SWITCHES[k]
+        self.note_event(t, f"sliding on {label}")
+        others = np.array([j for j in self.event_switches if j != k and plus[j] != 0], dtype=int)
+
+        def parts(tt, yy):
+            f_plus, f_minus = self.rhs(tt, yy, plus), self.rhs(tt, yy, minus)
+            return (f_plus, f_minus, self.switch_rate(tt, yy, f_plus, plus, k),
+                    self.switch_rate(tt, yy, f_minus, minus, k))
+
+        def weight(rate_plus, rate_minus):
+            span = rate_minus - rate_plus
+            if not (span > 0 and np.isfinite(span)):
+                return 0.5
+            return min(max(rate_minus / span, 0.0), 1.0)
+
+        def fun(tt, yy):
+            f_plus, f_minus, rate_plus, rate_minus = parts(tt, yy)
+            a = weight(rate_plus, rate_minus)
+            return a * f_plus + (1 - a) * f_minus
+
+        def jac(tt, yy):
+            _, _, rate_plus, rate_minus = parts(tt, yy)
+            a = weight(rate_plus, rate_minus)
+            return a * self.jac(tt, yy, plus) + (1 - a) * self.jac(tt, yy, minus)
+
+        def exits(tt, yy):      # every entry stays positive while sliding lasts
+            _, _, rate_plus, rate_minus = parts(tt, yy)
+            values = [rate_minus, -rate_plus]
+            if others.size:
+                values += list(plus[others] * self.model.switches(tt, yy, self.p, plus)[others])
+            return np.array(values, dtype=float)
+
+        def alphas(times, states):
+            return np.array([weight(*parts(ti, states[:, i])[2:]) for i, ti in enumerate(times)])
+
+        solver = self.new_solver(fun, jac, t, y, t_stop)
+        old = exits(t, y)
+        while True:
+            message = solver.step()
+            self.stats["steps"] += 1
+            if solver.status == "failed":
+                self.collect(solver)
+                raise _Stop(self.solver_failure(solver.t, message))
+            t_new, y_new = solver.t, solver.y
+            if not (np.all(np.isfinite(y_new)) and np.all(np.isfinite(fun(t_new, y_new)))):
+                self.collect(solver)
+                self.stop_nonfinite(solver, fun, lambda tt, yy: plus, id_plus)
+            new = exits(t_new, y_new)
+            dense = solver.dense_output()
+            hit = None
+            fired = [j for j in range(new.size) if old[j] > 0 >= new[j] or (old[j] >= 0 > new[j])]
+            for j in fired:
+                if old[j] <= 0:
+                    root = t_old = solver.t_old
+                else:
+                    try:
+                        root = _optimize.brentq(lambda tt: exits(tt, dense(tt))[j], solver.t_old, t_new,
+                                                xtol=4 * _EPS, rtol=4 * _EPS)
+                    except ValueError:
+                        root = t_new
+                hit = root if hit is None else min(hit, root)
+            end = t_new if hit is None else hit
+            y_end = y_new if hit is None else dense(hit)
+            self.record_sliding(solver.t_old, end, y_end, dense, id_plus, id_minus, alphas)
+            if self.progress is not None:
+                self.progress(end)
+            if hit is not None or solver.status == "finished":
+                self.collect(solver)
+                if hit is not None:
+                    self.note_event(end, f"sliding on {label} ends")
+                return end, np.array(y_end)
+            old = new
+
+    def record_sliding(self, t_old, t_new, y_new, dense, id_plus, id_minus, alphas):
+        if self.t_eval is None:
+            times = np.array([t_new])
+            states = np.asarray(y_new, dtype=float).reshape(-1, 1)
+        else:
+            stop = np.searchsorted(self.t_eval, t_new, side="right")
+            times = self.t_eval[self.eval_index:stop]
+            self.eval_index = stop
+            if times.size == 0:
+                return
+            states = np.column_stack([y_new if ti == t_new else dense(ti) for ti in times])
+        self.blocks_t.append(times)
+        self.blocks_x.append(states)
+        self.blocks_mode.append(("slide", id_plus, id_minus, alphas(times, states)))
+
+    def unfrozen_interval(self, t, y, modes, t_stop, method=None):
+        """Integrate the unfrozen law (modes recomputed at every evaluation) over a short interval.
+
+        If the solver gives up on the discontinuous right-hand side, the
+        interval is retried once with the explicit RK23 method.
+        """
+        self.stats["chattering_intervals"] += 1
+        if self.chattering_since is None:
+            self.chattering_since = t
+            labels = [self.model.SWITCHES[k] for k in range(self.switch_count)] if self.switch_count else []
+            self.note_event(t, "chattering: integrating the unfrozen law (" + "; ".join(labels[:3])
+                            + ("; ..." if len(labels) > 3 else "") + ")")
+        else:
+            self.tau = min(2 * self.tau, self.span / 100.0)
+        state = {"modes": np.array(modes)}
+
+        def current(tt, yy):
+            state["modes"] = self.modes_at(tt, yy, state["modes"])
+            return state["modes"]
+
+        fun = lambda tt, yy: self.rhs(tt, yy, current(tt, yy))
+        jac = lambda tt, yy: self.jac(tt, yy, current(tt, yy))
+        if method is None:
+            solver = self.new_solver(fun, jac, t, y, t_stop)
+        else:
+            options = {key: value for key, value in self.options.items() if key != "first_step"}
+            solver = solver_class(method)(fun, t, y, t_stop, **options)
+        blocks = len(self.blocks_t), self.eval_index
+        while True:
+            message = solver.step()
+            self.stats["steps"] += 1
+            if solver.status == "failed":
+                self.collect(solver)
+                if method is None:      # forget this attempt's points and retry explicitly
+                    del self.blocks_t[blocks[0]:], self.blocks_x[blocks[0]:], self.blocks_mode[blocks[0]:]
+                    self.eval_index = blocks[1]
+                    return self.unfrozen_interval(t, y, modes, t_stop, method="RK23")
+                raise _Stop(self.solver_failure(solver.t, message))
+            t_new, y_new = solver.t, solver.y
+            derivative = self.rhs(t_new, y_new, current(t_new, y_new))
+            if not (np.all(np.isfinite(y_new)) and np.all(np.isfinite(derivative))):
+                self.collect(solver)
+                self.stop_nonfinite(solver, lambda tt, yy: self.rhs(tt, yy, current(tt, yy)), current, None)
+            if self.t_eval is None:
+                self.record(solver.t_old, t_new, y_new, None, self.mode_id(state["modes"]))
+            else:
+                # each point gets the modes of its own state
+                dense = solver.dense_output()
+                stop = np.searchsorted(self.t_eval, t_new, side="right")
+                for ti in self.t_eval[self.eval_index:stop]:
+                    yi = y_new if ti == t_new else dense(ti)
+                    self.blocks_t.append(np.array([ti]))
+                    self.blocks_x.append(np.asarray(yi, dtype=float).reshape(-1, 1))
+                    self.blocks_mode.append(self.mode_id(self.modes_at(ti, yi, state["modes"])))
+                self.eval_index = stop
+            if self.progress is not None:
+                self.progress(t_new)
+            if solver.status == "finished":
+                self.collect(solver)
+                return t_new, np.array(y_new)
+
+    def evaluate_columns(self, function, t, x, modes, rows):
+        """``function(t, x, p, modes)`` over columns: at once when the model is vectorized, else one by one."""
+        out = np.full((rows, t.size), np.nan)
+        if getattr(self.model, "VECTORIZED", True):
+            for row, value in enumerate(function(t, x, self.p, modes)):
+                out[row] = value
+        else:
+            for j in range(t.size):
+                out[:, j] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
+        return out
+
+    def result(self, complete, failure):
+        model = self.model
+        n = len(model.STATE_NAMES)
+        n_out, n_var = len(model.OUTPUT_NAMES), len(model.VARIABLE_NAMES)
+        modes_by_id = {index: np.array(key) for key, index in self.mode_table.items()}
+        if self.blocks_t:
+            t = np.concatenate(self.blocks_t)
+            x = np.concatenate(self.blocks_x, axis=1)
+        else:
+            t, x = np.zeros(0), np.zeros((n, 0))
+        outputs = np.full((n_out, t.size), np.nan)
+        variables = np.full((n_var, t.size), np.nan)
+        frozen_points = np.full(t.size, -1)
+        start = 0
+        with np.errstate(all="ignore"):
+            for times, mode in zip(self.blocks_t, self.blocks_mode):
+                columns = slice(start, start + times.size)
+                start += times.size
+                if isinstance(mode, tuple):     # a sliding mode: the Filippov combination
+                    _, id_plus, id_minus, alpha = mode
+                    xx = x[:, columns]
+                    for target, function, rows in ((outputs, model.outputs, n_out),
+                                                    (variables, model.variables, n_var)):
+                        upper = self.evaluate_columns(function, times, xx, modes_by_id[id_plus], rows)
+                        lower = self.evaluate_columns(function, times, xx, modes_by_id[id_minus], rows)
+                        target[:, columns] = alpha * upper + (1 - alpha) * lower
+                else:
+                    frozen_points[columns] = mode
+            for mode in np.unique(frozen_points[frozen_points >= 0]):
+                columns = np.flatnonzero(frozen_points == mode)
+                tt, xx, mm = t[columns], x[:, columns], modes_by_id[int(mode)]
+                outputs[:, columns] = self.evaluate_columns(model.outputs, tt, xx, mm, n_out)
+                variables[:, columns] = self.evaluate_columns(model.variables, tt, xx, mm, n_var)
+        reached = float(t[-1]) if t.size else self.t_start
+        if complete:
+            message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
+        else:
+            message = failure["message"]
+        self.stats["points"] = int(t.size)
+        return Result(
+            t=t,
+            states={name: x[i] for i, name in enumerate(model.STATE_NAMES)},
+            outputs={name: outputs[i] for i, name in enumerate(model.OUTPUT_NAMES)},
+            variables={name: variables[i] for i, name in enumerate(model.VARIABLE_NAMES)},
+            events=list(self.events),
+            complete=complete,
+            message=message,
+            failure=failure,
+            stats=dict(self.stats),
+            parameters={name: float(v) for name, v in zip(model.parameter_names, self.p)},
+        )
+
+
+def output_grid(t_start, t_end, dt):
+    """``t_start, t_start + dt, ...`` up to ``t_end`` (included, even when not a multiple of dt)."""
+    count = int(math.floor((t_end - t_start) / dt * (1 + 1e-12) + 1e-9))
+    grid = t_start + dt * np.arange(count + 1)
+    if grid[-1] < t_end - 1e-9 * dt:
+        grid = np.append(grid, t_end)
+    grid[-1] = min(grid[-1], t_end)
+    return grid
+
+
+def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=None, atol=None,
+                   max_step=None, first_step=None, dt=None, t_start=0.0, progress=None,
+                   max_events=100000, max_event_rate=100):
+    """Simulate a generated model from ``t_start`` to ``t_end``; see the module docstring.
+
+    ``p``: None, a dict of parameter overrides or a full parameter array.
+    ``t_eval``: the times to report; ``dt``: report on a regular grid instead;
+    neither: every solver step (and every event). Missing solver settings come
+    from the model's ``DEFAULTS`` (its experiment), then Radau, rtol 1e-6,
+    atol 1e-9. ``progress(t)`` is called after every step.
+    """
+    model = model if isinstance(model, _Model) else _Model(model)
+    defaults = model.DEFAULTS
+    t_end = defaults.get("t_end") if t_end is None else t_end
+    if t_end is None:
+        raise ValueError("t_end is needed (the experiment does not set it)")
+    t_end = float(t_end)
+    if not t_end > t_start:
+        raise ValueError(f"t_end ({t_end}) must be after the start time ({t_start})")
+    dt = defaults.get("dt") if (dt is None and t_eval is None) else dt
+    if t_eval is None and dt is not None:
+        t_eval = output_grid(t_start, t_end, float(dt))
+    if t_eval is not None:
+        t_eval = np.asarray(t_eval, dtype=float)
+        if np.any(np.diff(t_eval) < 0):
+            raise ValueError("t_eval must be increasing")
+        t_eval = t_eval[(t_eval >= t_start) & (t_eval <= t_end)]
+    method = method or defaults.get("method") or "Radau"
+    rtol = float(rtol if rtol is not None else defaults.get("rtol") or 1e-6)
+    atol = float(atol if atol is not None else defaults.get("atol") or 1e-9)
+    max_step = float(max_step if max_step is not None else defaults.get("max_step") or np.inf)
+    run = _Run(model, param_array(model.PARAMETERS, p), t_start, t_end, t_eval, method, rtol, atol,
+               max_step, first_step, progress, max_events, max_event_rate)
+    return run.run()

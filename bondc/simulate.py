@@ -1,0 +1,475 @@
+"""Simulation stage: :class:`~bondc.statespace.StateSpace` (+ experiment) -> :class:`SimResult`.
+
+:func:`simulate` generates the model's module with :func:`bondc.codegen.emit`,
+executes it in-process (the very code ``bondc compile`` writes, runtime
+included) and runs :func:`bondc.runtime.simulate_model`: a stiff solver by
+default (Radau) with the analytic Jacobian, every discontinuity located as an
+event or a known time (see :mod:`bondc.runtime`), every state and derivative
+checked for nan/inf.
+
+A run that fails (solver failure, a nan or inf, too many events) still
+returns what it computed: ``complete`` is False, ``message`` says what
+happened and ``diagnostics`` holds a :class:`~bondc.errors.Diagnostic`
+pointing, when it can, at the law of the variable that went wrong.
+:meth:`SimResult.error` turns that into a :class:`~bondc.errors.SimulationError`.
+
+Files: :func:`write_csv` writes the columns ``t``, every output (SI), every
+state by qualified name and, with ``all_bonds``, every bond's effort and flow
+(``b3.e``, ``b3.f`` or the bond's label); values are the shortest text that
+reads back to the same float. An incomplete run's csv is written the same way
+(no comment line, so every csv reader reads it); the command line says that it
+is incomplete and exits with status 1. :func:`write_npz` writes the same
+arrays plus ``complete``, ``message``, events and parameters. Both write a
+temporary file in the target's directory and rename it over the target.
+
+:func:`run` is the whole ``bondc simulate`` command without argument parsing.
+
+>>> from pathlib import Path
+>>> result = run(Path(__file__).parent.parent / "tests/fixtures/sim/rc.bg", dt=0.5e-3)
+>>> result.complete, round(float(result.outputs["v"][-1]), 4)
+(True, 9.9326)
+"""
+
+from __future__ import annotations
+
+import difflib
+import io
+import os
+import sys
+import tempfile
+import time
+import weakref
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from bondc.errors import Diagnostic, SimulationError, UsageError
+
+_COMPILED: dict = {}
+
+
+@dataclass
+class SimResult:
+    """The trajectories of one simulation run, arrays by name, SI units.
+
+    ``bonds`` holds every bond's effort and flow (``b3.e``, ``label.f``);
+    ``variables`` every assigned variable (inputs, bond variables, eliminated
+    states); ``events`` is a list of ``(time, label)``; ``stats`` the solver's
+    counts (nfev, njev, nlu, steps, segments, events, wall_time, ...).
+    """
+
+    t: np.ndarray
+    states: dict
+    outputs: dict
+    bonds: dict
+    variables: dict
+    complete: bool
+    message: str
+    events: list
+    stats: dict
+    parameters: dict
+    failure: dict | None = None
+    model: str = ""
+    experiment: str | None = None
+    diagnostics: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def t_reached(self) -> float:
+        return float(self.t[-1]) if self.t.size else float("nan")
+
+    def error(self) -> SimulationError | None:
+        """The failure as a :class:`SimulationError` (carrying this result as ``.result``), or None."""
+        if self.complete:
+            return None
+        error = SimulationError(self.diagnostics or self.message)
+        error.result = self
+        return error
+
+    def summary(self) -> dict:
+        """A JSON-ready summary (what ``bondc simulate --json`` prints)."""
+        return {
+            "model": self.model,
+            "experiment": self.experiment,
+            "complete": self.complete,
+            "message": self.message,
+            "t_reached": self.t_reached,
+            "points": int(self.t.size),
+            "states": list(self.states),
+            "outputs": list(self.outputs),
+            "final": {name: _json_float(values[-1]) for name, values in
+                      {**self.outputs, **self.states}.items()} if self.t.size else {},
+            "events": [{"time": time_, "what": label} for time_, label in self.events],
+            "stats": {k: (round(v, 6) if isinstance(v, float) else v) for k, v in self.stats.items()},
+            "settings": self.settings,
+            "parameters": self.parameters,
+            "failure": self.failure,
+            "diagnostics": [d.to_json() for d in self.diagnostics],
+        }
+
+
+def _json_float(value):
+    value = float(value)
+    return value if np.isfinite(value) else str(value)
+
+
+# ------------------------------------------------------------------ compile
+
+
+def compile_model(ss) -> dict:
+    """The generated module of ``ss``, executed in a fresh namespace (cached per StateSpace object)."""
+    key = id(ss)
+    cached = _COMPILED.get(key)
+    if cached is not None and cached[0]() is ss:
+        return cached[1]
+    from bondc.codegen import emit
+
+    graph = getattr(ss, "graph", None)
+    graph_file = getattr(graph, "file", None)
+    module_dir = Path(graph_file).resolve().parent if graph_file else Path.cwd()
+    source = emit(ss, None, module_dir=module_dir)
+    name = getattr(graph, "name", "model")
+    namespace = {"__name__": f"bondc_generated_{name}", "__file__": str(module_dir / f"__bondc_{name}__.py")}
+    # the text is bondc's own output (printed from sympy), never user text
+    exec(compile(source, f"<bondc generated module of {name}>", "exec"), namespace)
+    namespace["__bondc_source__"] = source
+    try:
+        _COMPILED[key] = (weakref.ref(ss), namespace)
+    except TypeError:       # not weak-referenceable: do not cache
+        pass
+    return namespace
+
+
+# ------------------------------------------------------------------ simulate
+
+
+def _settings(experiment, t_end, dt, method, rtol, atol, max_step) -> dict:
+    extra = dict(getattr(experiment, "settings", {}) or {}) if experiment is not None else {}
+    pick = lambda given, name, default=None: given if given is not None else (
+        getattr(experiment, name, None) if experiment is not None and getattr(experiment, name, None) is not None
+        else default)
+    settings = {
+        "t_end": pick(t_end, "t_end"),
+        "method": pick(method, "solver", "Radau"),
+        "rtol": float(pick(rtol, "rtol", 1e-6)),
+        "atol": float(pick(atol, "atol", 1e-9)),
+        "max_step": pick(max_step, "max_step"),
+        "dt": dt if dt is not None else extra.get("dt"),
+        "first_step": extra.get("first_step"),
+    }
+    return settings
+
+
+def _check_overrides(ss, overrides) -> dict:
+    overrides = dict(overrides or {})
+    names = list(ss.parameters)
+    for name in overrides:
+        if name not in ss.parameters:
+            close = difflib.get_close_matches(name, names, n=1)
+            hint = f"did you mean '{close[0]}'?" if close else "parameters: " + ", ".join(names)
+            raise UsageError(Diagnostic("error", "E802", f"unknown parameter '{name}'", hint=hint))
+    return {name: float(value) for name, value in overrides.items()}
+
+
+def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | None = None,
+             overrides: Mapping[str, float] | None = None, progress: bool = False, t_eval=None,
+             method: str | None = None, rtol: float | None = None, atol: float | None = None,
+             max_step: float | None = None) -> SimResult:
+    """Simulate ``ss`` with the settings of ``experiment`` (an ExperimentDef or None).
+
+    Keyword arguments override the experiment: ``t_end`` [s], ``dt`` (report
+    on a regular grid instead of at every solver step), ``overrides``
+    (parameter name -> SI value), ``t_eval`` (report at these times),
+    ``method``/``rtol``/``atol``/``max_step``. ``progress``: draw a progress
+    bar on stderr when the run takes more than 2 s and stderr is a terminal.
+    Never raises for a failed run: see ``SimResult.complete``.
+    """
+    settings = _settings(experiment, t_end, dt, method, rtol, atol, max_step)
+    if settings["t_end"] is None:
+        raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
+                                    hint="give --t-end, or set t_end in the experiment"))
+    p = _check_overrides(ss, overrides)
+    namespace = compile_model(ss)
+    bar = ProgressBar(0.0, float(settings["t_end"])) if progress else None
+    try:
+        raw = namespace["simulate_model"](
+            namespace["_MODEL"], float(settings["t_end"]), p or None, t_eval, method=settings["method"],
+            rtol=settings["rtol"], atol=settings["atol"], max_step=settings["max_step"],
+            first_step=settings["first_step"], dt=settings["dt"], progress=bar)
+    except ValueError as error:
+        raise UsageError(Diagnostic("error", "E803", f"cannot simulate: {error}")) from None
+    finally:
+        if bar is not None:
+            bar.close()
+    return _result(ss, experiment, namespace, raw, settings)
+
+
+def _result(ss, experiment, namespace, raw, settings) -> SimResult:
+    bond_names = namespace["BOND_VARIABLES"]
+    graph = getattr(ss, "graph", None)
+    result = SimResult(
+        t=raw.t, states=dict(raw.states), outputs=dict(raw.outputs),
+        bonds={name: raw.variables[name] for name in bond_names},
+        variables=dict(raw.variables), complete=raw.complete, message=raw.message, events=list(raw.events),
+        stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
+        model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
+        settings={k: v for k, v in settings.items() if v is not None},
+    )
+    if raw.failure is not None:
+        result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw))
+    for group, values in (("output", result.outputs), ("bond variable", result.bonds)):
+        for name, series in values.items():
+            bad = np.flatnonzero(~np.isfinite(series))
+            if bad.size:
+                alias = _alias(graph, name) if group == "bond variable" else None
+                shown = f"{name} ({alias})" if alias else name
+                result.warnings.append(Diagnostic(
+                    "warning", "W821", f"{group} '{shown}' is not finite from t={result.t[bad[0]]:.6g} s "
+                                       f"({bad.size} of {series.size} points)",
+                    _span_of(graph, name) or _no_span(),
+                    hint="its law is evaluated outside its domain there; the states are unaffected"))
+                break
+    chattering = [label for _, label in raw.events if label.startswith("chattering")]
+    if chattering:
+        result.warnings.append(Diagnostic(
+            "warning", "W820",
+            f"{len(chattering)} chattering episode{'s' if len(chattering) > 1 else ''}: a switch kept changing "
+            "mode and was integrated with its unfrozen law",
+            hint="usually a sliding mode (friction sticking at a velocity threshold); results there are "
+                 "accurate to the solver tolerance, not exact"))
+    return result
+
+
+_CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813"}
+
+
+def _failure_diagnostic(graph, failure, raw) -> Diagnostic:
+    reached = float(raw.t[-1]) if raw.t.size else failure.get("time", 0.0)
+    text = failure["message"]
+    variable = failure.get("variable")
+    alias = _alias(graph, variable)
+    if alias:
+        text = text.replace(f"'{variable}'", f"'{variable}' ({alias})", 1)
+    message = f"simulation stopped: {text}; results up to t={reached:.6g} s were kept (incomplete)"
+    if failure.get("cause"):
+        message += f". Likely cause: {failure['cause']}"
+    from bondc.source import NO_SPAN
+
+    span = _span_of(graph, failure.get("variable")) or NO_SPAN
+    return Diagnostic("error", _CODES.get(failure.get("kind"), "E811"), message, span, hint=failure.get("hint"))
+
+
+def _alias(graph, variable: str | None) -> str | None:
+    """``b3.e`` -> ``damper.e`` (or ``screw.p1.e``): the element variable a bond variable is."""
+    if graph is None or not variable:
+        return None
+    head, _, which = variable.rpartition(".")
+    if which not in ("e", "f"):
+        return None
+    for bond in getattr(graph, "bonds", ()):
+        if bond.name == head:
+            names, computing = [], []
+            for end, port in ((bond.head, bond.head_port), (bond.tail, bond.tail_port)):
+                if end in graph.elements:
+                    names.append(f"{end}.{port}.{which}" if port else f"{end}.{which}")
+                    if which in graph.elements[end].laws:
+                        computing.append(names[-1])
+            return ", ".join(computing or names) or None
+    return None
+
+
+def _span_of(graph, variable: str | None):
+    """The source span of the law that computes ``variable`` (a bond variable, input, output or state)."""
+    if graph is None or not variable:
+        return None
+    name = variable[4:-1] if variable.startswith("der(") else variable
+    if name in getattr(graph, "inputs", {}):
+        return graph.inputs[name].span
+    if name in getattr(graph, "outputs", {}):
+        return graph.outputs[name].span
+    for state in getattr(graph, "states", ()):
+        if state.qualified == name:
+            return state.span
+    head, _, which = name.rpartition(".")
+    for bond in getattr(graph, "bonds", ()):
+        if bond.name == head:
+            for end in (bond.head, bond.tail):
+                element = graph.elements.get(end)
+                if element is None:
+                    continue
+                spans = element.law_spans
+                if which in spans:
+                    return spans[which]
+                if element.kind in ("C", "I", "R") and spans:
+                    return next(iter(spans.values()))
+            for end in (bond.head, bond.tail):
+                if end in graph.elements:
+                    return graph.elements[end].span
+    return None
+
+
+def _no_span():
+    from bondc.source import NO_SPAN
+
+    return NO_SPAN
+
+
+# --------------------------------------------------------------- progress
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr, drawn only after 2 s and only on a terminal."""
+
+    def __init__(self, t_start: float, t_end: float, stream=None, delay: float = 2.0):
+        self.t_start, self.t_end = t_start, t_end
+        self.stream = stream or sys.stderr
+        self.delay = delay
+        self.started = time.monotonic()
+        self.last = 0.0
+        self.drawn = False
+        try:
+            self.enabled = self.stream.isatty()
+        except (AttributeError, ValueError):
+            self.enabled = False
+
+    def __call__(self, t: float) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if now - self.started < self.delay or now - self.last < 0.1:
+            return
+        self.last = now
+        fraction = min(max((t - self.t_start) / (self.t_end - self.t_start), 0.0), 1.0)
+        width = 30
+        filled = int(round(fraction * width))
+        elapsed = now - self.started
+        remaining = elapsed * (1 - fraction) / fraction if fraction > 0 else float("nan")
+        self.stream.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {100 * fraction:5.1f}%  t={t:.4g} s  "
+                          f"elapsed {elapsed:.0f} s, about {remaining:.0f} s left ")
+        self.stream.flush()
+        self.drawn = True
+
+    def close(self) -> None:
+        if self.drawn:
+            self.stream.write("\r" + " " * 79 + "\r")
+            self.stream.flush()
+
+
+# ------------------------------------------------------------------ files
+
+
+def _columns(result: SimResult, all_bonds: bool):
+    names = ["t"] + list(result.outputs) + [n for n in result.states if n not in result.outputs]
+    columns = [result.t] + list(result.outputs.values()) + [v for n, v in result.states.items()
+                                                             if n not in result.outputs]
+    if all_bonds:
+        for name, values in result.bonds.items():
+            if name not in names:
+                names.append(name)
+                columns.append(values)
+    return names, columns
+
+
+def _atomic_write(path: Path, write) -> None:
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(descriptor, "wb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temporary, 0o666 & ~umask)
+        os.replace(temporary, path)
+    except BaseException:
+        try:
+            os.unlink(temporary)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def csv_text(result: SimResult, all_bonds: bool = False) -> str:
+    names, columns = _columns(result, all_bonds)
+    out = io.StringIO()
+    out.write(",".join(names) + "\n")
+    if result.t.size:
+        for row in np.column_stack(columns).tolist():
+            out.write(",".join(map(repr, row)) + "\n")
+    return out.getvalue()
+
+
+def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
+    """Write ``t``, outputs, states (and bonds) as csv, atomically (see the module docstring)."""
+    text = csv_text(result, all_bonds)
+    _atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
+
+
+def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
+    """Write the arrays as a compressed ``.npz``, atomically: ``t``, ``states/NAME``, ``outputs/NAME``,
+    ``bonds/NAME``, ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
+    ``parameter_values``."""
+    arrays = {"t": result.t}
+    arrays.update({f"states/{k}": v for k, v in result.states.items()})
+    arrays.update({f"outputs/{k}": v for k, v in result.outputs.items()})
+    if all_bonds:
+        arrays.update({f"bonds/{k}": v for k, v in result.bonds.items()})
+    arrays["complete"] = np.array(result.complete)
+    arrays["message"] = np.array(result.message)
+    arrays["event_times"] = np.array([e[0] for e in result.events], dtype=float)
+    arrays["event_labels"] = np.array([e[1] for e in result.events], dtype=str)
+    arrays["parameter_names"] = np.array(list(result.parameters), dtype=str)
+    arrays["parameter_values"] = np.array(list(result.parameters.values()), dtype=float)
+    _atomic_write(Path(path), lambda handle: np.savez_compressed(handle, **arrays))
+
+
+def write(result: SimResult, path, all_bonds: bool = False) -> None:
+    """``.npz`` -> :func:`write_npz`, anything else -> :func:`write_csv`."""
+    if str(path).lower().endswith(".npz"):
+        write_npz(result, path)
+    else:
+        write_csv(result, path, all_bonds)
+
+
+# ------------------------------------------------------------------- run
+
+
+def run(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
+        t_end: float | None = None, dt: float | None = None, output=None, all_bonds: bool = False,
+        progress: bool = False) -> SimResult:
+    """``bondc simulate``: load, check, derive, simulate and write; returns the result.
+
+    ``experiment`` None uses the model's first experiment (if any); ``sets``
+    are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
+    ``ast.SetValue``; ``output`` a ``.csv`` or ``.npz`` path (None: write
+    nothing). Raises ModelError/CausalityError/EquationError/UsageError for a
+    model or usage problem. A failed run writes what it computed, then raises
+    :class:`SimulationError` whose ``.result`` is the incomplete result.
+    """
+    from bondc import semantic
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+    from bondc.parse import parse_set_value
+
+    parsed = [parse_set_value(item) if isinstance(item, str) else item for item in sets or ()]
+    graph, warnings = semantic.load(Path(path), model=model,
+                                    experiment=experiment if experiment is not None else semantic.FIRST,
+                                    sets=parsed)
+    causal = assign_causality(graph)
+    ss = derive(causal)
+    chosen = None
+    if graph.experiments:
+        chosen = graph.experiments[experiment] if experiment is not None else next(iter(graph.experiments.values()))
+    result = simulate(ss, chosen, t_end=t_end, dt=dt, progress=progress)
+    result.warnings = list(warnings) + list(getattr(ss, "diagnostics", ())) + result.warnings
+    if output is not None:
+        write(result, output, all_bonds)
+    error = result.error()
+    if error is not None:
+        raise error
+    return result

@@ -1,0 +1,479 @@
+"""AST expressions -> sympy, and the sympy vocabulary of bondc's signals.
+
+The equations stage (:mod:`bondc.equations`) turns every law, input, output
+and rate of a :class:`~bondc.model.BondGraph` into sympy by walking the AST
+with :class:`Translator` (one method per node class, ``_Num``, ``_Name``,
+``_Binary``, ...). Text is never evaluated: no ``sympify``, no ``eval``.
+
+Translation rules:
+
+- numbers: integer literals become sympy Integers, others Floats;
+- ``if c then a else b`` -> ``Piecewise((a, c), (b, True))``; comparisons and
+  ``and``/``or``/``not`` become sympy relationals and booleans;
+- ``abs`` -> ``Abs``, ``sign`` -> ``sign``, ``min``/``max`` -> ``Min``/``Max``,
+  ``^`` -> ``Pow``, the other built-ins to their sympy functions;
+- ``table(x, [..], [..])`` -> :class:`Table`, ``step(x, t0)`` -> :class:`Step`,
+  ``csv("file", "col")`` -> :class:`Csv` (carrying the resolved absolute path):
+  opaque functions the code generator prints as runtime calls;
+- calls of ``fn`` functions are inlined: the body is translated with the
+  parameters bound to the translated arguments.
+
+Laws are never passed through ``simplify``/``powsimp``/``nsimplify``: sympy may
+rewrite ``abs(v)^0.27*sign(v)`` into a form that is nan for ``v < 0``.
+
+>>> import sympy
+>>> from bondc.parse import parse_set_value
+>>> q = sympy.Symbol("spring.q", real=True)
+>>> tr = Translator(lambda name, node: {"q": q, "k": sympy.Symbol("k", real=True)}[name])
+>>> tr(parse_set_value("x = if abs(q) < 1 then k*q else k*q^3").value)
+Piecewise((k*spring.q, Abs(spring.q) < 1), (k*spring.q**3, True))
+"""
+
+from __future__ import annotations
+
+import csv as _csv
+import functools
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import sympy
+from sympy.core.symbol import Str as _SymStr
+
+from bondc import ast
+from bondc.errors import Diagnostic, EquationError
+
+# ------------------------------------------------------------ signal functions
+
+
+class Table(sympy.Function):
+    """``table(x, [x0, x1, ...], [v0, v1, ...])``: piecewise linear, held at the ends.
+
+    ``args`` are ``(x, Tuple(breakpoints), Tuple(values))``; breakpoints and
+    values are expressions of parameters.
+    """
+
+    nargs = 3
+    is_real = True
+
+    @property
+    def argument(self):
+        return self.args[0]
+
+    @property
+    def breakpoints(self) -> tuple:
+        return tuple(self.args[1])
+
+    @property
+    def values(self) -> tuple:
+        return tuple(self.args[2])
+
+    def fdiff(self, argindex=1):
+        if argindex != 1:
+            raise sympy.ArgumentIndexError(self, argindex)
+        # The slope, piecewise constant; 0 outside the breakpoints (held ends).
+        x, xs, vs = self.argument, self.breakpoints, self.values
+        pieces = [(sympy.Integer(0), x < xs[0])]
+        for i in range(len(xs) - 1):
+            pieces.append(((vs[i + 1] - vs[i]) / (xs[i + 1] - xs[i]), x < xs[i + 1]))
+        pieces.append((sympy.Integer(0), True))
+        return sympy.Piecewise(*pieces)
+
+    def _eval_derivative(self, symbol):
+        # Breakpoints and values are constants (parameters): only the argument varies.
+        return sympy.diff(self.argument, symbol) * self.fdiff(1)
+
+    def _latex(self, printer):
+        return r"\operatorname{table}\left(%s\right)" % printer._print(self.argument)
+
+    def _eval_evalf(self, prec):
+        x = self.argument
+        if not (x.is_number and all(v.is_number for v in self.breakpoints + self.values)):
+            return None
+        value = table_value(float(x), [float(v) for v in self.breakpoints], [float(v) for v in self.values])
+        return sympy.Float(value, prec)
+
+
+class Step(sympy.Function):
+    """``step(x, x0)``: 0 before ``x0``, 1 from it."""
+
+    nargs = 2
+    is_real = True
+
+    def fdiff(self, argindex=1):
+        # The derivative is a Dirac impulse at x0, which no ODE can carry: 0 elsewhere.
+        return sympy.Integer(0)
+
+    def _eval_derivative(self, symbol):
+        return sympy.Integer(0)
+
+    def _latex(self, printer):
+        return r"\operatorname{step}\left(%s, %s\right)" % (printer._print(self.args[0]), printer._print(self.args[1]))
+
+    def _eval_evalf(self, prec):
+        x, x0 = self.args
+        if not (x.is_number and x0.is_number):
+            return None
+        return sympy.Float(step_value(float(x), float(x0)), prec)
+
+
+class Csv(sympy.Function):
+    """``csv("file", "column")``: a measured signal of time, linearly interpolated.
+
+    ``args`` are ``(t, Str(absolute path), Str(column))``; use :attr:`path`
+    and :attr:`column`.
+    """
+
+    nargs = 3
+    is_real = True
+
+    @property
+    def path(self) -> str:
+        return self.args[1].name
+
+    @property
+    def column(self) -> str:
+        return self.args[2].name
+
+    def fdiff(self, argindex=1):
+        raise EquationError(Diagnostic(
+            "error", "E703",
+            f"the time derivative of the measured signal csv(\"{Path(self.path).name}\", \"{self.column}\") "
+            "is needed (derivative causality) but a measured signal cannot be differentiated"))
+
+    def _eval_derivative(self, symbol):
+        if symbol not in self.args[0].free_symbols:
+            return sympy.Integer(0)
+        return self.fdiff(1)
+
+    def _eval_evalf(self, prec):
+        x = self.args[0]
+        if not x.is_number:
+            return None
+        return sympy.Float(csv_value(float(x), self.path, self.column), prec)
+
+    def _sympystr(self, printer):
+        return f'csv({printer._print(self.args[0])}, "{Path(self.path).name}", "{self.column}")'
+
+    def _latex(self, printer):
+        return r"\operatorname{csv}_{\mathrm{%s}}\left(%s\right)" % (
+            self.column.replace("_", r"\_"), printer._print(self.args[0]))
+
+    def _numpycode(self, printer):
+        return f"Csv({printer._print(self.args[0])}, {self.path!r}, {self.column!r})"
+
+    _pythoncode = _numpycode
+
+
+# --------------------------------------------------- numeric implementations
+
+def table_value(x, breakpoints, values):
+    """Numeric ``table``: ``numpy.interp`` holds the end values."""
+    return float(np.interp(x, np.asarray(breakpoints, dtype=float), np.asarray(values, dtype=float)))
+
+
+def step_value(x, x0):
+    return 1.0 if x >= x0 else 0.0
+
+
+@functools.lru_cache(maxsize=32)
+def read_csv_column(path: str, column: str) -> tuple[np.ndarray, np.ndarray]:
+    """Time and value columns of a csv file: time is the ``t``/``time`` column, else the first."""
+    with open(path, newline="", encoding="utf-8") as handle:
+        rows = list(_csv.reader(handle))
+    header = [cell.strip() for cell in rows[0]]
+    time_index = next((i for i, name in enumerate(header) if name.lower() in ("t", "time")), 0)
+    value_index = header.index(column)
+    data = np.array([[float(row[time_index]), float(row[value_index])] for row in rows[1:] if row])
+    return data[:, 0], data[:, 1]
+
+
+def csv_value(x, path, column):
+    times, values = read_csv_column(str(path), str(column))
+    return float(np.interp(x, times, values))
+
+
+#: What ``lambdify``/generated numpy code needs besides numpy for bondc's functions.
+NUMERIC_FUNCTIONS: Mapping[str, Callable] = {
+    "Table": lambda x, xs, vs: table_value(x, xs, vs),
+    "Step": step_value,
+    "Csv": csv_value,
+}
+
+
+# ----------------------------------------------------------------- translator
+
+BUILTINS: Mapping[str, Callable] = {
+    "abs": sympy.Abs,
+    "sign": sympy.sign,
+    "sqrt": sympy.sqrt,
+    "exp": sympy.exp,
+    "log": sympy.log,
+    "sin": sympy.sin,
+    "cos": sympy.cos,
+    "tan": sympy.tan,
+    "tanh": sympy.tanh,
+    "atan": sympy.atan,
+    "atan2": sympy.atan2,
+    "min": sympy.Min,
+    "max": sympy.Max,
+}
+
+BUILTIN_ARITY = {"atan2": 2, "step": 2, "table": 3, "csv": 2}
+
+_COMPARISONS = {
+    "<": sympy.StrictLessThan,
+    "<=": sympy.LessThan,
+    ">": sympy.StrictGreaterThan,
+    ">=": sympy.GreaterThan,
+    "==": sympy.Eq,
+    "!=": sympy.Ne,
+}
+
+
+def _fail(node, message: str, hint: str | None = None) -> EquationError:
+    return EquationError(Diagnostic("error", "E701", message, getattr(node, "span", None) or _no_span(), hint=hint))
+
+
+def _no_span():
+    from bondc.source import NO_SPAN
+
+    return NO_SPAN
+
+
+def _as_value(expr):
+    """A boolean used as a number is 1 or 0 (``(x > 0)*k``)."""
+    if isinstance(expr, sympy.logic.boolalg.Boolean) and not isinstance(expr, sympy.Symbol):
+        return sympy.Piecewise((sympy.Integer(1), expr), (sympy.Integer(0), True))
+    return expr
+
+
+def _as_condition(expr):
+    """A number used as a condition is true when non-zero."""
+    if isinstance(expr, sympy.logic.boolalg.Boolean):
+        return expr
+    return sympy.Ne(expr, 0)
+
+
+class Translator:
+    """Translates AST expressions to sympy.
+
+    ``resolve_name(name, node)`` returns the sympy value of a bare name (and
+    raises for an unknown one); ``resolve_ref(node)`` that of a dotted
+    reference. ``functions`` are the model's ``fn`` definitions (anything with
+    ``params`` and ``body``), inlined at each call. ``base_dir`` resolves csv
+    paths of nodes without a source file.
+    """
+
+    def __init__(self, resolve_name: Callable, resolve_ref: Callable | None = None,
+                 functions: Mapping[str, object] | None = None, base_dir: Path | None = None,
+                 time: sympy.Symbol | None = None):
+        self.resolve_name = resolve_name
+        self.resolve_ref = resolve_ref
+        self.functions = functions or {}
+        self.base_dir = base_dir
+        self.time = time if time is not None else sympy.Symbol("t", real=True)
+        self._bound: list[Mapping[str, object]] = []    # fn parameters, innermost last
+        self._calls: list[str] = []
+
+    def __call__(self, node):
+        return _as_value(self.translate(node))
+
+    def translate(self, node):
+        method = getattr(self, "_" + type(node).__name__, None)
+        if method is None:
+            raise _fail(node, f"unsupported expression {type(node).__name__}")
+        return method(node)
+
+    # -- leaves
+
+    def _Num(self, node: ast.Num):
+        text = node.text.strip()
+        if text.isdigit():
+            return sympy.Integer(int(text))
+        return sympy.Float(node.value)
+
+    def _Str(self, node: ast.Str):
+        raise _fail(node, "a string is not a value here", hint="strings are only used by csv(\"file\", \"column\")")
+
+    def _Name(self, node: ast.Name):
+        if self._bound and node.name in self._bound[-1]:
+            return self._bound[-1][node.name]
+        if node.name == "pi":
+            try:
+                return self.resolve_name(node.name, node)
+            except EquationError:
+                return sympy.pi
+        return self.resolve_name(node.name, node)
+
+    def _Ref(self, node: ast.Ref):
+        if self.resolve_ref is None:
+            raise _fail(node, f"'{node.dotted}' cannot be used here")
+        return self.resolve_ref(node)
+
+    def _ListExpr(self, node: ast.ListExpr):
+        raise _fail(node, "a list is only allowed as an argument of table()")
+
+    # -- operators
+
+    def _Unary(self, node: ast.Unary):
+        operand = self.translate(node.operand)
+        if node.op == "not":
+            return sympy.Not(_as_condition(operand))
+        operand = _as_value(operand)
+        return -operand if node.op == "-" else operand
+
+    def _Binary(self, node: ast.Binary):
+        left, right = self.translate(node.left), self.translate(node.right)
+        op = node.op
+        if op == "and":
+            return sympy.And(_as_condition(left), _as_condition(right))
+        if op == "or":
+            return sympy.Or(_as_condition(left), _as_condition(right))
+        left, right = _as_value(left), _as_value(right)
+        if op in _COMPARISONS:
+            return _COMPARISONS[op](left, right)
+        if op == "+":
+            return left + right
+        if op == "-":
+            return left - right
+        if op == "*":
+            return left * right
+        if op == "/":
+            return left / right
+        if op == "^":
+            return sympy.Pow(left, right)
+        raise _fail(node, f"unsupported operator '{op}'")
+
+    def _If(self, node: ast.If):
+        cond = _as_condition(self.translate(node.cond))
+        then, orelse = _as_value(self.translate(node.then)), _as_value(self.translate(node.orelse))
+        return sympy.Piecewise((then, cond), (orelse, True))
+
+    # -- calls
+
+    def _Call(self, node: ast.Call):
+        name = node.func
+        if name in self.functions:
+            return self._inline(node, self.functions[name])
+        special = getattr(self, "_call_" + name, None)
+        if special is not None:
+            return special(node)
+        if name in BUILTINS:
+            arity = BUILTIN_ARITY.get(name, None if name in ("min", "max") else 1)
+            if arity is not None and len(node.args) != arity:
+                raise _fail(node, f"{name}() takes {arity} argument{'s' if arity > 1 else ''}, "
+                                  f"got {len(node.args)}")
+            if name in ("min", "max") and len(node.args) < 2:
+                raise _fail(node, f"{name}() takes at least 2 arguments")
+            return BUILTINS[name](*[self(arg) for arg in node.args])
+        raise _fail(node, f"unknown function '{name}'")
+
+    def _inline(self, node: ast.Call, function):
+        if len(node.args) != len(function.params):
+            raise _fail(node, f"{function.name}() takes {len(function.params)} arguments, got {len(node.args)}")
+        if function.name in self._calls:
+            raise _fail(node, f"function '{function.name}' calls itself")
+        bound = {param: self(arg) for param, arg in zip(function.params, node.args)}
+        self._bound.append(bound)
+        self._calls.append(function.name)
+        try:
+            return self.translate(function.body)
+        finally:
+            self._bound.pop()
+            self._calls.pop()
+
+    def _list(self, node) -> sympy.Tuple:
+        if not isinstance(node, ast.ListExpr):
+            raise _fail(node, "table() needs lists: table(t, [t0, t1, ...], [v0, v1, ...])")
+        return sympy.Tuple(*[self(item) for item in node.items])
+
+    def _call_table(self, node: ast.Call):
+        if len(node.args) != 3:
+            raise _fail(node, "table() takes 3 arguments: table(t, [t0, t1, ...], [v0, v1, ...])")
+        xs, vs = self._list(node.args[1]), self._list(node.args[2])
+        if len(xs) != len(vs) or len(xs) == 0:
+            raise _fail(node, f"table() needs as many values as breakpoints (got {len(xs)} and {len(vs)})")
+        return Table(self(node.args[0]), xs, vs)
+
+    def _call_step(self, node: ast.Call):
+        if len(node.args) != 2:
+            raise _fail(node, "step() takes 2 arguments: step(t, t0)")
+        return Step(self(node.args[0]), self(node.args[1]))
+
+    def _call_csv(self, node: ast.Call):
+        if len(node.args) != 2 or not all(isinstance(arg, ast.Str) for arg in node.args):
+            raise _fail(node, 'csv() takes 2 strings: csv("file.csv", "column")')
+        file_arg, column = node.args
+        return Csv(self.time, _SymStr(self._resolve_path(file_arg)), _SymStr(column.value))
+
+    def _resolve_path(self, node: ast.Str) -> str:
+        path = Path(node.value)
+        if not path.is_absolute():
+            origin = node.span.file if node.span and node.span.line > 0 else None
+            base = Path(origin).parent if origin and Path(origin).exists() else self.base_dir
+            path = (base or Path.cwd()) / path
+        return str(path.resolve())
+
+
+# --------------------------------------------------------------- inspection
+
+def discontinuities(expr) -> list:
+    """Expressions of ``expr`` whose zero crossings are potential discontinuities.
+
+    If/Piecewise conditions as ``lhs - rhs``, arguments of Abs/sign/Heaviside,
+    Min/Max argument differences, table breakpoints as ``x - x_i`` and step
+    times as ``x - x0``; in order of first appearance (pre-order), without
+    duplicates.
+
+    >>> x = sympy.Symbol("x", real=True)
+    >>> discontinuities(sympy.Piecewise((1, x < 2), (sympy.Abs(x), True)))
+    [x - 2, x]
+    """
+    found: list = []
+
+    def add(candidate):
+        candidate = sympy.sympify(candidate)
+        if candidate.is_number:
+            return
+        if candidate not in found and -candidate not in found:
+            found.append(candidate)
+
+    def conditions(cond):
+        if isinstance(cond, sympy.core.relational.Relational):
+            add(cond.lhs - cond.rhs)
+        elif isinstance(cond, (sympy.And, sympy.Or, sympy.Not, sympy.Xor)):
+            for arg in cond.args:
+                conditions(arg)
+
+    def visit(node):
+        if isinstance(node, sympy.Piecewise):
+            for _, cond in node.args:
+                conditions(cond)
+        elif isinstance(node, (sympy.Abs, sympy.sign, sympy.Heaviside)):
+            add(node.args[0])
+        elif isinstance(node, (sympy.Min, sympy.Max)):
+            args = list(node.args)
+            for i in range(len(args)):
+                for j in range(i + 1, len(args)):
+                    add(args[i] - args[j])
+        elif isinstance(node, Table):
+            for breakpoint in node.breakpoints:
+                add(node.argument - breakpoint)
+        elif isinstance(node, Step):
+            add(node.args[0] - node.args[1])
+        elif isinstance(node, sympy.core.relational.Relational):
+            conditions(node)
+        for arg in node.args:
+            if isinstance(arg, sympy.Basic):
+                visit(arg)
+
+    visit(sympy.sympify(expr))
+    return found
+
+
+def strip_impulses(expr):
+    """Drop Dirac impulses that differentiating sign/Heaviside/Piecewise produces."""
+    if expr.has(sympy.DiracDelta):
+        expr = expr.replace(sympy.DiracDelta, lambda *args: sympy.Integer(0))
+    return expr

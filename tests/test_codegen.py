@@ -1,0 +1,289 @@
+"""bondc.codegen: the printer, the freezer, and the generated module.
+
+The generated module is checked against independent references: the
+StateSpace's own numeric evaluator (``ss.numeric()``, lambdify-based) for the
+right-hand side at seeded random points, central finite differences for the
+analytic Jacobian, and a subprocess in which ``import bondc`` fails for the
+standalone run.
+"""
+
+import ast
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+from bondc import causality, equations, semantic
+from bondc.codegen import emit
+from bondc.codegen.emit import Namer
+from bondc.codegen.freeze import Freezer
+from bondc.codegen.printer import BondcPrinter, UnsupportedExpression
+from bondc.symbolic import Step, Table
+
+SIM = Path(__file__).parent / "fixtures" / "sim"
+ROOT = Path(__file__).parent.parent
+
+
+def derive(name):
+    graph, _ = semantic.load(SIM / f"{name}.bg", experiment=semantic.FIRST)
+    ss = equations.derive(causality.assign_causality(graph))
+    experiment = next(iter(graph.experiments.values()), None)
+    return graph, ss, experiment
+
+
+def load_module(source):
+    namespace = {"__name__": "generated", "__file__": str(SIM / "generated.py")}
+    exec(compile(source, "<generated>", "exec"), namespace)
+    return namespace
+
+
+# ------------------------------------------------------------------ printer
+
+t, x, y = sympy.symbols("t x y", real=True)
+m0, m1 = sympy.symbols("_m0 _m1", real=True)
+NAMES = {t: "t", x: "x", y: "y", m0: "m[0]", m1: "m[1]"}
+
+
+@pytest.mark.parametrize("expr, text", [
+    (x**2, "x**2"),
+    (1 / x, "1/x"),
+    (x**-2, "1/x**2"),
+    (1 / (x * y), "1/(x*y)"),
+    (sympy.sqrt(x), "np.sqrt(x)"),
+    (x**sympy.Rational(1, 3), "np.power(x, 1/3)"),
+    (x**0.27, "np.power(x, 0.27)"),
+    (sympy.Float(0.1) * x, "0.1*x"),
+    (sympy.Float(4.06e-5) * x, "4.06e-05*x"),
+    (sympy.pi * x, "np.pi*x"),
+    (sympy.atan2(y, x), "np.arctan2(y, x)"),
+    (sympy.Min(x, y, t), "np.minimum(np.minimum(t, x), y)"),
+    (sympy.Piecewise((x, m0 < 0), (y, True)), "(x if (m[0] < 0) else y)"),
+    (sympy.Piecewise((x, x < y), (y, True)), "np.where((x < y), x, y)"),
+    (Table(t, sympy.Tuple(0, 1), sympy.Tuple(x, 2)), "table(t, (0, 1), (x, 2))"),
+    (Step(t, y), "step(t, y)"),
+])
+def test_printer(expr, text):
+    assert BondcPrinter(NAMES, mode_symbols={m0, m1}).doprint(expr) == text
+
+
+def test_printer_prints_floats_exactly():
+    value = 0.1 + 0.2
+    printed = BondcPrinter(NAMES).doprint(sympy.Float(value) * x)
+    assert float(printed.split("*")[0]) == value
+
+
+def test_printer_refuses_unknown_symbols_and_functions():
+    with pytest.raises(UnsupportedExpression, match="unknown symbol 'z'"):
+        BondcPrinter(NAMES).doprint(sympy.Symbol("z") + x)
+    with pytest.raises(UnsupportedExpression, match="unsupported function"):
+        BondcPrinter(NAMES).doprint(sympy.Function("mystery")(x))
+
+
+def test_namer_is_deterministic_and_avoids_clashes():
+    namer = Namer({"m", "x"})
+    assert [namer(n) for n in ["mass.p", "m", "x", "mass_p", "_a", "3d", "class"]] == \
+        ["mass_p", "m_", "x_", "mass_p_", "u_a", "v3d", "class_"]
+
+
+# ------------------------------------------------------------------ freezer
+
+def test_freezer_shares_modes_and_labels_switches():
+    f, v0, F0 = sympy.symbols("f v0 F0", real=True)
+    freezer = Freezer(t, states={f}, parameters={v0, F0})
+    law = sympy.Piecewise((5 * f, sympy.Abs(f) < v0), (f + F0 * sympy.sign(f), True))
+    frozen = freezer.freeze(law, "R.e")
+    assert [s.g for s in freezer.switches] == [f, v0 - m0 * f]
+    assert all(s.event for s in freezer.switches)
+    assert frozen == sympy.Piecewise((5 * f, m1 > 0), (f + F0 * m0, True))
+    assert freezer.switches[0].label == "abs(f) in R.e"
+
+
+def test_freezer_turns_time_switches_into_known_times():
+    t1, k = sympy.symbols("t1 k", real=True)
+    freezer = Freezer(t, states={x}, parameters={t1, k})
+    freezer.freeze(Step(t, t1) + sympy.Piecewise((1, t < 2 * t1), (0, True)) + sympy.Piecewise((1, sympy.sin(t) > 0.5), (0, True)))
+    freezer.freeze(Table(t, sympy.Tuple(0, t1), sympy.Tuple(0, k)))
+    events = {s.g: s.event for s in freezer.switches}
+    assert events == {t - t1: False, t - 2 * t1: False, sympy.sin(t) - 0.5: True}   # known, known, located
+    assert sorted((str(b.time), b.kind) for b in freezer.time_breaks) == \
+        [("0", "table"), ("2*t1", "if"), ("t1", "step"), ("t1", "table")]
+
+
+def test_freezer_freezes_a_table_of_a_state_into_linear_pieces():
+    freezer = Freezer(t, states={x}, parameters=set())
+    frozen = freezer.freeze(Table(x, sympy.Tuple(0, 1, 2), sympy.Tuple(0, 10, 0)))
+    assert [s.g for s in freezer.switches] == [x, x - 1, x - 2]
+    m2 = sympy.Symbol("_m2", real=True)
+    values = {x: 1.5, m0: 1, m1: 1, m2: -1}
+    assert float(frozen.subs(values)) == pytest.approx(5.0)
+
+
+# ----------------------------------------------------------- the module
+
+def test_header_names_the_source_file_only():
+    graph, ss, experiment = derive("msd")
+    source = emit(ss, experiment)
+    first = source.splitlines()[0]
+    assert first == "# generated by bondc 0.1.0 from msd.bg (model MassSpringDamper, experiment step) — do not edit"
+    assert str(SIM) not in source
+
+
+def test_module_imports_only_numpy_scipy_and_the_standard_library():
+    _, ss, experiment = derive("friction")
+    tree = ast.parse(emit(ss, experiment))
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            imported.add(node.module.split(".")[0])
+    assert imported <= {"numpy", "scipy", "math", "os", "sys", "time", "argparse"}
+
+
+def test_module_constants():
+    _, ss, experiment = derive("friction")
+    module = load_module(emit(ss, experiment))
+    assert module["STATE_NAMES"] == ("mass.p", "x")
+    assert module["OUTPUT_NAMES"] == ("v", "Ff")
+    assert module["PARAMETERS"] == {"m": 1.0, "F": 10.0, "v0": 1.0, "c0": 5.0, "c1": 1.0, "F0": 3.0}
+    assert module["DEFAULTS"] == {"t_end": 2.0, "rtol": 1e-8, "atol": 1e-10}
+    assert set(module["BOND_VARIABLES"]) == {"b1.e", "b1.f", "b2.e", "b2.f", "b3.e", "b3.f"}
+    np.testing.assert_array_equal(module["x0"](), [0.0, 0.0])
+
+
+def test_emit_is_byte_identical_across_hash_seeds(tmp_path):
+    script = tmp_path / "emit.py"
+    script.write_text(textwrap.dedent(f"""
+        import hashlib, sys
+        from pathlib import Path
+        from bondc import semantic, causality, equations
+        from bondc.codegen import emit
+        for name in ("friction", "table_force"):
+            graph, _ = semantic.load(Path({str(SIM)!r}) / (name + ".bg"), experiment=semantic.FIRST)
+            ss = equations.derive(causality.assign_causality(graph))
+            print(hashlib.sha256(emit(ss, next(iter(graph.experiments.values()))).encode()).hexdigest())
+    """))
+    digests = set()
+    for seed in ("1", "12345"):
+        env = dict(os.environ, PYTHONHASHSEED=seed)
+        out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, check=True)
+        digests.add(out.stdout)
+    assert len(digests) == 1
+    graph, ss, experiment = derive("friction")
+    assert hashlib.sha256(emit(ss, experiment).encode()).hexdigest() == digests.pop().split()[0]
+
+
+@pytest.mark.parametrize("name", ["msd", "friction", "friction_stick", "table_force", "oscillator", "rc"])
+def test_rhs_matches_the_statespace_evaluator_at_random_points(name):
+    _, ss, experiment = derive(name)
+    module = load_module(emit(ss, experiment))
+    reference = ss.numeric()
+    rng = np.random.default_rng(7)
+    n = len(ss.states)
+    for _ in range(40):
+        t_point = rng.uniform(0.0, 2.0)
+        state = rng.uniform(-3.0, 3.0, n)
+        expected = reference.derivatives(t_point, state)
+        np.testing.assert_allclose(module["rhs"](t_point, state), expected, rtol=1e-12, atol=1e-12)
+        outputs = reference.outputs(t_point, state)
+        np.testing.assert_allclose(module["outputs"](t_point, state), list(outputs.values()), rtol=1e-12,
+                                   atol=1e-12)
+
+
+def test_rhs_follows_the_language_at_a_switching_surface():
+    # abs(f) < v0 is false at f = v0 exactly: the Coulomb branch applies
+    _, ss, experiment = derive("friction")
+    module = load_module(emit(ss, experiment))
+    at_threshold = np.array([1.0, 0.0])     # p = m*v0
+    np.testing.assert_allclose(module["rhs"](0.0, at_threshold), ss.numeric().derivatives(0.0, at_threshold))
+    np.testing.assert_allclose(module["rhs"](0.0, at_threshold)[0], 10.0 - (1.0 + 3.0))
+
+
+@pytest.mark.parametrize("name", ["msd", "friction", "oscillator"])
+def test_analytic_jacobian_matches_finite_differences(name):
+    _, ss, experiment = derive(name)
+    module = load_module(emit(ss, experiment))
+    rng = np.random.default_rng(3)
+    n = len(ss.states)
+    for _ in range(20):
+        t_point, state = rng.uniform(0.0, 2.0), rng.uniform(-3.0, 3.0, n)
+        analytic = module["jacobian"](t_point, state)
+        numeric = np.empty((n, n))
+        for j in range(n):
+            h = 1e-6 * max(1.0, abs(state[j]))
+            up, down = state.copy(), state.copy()
+            up[j] += h
+            down[j] -= h
+            numeric[:, j] = (module["rhs"](t_point, up) - module["rhs"](t_point, down)) / (2 * h)
+        np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-8)
+
+
+def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
+    from bondc.simulate import simulate
+
+    graph, ss, experiment = derive("friction")
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+    (work / "friction_gen.py").write_text(emit(ss, experiment), encoding="utf-8")
+    (work / "launch.py").write_text(textwrap.dedent("""
+        import importlib.abc, runpy, sys
+
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in ("bondc", "sympy", "lark"):
+                    raise ImportError(name + " is not available here")
+                return None
+
+        sys.meta_path.insert(0, Block())
+        try:
+            import bondc
+        except ImportError:
+            print("bondc not importable")
+        else:
+            raise SystemExit("bondc is importable")
+        sys.argv = ["friction_gen.py"] + sys.argv[1:]
+        try:
+            runpy.run_path("friction_gen.py", run_name="__main__")
+        except SystemExit as done:
+            assert "sympy" not in sys.modules and "bondc" not in sys.modules
+            raise
+    """))
+    env = {key: value for key, value in os.environ.items() if not key.startswith("PYTHON")}
+    env["PYTHONPATH"] = ""
+    out = subprocess.run([sys.executable, "-I", "launch.py", "--dt", "0.01", "-o", "out.csv"], cwd=work, env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "bondc not importable"
+    header = (work / "out.csv").read_text().splitlines()[0]
+    assert header == "t,v,Ff,mass.p,x"
+    data = np.loadtxt(work / "out.csv", delimiter=",", skiprows=1)
+    reference = simulate(ss, experiment, dt=0.01)
+    np.testing.assert_allclose(data[:, 0], reference.t, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(data[:, 1], reference.outputs["v"], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(data[:, 3], reference.states["mass.p"], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(data[:, 4], reference.states["x"], rtol=1e-13, atol=1e-15)
+
+
+def test_generated_module_copy_of_the_runtime_is_verbatim():
+    _, ss, experiment = derive("msd")
+    source = emit(ss, experiment)
+    runtime_text = (ROOT / "bondc" / "runtime.py").read_text(encoding="utf-8")
+    assert runtime_text.rstrip("\n") in source
+
+
+def test_model_code_golden(update_golden):
+    """The model section generated for msd.bg (``pytest --update-golden`` rewrites it)."""
+    _, ss, experiment = derive("msd")
+    source = emit(ss, experiment)
+    model_part = source[source.index("MODEL_NAME = "):]
+    golden = SIM / "msd.expected.py.txt"
+    if update_golden or not golden.exists():
+        golden.write_text(model_part, encoding="utf-8")
+    assert model_part == golden.read_text(encoding="utf-8")

@@ -1,0 +1,229 @@
+"""Tests of linearisation against textbook characteristic polynomials and hand-derived matrices."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bondc import semantic
+from bondc.analysis.linearize import linearize
+from bondc.causality import assign_causality
+from bondc.equations import derive
+from bondc.errors import AnalysisError
+
+FIXTURES = Path(__file__).parent / "fixtures" / "textbook"
+
+
+def state_space(name: str):
+    graph, _ = semantic.load(FIXTURES / f"{name}.bg")
+    return derive(assign_causality(graph))
+
+
+def state_space_of(tmp_path, text: str):
+    path = tmp_path / "model.bg"
+    path.write_text(text)
+    graph, _ = semantic.load(path)
+    return derive(assign_causality(graph))
+
+
+def params(ss) -> dict:
+    return {name: value for name, (_, value) in ss.parameters.items()}
+
+
+def assert_same_spectrum(actual, expected, rtol=1e-6):
+    actual = np.sort_complex(np.asarray(actual, dtype=complex))
+    expected = np.sort_complex(np.asarray(expected, dtype=complex))
+    assert len(actual) == len(expected)
+    for a, e in zip(actual, expected):
+        assert abs(a - e) <= rtol * abs(e), (actual, expected)
+
+
+def test_mass_spring_damper_frequency_and_damping():
+    ss = state_space("mass_spring_damper")
+    p = params(ss)
+    lin = linearize(ss, time=0.5)
+    omega_n = math.sqrt(p["k"] / p["m"])
+    zeta = p["b"] / (2 * math.sqrt(p["k"] * p["m"]))
+    assert lin.natural_frequencies == pytest.approx([omega_n, omega_n], rel=1e-9)
+    assert lin.damping_ratios == pytest.approx([zeta, zeta], rel=1e-9)
+    # States (p, q), input F, outputs x = q and v = p/m.
+    assert lin.states == ("mass.p", "spring.q") and lin.inputs == ("F",) and lin.outputs == ("x", "v")
+    assert lin.A == pytest.approx(np.array([[-p["b"] / p["m"], -p["k"]], [1 / p["m"], 0]]))
+    assert lin.B == pytest.approx(np.array([[1.0], [0.0]]))
+    assert lin.C == pytest.approx(np.array([[0.0, 1.0], [1 / p["m"], 0.0]]))
+    assert lin.D == pytest.approx(np.zeros((2, 1)))
+    assert lin.u0.tolist() == [p["F0"]]
+
+
+def test_parameter_overrides():
+    ss = state_space("mass_spring_damper")
+    lin = linearize(ss, parameters={"k": 200.0})
+    assert lin.natural_frequencies == pytest.approx([10.0, 10.0])
+    with pytest.raises(KeyError):
+        linearize(ss, parameters={"nope": 1.0})
+
+
+def test_series_rlc_poles():
+    ss = state_space("series_rlc")
+    p = params(ss)
+    expected = np.roots([p["L"] * p["Cap"], p["R"] * p["Cap"], 1.0])
+    assert_same_spectrum(linearize(ss).eigenvalues, expected)
+
+
+def test_parallel_rlc_poles():
+    ss = state_space("parallel_rlc")
+    p = params(ss)
+    expected = np.roots([1.0, 1 / (p["R"] * p["Cap"]), 1 / (p["L"] * p["Cap"])])
+    assert_same_spectrum(linearize(ss).eigenvalues, expected)
+
+
+def test_quarter_car_matrix_from_newton():
+    ss = state_space("quarter_car")
+    p = params(ss)
+    ms, mu, ks, bs, kt = (p[n] for n in ("ms", "mu", "ks", "bs", "kt"))
+    # x = (p_s, p_u, q_susp, q_tyre); q_susp = x_u - x_s, q_tyre = x_road - x_u.
+    A = np.array([
+        [-bs / ms, bs / mu, ks, 0.0],
+        [bs / ms, -bs / mu, -ks, kt],
+        [-1 / ms, 1 / mu, 0.0, 0.0],
+        [0.0, -1 / mu, 0.0, 0.0],
+    ])
+    lin = linearize(ss, time=0.15)
+    assert lin.states == ("body.p", "wheel.p", "suspension.q", "tyre.q")
+    assert lin.A == pytest.approx(A, rel=1e-12)
+    assert lin.B == pytest.approx(np.array([[0.0], [0.0], [0.0], [1.0]]))
+    assert_same_spectrum(lin.eigenvalues, np.linalg.eigvals(A))
+    assert lin.u0 == pytest.approx([0.05 / 0.1 * 0.5])     # road speed on the falling ramp at t = 0.15
+
+
+def test_dc_motor_electrical_and_mechanical_poles():
+    ss = state_space("dc_motor_gear")
+    p = params(ss)
+    b_eq = p["bm"] + p["n"] ** 2 * p["bl"]
+    expected = np.roots([1.0, p["Ra"] / p["La"] + b_eq / p["J"], (p["Ra"] * b_eq + p["K"] ** 2) / (p["La"] * p["J"])])
+    lin = linearize(ss)
+    assert_same_spectrum(lin.eigenvalues, expected)
+    # One fast electrical pole and one slow mechanical pole, both real here.
+    assert np.all(lin.eigenvalues.imag == 0) and lin.damping_ratios == pytest.approx([1.0, 1.0])
+
+
+def test_gyrator_motor_poles():
+    ss = state_space("gyrator_motor")
+    p = params(ss)
+    expected = np.roots([1.0, p["R"] / p["L"] + p["b"] / p["J"], (p["R"] * p["b"] + p["K"] ** 2) / (p["L"] * p["J"])])
+    assert_same_spectrum(linearize(ss).eigenvalues, expected)
+
+
+def test_rigid_gear_pole_uses_the_combined_inertia():
+    ss = state_space("two_inertias_gear")
+    p = params(ss)
+    expected = -(p["b1"] + p["n"] ** 2 * p["b2"]) / (p["J1"] + p["n"] ** 2 * p["J2"])
+    assert_same_spectrum(linearize(ss).eigenvalues, [expected])
+
+
+def test_resistor_loop_time_constant():
+    ss = state_space("rr_loop")
+    p = params(ss)
+    tau = (p["R3"] + p["R1"] * p["R2"] / (p["R1"] + p["R2"])) * p["Cap"]
+    assert_same_spectrum(linearize(ss).eigenvalues, [-1 / tau])
+
+
+def test_nonlinear_spring_at_its_equilibrium():
+    ss = state_space("nonlinear_spring")
+    p = params(ss)
+    lin = linearize(ss, at="equilibrium")
+    # k q + k3 q^3 = F has one real root.
+    roots = np.roots([p["k3"], 0.0, p["k"], -p["F"]])
+    q_eq = float(roots[np.argmin(np.abs(roots.imag))].real)
+    assert lin.x0 == pytest.approx([0.0, q_eq], abs=1e-12)
+    stiffness = p["k"] + 3 * p["k3"] * q_eq ** 2
+    assert lin.A == pytest.approx(np.array([[-p["b"] / p["m"], -stiffness], [1 / p["m"], 0.0]]))
+    assert lin.held == ()
+
+
+def test_modulated_transformer_input_gain():
+    ss = state_space("modulated_transformer")
+    p = params(ss)
+    time = 0.7
+    ratio = p["r0"] + math.sin(3 * time)
+    lin = linearize(ss, time=time)
+    assert lin.A == pytest.approx(np.array([[-p["b"] / p["m"]]]))
+    assert lin.B == pytest.approx(np.array([[-p["F"] / ratio ** 2]]))
+    assert lin.u0 == pytest.approx([ratio])
+
+
+def test_nonlinear_algebraic_block_is_differentiated_implicitly(tmp_path):
+    ss = state_space_of(tmp_path, """model NonlinearLoop
+  param c = 1e-4
+  Se source : e = 10
+  R  r1     : e = 100*f
+  R  r2     : f = e/300 + c*e^3
+  R  r3     : e = 50*f
+  C  cap    : e = q/1e-3
+  1  series, branch
+  0  node
+  source -> series
+  series -> r1
+  series -> node
+  node -> r2
+  node -> branch
+  branch -> r3
+  branch -> cap
+end
+""")
+    assert len(ss.algebraic_blocks) == 1
+    q = 0.0     # the initial state, where linearize() works
+    model = ss.numeric()
+    h = 1e-7
+    finite_difference = (model.derivatives(0, [q + h])[0] - model.derivatives(0, [q - h])[0]) / (2 * h)
+    lin = linearize(ss)
+    assert lin.A[0, 0] == pytest.approx(finite_difference, rel=1e-6)
+    # By hand: node voltage v solves (10 - v)/100 = v/300 + c v^3 + (v - vc)/50 at vc = 0 (q = 0);
+    # dv/dvc = (1/50) / (1/100 + 1/300 + 3 c v^2 + 1/50) and dq/dt = (v - vc)/50.
+    from scipy.optimize import brentq
+
+    v = brentq(lambda v: (10 - v) / 100 - v / 300 - 1e-4 * v ** 3 - v / 50, -100, 100, xtol=1e-14)
+    dv = (1 / 50) / (1 / 100 + 1 / 300 + 3e-4 * v ** 2 + 1 / 50)
+    assert lin.A[0, 0] == pytest.approx((dv - 1) / 50 / 1e-3, rel=1e-9)
+
+
+def test_equilibrium_holds_pure_integrators(tmp_path):
+    ss = state_space("pneumatic_piston")
+    p = params(ss)
+    lin = linearize(ss, time=0.0, at="equilibrium")
+    # No inflow before the step: the piston stops where the pressure balances the load.
+    assert lin.held == ("x",)
+    assert lin.x0 == pytest.approx([p["Fl"] / p["Ar"], 0.0, 0.0], abs=1e-6)
+    assert "held" in lin.notes[0]
+    assert np.count_nonzero(np.abs(lin.eigenvalues) < 1e-9) >= 1
+
+
+def test_no_equilibrium_is_e706(tmp_path):
+    ss = state_space_of(tmp_path, """model Free
+  Se push : e = 3
+  I  mass : f = p/2
+  push -> mass
+end
+""")
+    with pytest.raises(AnalysisError) as info:
+        linearize(ss, at="equilibrium")
+    assert info.value.diagnostics[0].code == "E706"
+    with pytest.raises(ValueError):
+        linearize(ss, at="somewhere")
+
+
+def test_json_and_text_reports():
+    ss = state_space("mass_spring_damper")
+    lin = linearize(ss, time=1.0)
+    data = lin.to_json()
+    assert json.loads(json.dumps(data)) == data
+    for key in ("states", "inputs", "outputs", "A", "B", "C", "D", "eigenvalues"):
+        assert key in data
+    assert data["eigenvalues"] == [[pytest.approx(-3.0), pytest.approx(-math.sqrt(400 - 9))],
+                                   [pytest.approx(-3.0), pytest.approx(math.sqrt(400 - 9))]]
+    text = lin.to_text()
+    assert "A (2 x 2)" in text and "eigenvalues" in text and "rad/s" in text

@@ -1,0 +1,353 @@
+"""The HTML report: structure, sections, escaping, self-containment, and its building blocks."""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+from html.parser import HTMLParser
+
+import numpy as np
+import pytest
+import sympy
+from jinja2 import UndefinedError
+from markupsafe import Markup
+
+from bondc.causality import assign_causality
+from bondc.parse import parse_text
+from bondc.report.diagram import bond_graph_svg
+from bondc.report.lexer import highlight_bg
+from bondc.report.render import (
+    Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection, causality_notes,
+    causality_rows, environment, equation_markup, format_number, format_unit, math_markup, parameter_rows,
+    plot_svg, render_report, source_sha256,
+)
+from bondc.report.validate import compare, parse_compare_spec
+from bondc.semantic import build
+
+SOURCE = """\
+model MassSpringDamper "Force step <script>alert(1)</script> & more"
+  param m = 2.0 [kg] "moving <b>mass</b>"
+  param k = 800 [N/m]
+  param b = 12  [N*s/m]
+  param lead = 5.0 [mm]
+  input F [N] = step(t, 0.1) * 10
+  MSe force  : e = F
+  I   mass   : f = p/m
+  C   spring : e = k*q
+  R   damper : e = b*f
+  1   j
+  force -> j
+  j -> mass
+  j -> spring
+  j -> damper
+  output x [m] = spring.q
+  experiment step "step <i>response</i>"
+    t_end = 2 [s]
+    rtol = 1e-6
+  end
+end
+"""
+
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
+
+
+class NestingChecker(HTMLParser):
+    """Every opened tag is closed, in order (void elements and ``<x/>`` excepted)."""
+
+    def __init__(self):
+        super().__init__(convert_charrefs=True)
+        self.stack: list[str] = []
+        self.errors: list[str] = []
+        self.ids: list[str] = []
+        self.tags: list[str] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag, attrs):
+        self.tags.append(tag)
+        self.ids += [value for name, value in attrs if name == "id"]
+        if tag not in VOID:
+            self.stack.append(tag)
+
+    def handle_startendtag(self, tag, attrs):
+        self.tags.append(tag)
+        self.ids += [value for name, value in attrs if name == "id"]
+
+    def handle_endtag(self, tag):
+        if tag in VOID:
+            return
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"</{tag}> closes <{self.stack[-1] if self.stack else None}> at {self.getpos()}")
+            return
+        self.stack.pop()
+
+    def handle_data(self, data):
+        self.text.append(data)
+
+
+def check_html(html: str) -> NestingChecker:
+    checker = NestingChecker()
+    checker.feed(html)
+    checker.close()
+    assert checker.errors == []
+    assert checker.stack == []
+    return checker
+
+
+@pytest.fixture(scope="module")
+def model():
+    graph, _ = build(parse_text(SOURCE, "msd.bg"))
+    return graph, assign_causality(graph)
+
+
+def full_context(graph, causal, **changes) -> ReportContext:
+    t = np.linspace(0.0, 2.0, 201)
+    x = 0.0125 * (1 - np.exp(-3 * t) * np.cos(20 * t))
+    results = compare(t, {"x": x}, {"t": t, "x_meas": x * 1.001, "x_bad": x * 1.3},
+                      [parse_compare_spec("x=x_meas"), parse_compare_spec("x=x_bad")])
+    p, q = sympy.symbols("mass.p spring.q", real=True)
+    m, k, b, force = sympy.symbols("m k b F", positive=True)
+    fields = dict(
+        header=ReportHeader.for_graph(graph, SOURCE, "step", date="2024-05-01"),
+        source_html=highlight_bg(SOURCE),
+        parameters=parameter_rows(graph),
+        diagram_svg=bond_graph_svg(graph, causal),
+        causality=causality_rows(causal),
+        causality_notes=causality_notes(causal) + ["a note with <tags> & ampersands"],
+        equations=[Equation(equation_markup(sympy.Symbol("dp/dt"), force - k * q - b * p / m), "mass.p"),
+                   Equation(equation_markup(sympy.Symbol("dq/dt"), sympy.Piecewise((p / m, p > 0), (0, True))),
+                            "spring.q")],
+        plots=[Plot("Displacement", plot_svg(t, {"x": x}, "Displacement", "x [m]"), "spring deflection"),
+               ("Force", plot_svg(t, {"F": 10.0 * (t > 0.1)}, "Force", "F [N]"))],
+        power_tables=[Table.from_dicts("Energy per cycle", [
+            {"element": "damper", "energy [J]": 0.1234567, "mean power [W]": -1.5e-7},
+            {"element": "force <src>", "energy [J]": 12, "mean power [W]": None}])],
+        motor_requirements=Table("Motor requirements", ("quantity", "value"), [("peak torque [N m]", 1.23)]),
+        motor_candidates=Table.from_dicts("Candidates", [{"motor": "MX-<1>", "margin": 0.4}]),
+        validation=ValidationSection(results, "data/x.csv",
+                                     plots=[Plot("x against measured", plot_svg(t, {"sim": x, "meas": 1.3 * x},
+                                                                                "x against measured", "x [m]"))],
+                                     junit_file="reports/junit.xml"),
+        warnings=["W602: capacitor <c> in derivative causality"],
+    )
+    fields.update(changes)
+    return ReportContext(**fields)
+
+
+@pytest.fixture(scope="module")
+def html(model) -> str:
+    return render_report(full_context(*model))
+
+
+SECTIONS = ["bond-graph", "parameters", "causality", "equations", "results", "power", "motor-requirements",
+            "motor-candidates", "validation", "source"]
+
+
+def test_structure_is_well_nested(html):
+    assert html.startswith("<!DOCTYPE html>\n<html lang=\"en\">")
+    checker = check_html(html)
+    for tag in ("head", "body", "main", "style", "svg", "math", "table", "figure", "figcaption"):
+        assert tag in checker.tags
+    assert len(checker.ids) == len(set(checker.ids)), "duplicate ids"
+
+
+def test_every_section_present_in_order_with_contents(html):
+    ids = re.findall(r'<section id="([^"]+)"', html)
+    assert ids == SECTIONS
+    toc = re.findall(r'<li><a href="#([^"]+)">', html)
+    assert toc == SECTIONS
+    for number, section in enumerate(SECTIONS, start=1):
+        assert re.search(rf'<section id="{section}"[^>]*>\s*<h2><span class="secno">{number}</span>', html)
+
+
+def test_optional_sections_are_hidden_when_absent(model):
+    graph, causal = model
+    html = render_report(ReportContext(ReportHeader.for_graph(graph, SOURCE, date="2024-05-01"),
+                                       highlight_bg(SOURCE)))
+    check_html(html)
+    assert re.findall(r'<section id="([^"]+)"', html) == ["source"]
+    html = render_report(full_context(graph, causal, motor_requirements=None, motor_candidates=None,
+                                      validation=None, plots=(), warnings=()))
+    ids = re.findall(r'<section id="([^"]+)"', html)
+    assert "validation" not in ids and "motor-candidates" not in ids and "results" not in ids
+    assert "Check before use" not in html
+
+
+def test_text_is_escaped(html):
+    assert "Force step &lt;script&gt;alert(1)&lt;/script&gt; &amp; more" in html
+    assert "moving &lt;b&gt;mass&lt;/b&gt;" in html
+    assert "a note with &lt;tags&gt; &amp; ampersands" in html
+    assert "force &lt;src&gt;" in html and "MX-&lt;1&gt;" in html
+    assert "W602: capacitor &lt;c&gt;" in html
+    assert "step &lt;i&gt;response&lt;/i&gt;" in html
+    assert "<b>mass</b>" not in html and "<i>response" not in html
+
+
+def test_report_is_self_contained(html):
+    """No scripts and nothing fetched: the only URIs allowed are namespace names in xmlns attributes."""
+    without_namespaces = re.sub(r'\sxmlns(:[\w-]+)?="[^"]*"', "", html)
+    lowered = without_namespaces.lower()
+    for forbidden in ("http://", "https://", "src=", "<script", "<link", "@import", "<iframe", "<object",
+                      "<embed", "<img", "javascript:"):
+        assert forbidden not in lowered, forbidden
+    assert re.findall(r"\bon[a-z]+\s*=", lowered) == []                   # no event handlers
+    assert all(ref.startswith("#") for ref in re.findall(r'href="([^"]*)"', without_namespaces))
+    assert all(ref.startswith("#") for ref in re.findall(r"url\(([^)]*)\)", without_namespaces))
+
+
+def test_tables_have_numbers_formatted_and_captions(html):
+    assert "Table 1.</span> Parameters" in html
+    assert "<td><code>lead</code></td><td class=\"num\">5</td><td>mm</td>" in html   # shown as written: 5 mm
+    assert "N·s/m" in html
+    assert "−1.5×10<sup>−7</sup>" in html
+    assert "<td class=\"num\">0.1235</td>" in html
+
+
+def test_causality_table_and_figures(html):
+    assert "<code>force</code> → <code>j</code>" in html
+    assert "I mass: integral" in html and "R damper: resistance" in html
+    captions = re.findall(r'<span class="label">Figure (\d+)\.</span>', html)
+    assert captions == ["1", "2", "3", "4"]
+    assert 'class="causal-stroke"' in html
+
+
+def test_validation_section(html):
+    section = html[html.index('<section id="validation">'):html.index('<section id="source"')]
+    assert section.count('<span class="badge pass">PASS</span>') == 1
+    assert section.count('<span class="badge fail">FAIL</span>') == 1
+    assert "data/x.csv" in section and "reports/junit.xml" in section
+
+
+def test_equations_are_mathml(html):
+    section = html[html.index('<section id="equations">'):html.index('<section id="results"')]
+    maths = re.findall(r"<math .*?</math>", section, flags=re.S)
+    assert len(maths) == 2
+    for math in maths:
+        ET.fromstring(math)
+    assert "<mtable" in maths[1] and "otherwise" in maths[1]
+
+
+def test_rendering_is_deterministic(model):
+    assert render_report(full_context(*model)) == render_report(full_context(*model))
+
+
+# ---------------------------------------------------------------- environment and context
+
+def test_environment_escapes_everything_and_is_strict():
+    env = environment()
+    assert env is environment()
+    assert env.from_string("{{ x }}").render(x="<b>") == "&lt;b&gt;"
+    assert env.get_template("report.css").environment is env
+    assert {"report.html", "report.css", "macros.html"} <= set(env.list_templates())
+    with pytest.raises(UndefinedError):
+        env.from_string("{{ missing }}").render()
+    with pytest.raises(UndefinedError):
+        env.get_template("report.html").render()
+
+
+def test_context_refuses_untrusted_html(model):
+    graph, _ = model
+    header = ReportHeader.for_graph(graph, SOURCE, date="2024-05-01")
+    with pytest.raises(TypeError, match="source_html"):
+        ReportContext(header, "<pre>model</pre>")
+    with pytest.raises(TypeError, match="diagram_svg"):
+        ReportContext(header, highlight_bg(SOURCE), diagram_svg="<svg/>")
+    with pytest.raises(TypeError, match="plot"):
+        ReportContext(header, highlight_bg(SOURCE), plots=[("t", "<svg/>")])
+    with pytest.raises(TypeError, match="Equation"):
+        ReportContext(header, highlight_bg(SOURCE), equations=[Equation("<math/>")])
+
+
+def test_header_for_graph(model):
+    graph, _ = model
+    header = ReportHeader.for_graph(graph, SOURCE, "step", date="2024-05-01")
+    assert header.model_name == "MassSpringDamper" and header.source_file == "msd.bg"
+    assert header.source_sha256 == source_sha256(SOURCE) and len(header.source_sha256) == 64
+    assert header.experiment_description == "step <i>response</i>"
+    assert dict(header.solver_settings) == {"t_end": 2.0, "rtol": 1e-6}
+    assert "<span class=\"setting\">t_end</span> = 2 s" in render_report(ReportContext(header, highlight_bg(SOURCE)))
+    assert re.fullmatch(r"\d{4}-\d\d-\d\d", ReportHeader.for_graph(graph, SOURCE).date)
+
+
+def test_parameter_rows_in_written_units(model):
+    rows = {row.name: row for row in parameter_rows(model[0])}
+    assert rows["lead"] == ParameterRow("lead", pytest.approx(5.0), "mm", None)
+    assert rows["m"].description == "moving <b>mass</b>"
+
+
+def test_table_from_dicts_and_shape_check():
+    table = Table.from_dicts("T", [{"a": 1}, {"b": 2, "a": 3}])
+    assert table.columns == ("a", "b") and table.rows == ((1, None), (3, 2))
+    with pytest.raises(ValueError, match="row 1"):
+        Table("T", ("a", "b"), [(1,)])
+
+
+@pytest.mark.parametrize("value, text", [
+    (None, "—"), (True, "yes"), (3, "3"), (0.1234567, "0.1235"), (-2.5, "−2.5"),
+    (1.5e-7, "1.5×10<sup>−7</sup>"), (224000.0, "2.24×10<sup>5</sup>"), (float("nan"), "n/a"),
+    (float("inf"), "∞"), ("a<b", "a&lt;b"), (np.float64(2.0), "2"),
+])
+def test_format_number(value, text):
+    assert str(format_number(value)) == text
+
+
+def test_format_unit():
+    assert str(format_unit("kg*m^2")) == "kg·m<sup>2</sup>"
+    assert str(format_unit("1/s")) == "1/s"
+    assert str(format_unit("<x>")) == "&lt;x&gt;"
+    assert str(format_unit(None)) == ""
+
+
+# ---------------------------------------------------------------- plots and MathML
+
+def test_plot_svg_is_clean_inline_svg():
+    t = np.linspace(0, 1, 50)
+    svg = plot_svg(t, {"x <a&b>": np.sin(t), "y": np.cos(t)}, "Signals <1>", "value [m]")
+    assert isinstance(svg, Markup)
+    assert svg.startswith("<svg ") and svg.rstrip().endswith("</svg>")
+    assert "<?xml" not in svg and "<!DOCTYPE" not in svg and "<style" not in svg and "<metadata" not in svg
+    root = ET.fromstring(svg)
+    texts = ["".join(e.itertext()) for e in root.iter("{http://www.w3.org/2000/svg}text")]
+    assert "x <a&b>" in texts and "value [m]" in texts          # fonttype none: text stays text
+    assert root.find("{http://www.w3.org/2000/svg}title").text == "Signals <1>"
+    assert float(root.get("width").rstrip("pt")) > 0 and float(root.get("height").rstrip("pt")) > 0
+    assert plot_svg(t, {"x <a&b>": np.sin(t), "y": np.cos(t)}, "Signals <1>", "value [m]") == svg
+
+
+def test_plot_ids_are_unique_per_plot_and_references_resolve():
+    t = np.linspace(0, 1, 50)
+    first = plot_svg(t, {"x": t}, "A", "x")
+    second = plot_svg(t, {"x": t ** 2}, "B", "x")
+    ids_first = set(re.findall(r'\bid="([^"]+)"', first))
+    ids_second = set(re.findall(r'\bid="([^"]+)"', second))
+    assert ids_first and not ids_first & ids_second
+    for svg, ids in ((first, ids_first), (second, ids_second)):
+        refs = set(re.findall(r'href="#([^"]+)"', svg)) | set(re.findall(r"url\(#([^)]+)\)", svg))
+        assert refs and refs <= ids
+
+
+def test_plot_rejects_mismatched_lengths():
+    with pytest.raises(ValueError, match="series 'x'"):
+        plot_svg(np.arange(3.0), {"x": np.arange(4.0)}, "T", "x")
+
+
+def test_mathml_escapes_and_is_well_formed():
+    symbol = sympy.Symbol("a<b&c")
+    markup = math_markup(symbol + sympy.pi * sympy.Symbol("x") ** 2)
+    assert "<mi>a&lt;b&amp;c</mi>" in markup and "π" in markup
+    root = ET.fromstring(markup)
+    assert root.tag == "math" and root.get("display") == "block"
+    relation = math_markup(sympy.Symbol("x") < 1, display="inline")
+    assert "<mo>&lt;</mo>" in relation
+    equation = equation_markup(sympy.Derivative(sympy.Function("p")(sympy.Symbol("t")), sympy.Symbol("t")),
+                               sympy.Symbol("e"))
+    ET.fromstring(equation)
+    assert "<mo>=</mo>" in equation
+
+
+def test_docstring_examples():
+    import doctest
+
+    from bondc.report import render
+
+    result = doctest.testmod(render)
+    assert result.attempted > 0 and result.failed == 0

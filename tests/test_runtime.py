@@ -1,0 +1,184 @@
+"""bondc.runtime on its own: signals, parameters, and the integrator on hand-written models.
+
+The models here are written by hand (no code generation), so these tests pin
+the event machinery independently of bondc.codegen: a known crossing time, a
+known-time step that must not be stepped across, and a sliding mode whose
+Filippov solution is known exactly.
+"""
+
+import io
+
+import numpy as np
+import pytest
+
+from bondc import runtime
+
+
+# ------------------------------------------------------------------ signals
+
+def test_table_is_piecewise_linear_and_held_at_the_ends():
+    ts, vs = (0.0, 1.0, 3.0), (0.0, 10.0, -10.0)
+    assert float(runtime.table(0.5, ts, vs)) == 5.0
+    assert float(runtime.table(2.0, ts, vs)) == 0.0
+    assert float(runtime.table(-1.0, ts, vs)) == 0.0
+    assert float(runtime.table(7.0, ts, vs)) == -10.0
+    np.testing.assert_allclose(runtime.table(np.array([0.25, 1.0, 2.5]), ts, vs), [2.5, 10.0, -5.0])
+
+
+def test_step_is_zero_before_and_one_from_its_time():
+    assert runtime.step(0.0999999, 0.1) == 0.0
+    assert runtime.step(0.1, 0.1) == 1.0
+    np.testing.assert_array_equal(runtime.step(np.array([0.0, 0.1, 0.2]), 0.1), [0.0, 1.0, 1.0])
+
+
+def test_csv_signal_uses_the_time_column_and_interpolates(tmp_path):
+    path = tmp_path / "speed.csv"
+    path.write_text("# measured\nomega,time,torque\n0,0,5\n10,1,6\n10,2,7\n")
+    assert float(runtime.csv_signal(0.5, str(tmp_path), "speed.csv", "omega")) == 5.0
+    assert float(runtime.csv_signal(5.0, str(tmp_path), "speed.csv", "torque")) == 7.0
+    np.testing.assert_array_equal(runtime.csv_times(str(tmp_path), "speed.csv", "omega"), [0, 1, 2])
+
+
+def test_csv_signal_without_time_column_uses_the_first(tmp_path):
+    path = tmp_path / "f.csv"
+    path.write_text("s,force\n0,0\n2,4\n")
+    assert float(runtime.csv_signal(1.0, str(tmp_path), "f.csv", "force")) == 2.0
+
+
+def test_csv_errors_name_the_problem(tmp_path):
+    (tmp_path / "a.csv").write_text("t,x\n0,1\n")
+    with pytest.raises(ValueError, match="no column 'y'.*columns: t, x"):
+        runtime.load_csv(str(tmp_path / "a.csv"), "y")
+    (tmp_path / "b.csv").write_text("t,x\n1,1\n0,2\n")
+    with pytest.raises(ValueError, match="must not decrease"):
+        runtime.load_csv(str(tmp_path / "b.csv"), "x")
+
+
+# --------------------------------------------------------------- parameters
+
+def test_param_array_accepts_none_dict_and_array():
+    parameters = {"m": 2.0, "k": 800.0}
+    np.testing.assert_array_equal(runtime.param_array(parameters), [2.0, 800.0])
+    np.testing.assert_array_equal(runtime.param_array(parameters, {"k": 1}), [2.0, 1.0])
+    np.testing.assert_array_equal(runtime.param_array(parameters, [3, 4]), [3.0, 4.0])
+    with pytest.raises(KeyError, match="unknown parameter kk"):
+        runtime.param_array(parameters, {"kk": 1})
+    with pytest.raises(ValueError, match="2 entries"):
+        runtime.param_array(parameters, [1.0])
+
+
+def test_output_grid_includes_the_end():
+    np.testing.assert_allclose(runtime.output_grid(0.0, 1.0, 0.25), [0, 0.25, 0.5, 0.75, 1.0])
+    grid = runtime.output_grid(0.0, 1.0, 0.3)
+    np.testing.assert_allclose(grid, [0, 0.3, 0.6, 0.9, 1.0])
+    assert runtime.output_grid(0.0, 0.3, 0.1).size == 4
+
+
+# ------------------------------------------------------- hand-written models
+
+def _namespace(**overrides):
+    """A model with every name the runtime needs; tests replace the functions."""
+    namespace = {
+        "STATE_NAMES": ("x",), "OUTPUT_NAMES": ("y",), "VARIABLE_NAMES": ("y",), "VARIABLE_LAWS": ("y",),
+        "PARAMETERS": {"a": 1.0}, "SWITCHES": (), "EVENT_SWITCHES": (), "DEFAULTS": {},
+        "x0": lambda p: np.array([1.0]),
+        "_rhs": lambda t, x, p, m: np.array([-p[0] * x[0]]),
+        "_jac": lambda t, x, p, m: np.array([[-p[0]]]),
+        "_switches": lambda t, x, p, m: np.zeros(0),
+        "_outputs": lambda t, x, p, m: (2 * x[0],),
+        "_variables": lambda t, x, p, m: (2 * x[0],),
+        "_time_breaks": lambda p: [],
+    }
+    namespace.update(overrides)
+    return namespace
+
+
+def test_smooth_model_matches_the_exponential():
+    result = runtime.simulate_model(_namespace(), 2.0, {"a": 3.0}, rtol=1e-9, atol=1e-12)
+    assert result.complete
+    np.testing.assert_allclose(result.states["x"], np.exp(-3.0 * result.t), rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(result.outputs["y"], 2 * result.states["x"])
+
+
+def test_known_time_step_is_a_segment_boundary_not_stepped_across():
+    # dx/dt = step(t, 0.5) written frozen: the mode of g = t - 0.5 selects 0 or 1
+    model = _namespace(
+        x0=lambda p: np.array([0.0]),
+        _rhs=lambda t, x, p, m: np.array([1.0 if m[0] >= 0 else 0.0]),
+        _jac=lambda t, x, p, m: np.zeros((1, 1)),
+        SWITCHES=("step(t, 0.5)",), EVENT_SWITCHES=(),
+        _switches=lambda t, x, p, m: np.array([t - 0.5]),
+        _time_breaks=lambda p: [(0.5, "step(t, 0.5)", "step")],
+    )
+    result = runtime.simulate_model(model, 1.0, method="RK45")
+    assert result.complete
+    assert result.states["x"][-1] == pytest.approx(0.5, abs=1e-12)
+    assert result.events == [(0.5, "step(t, 0.5) -> +1")]
+
+
+def test_state_event_is_located_at_the_crossing():
+    # x' = -1 while x > 0.3 (mode +1 of g = x - 0.3), then x' = -2: x reaches 0.3 at t = 0.7
+    model = _namespace(
+        _rhs=lambda t, x, p, m: np.array([-1.0 if m[0] > 0 else -2.0]),
+        _jac=lambda t, x, p, m: np.zeros((1, 1)),
+        SWITCHES=("if x > 0.3",), EVENT_SWITCHES=(0,),
+        _switches=lambda t, x, p, m: np.array([x[0] - 0.3]),
+    )
+    result = runtime.simulate_model(model, 0.9, rtol=1e-10, atol=1e-12)
+    assert result.complete
+    (time, label), = result.events
+    assert time == pytest.approx(0.7, abs=1e-12)
+    assert label == "if x > 0.3 -> -1"
+    assert result.states["x"][-1] == pytest.approx(0.3 - 2 * 0.2, abs=1e-10)
+
+
+def test_sliding_mode_follows_the_filippov_solution():
+    # x' = -sign(x): x = 1 - t until t = 1, then x stays 0 with the equivalent sign 0
+    model = _namespace(
+        _rhs=lambda t, x, p, m: np.array([-m[0]]),
+        _jac=lambda t, x, p, m: np.zeros((1, 1)),
+        SWITCHES=("sign(x)",), EVENT_SWITCHES=(0,),
+        _switches=lambda t, x, p, m: np.array([x[0]]),
+        _outputs=lambda t, x, p, m: (m[0] + 0 * x[0],),
+        _variables=lambda t, x, p, m: (m[0] + 0 * x[0],),
+    )
+    result = runtime.simulate_model(model, 3.0, dt=0.25)
+    assert result.complete
+    expected = np.maximum(1.0 - result.t, 0.0)
+    np.testing.assert_allclose(result.states["x"], expected, atol=1e-8)
+    assert result.events[0][0] == pytest.approx(1.0, abs=1e-9)
+    assert result.events[0][1] == "sliding on sign(x)"
+    after = result.t > 1.0
+    np.testing.assert_allclose(result.outputs["y"][after], 0.0, atol=1e-6)   # the Filippov sign
+    np.testing.assert_array_equal(result.outputs["y"][result.t < 1.0], 1.0)
+    assert result.stats["sliding_segments"] == 1
+
+
+@pytest.mark.parametrize("method", ["RK45", "Radau", "BDF"])
+def test_nonfinite_derivative_stops_the_run_and_names_the_variable(method):
+    # y = sqrt(x - 0.5) with x = 1 - t: nan from t = 0.5
+    model = _namespace(
+        _rhs=lambda t, x, p, m: np.array([-1.0 + 0 * np.sqrt(x[0] - 0.5)]),
+        _jac=lambda t, x, p, m: np.zeros((1, 1)),
+        VARIABLE_NAMES=("root",), VARIABLE_LAWS=("sqrt(x - 0.5)",),
+        _variables=lambda t, x, p, m: (np.sqrt(x[0] - 0.5),),
+    )
+    with np.errstate(invalid="ignore"):
+        result = runtime.simulate_model(model, 1.0, method=method)
+    assert not result.complete
+    assert result.failure["variable"] == "root"
+    assert result.failure["law"] == "sqrt(x - 0.5)"
+    assert result.failure["time"] == pytest.approx(0.5, abs=1e-6)
+    assert result.t[-1] <= 0.5 + 1e-12
+    assert "became nan" in result.message
+
+
+def test_write_csv_round_trips_exactly():
+    result = runtime.simulate_model(_namespace(), 1.0, dt=0.1)
+    buffer = io.StringIO()
+    runtime.write_csv(result, buffer)
+    lines = buffer.getvalue().splitlines()
+    assert lines[0] == "t,y,x"
+    data = np.loadtxt(io.StringIO(buffer.getvalue()), delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(data[:, 0], result.t)
+    np.testing.assert_array_equal(data[:, 2], result.states["x"])

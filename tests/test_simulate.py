@@ -1,0 +1,232 @@
+"""bondc.simulate against analytic solutions, located events, failures and output files.
+
+Every expectation is computed here from the physics (closed-form solutions,
+crossing times, table breakpoints), never from an earlier run.
+"""
+
+import io
+import json
+
+import numpy as np
+import pytest
+
+from bondc import causality, equations, semantic
+from bondc.errors import SimulationError, UsageError
+from bondc.simulate import ProgressBar, SimResult, csv_text, run, simulate, write_csv, write_npz
+
+from test_codegen import SIM, derive
+
+
+# ------------------------------------------------------------ analytic models
+
+def test_rc_charging_matches_one_minus_exp():
+    result = run(SIM / "rc.bg", dt=1e-4)
+    assert result.complete
+    tau = 1e3 * 1e-6
+    expected = 10.0 * (1.0 - np.exp(-result.t / tau))
+    # rtol 1e-6, atol 1e-12 C on a charge of 1e-5 C: a few parts in 1e7 of 10 V
+    np.testing.assert_allclose(result.outputs["v"], expected, rtol=0, atol=5e-6)
+    np.testing.assert_allclose(result.outputs["i"], (10.0 - expected) / 1e3, rtol=0, atol=5e-9)
+    np.testing.assert_allclose(result.t, np.arange(51) * 1e-4, rtol=0, atol=1e-15)
+
+
+def test_mass_spring_damper_step_response_is_the_underdamped_solution():
+    result = run(SIM / "msd.bg")
+    assert result.complete
+    m, k, b, force, t0 = 2.0, 800.0, 12.0, 10.0, 0.1
+    wn, zeta = np.sqrt(k / m), b / (2 * np.sqrt(k * m))
+    wd = wn * np.sqrt(1 - zeta**2)
+    s = result.t - t0
+    expected = np.where(s >= 0, force / k * (1 - np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta / np.sqrt(1 - zeta**2)
+                                                                            * np.sin(wd * s))), 0.0)
+    np.testing.assert_allclose(result.outputs["x"], expected, rtol=0, atol=1e-6 * force / k)
+    assert result.outputs["x"][result.t < t0].max() == 0.0          # nothing moves before the step
+    assert [e[0] for e in result.events] == [pytest.approx(t0, abs=0)]
+
+
+def test_undamped_oscillator_period_and_energy():
+    result = run(SIM / "oscillator.bg")
+    assert result.complete
+    q, t = result.states["spring.q"], result.t
+    down = np.flatnonzero((q[:-1] > 0) & (q[1:] <= 0))
+    # crossing times by cubic interpolation on 4 points around each sign change
+    crossings = []
+    for i in down:
+        window = slice(max(i - 1, 0), i + 3)
+        coefficients = np.polyfit(t[window] - t[i], q[window], 3)
+        roots = [r.real + t[i] for r in np.roots(coefficients) if abs(r.imag) < 1e-12 and 0 <= r.real <= t[i + 1] - t[i]]
+        crossings.append(roots[0])
+    period = 2 * np.pi * np.sqrt(0.5 / 200.0)
+    assert len(crossings) >= 5
+    np.testing.assert_allclose(np.diff(crossings), period, rtol=1e-6)
+    energy = result.outputs["E"]
+    assert energy[0] == pytest.approx(0.5 * 200.0 * 0.01**2)
+    assert np.ptp(energy) / energy[0] < 1e-7
+
+
+def test_overrides_change_the_physics():
+    _, ss, experiment = derive("oscillator")
+    stiff = simulate(ss, experiment, overrides={"k": 800.0}, t_end=0.5)
+    q, t = stiff.states["spring.q"], stiff.t
+    i = np.flatnonzero((q[:-1] > 0) & (q[1:] <= 0))[0]
+    first = t[i] - q[i] * (t[i + 1] - t[i]) / (q[i + 1] - q[i])
+    assert first == pytest.approx(0.25 * 2 * np.pi * np.sqrt(0.5 / 800.0), rel=1e-3)
+    assert stiff.parameters["k"] == 800.0
+    with pytest.raises(UsageError, match="unknown parameter 'kk'"):
+        simulate(ss, experiment, overrides={"kk": 1.0})
+
+
+def test_sets_reach_the_model_through_run():
+    result = run(SIM / "rc.bg", sets=["R=2 [kOhm]"], dt=1e-3)
+    tau = 2e3 * 1e-6
+    np.testing.assert_allclose(result.outputs["v"], 10.0 * (1 - np.exp(-result.t / tau)), atol=5e-6)
+
+
+# ------------------------------------------------------------------ events
+
+def _friction_expected(t):
+    """Mass 1 kg, push 10 N; friction 5*v below v0 = 1 m/s, 1*v + 3 N above."""
+    crossing = np.log(2.0) / 5.0
+    below = t < crossing
+    v = np.where(below, 2 * (1 - np.exp(-5 * t)), 7 - 6 * np.exp(-(t - crossing)))
+    x_cross = 2 * crossing - 0.4 * (1 - np.exp(-5 * crossing))
+    x = np.where(below, 2 * t - 0.4 * (1 - np.exp(-5 * t)), x_cross + 7 * (t - crossing) - 6 * (1 - np.exp(-(t - crossing))))
+    return crossing, v, x
+
+
+def test_friction_threshold_crossing_is_located():
+    result = run(SIM / "friction.bg")
+    assert result.complete
+    crossing, v, x = _friction_expected(result.t)
+    (time, label), = result.events
+    assert time == pytest.approx(crossing, abs=1e-8)
+    assert "if" in label and "b3.e" in label
+    np.testing.assert_allclose(result.outputs["v"], v, atol=1e-7)
+    np.testing.assert_allclose(result.states["x"], x, atol=1e-7)
+    # the friction force jumps from 5 N to 4 N at the crossing; the event point keeps the value before it
+    at = np.flatnonzero(result.t == time)[0]
+    assert result.outputs["Ff"][at] == pytest.approx(5.0, abs=1e-6)
+    assert result.outputs["Ff"][at + 1] == pytest.approx(4.0 + (result.outputs["v"][at + 1] - 1.0), abs=1e-6)
+
+
+def test_friction_results_do_not_depend_on_max_step():
+    _, ss, experiment = derive("friction")
+    grid = np.linspace(0.0, 2.0, 201)
+    free = simulate(ss, experiment, t_eval=grid)
+    small = simulate(ss, experiment, t_eval=grid, max_step=1e-3)
+    assert free.stats["steps"] < small.stats["steps"]
+    np.testing.assert_allclose(free.outputs["v"], small.outputs["v"], atol=1e-7)
+    np.testing.assert_allclose(free.states["x"], small.states["x"], atol=1e-7)
+    assert free.events[0][0] == pytest.approx(small.events[0][0], abs=1e-9)
+
+
+def test_table_breakpoints_split_the_integration():
+    result = run(SIM / "table_force.bg")
+    assert result.complete
+    assert [e[0] for e in result.events] == [0.5, 1.0, 1.5]
+    t = result.t
+    for corner in (0.5, 1.0, 1.5):
+        assert corner in t                       # a segment ends exactly at every corner
+    expected = np.select([t < 0.5, t < 1.0, t < 1.5],
+                         [10 * t**2, 2.5 + 10 * (t - 0.5), 7.5 + 10 * (t - 1) - 10 * (t - 1) ** 2], 10.0)
+    np.testing.assert_allclose(result.states["mass.p"], expected, atol=1e-9)
+    _, ss, experiment = derive("table_force")
+    small = simulate(ss, experiment, max_step=1e-2, t_eval=t)
+    np.testing.assert_allclose(small.states["mass.p"], result.states["mass.p"], atol=1e-9)
+
+
+def test_friction_that_sticks_at_the_threshold_slides_there():
+    result = run(SIM / "friction_stick.bg", dt=0.01)
+    assert result.complete
+    crossing = -np.log(1 - 5.0 / 6.0) / 5.0       # v = 1.2*(1 - exp(-5t)) reaches 1 m/s
+    assert result.events[0][0] == pytest.approx(crossing, abs=1e-7)
+    assert result.events[0][1].startswith("sliding on")
+    after = result.t > crossing
+    np.testing.assert_allclose(result.outputs["v"][after], 1.0, atol=1e-7)
+    np.testing.assert_allclose(result.outputs["Ff"][after], 6.0, atol=1e-5)   # friction balances the push
+    assert result.stats["segments"] <= 5
+
+
+# ----------------------------------------------------------------- failures
+
+def test_nan_is_reported_with_time_variable_and_law(tmp_path):
+    target = tmp_path / "drain.csv"
+    with pytest.raises(SimulationError) as caught:
+        run(SIM / "sqrt_drain.bg", output=target)
+    error = caught.value
+    result = error.result
+    assert not result.complete
+    assert result.failure["variable"] == "b1.e"
+    assert result.failure["time"] == pytest.approx(1.0, abs=1e-6)      # q = 2 - t reaches 1 at t = 1
+    assert result.t[-1] == pytest.approx(1.0, abs=1e-6)
+    diagnostic, = error.diagnostics
+    assert diagnostic.code == "E810"
+    assert "'b1.e' (tank.e) became nan" in diagnostic.message and "sqrt(tank.q - 1)" in diagnostic.message
+    assert diagnostic.span.line == 4                      # the tank's law
+    assert diagnostic.hint
+    data = np.loadtxt(target, delimiter=",", skiprows=1)  # what was computed is written
+    assert data[-1, 0] == pytest.approx(1.0, abs=1e-6)
+    np.testing.assert_allclose(data[:, 2], 2.0 - data[:, 0], atol=1e-9)
+
+
+def test_missing_end_time_is_a_usage_error():
+    _, ss, _ = derive("rc")
+    with pytest.raises(UsageError, match="no end time"):
+        simulate(ss, None)
+
+
+# -------------------------------------------------------------------- files
+
+def test_csv_columns_and_all_bonds(tmp_path):
+    result = run(SIM / "msd.bg", dt=0.1)
+    path = tmp_path / "out.csv"
+    write_csv(result, path)
+    lines = path.read_text().splitlines()
+    assert lines[0] == "t,x,mass.p,spring.q"
+    assert len(lines) == 1 + 21
+    write_csv(result, path, all_bonds=True)
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[:4] == ["t", "x", "mass.p", "spring.q"]
+    assert sorted(header[4:]) == sorted(f"b{i}.{v}" for i in range(1, 5) for v in "ef")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(data[:, 0], result.t)                  # exact round trip
+    np.testing.assert_array_equal(data[:, header.index("b4.e")], result.bonds["b4.e"])
+    assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]           # no temporary left
+
+
+def test_npz_holds_arrays_and_status(tmp_path):
+    result = run(SIM / "msd.bg", dt=0.1)
+    path = tmp_path / "out.npz"
+    write_npz(result, path)
+    with np.load(path) as data:
+        np.testing.assert_array_equal(data["t"], result.t)
+        np.testing.assert_array_equal(data["states/spring.q"], result.states["spring.q"])
+        np.testing.assert_array_equal(data["bonds/b2.f"], result.bonds["b2.f"])
+        assert bool(data["complete"]) and str(data["message"]).startswith("completed")
+        assert list(data["parameter_names"]) == ["m", "k", "b"]
+
+
+def test_summary_is_json_ready():
+    result = run(SIM / "friction.bg", dt=0.1)
+    summary = json.loads(json.dumps(result.summary()))
+    assert summary["complete"] and summary["model"] == "FrictionJump" and summary["experiment"] == "run"
+    assert summary["events"][0]["time"] == pytest.approx(np.log(2) / 5, abs=1e-8)
+    assert summary["final"]["v"] == pytest.approx(7 - 6 * np.exp(-(2 - np.log(2) / 5)), abs=1e-6)
+
+
+def test_progress_bar_is_quiet_off_a_terminal_and_drawn_on_one():
+    quiet = io.StringIO()
+    bar = ProgressBar(0.0, 1.0, stream=quiet, delay=0.0)
+    bar(0.5)
+    bar.close()
+    assert quiet.getvalue() == ""
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    terminal = Terminal()
+    bar = ProgressBar(0.0, 2.0, stream=terminal, delay=0.0)
+    bar(1.0)
+    bar.close()
+    assert "50.0%" in terminal.getvalue()
