@@ -316,6 +316,7 @@ class SetValue:
     value: Expr
     unit: Unit | None
     span: Span = _span()
+    source: object = field(default=None, compare=False, repr=False)  # the Source it was parsed from
 
 
 def walk(expr: Expr):

@@ -42,7 +42,7 @@ from typing import Iterable, Mapping
 from bondc import ast
 from bondc.errors import CausalityError, Diagnostic, Related, sort_key
 from bondc.model import BondGraph, ElementNode, JunctionNode
-from bondc.source import NO_SPAN, Span
+from bondc.source import Span
 
 # ---------------------------------------------------------------- kinds as data
 
@@ -183,7 +183,8 @@ def _other_end(graph: BondGraph, bond: int, node: str) -> str:
     return b.head if b.tail == node else b.tail
 
 
-def _element_span(element: ElementNode) -> Span:
+def element_span(element: ElementNode) -> Span:
+    """Where a diagnostic about an element points: its name."""
     return element.name_span if element.name_span.line > 0 else element.span
 
 
@@ -399,7 +400,8 @@ class _Procedure:
 
 # --------------------------------------------------------------- diagnostics
 
-def _describe(graph: BondGraph, name: str) -> str:
+def describe_node(graph: BondGraph, name: str) -> str:
+    """``resistor 'damper'``, ``1-junction 'j'``: a node as diagnostics name it."""
     if name in graph.elements:
         element = graph.elements[name]
         return f"{element.kind_info.description} '{name}'"
@@ -408,7 +410,8 @@ def _describe(graph: BondGraph, name: str) -> str:
     return name
 
 
-def _join(items: list[str]) -> str:
+def join_words(items: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
     if len(items) <= 1:
         return "".join(items)
     return ", ".join(items[:-1]) + " and " + items[-1]
@@ -449,7 +452,7 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
     origins.append(origin)
     culprits = [name for name in origins if name in graph.elements]
     where = conflict.node
-    described = _join([_describe(graph, name) for name in culprits]) or "the bonds"
+    described = join_words([describe_node(graph, name) for name in culprits]) or "the bonds"
     if where in graph.junctions:
         kind = graph.junctions[where].kind
         if conflict.what == "none":
@@ -462,7 +465,7 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
         hint = (f"a {kind}-junction takes its common {'effort' if kind == '0' else 'flow'} from exactly one bond; "
                 "remove one of them, or put a resistor or storage element between them")
     elif where in graph.elements:
-        message = (f"causal conflict at {_describe(graph, where)}: {described} impose incompatible causality "
+        message = (f"causal conflict at {describe_node(graph, where)}: {described} impose incompatible causality "
                    f"on its two ports")
         hint = "a transformer passes an effort through in one direction only; a gyrator turns flow into effort"
     else:
@@ -474,16 +477,16 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
         hint = "one end of a bond sets the effort and the other the flow"
     if subject is not None and ROLES.get(subject.kind) == "storage":
         message += f" (no causality of '{subject.name}' is consistent)"
-    primary = _element_span(subject) if subject is not None else graph.bond(conflict.bonds[0]).span
+    primary = element_span(subject) if subject is not None else graph.bond(conflict.bonds[0]).span
     related: list[Related] = []
     for name in culprits:
         if subject is not None and name == subject.name:
             continue
-        related.append(Related(_element_span(graph.elements[name]), f"{_describe(graph, name)} is declared here"))
+        related.append(Related(element_span(graph.elements[name]), f"{describe_node(graph, name)} is declared here"))
     if where in graph.junctions:
-        related.append(Related(graph.junctions[where].span, f"{_describe(graph, where)}"))
+        related.append(Related(graph.junctions[where].span, f"{describe_node(graph, where)}"))
     elif where in graph.elements and (subject is None or where != subject.name):
-        related.append(Related(_element_span(graph.elements[where]), _describe(graph, where)))
+        related.append(Related(element_span(graph.elements[where]), describe_node(graph, where)))
     for bond in conflict.bonds:
         related.append(Related(graph.bond(bond).span, _bond_text(graph, bond)))
     if subject is not None and ROLES.get(subject.kind) == "source":
@@ -656,6 +659,12 @@ def _variable_name(graph: BondGraph, key: str) -> str:
     return key.split(":", 1)[1]
 
 
+def _variable_order(key: str) -> tuple:
+    if key[0] in "ef" and key[1:].isdigit():
+        return (0, int(key[1:]), key[0])
+    return (1, 0, key)
+
+
 def _find_loops(graph: BondGraph, relations) -> tuple[AlgebraicLoop, ...]:
     computed_by = {output: node for node, output, _ in relations}
     edges = {output: [k for k in inputs if k in computed_by] for _, output, inputs in relations}
@@ -671,7 +680,7 @@ def _find_loops(graph: BondGraph, relations) -> tuple[AlgebraicLoop, ...]:
             resistors=tuple(n for n in ordered if n in graph.elements and ROLES.get(graph.elements[n].kind) == "resistor"),
             junctions=tuple(n for n in ordered if n in graph.junctions),
             nodes=tuple(ordered),
-            variables=tuple(_variable_name(graph, k) for k in component),
+            variables=tuple(_variable_name(graph, k) for k in sorted(component, key=_variable_order)),
         ))
     return tuple(loops)
 
@@ -680,25 +689,25 @@ def _loop_diagnostic(graph: BondGraph, loop: AlgebraicLoop) -> Diagnostic:
     parts = []
     if loop.resistors:
         parts.append(f"resistor{'s' if len(loop.resistors) > 1 else ''} "
-                     + _join([f"'{n}'" for n in loop.resistors]))
+                     + join_words([f"'{n}'" for n in loop.resistors]))
     if loop.junctions:
         parts.append(f"junction{'s' if len(loop.junctions) > 1 else ''} "
-                     + _join([f"'{n}'" for n in loop.junctions]))
+                     + join_words([f"'{n}'" for n in loop.junctions]))
     rest = [n for n in loop.nodes if n not in loop.resistors and n not in loop.junctions]
     if rest:
-        parts.append(_join([f"'{n}'" for n in rest]))
+        parts.append(join_words([f"'{n}'" for n in rest]))
     first = loop.nodes[0]
-    span = (_element_span(graph.elements[first]) if first in graph.elements
+    span = (element_span(graph.elements[first]) if first in graph.elements
             else graph.junctions[first].span if first in graph.junctions else graph.outputs[first].span)
     related = []
     for name in loop.nodes[1:]:
         if name in graph.elements:
-            related.append(Related(_element_span(graph.elements[name]), f"{_describe(graph, name)} is on the loop"))
+            related.append(Related(element_span(graph.elements[name]), f"{describe_node(graph, name)} is on the loop"))
         elif name in graph.junctions:
-            related.append(Related(graph.junctions[name].span, f"{_describe(graph, name)} is on the loop"))
+            related.append(Related(graph.junctions[name].span, f"{describe_node(graph, name)} is on the loop"))
     return Diagnostic(
         "info", "I603",
-        f"algebraic loop through {_join(parts)}: {', '.join(loop.variables)} depend on each other "
+        f"algebraic loop through {join_words(parts)}: {', '.join(loop.variables)} depend on each other "
         "with no storage element in between; the equations stage solves the loop",
         span, related=tuple(related),
         hint="a small storage element (or a resistor in the other causality) would break the loop")
@@ -739,14 +748,14 @@ def _derivative_diagnostic(graph: BondGraph, name: str, depends_on: tuple[str, .
     element = graph.elements[name]
     variable = "effort" if element.kind == "C" else "flow"
     if depends_on:
-        by = f"is fixed by {_join([_describe(graph, n) for n in depends_on])}"
+        by = f"is fixed by {join_words([describe_node(graph, n) for n in depends_on])}"
     else:
         by = "is fixed by the rest of the graph"
-    message = (f"{_describe(graph, name)} is in derivative causality: its {variable} {by}, "
+    message = (f"{describe_node(graph, name)} is in derivative causality: its {variable} {by}, "
                f"so its state is not independent and is eliminated from the state equations")
-    related = tuple(Related(_element_span(graph.elements[n]), f"{_describe(graph, n)} fixes it")
+    related = tuple(Related(element_span(graph.elements[n]), f"{describe_node(graph, n)} fixes it")
                     for n in depends_on)
-    return Diagnostic("warning", "W602", message, _element_span(element), related=related,
+    return Diagnostic("warning", "W602", message, element_span(element), related=related,
                       hint="intended for rigidly coupled parts; otherwise put a compliance (C) or "
                            "inertia (I) between the storage elements")
 
@@ -756,7 +765,13 @@ def _derivative_diagnostic(graph: BondGraph, name: str, depends_on: tuple[str, .
 def assign_causality(graph: BondGraph) -> CausalGraph:
     """Assign a causality to every bond of ``graph`` (SCAP), or raise CausalityError.
 
-    >>> from bondc.model import BondGraph  # doctest: +SKIP
+    >>> from bondc.parse import parse_text
+    >>> from bondc.semantic import build
+    >>> text = "model M\\n Se force : e = 10\\n I mass : f = p/2\\n R damper : e = 3*f\\n 1 j\\n" \\
+    ...        " force -> j\\n j -> mass\\n j -> damper\\nend\\n"
+    >>> causal = assign_causality(build(parse_text(text, "m.bg"))[0])
+    >>> dict(causal.storage), dict(causal.resistors), causal.effort_from(2)
+    ({'mass': 'integral'}, {'damper': 'resistance'}, 'j')
     """
     procedure = _Procedure(graph)
     state = procedure.run()

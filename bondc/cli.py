@@ -36,7 +36,7 @@ def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
 def _parse_sets(values) -> list:
     from bondc.parse import parse_set_value
 
-    return [parse_set_value(text) for text in values or ()]
+    return [parse_set_value(text, f"--set #{index}") for index, text in enumerate(values or (), 1)]
 
 
 def _load(args, *, experiment=None):
@@ -46,11 +46,29 @@ def _load(args, *, experiment=None):
                          sets=_parse_sets(getattr(args, "set", None)))
 
 
+def _derive(args):
+    """parse -> build -> causality -> equations, with the experiment's overrides applied.
+
+    Warnings (derivative causality, unused parameters, ...) go to stderr.
+    """
+    from bondc import semantic
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+
+    experiment = getattr(args, "experiment", None)
+    graph, warnings = _load(args, experiment=experiment if experiment is not None else semantic.FIRST)
+    causal = assign_causality(graph)
+    state_space = derive(causal)
+    notes = list(warnings)
+    notes += [d for d in list(causal.diagnostics) + list(state_space.diagnostics) if d not in notes]
+    _print_diagnostics(notes, graph.sources)
+    return graph, causal, state_space
+
+
 # ------------------------------------------------------------------ commands
 
 def _cmd_check(args) -> int:
     from bondc import semantic
-    from bondc.errors import ModelError
 
     diagnostics: list[Diagnostic] = []
     graph = None
@@ -64,12 +82,11 @@ def _cmd_check(args) -> int:
 
         causal = assign_causality(graph)
         diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
-    except ModelError as error:
-        diagnostics += error.diagnostics
     except BondcError as error:
         if error.stage in ("usage",):
             raise
         diagnostics += error.diagnostics
+        sources = error.sources
     ok = not any(d.is_error for d in diagnostics)
     if args.json:
         summary = graph.summary() if graph is not None else None
@@ -116,6 +133,27 @@ def _cmd_fmt(args) -> int:
     return EXIT_OK
 
 
+def _cmd_equations(args) -> int:
+    from bondc.equations import format_equations
+
+    _, _, state_space = _derive(args)
+    text = format_equations(state_space, args.format)
+    sys.stdout.write(text if text.endswith("\n") else text + "\n")
+    return EXIT_OK
+
+
+def _cmd_linearize(args) -> int:
+    from bondc.analysis.linearize import linearize
+
+    _, _, state_space = _derive(args)
+    result = linearize(state_space, time=args.time, at=args.at)
+    if args.json:
+        print(json.dumps(result.to_json(), indent=2))
+    else:
+        print(result.to_text())
+    return EXIT_OK
+
+
 def _cmd_fit_friction(args) -> int:
     from bondc.analysis.friction import run_fit_friction
 
@@ -155,6 +193,21 @@ def build_parser() -> argparse.ArgumentParser:
     group.add_argument("--write", action="store_true", help="rewrite the file in place")
     fmt.set_defaults(run=_cmd_fmt)
 
+    equations = commands.add_parser("equations", help="print the state equations")
+    _add_model_args(equations)
+    equations.add_argument("--experiment", help="apply this experiment's parameter overrides (default: the first)")
+    equations.add_argument("--format", choices=("text", "latex", "json"), default="text")
+    equations.set_defaults(run=_cmd_equations)
+
+    linear = commands.add_parser("linearize", help="A, B, C, D, eigenvalues, natural frequencies, damping")
+    _add_model_args(linear)
+    linear.add_argument("--experiment", help="apply this experiment's parameter overrides (default: the first)")
+    linear.add_argument("--time", type=float, default=0.0, help="hold the inputs at their value at this time, s")
+    linear.add_argument("--at", choices=("initial", "equilibrium"), default="initial",
+                        help="linearise at the initial state or at the equilibrium found from it")
+    linear.add_argument("--json", action="store_true")
+    linear.set_defaults(run=_cmd_linearize)
+
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")
     fit.add_argument("file", help="CSV with velocity [m/s], torque [N*m], pressure [Pa] columns")
@@ -180,10 +233,10 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_USAGE
         return args.run(args)
     except UsageError as error:
-        _print_diagnostics(error.diagnostics)
+        _print_diagnostics(error.diagnostics, error.sources)
         return EXIT_USAGE
     except BondcError as error:
-        _print_diagnostics(error.diagnostics)
+        _print_diagnostics(error.diagnostics, error.sources)
         return EXIT_ERRORS
     except KeyboardInterrupt:
         print("bondc: interrupted", file=sys.stderr)

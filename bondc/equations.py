@@ -40,14 +40,13 @@ from __future__ import annotations
 import heapq
 import json
 import math
-import random
 from pathlib import Path
 from typing import Mapping
 
 import sympy
 
 from bondc import ast
-from bondc.causality import (CONDUCTANCE, DERIVATIVE, ROLES, CausalGraph, _describe, _element_span, _join,
+from bondc.causality import (CONDUCTANCE, DERIVATIVE, ROLES, CausalGraph, describe_node, element_span, join_words,
                              strongly_connected)
 from bondc.errors import Diagnostic, EquationError, Related
 from bondc.model import ElementNode, JunctionNode
@@ -181,10 +180,10 @@ class _Deriver:
                 hint = ("the causality needs the state as a function of the port variable; "
                         "give an invertible law, or add compliance/inertia to avoid derivative causality")
             raise _error("E605",
-                         f"the law `{law} = ...` of {_describe(self.graph, element.name)} must be solved for "
+                         f"the law `{law} = ...` of {describe_node(self.graph, element.name)} must be solved for "
                          f"{wanted} ({'conductance' if wanted == 'f' else 'the causality'} needs it) and "
                          "bondc cannot invert it",
-                         span if span is not None and span.line > 0 else _element_span(element), hint=hint)
+                         span if span is not None and span.line > 0 else element_span(element), hint=hint)
         return solution.xreplace({self._value_dummy: value})
 
     _value_dummy = sympy.Dummy("y", real=True)
@@ -260,9 +259,9 @@ class _Deriver:
         # Derivative causality: the port input (e for a C) is fixed by the rest of the
         # graph; the state follows from the law, its rate from the others' states.
         if len(element.states) != 1:
-            raise _error("E703", f"{_describe(self.graph, element.name)} is in derivative causality and has "
+            raise _error("E703", f"{describe_node(self.graph, element.name)} is in derivative causality and has "
                                  f"{len(element.states)} states; bondc can eliminate only a single-state element",
-                         _element_span(element),
+                         element_span(element),
                          hint="add compliance or inertia so that it gets integral causality")
         state = element.states[0]
         symbol = self.state_symbols[state.qualified]
@@ -276,9 +275,9 @@ class _Deriver:
         if state.initial is not None and not (isinstance(state.initial, ast.Num) and state.initial.value == 0):
             self.diagnostics.append(Diagnostic(
                 "warning", "W704",
-                f"the initial value of '{state.qualified}' is ignored: {_describe(self.graph, element.name)} is "
+                f"the initial value of '{state.qualified}' is ignored: {describe_node(self.graph, element.name)} is "
                 "in derivative causality, so its state follows from the other states",
-                state.initial.span if getattr(state.initial, "span", NO_SPAN).line > 0 else _element_span(element)))
+                state.initial.span if getattr(state.initial, "span", NO_SPAN).line > 0 else element_span(element)))
 
     def _resistor(self, element: ElementNode) -> None:
         bond = element.bond
@@ -437,11 +436,11 @@ class _Deriver:
         self.blocks.append(AlgebraicBlock(tuple(unknowns), tuple(residuals),
                                           tuple(sympy.Integer(0) for _ in unknowns), len(self.assignments), nodes))
         graph = self.graph
-        spans = [_element_span(graph.elements[n]) if n in graph.elements else graph.junctions[n].span
+        spans = [element_span(graph.elements[n]) if n in graph.elements else graph.junctions[n].span
                  for n in nodes if n in graph.elements or n in graph.junctions]
         self.diagnostics.append(Diagnostic(
             "warning", "W604",
-            f"nonlinear algebraic loop through {_join([repr(n) for n in nodes])}: "
+            f"nonlinear algebraic loop through {join_words([repr(n) for n in nodes])}: "
             f"{', '.join(u.name for u in unknowns)} solved numerically at every evaluation",
             spans[0] if spans else NO_SPAN,
             related=tuple(Related(span, "on the loop") for span in spans[1:]),
@@ -468,11 +467,15 @@ class _Deriver:
             singular = sympy.expand(A.det(method="berkowitz")) == 0
         if singular:
             graph = self.graph
-            first = next((n for n in nodes if n in graph.elements), None)
-            raise _error("E702", f"the algebraic loop through {_join([repr(n) for n in nodes])} is singular: "
-                                 f"{', '.join(u.name for u in unknowns)} are not determined by its equations",
-                         _element_span(graph.elements[first]) if first else NO_SPAN,
-                         hint="the loop's laws cancel each other; check signs and bond directions")
+            spans = [element_span(graph.elements[n]) if n in graph.elements else graph.junctions[n].span
+                     for n in nodes if n in graph.elements or n in graph.junctions]
+            names = ", ".join(u.name for u in unknowns)
+            raise _error("E702", f"the algebraic loop through {join_words([repr(n) for n in nodes])} is singular: "
+                                 f"its equations do not determine {names}",
+                         spans[0] if spans else NO_SPAN,
+                         related=[Related(span, "on the loop") for span in spans[1:]],
+                         hint="the loop's laws cancel each other (for example two ideal paths in parallel with "
+                              "nothing on them); check signs and bond directions")
         if len(unknowns) == 1:
             return [b[0] / A[0, 0]]
         return list(A.LUsolve(b))
@@ -491,8 +494,8 @@ class _Deriver:
         for block in self.blocks:
             if any(r.free_symbols & tainted for r in block.residuals):
                 raise _error("E703", "a storage element in derivative causality feeds a nonlinear algebraic "
-                                     f"loop ({_join([repr(n) for n in block.nodes])}); bondc cannot eliminate it",
-                             _element_span(self.dependents[0].element),
+                                     f"loop ({join_words([repr(n) for n in block.nodes])}); bondc cannot eliminate it",
+                             element_span(self.dependents[0].element),
                              hint="add compliance or inertia so that it gets integral causality")
         partial: dict = {}
         for symbol, rhs in self.assignments:
@@ -506,9 +509,9 @@ class _Deriver:
             value = expanded(dependent.state)
             bad = value.free_symbols & (tainted | {u for b in self.blocks for u in b.unknowns})
             if bad:
-                raise _error("E703", f"the state of {_describe(self.graph, dependent.element.name)} depends on "
+                raise _error("E703", f"the state of {describe_node(self.graph, dependent.element.name)} depends on "
                                      "another eliminated state's rate; bondc cannot eliminate it",
-                             _element_span(dependent.element),
+                             element_span(dependent.element),
                              hint="add compliance or inertia so that it gets integral causality")
             rate = sympy.diff(value, self.t)
             for state in states:
@@ -517,9 +520,9 @@ class _Deriver:
                     rate += sympy.diff(value, state) * self.rates[qualified].xreplace(partial)
             rate = strip_impulses(rate)
             if rate.has(sympy.Derivative):
-                raise _error("E703", f"the rate of {_describe(self.graph, dependent.element.name)} needs the "
+                raise _error("E703", f"the rate of {describe_node(self.graph, dependent.element.name)} needs the "
                                      "time derivative of a signal bondc cannot differentiate",
-                             _element_span(dependent.element))
+                             element_span(dependent.element))
             residuals.append(dependent.rate.xreplace(partial) - rate)
         nodes = tuple(d.element.name for d in self.dependents)
         solution = self._solve_linear(residuals, unknowns, nodes)
@@ -619,7 +622,17 @@ class _Deriver:
 # ------------------------------------------------------------------- stage
 
 def derive(causal: CausalGraph) -> StateSpace:
-    """State equations of a causal graph, as a sorted sequence of sympy assignments."""
+    """State equations of a causal graph, as a sorted sequence of sympy assignments.
+
+    >>> from bondc.causality import assign_causality
+    >>> from bondc.parse import parse_text
+    >>> from bondc.semantic import build
+    >>> text = "model M\\n Se force : e = 10\\n I mass : f = p/m\\n R damper : e = b*f\\n" \\
+    ...        " param m = 2\\n param b = 3\\n 1 j\\n force -> j\\n j -> mass\\n j -> damper\\nend\\n"
+    >>> ss = derive(assign_causality(build(parse_text(text, "m.bg"))[0]))
+    >>> ss.derivatives["mass.p"], ss.substituted(ss.derivatives["mass.p"])
+    (b2.e, -b*mass.p/m + 10)
+    """
     deriver = _Deriver(causal)
     deriver.build()
     deriver.order()

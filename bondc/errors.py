@@ -78,12 +78,15 @@ class BondcError(Exception):
 
     stage = "bondc"
 
-    def __init__(self, diagnostics: Iterable[Diagnostic] | Diagnostic | str):
+    def __init__(self, diagnostics: Iterable[Diagnostic] | Diagnostic | str,
+                 sources: Mapping[str, Source] | None = None):
         if isinstance(diagnostics, str):
             diagnostics = [Diagnostic("error", "E000", diagnostics)]
         elif isinstance(diagnostics, Diagnostic):
             diagnostics = [diagnostics]
         self.diagnostics: list[Diagnostic] = list(diagnostics)
+        # The texts the diagnostics point into, for rendering (files are re-read otherwise).
+        self.sources: dict[str, Source] = dict(sources or {})
         super().__init__("; ".join(d.message for d in self.diagnostics))
 
 

@@ -38,7 +38,7 @@ MAX_WIDTH = 100  # a line of laws continues after a comma rather than pass this 
 INDENT = "  "  # per block level
 CONTINUATION = "    "  # extra indent of a statement's continuation lines
 ALIGN_CELL_MAX = 40  # a column cell longer than this does not widen its column...
-VALUE_ALIGN_MAX = 16  # ...nor an expression longer than this (units and descriptions after it)...
+VALUE_ALIGN_MAX = 24  # ...nor an expression longer than this (units and descriptions after it)...
 HEAD_ALIGN_MAX = 64  # ...nor an element's 'KIND NAME "description"' longer than this (its ':')
 COMMENT_ALIGN_MAX = 80  # a line longer than this does not push the trailing-comment column
 
@@ -323,9 +323,9 @@ _GROUP = {
 }
 
 
-def _commas(text: str, start: int = 0) -> list[tuple[int, int]]:
-    """(offset, bracket depth) of each ', ' outside string literals, from ``start`` on."""
-    found, depth, index, in_string = [], 0, 0, False
+def _outside_strings(text: str):
+    """(offset, bracket depth) of every character of ``text`` outside string literals."""
+    depth, index, in_string = 0, 0, False
     while index < len(text):
         char = text[index]
         if in_string:
@@ -335,14 +335,19 @@ def _commas(text: str, start: int = 0) -> list[tuple[int, int]]:
                 in_string = False
         elif char == '"':
             in_string = True
-        elif char in "([":
-            depth += 1
-        elif char in ")]":
-            depth -= 1
-        elif text.startswith(", ", index) and index >= start:
-            found.append((index, depth))
+        else:
+            if char in ")]":
+                depth -= 1
+            yield index, depth
+            if char in "([":
+                depth += 1
         index += 1
-    return found
+
+
+def _commas(text: str, start: int = 0) -> list[tuple[int, int]]:
+    """(offset, bracket depth) of each ', ' outside string literals, from ``start`` on."""
+    return [(index, depth) for index, depth in _outside_strings(text)
+            if index >= start and text.startswith(", ", index)]
 
 
 def _leading(text: str) -> str:
@@ -381,8 +386,13 @@ def _wrap(indent: str, text: str, start: int = 0) -> list[str]:
     return wrapped
 
 
-# Where a long if/then/else chain, put in parentheses, continues on a new line.
+# Where a long if/then/else chain, put in parentheses, continues on a new line
+# (only outside string literals, which may hold any character).
 _ELSE_BREAK = "\x00"
+
+
+def _is_broken(text: str) -> bool:
+    return any(text[index] == _ELSE_BREAK for index, _ in _outside_strings(text))
 
 
 def _broken_if(expr: ast.If) -> str:
@@ -398,7 +408,8 @@ def _broken_if(expr: ast.If) -> str:
 
 def _lay_out(indent: str, text: str, start: int = 0) -> list[str]:
     """The physical lines of one logical line: if/else breaks first, then commas."""
-    segments = text.split(_ELSE_BREAK)
+    breaks = [index for index, _ in _outside_strings(text) if text[index] == _ELSE_BREAK]
+    segments = [text[a:b] for a, b in zip([0] + [i + 1 for i in breaks], breaks + [len(text)])]
     continuation = _leading(segments[0]) + CONTINUATION
     lines = _wrap(indent, segments[0], start)
     for segment in segments[1:]:
@@ -541,7 +552,8 @@ class _Formatter:
                    and not any(entries[end][1]) and not entries[end][2]):
                 end += 1
             if group is not None:
-                shared = getattr(self, "_widths_" + group)([entry[0] for entry in entries[start:end]])
+                shared = getattr(self, "_widths_" + group)([entry[0] for entry in entries[start:end]],
+                                                           [entry[0] for entry in entries])
                 for index in range(start, end):
                     widths[index] = shared
             start = end
@@ -575,9 +587,9 @@ class _Formatter:
         current, first_line = head + render(items[0], head), True
         for k in range(1, len(items)):
             gap = attached.gaps.get(k - 1)
-            plain = render(items[k], " " * MAX_WIDTH)  # as if it had to fit anywhere: never broken
+            plain = items[k] if isinstance(items[k], str) else format_law(items[k])  # one line
             comma = 1 if k < len(items) - 1 else 0
-            if (gap is None and (first_line or fill) and _ELSE_BREAK not in current
+            if (gap is None and (first_line or fill) and not _is_broken(current)
                     and len(indent + current) + 2 + len(plain) + comma <= MAX_WIDTH):
                 current += ", " + plain
                 continue
@@ -613,7 +625,7 @@ class _Formatter:
         self._laws(head + " : " if stmt.laws else head, list(stmt.laws), indent, attached)
 
     # params: param NAME = VALUE [UNIT] "DESC"
-    def _widths_param(self, run) -> dict:
+    def _widths_param(self, run, block) -> dict:
         with_unit_or_desc = [p for p in run if p.unit is not None or p.description is not None]
         return {
             "name": _column([p.name for p in run]),
@@ -625,16 +637,18 @@ class _Formatter:
         prefix = f"param {_pad(stmt.name, widths.get('name', 0))} = "
         value = _value(stmt.value, len(indent + prefix))
         unit, desc = _unit(stmt.unit), _desc(stmt.description)
-        if unit or desc:
-            value = _pad(value, widths.get("value", 0)) if _ELSE_BREAK not in value else value
-        if desc and (unit or widths.get("unit")):
+        aligned = not _is_broken(value) and len(value) <= widths.get("value", 0)
+        if aligned and (unit or desc):
+            value = _pad(value, widths.get("value", 0))
+        if aligned and desc and (unit or widths.get("unit")):  # a value too long to align ends the columns
             unit = _pad(unit, widths.get("unit", 0))
         self.code(indent, " ".join(part for part in (prefix + value, unit, desc) if part), attached.trailing)
 
     # elements and junctions: KIND NAME "DESC" : LAWS   /   KIND NAME, NAME
-    def _widths_element(self, run) -> dict:
+    def _widths_element(self, run, block) -> dict:
         elements = [s for s in run if isinstance(s, ast.Element)]
-        kind = max(len(s.kind) for s in run)
+        # one kind column for the whole block, so every element's name starts in one column
+        kind = max(len(s.kind) for s in block if isinstance(s, (ast.Element, ast.Junction)))
         name = max((len(s.name) for s in elements if s.description is not None or s.laws), default=0)
         heads = [self._element_head(s, kind, name) for s in elements if s.laws]
         return {"kind": kind, "name": name, "colon": _column(heads, HEAD_ALIGN_MAX)}
@@ -654,7 +668,7 @@ class _Formatter:
         self._laws(head, list(stmt.names), indent, attached, fill=True)
 
     # inputs and outputs: input NAME [UNIT] = VALUE "DESC"
-    def _widths_signal(self, run) -> dict:
+    def _widths_signal(self, run, block) -> dict:
         return {
             "keyword": max(len(_keyword(s)) for s in run),
             "name": _column([s.name for s in run]),
@@ -669,7 +683,7 @@ class _Formatter:
         prefix = " ".join(part for part in (keyword, name, unit) if part) + " = "
         value = _value(stmt.value, len(indent + prefix))
         desc = _desc(stmt.description)
-        if desc and _ELSE_BREAK not in value:
+        if desc and not _is_broken(value):
             value = _pad(value, widths.get("value", 0))
         self.code(indent, _words(prefix + value, desc), attached.trailing)
 
@@ -677,7 +691,7 @@ class _Formatter:
     _stmt_Output = _signal
 
     # experiment settings: NAME = VALUE [UNIT]
-    def _widths_setting(self, run) -> dict:
+    def _widths_setting(self, run, block) -> dict:
         return {"name": max(len(s.name) for s in run)}
 
     def _stmt_Setting(self, stmt: ast.Setting, indent, widths, attached) -> None:

@@ -150,7 +150,12 @@ class _ToAst(Transformer):
     def _meta(self, meta) -> Span:
         if getattr(meta, "empty", True):
             return self.source.span(0, 0)
-        return self.source.span(meta.start_pos, meta.end_pos)
+        # A statement's tokens include its closing newline; the span ends at its last character.
+        text = self.source.text
+        end = meta.end_pos
+        while end > meta.start_pos and text[end - 1] in " \t\r\n":
+            end -= 1
+        return self.source.span(meta.start_pos, end)
 
     # expressions -----------------------------------------------------------
     @v_args(meta=True)
@@ -503,7 +508,7 @@ def parse_source(source: Source) -> ast.File:
                     replacement = keyword + " _"
             text = _blank(text, start, end, replacement)
     if diagnostics:
-        raise ParseError(diagnostics)
+        raise ParseError(diagnostics, {source.name: source})
     try:
         items = _ToAst(source).transform(tree)
     except VisitError as error:  # a bug in a transformer method, not in the model
@@ -523,12 +528,13 @@ def parse_file(path: str | Path) -> tuple[ast.File, Source]:
     return parse_source(source), source
 
 
-def parse_set_value(text: str) -> ast.SetValue:
-    """Parse a command-line ``NAME=VALUE [unit]`` assignment."""
-    source = Source("--set", text)
+def parse_set_value(text: str, name: str = "--set") -> ast.SetValue:
+    """Parse a command-line ``NAME=VALUE [unit]`` assignment; ``name`` labels it in diagnostics."""
+    source = Source(name, text)
     try:
         tree, _ = _parse_tree(text, "set_value")
     except UnexpectedInput as error:
         diagnostic, _ = _syntax_diagnostic(error, source)
-        raise ParseError(diagnostic) from None
-    return _ToAst(source).transform(tree)
+        raise ParseError(diagnostic, {name: source}) from None
+    value = _ToAst(source).transform(tree)
+    return ast.SetValue(value.name, value.value, value.unit, value.span, source)

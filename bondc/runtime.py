@@ -32,29 +32,45 @@ the law. The integrator never steps across a switch blindly:
    ``m = sign(g)`` (-1, 0 or +1), so the right-hand side and the analytic
    Jacobian the solver sees are smooth (``abs(v)`` is ``m*v``, an ``if`` takes
    one branch, a table one linear piece).
-2. The switching functions that depend on the state are event functions:
-   after each step, a switch whose ``m*g`` went from positive to non-positive
-   has crossed (a mode-0 switch, sitting exactly on its surface, fires when
-   ``|g|`` leaves zero); the crossing time is found with ``brentq`` on the
-   solver's dense output, the segment ends there and is recorded as an event.
+2. The switches the frozen law actually reads (only the active branch of an
+   ``if`` reads its modes; ``SWITCH_DEPENDS`` adds what their switching
+   functions read) are event functions: after each step, a switch whose
+   ``m*g`` fell below ``-deadband`` has crossed (a mode-0 switch, sitting
+   exactly on its surface, when ``|g|`` leaves the band). The crossing time is
+   found with ``brentq`` on the solver's dense output (the zero of ``g``
+   itself when it lies in that step), the segment ends there and the mode
+   change is recorded as an event. The deadband is how far ``g`` moves when
+   the state moves by its error tolerance (``atol + rtol*|x|``): shallower
+   crossings are integration noise (a chamber pressure sitting at its
+   regulator's set point), not events. Crossings of switches the law does not
+   read change nothing the solver sees; outputs still get the right mode at
+   every point (``sign(g)`` there).
 3. Switches of time only (``step(t, t0)``, table corners in ``t``, conditions
-   like ``t < t1``, csv sample times when there are few) are known in advance:
-   segments simply end at those times; nothing is root-found.
+   like ``t < t1``, csv sample times when there are at most 200) are known in
+   advance: segments simply end at those times; nothing is root-found. A
+   denser measured signal instead caps ``max_step`` at its median sample
+   spacing (linear interpolation is continuous; only its slope jumps).
 4. At every restart the modes are chosen *just after* the restart point: the
    state is advanced by a probe ``h = 1e-8 * span`` along the frozen law and
    ``m = sign(g)`` is taken there, iterated until the modes agree with the law
    they select.
-5. Chattering guard. If no mode vector agrees with itself at a restart (the
-   new law pushes the state straight back across the surface, as friction
-   does when it sticks at a velocity threshold: a sliding mode), or events
-   come faster than ``max_event_rate`` per 1/1000 of the run, or several
-   events fire without time advancing, the next short interval ``tau`` is
-   integrated with the *unfrozen* law (modes recomputed at every evaluation,
-   no events; the adaptive solver's error control then bounds the chatter).
-   ``tau`` starts at 1e-6 of the run and doubles while chattering continues
-   (at most 1/100 of the run), so a long sliding phase costs a logarithmic
-   number of restarts; normal frozen segments resume as soon as the modes are
-   consistent again. Each chattering episode is listed in ``Result.events``.
+5. Sliding and chattering. When no mode vector agrees with itself at a
+   restart (each side's law pushes the state back across the surface, as
+   friction does when it sticks at a velocity threshold), one switch ``k`` is
+   sliding: the segment follows Filippov's convex combination
+   ``a*f(m_k=+1) + (1-a)*f(m_k=-1)`` with ``a`` chosen so that ``g_k`` stays
+   put (its rates on each side by central differences), until either side
+   stops pushing towards the surface, another switch crosses, or a known
+   time; outputs are the same combination (the friction force that holds the
+   speed). At the edge of the sliding region, the side that leaves is
+   followed. When several switches chatter at once, when events come faster
+   than ``max_event_rate`` per 1/1000 of the run, or when events repeat
+   without time advancing, the next short interval ``tau`` is integrated with
+   the *unfrozen* law (modes recomputed at every evaluation, no events; the
+   solver's error control bounds the chatter; retried with RK23 if the
+   implicit solver gives up); ``tau`` starts at 1e-6 of the run and doubles
+   while this continues (at most 1/100 of the run). Every sliding and
+   chattering episode is listed in ``Result.events``.
 
 A non-finite state or derivative ends the run: the result keeps every point
 computed before it, ``complete`` is False and ``failure`` names the time, the
@@ -63,7 +79,7 @@ variable that first became nan or inf (in causal order) and its law.
 
 import math
 import os
-import sys
+import sys  # noqa: F401  (the generated module's main writes to sys.stdout)
 import time as _time_module
 
 import numpy as np
@@ -100,7 +116,33 @@ def as_time(t):
     return np.float64(t) if np.ndim(t) == 0 else np.asarray(t, dtype=float)
 
 
+def stack(*values):
+    """``np.array(values)``, broadcasting scalars against arrays (a constant among time series)."""
+    try:
+        return np.array(values, dtype=float)
+    except ValueError:
+        return np.array(np.broadcast_arrays(*values), dtype=float)
+
+
+class _ModeReader:
+    """A mode vector that records which modes a law reads (only the active branches read theirs)."""
+
+    __slots__ = ("values", "read")
+
+    def __init__(self, values):
+        self.values = [float(v) for v in values]
+        self.read = set()
+
+    def __getitem__(self, k):
+        self.read.add(k)
+        return self.values[k]
+
+
 _CSV_CACHE = {}
+
+
+class CsvError(ValueError):
+    """A measured-signal file that cannot be read."""
 
 
 def load_csv(path, column):
@@ -118,12 +160,12 @@ def load_csv(path, column):
         lines = [line.strip() for line in handle]
     lines = [line for line in lines if line and not line.startswith("#")]
     if not lines:
-        raise ValueError(f"{path}: empty csv file")
+        raise CsvError(f"{path}: empty csv file")
     header = [cell.strip().strip('"').strip() for cell in lines[0].split(",")]
     lowered = [name.lower() for name in header]
     time_index = lowered.index("t") if "t" in lowered else (lowered.index("time") if "time" in lowered else 0)
     if column not in header:
-        raise ValueError(f"{path}: no column {column!r} (columns: {', '.join(header)})")
+        raise CsvError(f"{path}: no column {column!r} (columns: {', '.join(header)})")
     value_index = header.index(column)
     times, values = [], []
     for number, line in enumerate(lines[1:], start=2):
@@ -132,12 +174,12 @@ def load_csv(path, column):
             times.append(float(cells[time_index]))
             values.append(float(cells[value_index]))
         except (ValueError, IndexError):
-            raise ValueError(f"{path}: row {number} is not numeric: {line!r}") from None
+            raise CsvError(f"{path}: row {number} is not numeric: {line!r}") from None
     times, values = np.array(times), np.array(values)
     if times.size == 0:
-        raise ValueError(f"{path}: no data rows")
+        raise CsvError(f"{path}: no data rows")
     if np.any(np.diff(times) < 0):
-        raise ValueError(f"{path}: the time column must not decrease")
+        raise CsvError(f"{path}: the time column must not decrease")
     _CSV_CACHE[key] = (times, values)
     return times, values
 
@@ -196,6 +238,10 @@ class _Model:
         for name in _MODEL_NAMES:
             setattr(self, name.lstrip("_"), get(name))
         try:
+            self.derive_parameters = get("_derive_parameters")
+        except (KeyError, AttributeError):
+            self.derive_parameters = None
+        try:
             self.DEFAULTS = dict(get("DEFAULTS"))
         except (KeyError, AttributeError):
             self.DEFAULTS = {}
@@ -203,11 +249,18 @@ class _Model:
             self.VECTORIZED = bool(get("VECTORIZED"))
         except (KeyError, AttributeError):
             self.VECTORIZED = True
+        try:
+            self.SWITCH_DEPENDS = tuple(tuple(d) for d in get("SWITCH_DEPENDS"))
+        except (KeyError, AttributeError):
+            self.SWITCH_DEPENDS = None
         self.parameter_names = tuple(self.PARAMETERS)
 
 
-def param_array(parameters, p=None):
+def param_array(parameters, p=None, derive=None):
     """Parameter vector from ``None`` (the defaults), a dict of overrides or an array.
+
+    With a dict, ``derive(array, given_names)`` recomputes the parameters
+    defined by others that were not given (the generated ``_derive_parameters``).
 
     >>> param_array({"m": 2.0, "k": 800.0}, {"k": 100})
     array([  2., 100.])
@@ -220,7 +273,8 @@ def param_array(parameters, p=None):
         if unknown:
             raise KeyError(f"unknown parameter{'s' if len(unknown) > 1 else ''} {', '.join(unknown)}; "
                            f"the parameters are: {', '.join(names)}")
-        return np.array([float(p.get(name, parameters[name])) for name in names], dtype=float)
+        array = np.array([float(p.get(name, parameters[name])) for name in names], dtype=float)
+        return derive(array, frozenset(p)) if derive is not None and p else array
     array = np.asarray(p, dtype=float)
     if array.shape != (len(names),):
         raise ValueError(f"p must have {len(names)} entries ({', '.join(names)}), got shape {array.shape}")
@@ -268,7 +322,7 @@ def evaluate(model, what, t, x, p=None):
     of shape (n, N) for ``outputs`` and ``variables``.
     """
     model = model if isinstance(model, _Model) else _Model(model)
-    p = param_array(model.PARAMETERS, p)
+    p = param_array(model.PARAMETERS, p, model.derive_parameters)
     function = {"outputs": model.outputs, "variables": model.variables,
                 "rhs": model.rhs, "jacobian": model.jac, "switches": model.switches}[what]
     x = np.asarray(x, dtype=float)
@@ -405,6 +459,9 @@ class _Run:
         self.stats = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "segments": 0, "events": 0,
                       "chattering_intervals": 0}
         self.bad = None
+        self.last_relevant = np.ones(self.switch_count, dtype=bool)
+        self.last_sliding = None
+        self._dense = None
 
     # -- evaluation helpers
 
@@ -440,7 +497,7 @@ class _Run:
         if stop > start:
             times = self.t_eval[start:stop]
             if dense is None:
-                dense = self.dense_source()
+                dense = self._dense
             states = np.column_stack([y_new if ti == t_new else dense(ti) for ti in times])
             self.blocks_t.append(times)
             self.blocks_x.append(states)
@@ -504,7 +561,7 @@ class _Run:
             failure["solver_message"] = message
             return failure
         method = self.method.__name__
-        hint = ("try a stiff solver (solver = \"Radau\" or \"BDF\" in the experiment)" if not self.implicit
+        hint = ("try a stiff solver (solver = \"LSODA\" or \"Radau\" in the experiment)" if not self.implicit
                 else "check the laws near that time for a singularity or a switch bondc cannot see "
                      "(a discontinuity hidden in a smooth-looking function), or loosen rtol/atol")
         return {"message": f"the solver ({method}) failed at t={t:.6g}: {message}", "time": float(t),
@@ -517,12 +574,17 @@ class _Run:
 
     def breaks(self):
         """Known switching times inside (t_start, t_end) with their labels, merged when equal."""
-        found = []
-        csv = [(float(tb), label) for tb, label, kind in self.model.time_breaks(self.p) if kind == "csv"]
-        other = [(float(tb), label) for tb, label, kind in self.model.time_breaks(self.p) if kind != "csv"]
-        inside = lambda items: [(tb, label) for tb, label in items if self.t_start < tb < self.t_end]
-        csv = inside(csv)
-        if len(csv) > 200:       # a dense measured signal: its corners are left to the error control
+        listed = [(float(tb), label, kind) for tb, label, kind in self.model.time_breaks(self.p)]
+        inside = lambda items: [(tb, label) for tb, label in items
+                                if np.isfinite(tb) and self.t_start < tb < self.t_end]
+        csv = inside((tb, label) for tb, label, kind in listed if kind == "csv")
+        other = [(tb, label) for tb, label, kind in listed if kind != "csv"]
+        if len(csv) > 200:
+            # a dense measured signal: no segment per sample, but no step longer than its typical spacing
+            times = np.unique([tb for tb, _ in csv])
+            spacing = float(np.median(np.diff(times))) if times.size > 1 else np.inf
+            if spacing > 0 and spacing < self.options["max_step"]:
+                self.options["max_step"] = spacing
             csv = []
         found = sorted(inside(other) + csv)
         merged = []
@@ -556,10 +618,18 @@ class _Run:
             if tuple(ahead) in seen:
                 cycle = np.array(seen[seen.index(tuple(ahead)):])
                 flipping = [k for k in range(self.switch_count) if np.any(cycle[:, k] != cycle[0, k])]
-                return ahead, flipping or list(range(self.switch_count))
+                return ahead, self.only_relevant(t, y, cycle, flipping)
             seen.append(tuple(ahead))
             modes = ahead
-        return modes, [k for k in range(self.switch_count) if len({row[k] for row in seen}) > 1]
+        flipping = [k for k in range(self.switch_count) if len({row[k] for row in seen}) > 1]
+        return modes, self.only_relevant(t, y, np.array(seen), flipping)
+
+    def only_relevant(self, t, y, rows, switches):
+        """The switches among ``switches`` that matter for the law of any of the mode vectors ``rows``."""
+        relevant = np.zeros(self.switch_count, dtype=bool)
+        for row in rows:
+            relevant |= self.relevant(t, y, np.asarray(row, dtype=float))
+        return [k for k in switches if relevant[k]]
 
     def note_event(self, t, label):
         self.events.append((float(t), label))
@@ -586,9 +656,19 @@ class _Run:
                         break_index += 1
                     t_stop = breaks[break_index][0] if break_index < len(breaks) else self.t_end
                     sliding = None
-                    if len(chattering) == 1 and zero_progress <= 8:
+                    if t_stop - t <= 16 * _EPS * max(abs(t), abs(t_stop), 1.0):
+                        # a sliver too short for any solver (a switch just before a known time): one Euler step
+                        slope = self.rhs(t, y, modes)
+                        t_new, y_new = t_stop, y + (t_stop - t) * slope
+                        self.record(t, t_new, y_new, lambda tt, t0=t, y0=y, s=slope: y0 + (tt - t0) * s,
+                                    self.mode_id(modes))
+                    elif len(chattering) == 1 and zero_progress <= 8 and \
+                            self.sliding_segment(t, y, modes, chattering[0], t_stop)[0] is not None:
                         sliding = chattering[0]
-                        t_new, y_new = self.sliding_segment(t, y, modes, sliding, t_stop)
+                        t_new, y_new = self.last_sliding
+                    elif len(chattering) == 1 and zero_progress <= 8:
+                        modes = self.last_sliding[1]        # the side that leaves the surface
+                        t_new, y_new, hit = self.segment(t, y, modes, t_stop)
                     elif chattering or zero_progress > 8 or self.too_many_events(t):
                         t_new, y_new = self.unfrozen_interval(t, y, modes, min(t_stop, t + self.tau))
                         zero_progress = 0
@@ -596,9 +676,8 @@ class _Run:
                         t_new, y_new, hit = self.segment(t, y, modes, t_stop)
                         if hit is None and t_new - t > self.tau:
                             self.tau, self.chattering_since = self.tau_min, None
-                    if sliding is None:
-                        progress_made = t_new - t > 64 * _EPS * max(abs(t), 1.0)
-                        zero_progress = 0 if progress_made else zero_progress + 1
+                    progress_made = t_new - t > 64 * _EPS * max(abs(t), 1.0)
+                    zero_progress = 0 if progress_made else zero_progress + 1
                     old_modes = modes
                     t, y = t_new, y_new
                     at_break = break_index < len(breaks) and t >= breaks[break_index][0]
@@ -607,8 +686,10 @@ class _Run:
                             self.note_event(breaks[break_index][0], breaks[break_index][1])
                         break
                     modes, chattering = self.restart_modes(t, y, old_modes)
+                    relevant_now = self.relevant(t, y, modes) | self.last_relevant
+                    self.last_relevant = np.ones(self.switch_count, dtype=bool)
                     changed = [k for k in range(self.switch_count) if modes[k] != old_modes[k]
-                               and k not in chattering]
+                               and k not in chattering and relevant_now[k]]
                     if at_break:
                         labels = {model.SWITCHES[k] for k in changed}
                         if breaks[break_index][1] not in labels:
@@ -640,9 +721,6 @@ class _Run:
         self.recent_events = [te for te in self.recent_events if te > t - window]
         return len(self.recent_events) > self.max_event_rate
 
-    def dense_source(self):
-        return self._dense
-
     def new_solver(self, fun, jac, t, y, t_stop):
         options = dict(self.options)
         if self.implicit:
@@ -654,14 +732,17 @@ class _Run:
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
         self.stats["segments"] += 1
-        mode = self.mode_id(modes)
         modes = np.array(modes)
+        relevant = self.relevant(t, y, modes)
+        mode = ("frozen", self.mode_id(modes), tuple(relevant))
+        self.last_relevant = relevant
         fun = lambda tt, yy: self.rhs(tt, yy, modes)
         jac = lambda tt, yy: self.jac(tt, yy, modes)
         solver = self.new_solver(fun, jac, t, y, t_stop)
-        index = self.event_switches
+        index = np.array([k for k in self.event_switches if relevant[k]], dtype=int)
         signs = modes[index] if index.size else np.zeros(0)
         values_old = self.switches_at(t, y, modes, index)
+        deadband = self.deadbands(t, y, modes, index)
         while True:
             message = solver.step()
             self.stats["steps"] += 1
@@ -679,9 +760,11 @@ class _Run:
             self._dense = None
             if index.size:
                 values_new = self.switches_at(t_new, y_new, modes, index)
-                hit = self.crossing(solver, modes, index, signs, values_old, values_new)
+                hit = self.crossing(solver, modes, index, signs, values_old, values_new, deadband)
                 if hit is not None:
                     t_event, k = hit
+                    if self._dense is None:
+                        self._dense = solver.dense_output()
                     y_event = self._dense(t_event)
                     self.record(solver.t_old, t_event, y_event, self._dense, mode)
                     self.collect(solver)
@@ -729,38 +812,84 @@ class _Run:
             failure = cause
         raise _Stop(failure)
 
+    def relevant(self, t, y, modes):
+        """Which switches matter for the law selected by ``modes``: those whose modes the right-hand
+        side reads (only the active branch of an if reads its modes), and, through SWITCH_DEPENDS,
+        the modes their switching functions read. A crossing of any other switch changes nothing the
+        solver sees, so it is not located (outputs still get the right mode at every point)."""
+        relevant = np.ones(self.switch_count, dtype=bool)
+        depends = self.model.SWITCH_DEPENDS
+        if depends is None or self.switch_count == 0:
+            return relevant
+        reader = _ModeReader(modes)
+        try:
+            with np.errstate(all="ignore"):
+                self.model.rhs(t, y, self.p, reader)
+        except Exception:       # a law that needs a real array of modes: keep every switch
+            return relevant
+        needed, stack_ = set(), list(reader.read)
+        while stack_:
+            k = stack_.pop()
+            if k not in needed:
+                needed.add(k)
+                stack_.extend(depends[k])
+        relevant[:] = False
+        relevant[sorted(needed)] = True
+        return relevant
+
     def switches_at(self, t, y, modes, index):
         with np.errstate(all="ignore"):
             return np.asarray(self.model.switches(t, y, self.p, modes), dtype=float)[index]
 
-    def crossing(self, solver, modes, index, signs, old, new):
-        """The earliest switch crossing in the last step: (time, switch index), or None."""
+    def deadbands(self, t, y, modes, index):
+        """How far each switching function moves when the state moves by its error tolerance
+        (``atol + rtol*|x|``, state by state): crossings shallower than that are integration noise
+        (a chamber pressure sitting at its regulator's set point) and are not events."""
+        if index.size == 0:
+            return np.zeros(0)
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        base = self.switches_at(t, y, modes, index)
+        total = np.zeros(index.size)
+        for j in range(y.size):
+            shifted = np.array(y, dtype=float)
+            shifted[j] += scale[j]
+            total += np.abs(self.switches_at(t, shifted, modes, index) - base)
+        total[~np.isfinite(total)] = 0.0
+        return total
+
+    def crossing(self, solver, modes, index, signs, old, new, deadband):
+        """The earliest switch crossing in the last step: (time, switch index), or None.
+
+        A switch in mode +-1 crosses when ``m*g`` falls below ``-deadband`` (located where it does:
+        at most a tolerance-sized shift of the event); a switch in mode 0 when ``|g|`` exceeds it.
+        """
         t_old, t_new = solver.t_old, solver.t
         found = []
         for j, k in enumerate(index):
-            sign = signs[j]
+            sign, band = signs[j], deadband[j]
             if sign != 0:
-                before, after = sign * old[j], sign * new[j]
-                if not (after <= 0 and before >= 0 and (after < 0 or before > 0)):
+                before, after = sign * old[j] + band, sign * new[j] + band
+                if not (after < 0 or (after == 0 and before > 0)):
                     continue
-                if before == 0:
+                if before <= 0:
                     found.append((t_old, k))
                     continue
                 if after == 0:
                     found.append((t_new, k))
                     continue
-                level = 0.0
+                # the deadband only decides *whether* it crossed; when the zero itself lies in this
+                # step, locate the zero (no bias), else where it left the band
+                band = 0.0 if sign * old[j] > 0 else band
+                function = lambda tt, k=k, s=sign, b=band: s * self.model.switches(tt, self._dense(tt), self.p,
+                                                                                   modes)[k] + b
             else:
-                if not (new[j] != 0 and np.isfinite(new[j])):
+                if not (np.isfinite(new[j]) and abs(new[j]) > band and new[j] != 0):
                     continue
-                sign, level = -1.0, 1e-6 * abs(new[j])   # leaving the surface: |g| reaches a small level
+                level = band if band > 0 else 1e-6 * abs(new[j])   # leaving the surface
+                function = lambda tt, k=k, lv=level: lv - abs(self.model.switches(tt, self._dense(tt), self.p,
+                                                                                  modes)[k])
             if self._dense is None:
                 self._dense = solver.dense_output()
-            dense = self._dense
-            if level == 0.0:
-                function = lambda tt, k=k, s=sign: s * self.model.switches(tt, dense(tt), self.p, modes)[k]
-            else:
-                function = lambda tt, k=k, lv=level: lv - abs(self.model.switches(tt, dense(tt), self.p, modes)[k])
             with np.errstate(all="ignore"):
                 try:
                     root = _optimize.brentq(function, t_old, t_new, xtol=4 * _EPS, rtol=4 * _EPS)
@@ -828,6 +957,15 @@ class _Run:
         def alphas(times, states):
             return np.array([weight(*parts(ti, states[:, i])[2:]) for i, ti in enumerate(times)])
 
+        _, _, rate_plus, rate_minus = parts(t, y)
+        if not (rate_minus > 0 and rate_plus < 0):
+            # at the edge of the sliding region one side already moves away from the surface: no
+            # sliding, follow that side (the caller integrates it frozen)
+            self.events.pop()
+            self.stats["sliding_segments"] -= 1
+            self.stats["segments"] -= 1
+            self.last_sliding = (None, minus if not rate_minus > 0 else plus)
+            return self.last_sliding
         solver = self.new_solver(fun, jac, t, y, t_stop)
         old = exits(t, y)
         while True:
@@ -863,7 +1001,8 @@ class _Run:
                 self.collect(solver)
                 if hit is not None:
                     self.note_event(end, f"sliding on {label} ends")
-                return end, np.array(y_end)
+                self.last_sliding = (end, np.array(y_end))
+                return self.last_sliding
             old = new
 
     def record_sliding(self, t_old, t_new, y_new, dense, id_plus, id_minus, alphas):
@@ -942,6 +1081,33 @@ class _Run:
                 self.collect(solver)
                 return t_new, np.array(y_new)
 
+    def switch_columns(self, t, x, modes):
+        """Switching functions at many points with one mode vector: shape (switches, points)."""
+        if getattr(self.model, "VECTORIZED", True):
+            return np.asarray(np.broadcast_to(self.model.switches(t, x, self.p, modes),
+                                              (self.switch_count, t.size)), dtype=float)
+        return np.column_stack([self.model.switches(t[j], x[:, j], self.p, modes) for j in range(t.size)])
+
+    def point_modes(self, t, x, modes, relevant):
+        """Modes at every point of a frozen segment: the segment's for the switches that were located,
+        ``sign(g)`` at the point for the others (those whose crossings were not events)."""
+        rows = np.repeat(np.asarray(modes, dtype=float)[None, :], t.size, axis=0)
+        free = np.flatnonzero(~np.asarray(relevant, dtype=bool))
+        if free.size == 0 or t.size == 0:
+            return rows
+        for _ in range(self.switch_count + 1):
+            changed = False
+            unique, inverse = np.unique(rows, axis=0, return_inverse=True)
+            for r, row in enumerate(unique):
+                columns = np.flatnonzero(inverse.ravel() == r)
+                new = _sign(self.switch_columns(t[columns], x[:, columns], row)[free]).T
+                if not np.array_equal(new, rows[np.ix_(columns, free)]):
+                    rows[np.ix_(columns, free)] = new
+                    changed = True
+            if not changed:
+                break
+        return rows
+
     def evaluate_columns(self, function, t, x, modes, rows):
         """``function(t, x, p, modes)`` over columns: at once when the model is vectorized, else one by one."""
         out = np.full((rows, t.size), np.nan)
@@ -965,13 +1131,14 @@ class _Run:
             t, x = np.zeros(0), np.zeros((n, 0))
         outputs = np.full((n_out, t.size), np.nan)
         variables = np.full((n_var, t.size), np.nan)
-        frozen_points = np.full(t.size, -1)
+        groups = {}             # (mode id, relevant mask) -> column indices
+        all_relevant = (True,) * self.switch_count
         start = 0
         with np.errstate(all="ignore"):
             for times, mode in zip(self.blocks_t, self.blocks_mode):
-                columns = slice(start, start + times.size)
+                columns = np.arange(start, start + times.size)
                 start += times.size
-                if isinstance(mode, tuple):     # a sliding mode: the Filippov combination
+                if isinstance(mode, tuple) and mode[0] == "slide":     # the Filippov combination
                     _, id_plus, id_minus, alpha = mode
                     xx = x[:, columns]
                     for target, function, rows in ((outputs, model.outputs, n_out),
@@ -979,13 +1146,20 @@ class _Run:
                         upper = self.evaluate_columns(function, times, xx, modes_by_id[id_plus], rows)
                         lower = self.evaluate_columns(function, times, xx, modes_by_id[id_minus], rows)
                         target[:, columns] = alpha * upper + (1 - alpha) * lower
-                else:
-                    frozen_points[columns] = mode
-            for mode in np.unique(frozen_points[frozen_points >= 0]):
-                columns = np.flatnonzero(frozen_points == mode)
-                tt, xx, mm = t[columns], x[:, columns], modes_by_id[int(mode)]
-                outputs[:, columns] = self.evaluate_columns(model.outputs, tt, xx, mm, n_out)
-                variables[:, columns] = self.evaluate_columns(model.variables, tt, xx, mm, n_var)
+                    continue
+                key = (mode[1], mode[2]) if isinstance(mode, tuple) else (mode, all_relevant)
+                groups.setdefault(key, []).append(columns)
+            for (mode, relevant), parts in groups.items():
+                columns = np.concatenate(parts)
+                tt, xx = t[columns], x[:, columns]
+                per_point = self.point_modes(tt, xx, modes_by_id[int(mode)], relevant)
+                unique, inverse = np.unique(per_point, axis=0, return_inverse=True)
+                for r, row in enumerate(unique):
+                    chosen = np.flatnonzero(inverse.ravel() == r)
+                    cols = columns[chosen]
+                    outputs[:, cols] = self.evaluate_columns(model.outputs, tt[chosen], xx[:, chosen], row, n_out)
+                    variables[:, cols] = self.evaluate_columns(model.variables, tt[chosen], xx[:, chosen], row,
+                                                               n_var)
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
             message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
@@ -1024,8 +1198,10 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     ``p``: None, a dict of parameter overrides or a full parameter array.
     ``t_eval``: the times to report; ``dt``: report on a regular grid instead;
     neither: every solver step (and every event). Missing solver settings come
-    from the model's ``DEFAULTS`` (its experiment), then Radau, rtol 1e-6,
-    atol 1e-9. ``progress(t)`` is called after every step.
+    from the model's ``DEFAULTS`` (its experiment), then LSODA (stiff/non-stiff
+    switching, with the analytic Jacobian when stiff), rtol 1e-6, atol 1e-9.
+    ``atol`` is absolute, in the SI unit of each state: a charge in microcoulombs
+    needs a smaller one. ``progress(t)`` is called after every step.
     """
     model = model if isinstance(model, _Model) else _Model(model)
     defaults = model.DEFAULTS
@@ -1043,10 +1219,11 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
         if np.any(np.diff(t_eval) < 0):
             raise ValueError("t_eval must be increasing")
         t_eval = t_eval[(t_eval >= t_start) & (t_eval <= t_end)]
-    method = method or defaults.get("method") or "Radau"
+    method = method or defaults.get("method") or "LSODA"
     rtol = float(rtol if rtol is not None else defaults.get("rtol") or 1e-6)
     atol = float(atol if atol is not None else defaults.get("atol") or 1e-9)
     max_step = float(max_step if max_step is not None else defaults.get("max_step") or np.inf)
-    run = _Run(model, param_array(model.PARAMETERS, p), t_start, t_end, t_eval, method, rtol, atol,
-               max_step, first_step, progress, max_events, max_event_rate)
+    parameters = param_array(model.PARAMETERS, p, model.derive_parameters)
+    run = _Run(model, parameters, t_start, t_end, t_eval, method, rtol, atol, max_step, first_step, progress,
+               max_events, max_event_rate)
     return run.run()

@@ -322,6 +322,8 @@ def check_shadowing(m: _Model) -> None:
                               hint=f"in an element's laws '{decl.name}' is the element's own {meaning}; "
                                    f"rename the {decl.category} to use it there"))
             continue
+        if decl.category not in ("parameter", "input"):
+            continue  # an output or state of the same name as an element's state is usually that state
         owners = [name for name, laws in m.element_laws.items() if decl.name in laws.state_names]
         if owners:
             m.report(_warning("W303", f"{decl.category} '{decl.name}' is hidden inside the laws of "
@@ -1948,8 +1950,11 @@ def load(path: str | Path, *, model: str | None = None, experiment: str | None =
     ``sets`` are command-line ``--set`` values (from ``parse_set_value``), applied last.
     """
     files, sources, diagnostics = load_files(path)
+    for assignment in sets:
+        if assignment.source is not None:
+            sources[assignment.source.name] = assignment.source
     graph, more = _build(files, sources, model, experiment, sets)
     diagnostics = _unique(diagnostics + more)
     if graph is None or any(d.is_error for d in diagnostics):
-        raise ModelError([d for d in diagnostics if d.is_error])
+        raise ModelError([d for d in diagnostics if d.is_error], sources)
     return graph, diagnostics

@@ -277,6 +277,13 @@ class NumericModel:
         self._guesses[number] = result.x
         return tuple(float(v) for v in result.x)
 
+    def _call(self, t, x, inputs):
+        import numpy
+
+        # numpy evaluates every branch of a Piecewise: the unused ones may warn.
+        with numpy.errstate(all="ignore"):
+            return self._run(float(t), list(x), self._fixed(inputs))
+
     def _fixed(self, inputs):
         inputs = inputs or {}
         unknown = set(inputs) - set(self._input_names)
@@ -293,15 +300,15 @@ class NumericModel:
     def derivatives(self, t, x, inputs=None):
         import numpy
 
-        return numpy.array([float(v) for v in self._run(float(t), list(x), self._fixed(inputs))[1]], dtype=float)
+        return numpy.array([float(v) for v in self._call(t, x, inputs)[1]], dtype=float)
 
     def outputs(self, t, x, inputs=None) -> dict:
-        out = self._run(float(t), list(x), self._fixed(inputs))[2]
+        out = self._call(t, x, inputs)[2]
         return {name: float(v) for name, v in zip(self.ss.outputs, out)}
 
     def values(self, t, x, inputs=None) -> dict:
         """Every assigned symbol (by name), ``der(state)`` and output at one point."""
-        assigned, der, out = self._run(float(t), list(x), self._fixed(inputs))
+        assigned, der, out = self._call(t, x, inputs)
         result = {name: float(v) for name, v in zip(self._assigned_names, assigned)}
         result.update({f"der({s.name})": float(v) for s, v in zip(self.ss.states, der)})
         result.update({name: float(v) for name, v in zip(self.ss.outputs, out)})

@@ -180,7 +180,8 @@ def test_emit_is_byte_identical_across_hash_seeds(tmp_path):
     assert hashlib.sha256(emit(ss, experiment).encode()).hexdigest() == digests.pop().split()[0]
 
 
-@pytest.mark.parametrize("name", ["msd", "friction", "friction_stick", "table_force", "oscillator", "rc"])
+@pytest.mark.parametrize("name", ["msd", "friction", "friction_stick", "table_force", "oscillator", "rc",
+                                  "nonlinear_loop", "csv_force"])
 def test_rhs_matches_the_statespace_evaluator_at_random_points(name):
     _, ss, experiment = derive(name)
     module = load_module(emit(ss, experiment))
@@ -197,6 +198,14 @@ def test_rhs_matches_the_statespace_evaluator_at_random_points(name):
                                    atol=1e-12)
 
 
+@pytest.mark.parametrize("name", ["oscillator", "table_force", "rc"])
+def test_derived_parameters_reproduce_the_checked_values(name):
+    _, ss, experiment = derive(name)
+    module = load_module(emit(ss, experiment))
+    defaults = module["param_array"](module["PARAMETERS"])
+    np.testing.assert_allclose(module["_derive_parameters"](defaults), defaults, rtol=1e-15)
+
+
 def test_rhs_follows_the_language_at_a_switching_surface():
     # abs(f) < v0 is false at f = v0 exactly: the Coulomb branch applies
     _, ss, experiment = derive("friction")
@@ -206,7 +215,21 @@ def test_rhs_follows_the_language_at_a_switching_surface():
     np.testing.assert_allclose(module["rhs"](0.0, at_threshold)[0], 10.0 - (1.0 + 3.0))
 
 
-@pytest.mark.parametrize("name", ["msd", "friction", "oscillator"])
+def test_event_functions_work_with_plain_solve_ivp():
+    from scipy.integrate import solve_ivp
+
+    _, ss, experiment = derive("friction")
+    module = load_module(emit(ss, experiment))
+    events = module["event_functions"]()
+    assert len(events) == len(module["SWITCHES"]) == 2
+    # switch 0 is abs(f), zero at the start (solve_ivp would stop there at once); switch 1 the threshold
+    solution = solve_ivp(lambda t, x: module["rhs"](t, x), (0.0, 1.0), [0.0, 0.0], events=events[1], rtol=1e-10,
+                         atol=1e-12)
+    assert solution.status == 1                                    # stopped by the threshold event
+    assert solution.t_events[0][0] == pytest.approx(np.log(2) / 5, abs=1e-8)
+
+
+@pytest.mark.parametrize("name", ["msd", "friction", "oscillator", "nonlinear_loop"])
 def test_analytic_jacobian_matches_finite_differences(name):
     _, ss, experiment = derive(name)
     module = load_module(emit(ss, experiment))
@@ -228,10 +251,13 @@ def test_analytic_jacobian_matches_finite_differences(name):
 def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     from bondc.simulate import simulate
 
+    from bondc.codegen import compile_file
+
     graph, ss, experiment = derive("friction")
     work = tmp_path / "elsewhere"
     work.mkdir()
-    (work / "friction_gen.py").write_text(emit(ss, experiment), encoding="utf-8")
+    source = compile_file(SIM / "friction.bg", work / "friction_gen.py")
+    assert (work / "friction_gen.py").read_text(encoding="utf-8") == source == emit(ss, experiment)
     (work / "launch.py").write_text(textwrap.dedent("""
         import importlib.abc, runpy, sys
 
@@ -271,6 +297,27 @@ def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     np.testing.assert_allclose(data[:, 4], reference.states["x"], rtol=1e-13, atol=1e-15)
 
 
+def test_generated_module_finds_its_csv_data_relative_to_itself(tmp_path):
+    from bondc.simulate import simulate
+
+    _, ss, experiment = derive("csv_force")
+    work = tmp_path / "out"
+    work.mkdir()
+    source = emit(ss, experiment, module_dir=work)
+    import re
+
+    paths = set(re.findall(r"csv_signal\(t, DATA_DIR, '([^']*)'", source))
+    assert len(paths) == 1 and not os.path.isabs(paths.pop())      # relative to the module, not absolute
+    (work / "csv_gen.py").write_text(source, encoding="utf-8")
+    env = {key: value for key, value in os.environ.items() if not key.startswith("PYTHON")}
+    out = subprocess.run([sys.executable, "-I", "out/csv_gen.py", "--dt", "0.25"], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=60)     # run from another directory
+    assert out.returncode == 0, out.stderr
+    data = np.loadtxt(out.stdout.splitlines()[1:], delimiter=",")
+    reference = simulate(ss, experiment, dt=0.25)
+    np.testing.assert_allclose(data[:, 2], reference.states["mass.p"], rtol=1e-13, atol=1e-15)
+
+
 def test_generated_module_copy_of_the_runtime_is_verbatim():
     _, ss, experiment = derive("msd")
     source = emit(ss, experiment)
@@ -287,3 +334,14 @@ def test_model_code_golden(update_golden):
     if update_golden or not golden.exists():
         golden.write_text(model_part, encoding="utf-8")
     assert model_part == golden.read_text(encoding="utf-8")
+
+
+def test_doctests():
+    import doctest
+    import importlib
+
+    # importlib: bondc.codegen.emit as an attribute is the function the package re-exports
+    for name in ("bondc.codegen.emit", "bondc.codegen.freeze", "bondc.codegen.printer", "bondc.runtime",
+                 "bondc.simulate"):
+        result = doctest.testmod(importlib.import_module(name))
+        assert result.attempted and not result.failed, name

@@ -664,3 +664,84 @@ def test_random_linear_graphs_conserve_power(text, seed):
         if element.kind in ("TF", "GY"):
             (b1, b2), (s1, s2) = element.bonds, element.port_signs
             assert abs(s1 * e[b1] * f[b1] - s2 * e[b2] * f[b2]) <= 1e-9 * scale, text
+
+
+def test_singular_algebraic_loop_is_e702(tmp_path):
+    path = tmp_path / "model.bg"
+    # R2 = -R1 R3/(R1 + R3) makes the loop equation 0 = V/R2 + ...: no solution.
+    path.write_text("""model Singular
+  Se source : e = 10
+  R  r1     : e = 1*f
+  R  r2     : f = e/(-0.5)
+  R  r3     : f = e/1
+  C  cap    : e = q/1e-3
+  1  series, branch
+  0  node
+  source -> series
+  series -> r1
+  series -> node
+  node -> r2
+  node -> branch
+  branch -> r3
+  branch -> cap
+end
+""")
+    with pytest.raises(EquationError) as info:
+        derive(assign_causality(load(path)))
+    (error,) = info.value.diagnostics
+    assert error.code == "E702" and "'r1'" in error.message
+
+
+def test_initial_value_of_an_eliminated_state_is_reported(tmp_path):
+    ss = state_space_of(tmp_path, """model Geared
+  Se torque : e = 1
+  I  motor  : f = p/0.1
+  TF gear   : r = 3
+  I  load   : f = p/2, p(0) = 0.5
+  torque -> motor_j
+  1 motor_j, load_j
+  motor_j -> motor
+  motor_j -> gear -> load_j
+  load_j -> load
+end
+""")
+    assert ss.state_names == ("motor.p",)
+    (warning,) = ss.diagnostics
+    assert warning.code == "W704" and "load.p" in warning.message and warning.span.line == 5
+
+
+def test_eliminating_a_multi_state_element_is_e703(tmp_path):
+    path = tmp_path / "model.bg"
+    path.write_text("""model TwoStates
+  Se supply : e = 5
+  C  tank : state P, state T, der(P) = f, der(T) = -T + f, e = P + T
+  supply -> tank
+end
+""")
+    with pytest.raises(EquationError) as info:
+        derive(assign_causality(load(path)))
+    assert info.value.diagnostics[0].code == "E703"
+
+
+def test_two_ideal_parallel_paths_are_a_singular_loop(tmp_path):
+    path = tmp_path / "model.bg"
+    # Two bare paths from node a to node d: the split of the flow is undetermined.
+    path.write_text("""model Parallel
+  Sf src : f = 1
+  C  cap : e = q/2
+  0  a, d
+  1  b, c
+  src -> a
+  a -> b
+  a -> c
+  b -> d
+  c -> d
+  d -> cap
+end
+""")
+    causal = assign_causality(load(path))
+    assert {d.code for d in causal.diagnostics} == {"W602", "I603"}
+    with pytest.raises(EquationError) as info:
+        derive(causal)
+    (error,) = info.value.diagnostics
+    assert error.code == "E702" and error.span.line == 4 and len(error.related) == 3

@@ -452,3 +452,40 @@ def test_format_path_reports_syntax_errors_with_the_path(tmp_path):
     with pytest.raises(ParseError) as info:
         format_path(path)
     assert info.value.diagnostics[0].span.file == str(path)
+
+
+def test_long_if_chains_break_before_else():
+    text = ("model M\n"
+            "  R friction : e = if abs(f) < v_threshold then c0*f else if f > 0 then a_up*abs(f)^(1 + n_up)*sign(f)"
+            " else a_down*abs(f)^(1 + n_down)*sign(f)\n"
+            "end\n")
+    assert assert_round_trip(text) == (
+        "model M\n"
+        "  R friction : e = (if abs(f) < v_threshold then c0*f\n"
+        "      else if f > 0 then a_up*abs(f)^(1 + n_up)*sign(f)\n"
+        "      else a_down*abs(f)^(1 + n_down)*sign(f))\n"
+        "end\n")
+
+
+def test_function_parameters_are_not_broken():
+    text = ("fn valve(ps, pc, area, kappa, gas_constant, temperature) = orifice(ps, pc, area, kappa, "
+            "gas_constant, temperature)*correction(ps, pc)\n")
+    formatted = assert_round_trip(text)
+    assert formatted.splitlines()[0].startswith("fn valve(ps, pc, area, kappa, gas_constant, temperature) = ")
+    assert all(len(line) <= MAX_WIDTH for line in formatted.splitlines())
+
+
+def test_short_if_laws_stay_on_one_line():
+    text = "model M\n  R r : e = 1, f = if a then b else c\nend\n"
+    assert assert_round_trip(text) == text
+
+
+def test_doctests():
+    import doctest
+
+    import bondc.fmt
+    import bondc.io
+
+    for module in (bondc.fmt, bondc.io):
+        result = doctest.testmod(module)
+        assert result.attempted and not result.failed, module.__name__

@@ -202,7 +202,7 @@ def test_equilibrium_holds_pure_integrators(tmp_path):
     assert np.count_nonzero(np.abs(lin.eigenvalues) < 1e-9) >= 1
 
 
-def test_no_equilibrium_is_e706(tmp_path):
+def test_no_equilibrium_is_e940(tmp_path):
     ss = state_space_of(tmp_path, """model Free
   Se push : e = 3
   I  mass : f = p/2
@@ -211,7 +211,7 @@ end
 """)
     with pytest.raises(AnalysisError) as info:
         linearize(ss, at="equilibrium")
-    assert info.value.diagnostics[0].code == "E706"
+    assert info.value.diagnostics[0].code == "E940"
     with pytest.raises(ValueError):
         linearize(ss, at="somewhere")
 

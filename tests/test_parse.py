@@ -92,7 +92,8 @@ def test_precedence_and_associativity(text, tree):
     assert expr(text) == tree
 
 
-@pytest.mark.parametrize("text", ["a < b < c", "1 + if a then b else c", "a == b != c", "-not a", "a^if b then c else d"])
+@pytest.mark.parametrize("text", ["a < b < c", "1 + if a then b else c", "a == b != c", "-not a",
+                                  "a^if b then c else d"])
 def test_expressions_the_grammar_rejects(text):
     assert errors(f"model M\n  param x = {text}\nend\n")[0][0] == "E100"
 
@@ -153,7 +154,8 @@ def test_blank_lines_and_missing_final_newline():
 # ------------------------------------------------------------------ comments
 
 def test_comments_are_collected_in_order_with_positions():
-    text = '# head\nmodel M  # model\n  param a = 1 # trailing\n  # own line\n  R r : e = "#not a comment",  # law\n    f = 1\nend # done'
+    text = ('# head\nmodel M  # model\n  param a = 1 # trailing\n  # own line\n'
+            '  R r : e = "#not a comment",  # law\n    f = 1\nend # done')
     file = parse_text(text, "m.bg")
     assert [c.text for c in file.comments] == ["# head", "# model", "# trailing", "# own line", "# law", "# done"]
     assert [(c.span.line, c.span.column) for c in file.comments] == [(1, 1), (2, 10), (3, 15), (4, 3), (5, 32), (7, 5)]
@@ -396,3 +398,22 @@ def test_parse_set_value_errors(text, code):
         parse_set_value(text)
     assert [d.code for d in info.value.diagnostics] == [code]
     assert info.value.diagnostics[0].span.file == "--set"
+
+
+def test_doctests():
+    import doctest
+
+    import bondc.ast
+    import bondc.parse
+
+    for module in (bondc.parse, bondc.ast):
+        result = doctest.testmod(module)
+        assert result.attempted and not result.failed, module.__name__
+
+
+def test_an_if_operand_needs_parentheses():
+    with pytest.raises(ParseError) as info:
+        parse_text("model M\n  param x = 1 + if a then b else c\nend\n", "m.bg")
+    (diagnostic,) = info.value.diagnostics
+    assert (diagnostic.code, diagnostic.span.line, diagnostic.span.column) == ("E100", 2, 17)
+    assert "parentheses" in diagnostic.hint

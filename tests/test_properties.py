@@ -6,7 +6,10 @@
     check raise only ``BondcError`` subclasses;
 (c) every input is handled within a deadline;
 (d) random expression trees and whole models printed by fmt parse back equal,
-    and fmt is a fixed point on them.
+    and fmt is a fixed point on them; comments added anywhere to valid models
+    are kept, in order, and fmt is a fixed point on the result.
+
+``BONDC_FUZZ_EXAMPLES=2000 pytest tests/test_properties.py`` fuzzes longer.
 """
 
 from __future__ import annotations
@@ -124,8 +127,12 @@ def test_random_statements_inside_a_model_raise_only_parse_errors(statement):
         file = parse_text(text, "fuzz.bg")
     except ParseError as error:
         assert_parse_error_is_well_formed(error, text)
-    else:
-        assert fmt(fmt(text)) == fmt(text)  # whatever parses also formats, stably
+        return
+    # whatever parses also formats, keeping its meaning, stably
+    formatted = format_file(file, text)
+    again = parse_text(formatted, "fuzz.bg")
+    assert again == file
+    assert format_file(again, formatted) == formatted
 
 
 # ------------------------------------------------------------- (b) mutated models
@@ -177,7 +184,7 @@ def test_mutated_models_raise_only_bondc_errors(text):
 
 _names = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,5}", fullmatch=True).filter(lambda s: s not in KEYWORDS)
 _numbers = st.from_regex(r"(\d{1,4}(\.\d{0,3})?|\.\d{1,3})([eE][+-]?\d{1,2})?", fullmatch=True)
-_strings = st.text(alphabet=st.sampled_from(list('ab #,"\\\t\n')), max_size=8)
+_strings = st.text(alphabet=st.sampled_from(list('ab #,()"\\\t\n\x00')), max_size=8)
 _leaves = st.one_of(
     _numbers.map(lambda text: ast.Num(float(text), text)),
     _names.map(ast.Name),
@@ -242,7 +249,8 @@ files = st.builds(ast.File, st.lists(st.one_of(
 
 
 @given(files)
-@settings(max_examples=max(EXAMPLES // 2, 1), deadline=2000, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@settings(max_examples=max(EXAMPLES // 2, 1), deadline=2000,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 def test_printed_files_parse_back_equal_and_format_stably(file):
     text = format_file(file)
     parsed = parse_text(text, "gen.bg")
@@ -250,7 +258,7 @@ def test_printed_files_parse_back_equal_and_format_stably(file):
     assert format_file(parsed, text) == text
 
 
-# ------------------------------------------------------------- (d) comments anywhere
+# ------------------------------------------------------------- (d) comments anywhere (fmt)
 
 MULTILINE = """\
 model Lines
@@ -276,10 +284,26 @@ end
 """
 
 
+LONG = """\
+fn valve_mdot(ps, pc, Ae, kappa, Rg, T, b_cr) = if ps >= pc then orifice_mdot(ps, pc, Ae, kappa, Rg, T, b_cr) else -orifice_mdot(pc, ps, Ae, kappa, Rg, T, b_cr)
+model Long "a model whose lines are too long"
+  param a_long_parameter_name = (2/(kappa + 1))^(kappa/(kappa - 1)) [1] "a description long enough to pass the limit"
+  input omega [rad/s] = table(t, [0, t1, t2, t3, t4, t5, t6, t7, t8, t9], [0, 0, w_max, w_max, 0, 0, -w_max, -w_max, 0, 0]) "speed"
+  R friction "cylinder friction, eqs. (14)-(15)" : e = if abs(f) < v_th then c0*f else if f > 0 then a_up*abs(f)^(1 + n_up)*sign(f) else a_dn*abs(f)^(1 + n_dn)*sign(f), f = if e > 0 then e/c0 else -e/c0
+  C chamber "rod-side chamber air, adiabatic, eq. (4)" : state P [Pa], P(0) = P0, der(P) = kappa*P/(V0 + Ar*x_piston)*f, e = P
+  0 j_one, j_two, j_three, j_four, j_five, j_six, j_seven, j_eight, j_nine, j_ten, j_eleven, j_twelve
+  output y = if a then b else c
+end
+"""
+
+
 @st.composite
 def commented(draw) -> str:
     """A valid model with comments added at line ends and on lines of their own."""
-    lines = draw(st.sampled_from([MODEL, MULTILINE])).splitlines()
+    text = draw(st.sampled_from([MODEL, MULTILINE, LONG]))
+    if draw(st.booleans()):  # comments placed in formatted text land in other places
+        text = fmt(text)
+    lines = text.splitlines()
     out = []
     for index, line in enumerate(lines):
         if draw(st.integers(0, 3)) == 0:

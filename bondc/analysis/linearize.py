@@ -9,7 +9,10 @@ Operating point (``at``):
 
 - ``"initial"``: the initial state;
 - ``"equilibrium"``: ``f(x, u(time), time) = 0`` solved from the initial state
-  with ``scipy.optimize.least_squares``. States on which no derivative depends
+  with ``scipy.optimize.least_squares`` (Levenberg-Marquardt). A rate counts as
+  zero when it is negligible (1e-8) next to the terms it balances,
+  ``sum_j |A_ij x_j| + sum_k |B_ik u_k|``; an initial state that already
+  satisfies this is taken as it is. States on which no derivative depends
   (a zero column of ``A``: pure integrators such as a position ``x`` with
   ``der(x) = mass.f``) make ``A`` singular and leave the equilibrium
   undetermined along them; they are *held* at their initial value (listed in
@@ -17,7 +20,7 @@ Operating point (``at``):
   (theirs included, e.g. ``mass.f = 0``) as a residual. They stay in A, B, C,
   D and contribute zero eigenvalues. If the residual cannot be driven to zero
   (a constant force on a free mass) :class:`~bondc.errors.AnalysisError`
-  ``E706`` is raised.
+  ``E940`` is raised.
 
 The Jacobians are computed in forward mode over the assignment sequence: each
 assignment's symbolic partial derivatives (sympy), evaluated numerically at
@@ -25,7 +28,18 @@ the operating point and chained, so sizes stay linear in the model; algebraic
 blocks are differentiated implicitly. Dirac impulses of derivatives of
 ``sign``/``step`` are dropped (a kink's derivative is taken from one side).
 
->>> import numpy  # doctest: +SKIP
+>>> from bondc.causality import assign_causality
+>>> from bondc.equations import derive
+>>> from bondc.parse import parse_text
+>>> from bondc.semantic import build
+>>> text = "model M\\n param m = 2\\n param k = 800\\n param b = 12\\n Se force : e = 10\\n" \\
+...        " I mass : f = p/m\\n C spring : e = k*q\\n R damper : e = b*f\\n 1 j\\n" \\
+...        " force -> j\\n j -> mass\\n j -> spring\\n j -> damper\\nend\\n"
+>>> lin = linearize(derive(assign_causality(build(parse_text(text, "m.bg"))[0])), at="equilibrium")
+>>> lin.natural_frequencies.round(6).tolist(), lin.damping_ratios.round(6).tolist()
+([20.0, 20.0], [0.15, 0.15])
+>>> lin.x0.tolist()
+[0.0, 0.0125]
 """
 
 from __future__ import annotations
@@ -53,7 +67,8 @@ class Linearization:
     B: np.ndarray
     C: np.ndarray
     D: np.ndarray
-    eigenvalues: np.ndarray             # complex, sorted by real part, then imaginary part
+    eigenvalues: np.ndarray             # complex, sorted by real part, then imaginary part;
+                                        # parts below 1e-12 of the spectral radius are set to 0
     natural_frequencies: np.ndarray     # |lambda| [rad/s]
     damping_ratios: np.ndarray          # -Re(lambda)/|lambda|; nan for lambda = 0
     time: float
@@ -150,7 +165,7 @@ class _Jacobian:
         try:
             return float(number)
         except TypeError as error:
-            raise AnalysisError(Diagnostic("error", "E707", f"cannot evaluate the derivative {expr} "
+            raise AnalysisError(Diagnostic("error", "E941", f"cannot evaluate the derivative {expr} "
                                                             f"at the operating point ({number})")) from error
 
     def __call__(self, values: Mapping) -> tuple[np.ndarray, np.ndarray]:
@@ -240,7 +255,13 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
     f_rows, g_rows = jacobian(point(x))
     A, B = f_rows[:, :n], f_rows[:, n:]
     C, D = g_rows[:, :n], g_rows[:, n:]
-    eigenvalues = np.sort_complex(np.linalg.eigvals(A)) if n else np.zeros(0, dtype=complex)
+    eigenvalues = np.linalg.eigvals(A) if n else np.zeros(0, dtype=complex)
+    if n:
+        # Round-off-sized parts (a pure integrator's 1e-26) are zero: no spurious instability.
+        tiny = 1e-12 * float(np.max(np.abs(eigenvalues)))
+        eigenvalues = np.where(np.abs(eigenvalues.real) <= tiny, 0.0, eigenvalues.real) + 1j * np.where(
+            np.abs(eigenvalues.imag) <= tiny, 0.0, eigenvalues.imag)
+        eigenvalues = np.sort_complex(eigenvalues)
     magnitude = np.abs(eigenvalues)
     with np.errstate(divide="ignore", invalid="ignore"):
         damping = np.where(magnitude > 0, -eigenvalues.real / np.where(magnitude > 0, magnitude, 1), np.nan)
@@ -270,23 +291,33 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
     def jac(z):
         return jacobian(point(full(z)))[0][:, :n][:, free]
 
+    u = np.array(list(inputs.values()), dtype=float)
+
+    def unbalanced(x):
+        """Rates that are not negligible next to the terms they balance:
+        |f_i| > 1e-8 * (sum_j |A_ij x_j| + sum_k |B_ik u_k|) + 1e-12."""
+        rates = numeric.derivatives(time, x, inputs)
+        rows = jacobian(point(x))[0]
+        scale = np.abs(rows[:, :n]) @ np.abs(x) + np.abs(rows[:, n:]) @ np.abs(u)
+        return np.abs(rates) > 1e-8 * scale + 1e-12, rates
+
     start = np.asarray(x0, dtype=float)[free]
-    scale0 = float(np.max(np.abs(residual(start)))) if free else 0.0
-    if free:
-        result = least_squares(residual, start, jac=jac, method="lm",
-                               xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000)
-        z = result.x
-    else:
-        z = start
-    remaining = float(np.max(np.abs(residual(z)))) if n else 0.0
-    start_size = float(np.max(np.abs(start))) if free else 0.0
-    runaway = free and not (np.all(np.isfinite(z)) and np.max(np.abs(z - start)) <= 1e9 * (1.0 + start_size))
-    if remaining > 1e-8 * max(1.0, scale0) or runaway:
+    bad, rates = unbalanced(full(start))
+    if not bad.any():
+        return full(start), held          # already at rest: do not wander along flat directions
+    z = least_squares(residual, start, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                      max_nfev=2000).x if free else start
+    runaway = not np.all(np.isfinite(z)) or (
+        free and np.max(np.abs(z - start)) > 1e9 * (1.0 + float(np.max(np.abs(start)))))
+    if not runaway:
+        bad, rates = unbalanced(full(z))
+    if runaway or bad.any():
+        detail = ": the solver ran away" if runaway else ", ".join(
+            f"der({ss.state_names[i]}) stays {rates[i]:.3g}" for i in np.flatnonzero(bad))
         raise AnalysisError(Diagnostic(
-            "error", "E706",
-            f"no equilibrium found near the initial state with the inputs held at t = {time:g} s "
-            f"(largest remaining state derivative {remaining:.3g}"
-            f"{', the solver ran away' if runaway else ''})",
+            "error", "E940",
+            f"no equilibrium found near the initial state with the inputs held at t = {time:g} s"
+            + (detail if runaway else f" ({detail})"),
             hint="the system may have no equilibrium (e.g. a constant force on a free mass); "
                  "linearise at the initial point instead"))
     return full(z), held

@@ -1,5 +1,53 @@
-"""Code generation: StateSpace -> a standalone Python simulation module (see :mod:`bondc.codegen.emit`)."""
+"""Code generation: StateSpace -> a standalone Python simulation module.
+
+:func:`emit` (in :mod:`bondc.codegen.emit`) is the stage; :func:`compile_file`
+is the whole ``bondc compile`` command without argument parsing. The pieces:
+:mod:`~bondc.codegen.freeze` (discontinuities -> mode-selected smooth laws),
+:mod:`~bondc.codegen.printer` (the sympy printer), :mod:`~bondc.codegen.emit`
+(Jacobian, cse, module text around a verbatim copy of :mod:`bondc.runtime`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
 
 from bondc.codegen.emit import emit, runtime_source
 
-__all__ = ["emit", "runtime_source"]
+__all__ = ["emit", "runtime_source", "compile_file", "default_output"]
+
+
+def default_output(path) -> Path:
+    """Where ``bondc compile model.bg`` writes without ``-o``: ``model_gen.py`` next to the model."""
+    path = Path(path)
+    return path.with_name(path.stem + "_gen.py")
+
+
+def compile_file(path, output=None, *, model: str | None = None, experiment: str | None = None,
+                 sets: Sequence = ()) -> str:
+    """``bondc compile``: load, check, derive and emit; write ``output`` (atomically) if given.
+
+    ``experiment`` None takes the model's first experiment (its settings become
+    the module's defaults); ``sets`` are ``--set`` texts or parsed SetValues;
+    csv data paths are written relative to ``output``'s directory. Returns the
+    module's source. Raises the stage errors (ModelError, CausalityError,
+    EquationError, UsageError) for a model that cannot be compiled.
+    """
+    from bondc import semantic
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+    from bondc.io import atomic_write_text
+    from bondc.parse import parse_set_value
+
+    parsed = [parse_set_value(item) if isinstance(item, str) else item for item in sets or ()]
+    graph, _ = semantic.load(Path(path), model=model,
+                             experiment=experiment if experiment is not None else semantic.FIRST, sets=parsed)
+    ss = derive(assign_causality(graph))
+    chosen = None
+    if graph.experiments:
+        chosen = graph.experiments[experiment] if experiment is not None else next(iter(graph.experiments.values()))
+    module_dir = Path(output).resolve().parent if output is not None else Path(path).resolve().parent
+    source = emit(ss, chosen, source=Path(path).name, module_dir=module_dir)
+    if output is not None:
+        atomic_write_text(Path(output), source)
+    return source

@@ -10,10 +10,14 @@ is byte-identical for the same input (no hashes, dates or absolute paths).
 
 The module provides ``STATE_NAMES``, ``OUTPUT_NAMES``, ``PARAMETERS``,
 ``x0(p)``, ``rhs(t, x, p)``, ``jacobian(t, x, p)``, ``outputs(t, x, p)``,
-``modes(t, x, p)``, ``simulate(t_end, p=None, t_eval=None, **solver_options)``
-and a ``__main__`` that writes csv. ``p`` is None (the defaults), a dict of
-overrides or an array in the order of ``PARAMETERS``. Names like ``mass.p``
-become the identifiers ``mass_p`` (``.`` and other non-identifier characters
+``modes(t, x, p)``, ``event_functions(p)`` (one continuous g(t, x) per switch,
+zero where that law switches, for ``solve_ivp(events=...)``),
+``simulate(t_end, p=None, t_eval=None, **solver_options)`` and a ``__main__``
+that writes csv. ``p`` is None (the defaults), a dict of
+overrides (parameters defined by others, ``DERIVED_PARAMETERS``, are then
+recomputed unless given too) or an array in the order of ``PARAMETERS``
+(taken as it is). Names like ``mass.p`` become the identifiers ``mass_p``
+(``.`` and other non-identifier characters
 -> ``_``; a name that starts with ``_`` gets a ``u`` in front; a clash with a
 keyword, a runtime name or an earlier identifier gets ``_`` appended);
 ``STATE_NAMES`` and the other name tuples keep the qualified names.
@@ -49,7 +53,7 @@ from pathlib import Path
 import sympy
 
 from bondc import __version__
-from bondc.codegen.freeze import Freezer, TimeBreak
+from bondc.codegen.freeze import Freezer
 from bondc.codegen.printer import BondcPrinter, relative_data_path
 from bondc.symbolic import Csv, Table
 
@@ -58,9 +62,10 @@ ARGUMENTS = ("t", "x", "p", "m")
 #: Module-level names of the generated model code (besides the runtime's).
 MODULE_NAMES = (
     "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "BOND_VARIABLES",
-    "PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "DEFAULTS", "MODEL_NAME", "SOURCE_FILE", "DATA_DIR",
-    "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables", "modes", "simulate", "main",
-    "_rhs", "_jac", "_outputs", "_variables", "_switches", "_time_breaks", "_MODEL",
+    "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "DEFAULTS",
+    "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
+    "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
+    "_time_breaks", "_MODEL",
 )
 _INDENT = "    "
 _LAW_LIMIT = 200
@@ -123,6 +128,20 @@ def _assign(symbol, expr) -> _Statement:
     return _Statement("assign", (symbol,), [expr])
 
 
+def _hide_piecewise(expr, pieces: dict):
+    """``expr`` with every outermost Piecewise replaced by a placeholder symbol (recorded in ``pieces``)."""
+    if isinstance(expr, sympy.Piecewise):
+        if expr not in pieces:
+            pieces[expr] = sympy.Symbol(f"_pw{len(pieces)}", real=True)
+        return pieces[expr]
+    if expr.is_Atom or not expr.args:
+        return expr
+    args = [_hide_piecewise(arg, pieces) if isinstance(arg, sympy.Basic) else arg for arg in expr.args]
+    if all(a is b for a, b in zip(args, expr.args)):
+        return expr
+    return expr.func(*args)
+
+
 def _safe_diff(expr, symbol):
     """``d expr / d symbol`` with bondc's opaque signals (free of ``symbol``) held as constants."""
     if symbol not in expr.free_symbols:
@@ -153,9 +172,66 @@ class _Plan:
     outputs: list                    # [(name, frozen expr)]
     switches: list
     time_breaks: list
+    derived: list = field(default_factory=list)    # [(name, expr of other parameters)] in declaration order
     jacobian_statements: list = field(default_factory=list)
     jacobian_entries: dict = field(default_factory=dict)   # (row, column) -> expr
     blocks: int = 0
+
+
+def _derived_parameters(ss) -> list:
+    """Parameters defined by other parameters (``Ar = pi/4*(D^2 - d^2)``), as sympy, in declaration order.
+
+    The generated module recomputes them when ``p`` overrides what they depend on.
+    """
+    from bondc.errors import EquationError
+    from bondc.symbolic import Translator
+
+    graph = getattr(ss, "graph", None)
+    declared = getattr(graph, "parameters", None)
+    if not declared:
+        return []
+    symbols = {name: symbol for name, (symbol, _) in ss.parameters.items()}
+
+    def resolve(name, node):
+        if name in symbols:
+            return symbols[name]
+        raise EquationError(f"'{name}' is not a parameter")     # the translator falls back for pi
+
+    translator = Translator(resolve, functions=getattr(graph, "functions", {}), time=ss.time)
+    derived = []
+    for name, parameter in declared.items():
+        if name not in symbols:
+            continue
+        try:
+            expr = translator(parameter.expr)
+        except Exception:       # not expressible here (a csv value, ...): keep its number
+            continue
+        if expr.free_symbols and expr.free_symbols <= set(symbols.values()):
+            derived.append((name, expr))
+    return derived
+
+
+def _switch_depends(plan: _Plan) -> list:
+    """For each switch, the modes its frozen switching function reads (through the laws it uses)."""
+    index = {s.mode: s.index for s in plan.switches}
+    closure: dict = {}
+
+    def modes_of(exprs):
+        found = set()
+        for expr in exprs:
+            for symbol in expr.free_symbols:
+                if symbol in index:
+                    found.add(index[symbol])
+                elif symbol in closure:
+                    found |= closure[symbol]
+        return found
+
+    for statement in plan.statements:
+        exprs = statement.exprs if statement.kind == "assign" else statement.data["residuals"]
+        found = modes_of(exprs)
+        for symbol in statement.defines:
+            closure[symbol] = found
+    return [sorted(modes_of([s.g]) - {s.index}) for s in plan.switches]
 
 
 def _law_text(expr) -> str:
@@ -194,7 +270,7 @@ def _plan(ss) -> _Plan:
     derivatives = [freezer.freeze(ss.derivatives[s.name], f"der({s.name})") for s in states]
     outputs = [(name, freezer.freeze(expr, f"output {name}")) for name, expr in ss.outputs.items()]
     plan = _Plan(ss, states, parameters, statements, variables, derivatives, outputs, freezer.switches,
-                 freezer.time_breaks, blocks=len(ss.algebraic_blocks))
+                 freezer.time_breaks, blocks=len(ss.algebraic_blocks), derived=_derived_parameters(ss))
     _forward_jacobian(plan, state_symbols)
     return plan
 
@@ -326,8 +402,22 @@ class _Emitter:
                     needed |= expr.free_symbols
         kept.reverse()
         exprs = [expr for statement in kept for expr in statement.exprs] + [sympy.sympify(f) for f in finals]
+        # cse must not hoist work out of an if's branches (only the active one is evaluated, so its
+        # modes are the only ones read): every Piecewise is hidden behind a placeholder first
+        pieces: dict = {}
+        exprs = [_hide_piecewise(expr, pieces) for expr in exprs]
         replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_c", real=True),
                                           order="canonical", list=True) if exprs else ([], [])
+        placeholders = {symbol: piecewise for piecewise, symbol in pieces.items()}
+        uses: dict = {}
+        for expr in [e for _, e in replacements] + list(reduced):
+            for symbol in expr.free_symbols & set(placeholders):
+                uses[symbol] = uses.get(symbol, 0) + 1
+        once = {symbol: placeholders[symbol] for symbol, count in uses.items() if count == 1}
+        replacements = [(symbol, expr.xreplace(once)) for symbol, expr in replacements]
+        reduced = [expr.xreplace(once) for expr in reduced]
+        shared = [(symbol, placeholders[symbol]) for symbol in sorted(set(uses) - set(once), key=lambda s: s.name)]
+        replacements = replacements + shared
         substitutes = dict(replacements)
         order = {symbol: i for i, (symbol, _) in enumerate(replacements)}
         frozen = set()
@@ -425,11 +515,12 @@ class _Emitter:
                  self.model_banner()]
         parts.append(self.constants(model_name))
         statements = plan.statements
+        parts.append(self.derive_parameters())
         parts.append(self.function(
             "def x0(p=None):", "Initial state vector from the parameters (SI).",
             [], [s.initial for s in plan.states],
             lambda texts: ["return np.array([" + ", ".join(texts) + "], dtype=float)"],
-            prologue=["p = param_array(PARAMETERS, p)"]))
+            prologue=["p = param_array(PARAMETERS, p, _derive_parameters)"]))
         parts.append(self.function(
             "def _rhs(t, x, p, m):", "State derivatives with the modes m frozen.",
             statements, plan.derivatives,
@@ -448,7 +539,7 @@ class _Emitter:
         parts.append(self.function(
             "def _switches(t, x, p, m):", "Switching functions: the sign of each is its mode.",
             statements, [s.g for s in plan.switches],
-            lambda texts: ["return np.array([" + ", ".join(texts) + "], dtype=float)"]))
+            lambda texts: ["return stack(" + "".join(text + ", " for text in texts).rstrip(", ") + ")"]))
         parts.append(self.function(
             "def _outputs(t, x, p, m):", "Outputs with the modes m frozen.",
             statements, [expr for _, expr in plan.outputs],
@@ -460,6 +551,24 @@ class _Emitter:
         parts.append(self.time_breaks())
         parts.append(_WRAPPERS)
         return "\n\n\n".join(parts) + "\n"
+
+    def derive_parameters(self) -> str:
+        plan = self.plan
+        index = {symbol: i for i, (_, symbol, _) in enumerate(plan.parameters)}
+        position = {name: i for i, (name, _, _) in enumerate(plan.parameters)}
+        printer = BondcPrinter({symbol: f"p[{i}]" for symbol, i in index.items()}, data_paths=self.data_paths)
+        lines = ["def _derive_parameters(p, given=()):",
+                 f'{_INDENT}"""Recompute the parameters defined by others (DERIVED_PARAMETERS), except those in'
+                 " ``given``.",
+                 "",
+                 f"{_INDENT}Called when ``p`` is a dict of overrides: overriding D updates Ar = pi/4*(D^2 - d^2).",
+                 f'{_INDENT}"""',
+                 f"{_INDENT}p = np.array(p, dtype=float)"]
+        for name, expr in plan.derived:
+            lines.append(f"{_INDENT}if {name!r} not in given:")
+            lines.append(f"{_INDENT * 2}p[{position[name]}] = {printer.doprint(expr)}")
+        lines.append(f"{_INDENT}return p")
+        return "\n".join(lines)
 
     def header(self, model_name) -> str:
         experiment = self.experiment
@@ -499,10 +608,13 @@ class _Emitter:
                 bonds.append(symbol.name)
         known = {name for name, _, _ in plan.variables}
         lines.append("BOND_VARIABLES = " + _tuple(name for name in bonds if name in known))
+        lines.append("DERIVED_PARAMETERS = " + _tuple(name for name, _ in plan.derived))
         lines.append("PARAMETERS = {" + "".join(f"\n    {name!r}: {value!r}," for name, _, value in plan.parameters)
                      + ("\n}" if plan.parameters else "}"))
         lines.append("SWITCHES = " + _tuple((s.label for s in plan.switches), multiline=True))
         lines.append("EVENT_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event))
+        lines.append("SWITCH_DEPENDS = " + _tuple((tuple(d) for d in _switch_depends(plan)),
+                                                  multiline=len(plan.switches) > 8))
         lines.append(f"VECTORIZED = {plan.blocks == 0}")
         defaults = {}
         if experiment is not None:
@@ -539,7 +651,8 @@ class _Emitter:
                 entry = f"({printer.doprint(item.time)}, {item.label!r}, {item.kind!r})"
                 if entry not in items:
                     items.append(entry)
-        lines = ["def _time_breaks(p):", f'{_INDENT}"""Times known in advance where a law switches: (time, label, kind)."""']
+        lines = ["def _time_breaks(p):",
+                 f'{_INDENT}"""Times known in advance where a law switches: (time, label, kind)."""']
         lines += [_INDENT + line for line in self.unpack(used)]
         body = "[" + "".join(f"\n{_INDENT * 2}{entry}," for entry in items) + (f"\n{_INDENT}]" if items else "]")
         for text in csvs:
@@ -560,7 +673,7 @@ def _tuple(values, multiline=False) -> str:
 _WRAPPERS = '''\
 def modes(t, x, p=None):
     """The modes (sign of every switching function, SWITCHES) of the unfrozen law at (t, x)."""
-    return modes_at(_MODEL, t, np.asarray(x, dtype=float), param_array(PARAMETERS, p))
+    return modes_at(_MODEL, t, np.asarray(x, dtype=float), param_array(PARAMETERS, p, _derive_parameters))
 
 
 def rhs(t, x, p=None):
@@ -581,6 +694,25 @@ def outputs(t, x, p=None):
 def variables(t, x, p=None):
     """Every assigned variable (VARIABLE_NAMES order): inputs, bond efforts and flows, ..."""
     return evaluate(_MODEL, "variables", t, x, p)
+
+
+def event_functions(p=None):
+    """One function g(t, x) per switch (SWITCHES): continuous, zero where that law switches.
+
+    For scipy.integrate.solve_ivp(rhs, ..., events=event_functions()); each is terminal.
+    simulate() does not need them: it locates switches itself.
+    """
+    p = param_array(PARAMETERS, p, _derive_parameters)
+
+    def make(k):
+        def g(t, x):
+            x = np.asarray(x, dtype=float)
+            return float(_switches(t, x, p, modes_at(_MODEL, t, x, p))[k])
+        g.terminal = True
+        g.__name__ = f"switch_{k}"
+        return g
+
+    return [make(k) for k in range(len(SWITCHES))]
 
 
 def simulate(t_end=None, p=None, t_eval=None, **solver_options):

@@ -30,9 +30,9 @@ and the sample times of a ``csv`` signal are listed the same way.
 >>> t, f, v0 = sympy.symbols("t f v0", real=True)
 >>> freezer = Freezer(t, states={f}, parameters={v0})
 >>> freezer.freeze(sympy.Piecewise((f, sympy.Abs(f) < v0), (2*f, True)), "R.e")
-Piecewise((f, _m0*f - v0 < 0), (2*f, True))
+Piecewise((f, _m1 > 0), (2*f, True))
 >>> [(s.g, s.label) for s in freezer.switches]
-[(f, 'abs(f) in R.e'), (_m0*f - v0, 'if Abs(f) < v0 in R.e')]
+[(f, 'abs(f) in R.e'), (-_m0*f + v0, 'if v0 > Abs(f) in R.e')]
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import sympy
 from sympy.core.relational import Relational
 
-from bondc.symbolic import Csv, Step, Table
+from bondc.symbolic import Csv, Table
 
 _LABEL_LIMIT = 120
 
@@ -135,7 +135,9 @@ class Freezer:
         mode = sympy.Symbol(f"_m{index}", real=True)
         switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label)
         root = self._linear_time_root(g)
-        if root is not None:
+        if not (g.free_symbols - self.parameters):
+            switch.event = False            # of parameters only: its mode never changes
+        elif root is not None:
             switch.event = False
             switch.breaks.append((root, switch.label))
             self.time_breaks.append(TimeBreak(root, switch.label, kind))

@@ -20,7 +20,7 @@ does not know raises ``unsupported`` instead of printing something wrong.
 >>> import sympy
 >>> x = sympy.Symbol("mass.p", real=True)
 >>> BondcPrinter({x: "mass_p"}).doprint(sympy.sqrt(x) + x**2 / 3)
-'(1/3)*mass_p**2 + np.sqrt(mass_p)'
+'np.sqrt(mass_p) + (1/3)*mass_p**2'
 """
 
 from __future__ import annotations
@@ -29,11 +29,9 @@ from pathlib import Path
 from typing import Mapping
 
 import sympy
-from sympy.core.relational import Relational
 from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.precedence import precedence
 
-from bondc.symbolic import Csv, Step, Table
 
 
 class UnsupportedExpression(Exception):
@@ -49,6 +47,7 @@ class BondcPrinter(NumPyPrinter):
     def __init__(self, names: Mapping[sympy.Symbol, str], *, mode_symbols=frozenset(),
                  data_paths: Mapping[str, str] | None = None, settings=None):
         super().__init__(settings or {})
+        self.printmethod = "_bondccode"     # NumPyPrinter sets "_numpycode", which Csv answers
         self.names = dict(names)
         self.mode_symbols = frozenset(mode_symbols)
         self.data_paths = dict(data_paths or {})

@@ -194,6 +194,12 @@ class ReportContext:
     motor_candidates: Table | None = None
     validation: ValidationSection | None = None
     warnings: Sequence[str] = ()                # diagnostics worth a reader's attention
+    incomplete: str | None = None               # the diagnostic of a simulation that stopped early
+    summary: Sequence[tuple[str, Any, str | None]] = ()   # key results under the header: (label, value, unit)
+    equation_tables: Sequence[Table] = ()       # e.g. the states with their initial values
+    laws: Sequence[Equation] = ()               # "where": the laws the state equations name
+    result_tables: Sequence[Table] = ()         # e.g. statistics of the outputs
+    power_plots: Sequence[Plot] = ()            # power of the elements against time
 
     def __post_init__(self) -> None:
         # Trusted HTML must come from bondc's own producers, which return Markup; a
@@ -203,12 +209,13 @@ class ReportContext:
             if value is not None and not isinstance(value, Markup):
                 raise TypeError(f"ReportContext.{name} must be markupsafe.Markup (made by bondc), "
                                 f"not {type(value).__name__}")
-        plots = tuple(p if isinstance(p, Plot) else Plot(*p) for p in self.plots)
-        for plot in plots:
-            if not isinstance(plot.svg, Markup):
-                raise TypeError(f"plot '{plot.title}': svg must be Markup from plot_svg")
-        object.__setattr__(self, "plots", plots)
-        for equation in self.equations:
+        for name in ("plots", "power_plots"):
+            plots = tuple(p if isinstance(p, Plot) else Plot(*p) for p in getattr(self, name))
+            for plot in plots:
+                if not isinstance(plot.svg, Markup):
+                    raise TypeError(f"plot '{plot.title}': svg must be Markup from plot_svg")
+            object.__setattr__(self, name, plots)
+        for equation in tuple(self.equations) + tuple(self.laws):
             if not isinstance(equation.mathml, Markup):
                 raise TypeError("Equation.mathml must be Markup from math_markup")
 
@@ -293,9 +300,9 @@ def _sections(context: ReportContext) -> list[tuple[str, str]]:
         sections.append(("causality", "Causality"))
     if context.equations:
         sections.append(("equations", "State equations"))
-    if context.plots:
+    if context.plots or context.result_tables:
         sections.append(("results", "Simulation results"))
-    if context.power_tables:
+    if context.power_tables or context.power_plots:
         sections.append(("power", "Power and energy"))
     if context.motor_requirements is not None:
         sections.append(("motor-requirements", "Motor requirements"))
@@ -368,9 +375,46 @@ def _svg_ids_prefixed(svg: str, prefix: str) -> str:
     return pattern.sub(lambda m: f"{m.group(1)}{prefix}-{m.group(2)}", svg)
 
 
+def decimation_indices(t: np.ndarray, series: Sequence[np.ndarray], max_points: int) -> np.ndarray | None:
+    """Indices of the samples worth drawing when there are more than ``max_points``; None keeps all.
+
+    The time axis is cut into equal intervals; each keeps its first and last
+    sample and, for every series, its smallest and largest value, so peaks,
+    steps and corners survive exactly while a 7000-step run draws in a
+    fraction of the points.
+
+    >>> t = np.linspace(0, 1, 10001)
+    >>> kept = decimation_indices(t, [np.sin(40 * t)], 1000)
+    >>> len(kept) <= 1000, int(kept[0]), int(kept[-1]), bool(np.isclose(np.sin(40 * t[kept]).max(), np.sin(40 * t).max()))
+    (True, 0, 10000, True)
+    """
+    if t.size <= max_points:
+        return None
+    buckets = max(max_points // (2 + 2 * max(len(series), 1)), 1)
+    edges = np.searchsorted(t, np.linspace(t[0], t[-1], buckets + 1)[1:-1], side="left")
+    starts = np.concatenate(([0], edges))
+    ends = np.concatenate((edges, [t.size]))
+    kept = [0, t.size - 1]
+    for start, end in zip(starts, ends):
+        if end <= start:
+            continue
+        kept += [start, end - 1]
+        for values in series:
+            chunk = values[start:end]
+            if np.all(np.isnan(chunk)):
+                continue
+            kept += [start + int(np.nanargmin(chunk)), start + int(np.nanargmax(chunk))]
+    return np.unique(np.asarray(kept, dtype=int))
+
+
 def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: str, ylabel: str,
-             xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = (7.0, 2.9)) -> Markup:
+             xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = (7.0, 2.9),
+             max_points: int = 4000, styles: Mapping[str, Mapping[str, Any]] | None = None) -> Markup:
     """A line plot of ``series`` (label -> values over ``t``) as an inline SVG element.
+
+    More than ``max_points`` samples are thinned with :func:`decimation_indices`
+    (extremes kept). ``styles`` gives matplotlib line properties per label
+    (e.g. ``{"measured": {"linestyle": "none", "marker": "."}}``).
 
     Drawn with matplotlib's object-oriented API and its SVG canvas, never
     through pyplot, so no GUI backend is selected whatever ``MPLBACKEND`` says
@@ -395,6 +439,11 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
         digest.update(str(label).encode())
         digest.update(values.tobytes())
     key = digest.hexdigest()
+    kept = decimation_indices(t, list(arrays.values()), max_points)
+    if kept is not None:
+        t = t[kept]
+        arrays = {label: values[kept] for label, values in arrays.items()}
+    styles = styles or {}
 
     with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": key, "axes.spines.top": False,
                                 "axes.spines.right": False, "axes.grid": True, "grid.color": "#dddddd",
@@ -403,7 +452,7 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
         figure = Figure(figsize=size, layout="constrained")
         axes = figure.add_subplot()
         for label, values in arrays.items():
-            axes.plot(t, values, label=str(label))
+            axes.plot(t, values, label=str(label), **dict(styles.get(label, {})))
         axes.set_xlabel(xlabel)
         axes.set_ylabel(ylabel)
         if t.size:
@@ -433,7 +482,25 @@ def _presentation_printer():
     from sympy.printing.mathml import MathMLPresentationPrinter
 
     class Printer(MathMLPresentationPrinter):
-        """sympy's presentation printer with ``Piecewise`` as a brace over cases."""
+        """sympy's presentation printer with ``Piecewise`` as a brace over cases.
+
+        A name with several underscores keeps them after the first:
+        ``a_up_meas`` is *a* with the subscript ``up_meas`` (sympy would write
+        ``up meas``), so a reader finds the name of the model source.
+        """
+
+        def _print_Symbol(self, sym, style="plain"):
+            head, _, rest = sym.name.partition("_")
+            if head and "_" in rest and "^" not in sym.name and not rest.endswith("_"):
+                import sympy
+
+                node = self.dom.createElement("msub")
+                node.appendChild(self._print(sympy.Symbol(head)))
+                sub = self.dom.createElement("mi")
+                sub.appendChild(self.dom.createTextNode(rest))
+                node.appendChild(sub)
+                return node
+            return super()._print_Symbol(sym, style)
 
         def _print_Piecewise(self, expr):
             row = self.dom.createElement("mrow")
@@ -471,9 +538,14 @@ def _presentation_printer():
 _ENTITY = re.compile(r"&(#x[0-9A-Fa-f]+|#[0-9]+|[A-Za-z][A-Za-z0-9]*);")
 
 
+#: Entities written as plain characters rather than their Unicode symbol: the differential
+#: ``&dd;`` (U+2146, missing from most fonts) is an upright d.
+_PLAIN_ENTITIES = {"dd": "d"}
+
+
 def _decode_entities(text: str) -> str:
     """sympy writes some symbols as entity text (``&pi;``, ``&dd;``); make them characters."""
-    return _ENTITY.sub(lambda m: html.unescape(m.group(0)), text)
+    return _ENTITY.sub(lambda m: _PLAIN_ENTITIES.get(m.group(1)) or html.unescape(m.group(0)), text)
 
 
 def _to_etree(node) -> ET.Element:
@@ -503,7 +575,7 @@ def math_markup(expr: Any, display: str = "block") -> Markup:
     >>> str(math_markup(sympy.Symbol("a<b"), display="inline"))
     '<math display="inline"><mi>a&lt;b</mi></math>'
     """
-    printer = _presentation_printer()({})
+    printer = _presentation_printer()({"mul_symbol": "dot"})
     tree = _to_etree(printer._print(expr))
     root = ET.Element("math", {"display": display})
     root.append(tree)

@@ -1,0 +1,790 @@
+"""Energy account: :class:`~bondc.statespace.StateSpace` + :class:`~bondc.simulate.SimResult` -> :class:`EnergyAccount`.
+
+For every element the power *into* it is ``e*f`` when its bond points at it and
+``-e*f`` when the bond leaves it (a two-port gets one power per port). Per
+cycle (the experiment's ``cycle``; windows of that length from the start of the
+run, a last partial window dropped unless it is the only one) the account
+gives:
+
+- sources (Se, MSe, Sf, MSf): energy *supplied* to the graph and energy
+  *returned* into the source (both >= 0);
+- resistors: energy *dissipated* (the integral of the power into the R);
+- storage elements with a stored-energy function: the *change of stored
+  energy*, the function evaluated at the state at both window ends. The
+  function is ``StateSpace.energy`` (polynomial laws, analytic) or, for a law
+  of the element's own default state alone that is not polynomial (a spring
+  with backlash, a tyre that lifts off), ``integral of law dx`` between the two
+  end states by adaptive quadrature ("numeric");
+- storage elements without one (custom states such as a chamber with
+  ``state P``, laws that depend on other variables): the *net work in*, the
+  integral of the power into the element;
+- two-ports: the power in at each port and their sum, which must be ~0.
+
+The **balance** per cycle: sources' net energy (supplied - returned) =
+dissipated + change of stored energy + net work into storage without an energy
+function, and its *residual*. Junctions, transformers and gyrators conserve
+power at every instant, so the residual is the sum over the storage elements
+with an energy function of ``integral(power in) - change of stored energy``:
+it measures how far the simulated states are from integrating their own rates
+(the solver's accumulated local error), plus the error of the quadrature
+below, which is made far smaller. ``throughput`` is the sum over every element
+(two-ports excepted) of ``integral(|power|)``, the energy that moved;
+``relative_residual = |residual| / throughput``.
+
+How the powers are integrated: the result must hold the solver's own step
+points (a run without ``dt``; otherwise the run is repeated with the same
+settings, which reproduces the same steps, and ``resimulated`` says so).
+Steps never straddle an event or a known switching time. On each step the
+states are the cubic Hermite interpolant of the states and of the rates at
+both ends (the rates evaluated with the step's modes frozen, as the solver
+integrated it), and the powers are integrated with the 5-point Gauss-Lobatto
+rule (exact for degree 7) on it: fourth order in the step size, far below the
+solver's error at the tolerances of the models. Positive and negative parts
+are split at the roots of the degree-4 interpolant of the five samples, so
+``supplied - returned`` is the net integral exactly. Steps of a Filippov
+sliding mode (the law there is a convex combination the runtime computes) use
+the result's own recorded values, linearly (the trapezoid rule).
+
+>>> from pathlib import Path
+>>> from bondc.simulate import run
+>>> from bondc import semantic
+>>> from bondc.causality import assign_causality
+>>> from bondc.equations import derive
+>>> path = Path(__file__).parents[2] / "models/series_rlc.bg"
+>>> graph, _ = semantic.load(path, experiment=semantic.FIRST)
+>>> ss = derive(assign_causality(graph))
+>>> from bondc.simulate import simulate
+>>> account = energy_account(ss, simulate(ss, graph.experiments["step"], t_end=0.1))
+>>> cycle = account.windows[0]
+>>> round(cycle.balance.sources_net * 1e3, 6), round(cycle.element("resistor").dissipated * 1e3, 6)
+(10.0, 5.0)
+>>> account.windows[0].balance.relative_residual < 1e-8
+True
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+import sympy
+
+from bondc.errors import AnalysisError, Diagnostic
+
+# Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
+_LOBATTO_NODES = np.array([-1.0, -math.sqrt(3.0 / 7.0), 0.0, math.sqrt(3.0 / 7.0), 1.0])
+_LOBATTO_WEIGHTS = np.array([0.1, 49.0 / 90.0, 32.0 / 45.0, 49.0 / 90.0, 0.1])
+# The degree-4 interpolant of samples at the Lobatto nodes, evaluated on a fine grid: a linear map.
+_FINE_GRID = np.linspace(-1.0, 1.0, 65)
+_FINE_FROM_NODES = np.vander(_FINE_GRID, 5, increasing=True) @ np.linalg.inv(
+    np.vander(_LOBATTO_NODES, 5, increasing=True))
+
+#: A residual above this fraction of the throughput gets warning W930.
+RESIDUAL_TOLERANCE = 1e-6
+
+ROLES = {"Se": "source", "MSe": "source", "Sf": "source", "MSf": "source", "R": "dissipator",
+         "C": "storage", "I": "storage", "TF": "converter", "MTF": "converter", "GY": "converter",
+         "MGY": "converter"}
+
+METHOD = ("5-point Gauss-Lobatto quadrature per solver step on the cubic Hermite interpolant of the states "
+          "(rates evaluated with the step's modes); sliding-mode steps: trapezoid on the recorded values")
+
+
+# ------------------------------------------------------------------ values
+
+
+@dataclass(frozen=True)
+class ElementEnergy:
+    """One element's energies over one window, in J (None where they do not apply).
+
+    ``work_in`` is the integral of the power into the element (every kind);
+    ``gross`` the integral of its absolute value. Storage elements with an
+    energy function have ``stored_start``/``stored_end``/``stored_change``;
+    those without have ``net_work_in`` (= ``work_in``). Two-ports have
+    ``port_work`` (work in at p1, at p2) and ``work_in`` their sum.
+    """
+
+    element: str
+    kind: str
+    role: str                                   # source, dissipator, storage, converter
+    work_in: float
+    gross: float
+    supplied: float | None = None
+    returned: float | None = None
+    dissipated: float | None = None
+    stored_start: float | None = None
+    stored_end: float | None = None
+    stored_change: float | None = None
+    net_work_in: float | None = None
+    port_work: tuple[float, float] | None = None
+    energy_function: str | None = None          # "analytic", "numeric" or None
+
+    @property
+    def storage_defect(self) -> float | None:
+        """``work_in - stored_change``: this storage element's share of the balance residual."""
+        if self.stored_change is None:
+            return None
+        return self.work_in - self.stored_change
+
+
+@dataclass(frozen=True)
+class Balance:
+    """sources' net energy = dissipated + stored_change + net_work_in (+ residual)."""
+
+    supplied: float
+    returned: float
+    dissipated: float
+    stored_change: float
+    net_work_in: float
+    converter_work: float                       # sum over two-ports of the work in at both ports (~0)
+    throughput: float
+
+    @property
+    def sources_net(self) -> float:
+        return self.supplied - self.returned
+
+    @property
+    def residual(self) -> float:
+        return self.sources_net - (self.dissipated + self.stored_change + self.net_work_in)
+
+    @property
+    def relative_residual(self) -> float | None:
+        return abs(self.residual) / self.throughput if self.throughput > 0 else None
+
+    def to_json(self) -> dict:
+        return {
+            "supplied": self.supplied, "returned": self.returned, "sources_net": self.sources_net,
+            "dissipated": self.dissipated, "stored_change": self.stored_change,
+            "net_work_in": self.net_work_in, "converter_work": self.converter_work,
+            "residual": self.residual, "throughput": self.throughput,
+            "relative_residual": self.relative_residual,
+        }
+
+
+@dataclass(frozen=True)
+class Window:
+    """One cycle (or the whole run): its span, every element's energies and the balance."""
+
+    index: int
+    t_start: float
+    t_end: float
+    partial: bool
+    elements: tuple[ElementEnergy, ...]
+    balance: Balance
+
+    def element(self, name: str) -> ElementEnergy:
+        for entry in self.elements:
+            if entry.element == name:
+                return entry
+        raise KeyError(name)
+
+
+ROW_KEYS = ("cycle", "t_start", "t_end", "element", "kind", "role", "supplied", "returned", "dissipated",
+            "stored_change", "net_work_in", "work_in", "energy_function")
+BALANCE_KEYS = ("cycle", "t_start", "t_end", "supplied", "returned", "sources_net", "dissipated",
+                "stored_change", "net_work_in", "converter_work", "residual", "throughput", "relative_residual")
+
+
+@dataclass(frozen=True)
+class EnergyAccount:
+    """Energies per element and cycle, and the energy balance of each cycle (see the module docstring)."""
+
+    model: str
+    experiment: str | None
+    cycle: float | None
+    windows: tuple[Window, ...]
+    complete: bool                              # False: the run stopped early; the account covers what ran
+    resimulated: bool                           # True: the run was repeated to get the solver's steps
+    method: str = METHOD
+    diagnostics: tuple[Diagnostic, ...] = ()
+
+    @property
+    def max_relative_residual(self) -> float:
+        values = [w.balance.relative_residual for w in self.windows if w.balance.relative_residual is not None]
+        return max(values) if values else 0.0
+
+    def rows(self) -> list[dict]:
+        """One dict per (cycle, element), keys :data:`ROW_KEYS`, energies in J."""
+        rows = []
+        for window in self.windows:
+            for entry in window.elements:
+                rows.append({
+                    "cycle": window.index, "t_start": window.t_start, "t_end": window.t_end,
+                    "element": entry.element, "kind": entry.kind, "role": entry.role,
+                    "supplied": entry.supplied, "returned": entry.returned, "dissipated": entry.dissipated,
+                    "stored_change": entry.stored_change, "net_work_in": entry.net_work_in,
+                    "work_in": entry.work_in, "energy_function": entry.energy_function,
+                })
+        return rows
+
+    def balance_rows(self) -> list[dict]:
+        """One dict per cycle, keys :data:`BALANCE_KEYS`, energies in J."""
+        rows = []
+        for window in self.windows:
+            row = {"cycle": window.index, "t_start": window.t_start, "t_end": window.t_end}
+            row.update(window.balance.to_json())
+            rows.append({key: row[key] for key in BALANCE_KEYS})
+        return rows
+
+    def to_json(self) -> dict:
+        return {
+            "model": self.model,
+            "experiment": self.experiment,
+            "cycle": self.cycle,
+            "complete": self.complete,
+            "resimulated": self.resimulated,
+            "method": self.method,
+            "max_relative_residual": self.max_relative_residual,
+            "cycles": [
+                {
+                    "index": window.index, "t_start": window.t_start, "t_end": window.t_end,
+                    "partial": window.partial,
+                    "balance": window.balance.to_json(),
+                    "elements": [_element_json(entry) for entry in window.elements],
+                }
+                for window in self.windows
+            ],
+            "diagnostics": [d.to_json() for d in self.diagnostics],
+        }
+
+    def to_text(self) -> str:
+        """Readable tables, one per cycle: element, kind, supplied, returned, dissipated, change of
+        stored energy and net work in, in J; then the balance."""
+        out = [f"Energy account of {self.model}" + (f" ({self.experiment})" if self.experiment else "")]
+        if not self.complete:
+            out.append("(the run stopped early: the account covers what was simulated)")
+        for window in self.windows:
+            head = (f"cycle {window.index + 1}: t = {window.t_start:g} .. {window.t_end:g} s"
+                    + (" (partial)" if window.partial else ""))
+            out += ["", head]
+            out += _table(window)
+            b = window.balance
+            relative = "-" if b.relative_residual is None else f"{b.relative_residual:.2e}"
+            out.append(f"balance: sources net {_j(b.sources_net)} J = dissipated {_j(b.dissipated)} J"
+                       f" + stored {_j(b.stored_change)} J + net work in {_j(b.net_work_in)} J"
+                       f"; residual {b.residual:.3e} J ({relative} of throughput {_j(b.throughput)} J)")
+            if b.converter_work != 0.0:
+                out.append(f"two-ports (power in at both ports, ideally 0): {b.converter_work:.3e} J")
+        for diagnostic in self.diagnostics:
+            out.append(f"{diagnostic.severity}[{diagnostic.code}]: {diagnostic.message}")
+        return "\n".join(out)
+
+
+def _element_json(entry: ElementEnergy) -> dict:
+    data = {
+        "element": entry.element, "kind": entry.kind, "role": entry.role,
+        "work_in": entry.work_in, "gross": entry.gross,
+    }
+    for key in ("supplied", "returned", "dissipated", "stored_start", "stored_end", "stored_change",
+                "net_work_in", "energy_function"):
+        value = getattr(entry, key)
+        if value is not None:
+            data[key] = value
+    if entry.port_work is not None:
+        data["port_work"] = {"p1": entry.port_work[0], "p2": entry.port_work[1]}
+    if entry.storage_defect is not None:
+        data["storage_defect"] = entry.storage_defect
+    return data
+
+
+def _j(value: float) -> str:
+    return f"{value:.6g}"
+
+
+def _table(window: Window) -> list[str]:
+    columns = ("supplied", "returned", "dissipated", "stored_change", "net_work_in")
+    titles = ("element", "kind", "supplied", "returned", "dissipated", "Δstored", "net work in")
+    largest = max([abs(getattr(e, c)) for e in window.elements for c in columns
+                   if getattr(e, c) is not None] + [0.0])
+    # six significant digits for the largest entry of the table, at most nine decimals
+    decimals = 3 if largest == 0 else min(max(5 - int(math.floor(math.log10(largest))), 0), 9)
+    rows = []
+    for entry in window.elements:
+        cells = [entry.element, entry.kind]
+        for column in columns:
+            value = getattr(entry, column)
+            cells.append("-" if value is None else f"{value:.{decimals}f}")
+        if entry.role == "converter" and entry.port_work is not None:
+            cells[-1] = f"({entry.work_in:.2e})"
+        rows.append(cells)
+    widths = [max(len(titles[i]), *(len(r[i]) for r in rows)) if rows else len(titles[i])
+              for i in range(len(titles))]
+    line = lambda cells: "  ".join(c.ljust(w) if i < 2 else c.rjust(w)
+                                   for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+    return [line(titles), line(["-" * w for w in widths])] + [line(r) for r in rows]
+
+
+# ------------------------------------------------------------------ errors
+
+
+def _error(code: str, message: str, hint: str | None = None) -> AnalysisError:
+    return AnalysisError(Diagnostic("error", code, message, hint=hint))
+
+
+# ---------------------------------------------------------------- windows
+
+
+def cycle_windows(t_start: float, t_end: float, cycle: float | None) -> list[tuple[float, float, bool]]:
+    """``(start, end, partial)`` of consecutive windows of length ``cycle`` from ``t_start``.
+
+    A last partial window is dropped unless it is the only one; ``cycle`` None
+    is the whole run.
+
+    >>> cycle_windows(0.0, 1.0, 0.4)
+    [(0.0, 0.4, False), (0.4, 0.8, False)]
+    >>> cycle_windows(0.0, 1.0, 2.0)
+    [(0.0, 1.0, True)]
+    """
+    if cycle is None:
+        return [(t_start, t_end, False)]
+    if not (isinstance(cycle, (int, float)) and math.isfinite(cycle) and cycle > 0):
+        raise _error("E932", f"the cycle length must be a positive number of seconds, not {cycle!r}")
+    count = int(math.floor((t_end - t_start) / cycle * (1 + 1e-9) + 1e-9))
+    if count == 0:
+        return [(t_start, t_end, True)]
+    windows = [(t_start + k * cycle, t_start + (k + 1) * cycle, False) for k in range(count)]
+    if abs(windows[-1][1] - t_end) <= 1e-9 * cycle:
+        windows[-1] = (windows[-1][0], t_end, False)
+    return windows
+
+
+def experiment_cycle(ss, result) -> float | None:
+    """The ``cycle`` of the experiment the result was run with, or None."""
+    graph = getattr(ss, "graph", None)
+    name = getattr(result, "experiment", None)
+    experiments = getattr(graph, "experiments", {}) or {}
+    if name is not None and name in experiments:
+        return experiments[name].cycle
+    return None
+
+
+# ------------------------------------------------------------ trajectory
+
+
+def _sign(values):
+    modes = np.sign(np.asarray(values, dtype=float))
+    modes[np.isnan(modes)] = 0.0
+    return modes
+
+
+class _Model:
+    """The generated module's functions (see :mod:`bondc.runtime`), evaluated over columns."""
+
+    def __init__(self, namespace: Mapping, parameters: Mapping[str, float]):
+        self.state_names = tuple(namespace["STATE_NAMES"])
+        self.variable_names = tuple(namespace["VARIABLE_NAMES"])
+        self.switch_count = len(namespace["SWITCHES"])
+        self.vectorized = bool(namespace.get("VECTORIZED", False))
+        self._rhs, self._variables = namespace["_rhs"], namespace["_variables"]
+        self._switches = namespace["_switches"]
+        names = tuple(namespace["PARAMETERS"])
+        self.p = np.array([float(parameters.get(name, namespace["PARAMETERS"][name])) for name in names])
+
+    def _columns(self, function, t, x, modes, rows):
+        out = np.empty((rows, t.size))
+        if t.size == 0:
+            return out
+        with np.errstate(all="ignore"):
+            if self.vectorized:
+                try:
+                    values = function(t, x, self.p, modes)
+                    for row, value in enumerate(values):
+                        out[row] = value
+                    return out
+                except (ValueError, TypeError, IndexError):
+                    pass        # a law returns a constant in a list: evaluate point by point
+            for j in range(t.size):
+                out[:, j] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
+        return out
+
+    def by_modes(self, function, t, x, modes, rows):
+        """``function`` at every column with that column's mode vector (rows of ``modes``)."""
+        out = np.empty((rows, t.size))
+        if self.switch_count == 0:
+            return self._columns(function, t, x, np.zeros(0), rows)
+        unique, inverse = np.unique(modes, axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        for r, row in enumerate(unique):
+            columns = np.flatnonzero(inverse == r)
+            out[:, columns] = self._columns(function, t[columns], x[:, columns], row, rows)
+        return out
+
+    def modes(self, t, x):
+        """The mode vector of the unfrozen law at every column: ``m = sign(g(t, x, m))`` (fixed point)."""
+        rows = np.ones((t.size, self.switch_count))
+        if self.switch_count == 0:
+            return rows
+        for _ in range(self.switch_count + 1):
+            new = _sign(self.by_modes(self._switches, t, x, rows, self.switch_count)).T
+            if np.array_equal(new, rows):
+                break
+            rows = new
+        return rows
+
+    def rhs(self, t, x, modes):
+        return self.by_modes(self._rhs, t, x, modes, len(self.state_names))
+
+    def variables(self, t, x, modes):
+        return self.by_modes(self._variables, t, x, modes, len(self.variable_names))
+
+
+def _hermite(tau, h, xa, xb, fa, fb):
+    """Cubic Hermite interpolant at fractions ``tau`` of steps of length ``h`` (broadcast)."""
+    tau2, tau3 = tau * tau, tau * tau * tau
+    return ((2 * tau3 - 3 * tau2 + 1) * xa + (tau3 - 2 * tau2 + tau) * h * fa
+            + (-2 * tau3 + 3 * tau2) * xb + (tau3 - tau2) * h * fb)
+
+
+def _sliding_spans(events, t_end) -> list[tuple[float, float]]:
+    """Spans of Filippov sliding modes: from a "sliding on ..." event to the next event (or the end)."""
+    spans = []
+    ordered = sorted(events, key=lambda item: item[0])
+    for i, (time, label) in enumerate(ordered):
+        if label.startswith("sliding on") and not label.endswith(" ends"):
+            later = [other for other, _ in ordered[i + 1:] if other > time]
+            spans.append((float(time), float(later[0]) if later else float(t_end)))
+    return spans
+
+
+class _Trajectory:
+    """The run as steps: ends, states, rates and modes per step; samples at the Lobatto nodes."""
+
+    def __init__(self, model: _Model, result, boundaries: Sequence[float]):
+        self.model = model
+        self.result = result
+        t = np.asarray(result.t, dtype=float)
+        x = np.array([result.states[name] for name in model.state_names], dtype=float).reshape(-1, t.size)
+        keep = np.flatnonzero(np.diff(t) > 0)          # zero-length steps carry no energy
+        ta, tb = t[keep], t[keep + 1]
+        xa, xb = x[:, keep], x[:, keep + 1]
+        mid = 0.5 * (ta + tb)
+        modes = model.modes(mid, 0.5 * (xa + xb))
+        fa = model.rhs(ta, xa, modes)
+        fb = model.rhs(tb, xb, modes)
+        sliding = np.zeros(ta.size, dtype=bool)
+        for start, end in _sliding_spans(result.events, t[-1]):
+            sliding |= (mid > start) & (mid < end)
+        self.ta, self.tb, self.xa, self.xb, self.fa, self.fb = ta, tb, xa, xb, fa, fb
+        self.modes, self.sliding = modes, sliding
+        for boundary in boundaries:
+            self._split(boundary)
+
+    def state_at(self, k, time):
+        """The state inside step ``k`` at ``time``: Hermite (linear in sliding steps)."""
+        h = self.tb[k] - self.ta[k]
+        tau = (time - self.ta[k]) / h
+        if self.sliding[k]:
+            return (1 - tau) * self.xa[:, k] + tau * self.xb[:, k]
+        return _hermite(tau, h, self.xa[:, k], self.xb[:, k], self.fa[:, k], self.fb[:, k])
+
+    def _split(self, time):
+        span = max(abs(self.tb[-1]), abs(self.ta[0]), 1.0) if self.ta.size else 1.0
+        tolerance = 1e-12 * span
+        inside = np.flatnonzero((self.ta < time - tolerance) & (self.tb > time + tolerance))
+        if inside.size == 0:
+            return
+        k = int(inside[0])
+        x_mid = self.state_at(k, time)
+        f_mid = self.model.rhs(np.array([time]), x_mid.reshape(-1, 1), self.modes[k:k + 1])[:, 0]
+        insert = lambda array, left, right: np.concatenate(
+            [array[..., :k], left[..., None], right[..., None], array[..., k + 1:]], axis=-1)
+        self.ta = np.concatenate([self.ta[:k], [self.ta[k], time], self.ta[k + 1:]])
+        self.tb = np.concatenate([self.tb[:k], [time, self.tb[k]], self.tb[k + 1:]])
+        self.xa = insert(self.xa, self.xa[:, k], x_mid)
+        self.xb = insert(self.xb, x_mid, self.xb[:, k])
+        self.fa = insert(self.fa, self.fa[:, k], f_mid)
+        self.fb = insert(self.fb, f_mid, self.fb[:, k])
+        self.modes = np.concatenate([self.modes[:k], self.modes[k:k + 1], self.modes[k:k + 1],
+                                     self.modes[k + 1:]], axis=0)
+        self.sliding = np.concatenate([self.sliding[:k], [self.sliding[k]] * 2, self.sliding[k + 1:]])
+
+    def samples(self) -> tuple[np.ndarray, dict]:
+        """Times (steps, 5) of the Lobatto nodes and every variable there: name -> (steps, 5)."""
+        tau = (_LOBATTO_NODES + 1.0) / 2.0
+        h = self.tb - self.ta
+        times = self.ta[:, None] + h[:, None] * tau[None, :]
+        times[:, 0], times[:, -1] = self.ta, self.tb
+        states = _hermite(tau[None, None, :], h[None, :, None], self.xa[:, :, None], self.xb[:, :, None],
+                          self.fa[:, :, None], self.fb[:, :, None])         # (n, steps, 5)
+        states[:, :, 0], states[:, :, -1] = self.xa, self.xb
+        n, steps = states.shape[0], times.shape[0]
+        flat_modes = np.repeat(self.modes, 5, axis=0)
+        values = self.model.variables(times.ravel(), states.reshape(n, steps * 5), flat_modes)
+        values = values.reshape(len(self.model.variable_names), steps, 5)
+        if np.any(self.sliding):
+            # the Filippov combination is the runtime's: interpolate its recorded values
+            rows = np.flatnonzero(self.sliding)
+            recorded_t = np.asarray(self.result.t, dtype=float)
+            for i, name in enumerate(self.model.variable_names):
+                recorded = np.asarray(self.result.variables[name], dtype=float)
+                values[i, rows, :] = np.interp(times[rows], recorded_t, recorded)
+        return times, {name: values[i] for i, name in enumerate(self.model.variable_names)}
+
+    def states_at_bounds(self) -> dict:
+        """State name -> (value at the start of each step, value at its end)."""
+        return {name: (self.xa[i], self.xb[i]) for i, name in enumerate(self.model.state_names)}
+
+
+# ------------------------------------------------------------- integrals
+
+
+def _integrals(times: np.ndarray, power: np.ndarray):
+    """Per step: (net, positive part, negative part) of the integral of ``power`` (steps, 5).
+
+    The net integral is the Lobatto rule. Where the samples change sign, the
+    parts come from the degree-4 interpolant of the five samples (whose exact
+    integral is the Lobatto rule) on a fine grid, with linear zero crossings,
+    scaled so that positive + negative is the net integral.
+    """
+    half = 0.5 * (times[:, -1] - times[:, 0])
+    net = half * (power @ _LOBATTO_WEIGHTS)
+    positive = np.where(np.all(power >= 0, axis=1), net, 0.0)
+    negative = np.where(np.all(power <= 0, axis=1), net, 0.0)
+    mixed = np.flatnonzero(np.any(power > 0, axis=1) & np.any(power < 0, axis=1))
+    if mixed.size:
+        values = power[mixed] @ _FINE_FROM_NODES.T                      # (k, fine points)
+        left, right = values[:, :-1], values[:, 1:]
+        width = 2.0 / (_FINE_GRID.size - 1)
+        crossing = (left > 0) != (right > 0)
+        with np.errstate(all="ignore"):
+            theta = np.where(crossing, left / (left - right), 0.5)      # where the chord crosses zero
+        up = np.where(crossing, np.where(left > 0, theta * left, (1 - theta) * right),
+                      np.maximum(left, 0) + np.maximum(right, 0))
+        down = np.where(crossing, np.where(left < 0, theta * left, (1 - theta) * right),
+                        np.minimum(left, 0) + np.minimum(right, 0))
+        pos = 0.5 * width * np.sum(up, axis=1)
+        neg = 0.5 * width * np.sum(down, axis=1)
+        total = net[mixed] / half[mixed]
+        gross = pos - neg
+        with np.errstate(all="ignore"):
+            excess = np.where(gross > 0, (total - (pos + neg)) / gross, 0.0)
+        positive[mixed] = half[mixed] * pos * (1 + excess)
+        negative[mixed] = half[mixed] * neg * (1 - excess)
+    return net, positive, negative
+
+
+# ---------------------------------------------------------------- energy
+
+
+class _StoredEnergy:
+    """A storage element's stored-energy function: analytic (``StateSpace.energy``) or numeric."""
+
+    def __init__(self, kind: str, state_name: str, function=None, law=None):
+        self.kind = kind                    # "analytic" or "numeric"
+        self.state_name = state_name
+        self.function = function            # H(x), analytic
+        self.law = law                      # e(q) or f(p): dH/dx, numeric
+
+    def change(self, start: float, end: float) -> tuple[float, float, float]:
+        """(H at start, H at end, change); a numeric H is the law integrated from a zero state."""
+        if self.kind == "analytic":
+            h0, h1 = float(self.function(start)), float(self.function(end))
+            return h0, h1, h1 - h0
+        # the change is integrated directly (not as a difference of two large integrals)
+        return self._integral(0.0, start), self._integral(0.0, end), self._integral(start, end)
+
+    def _integral(self, a: float, b: float) -> float:
+        from scipy.integrate import quad
+
+        if a == b:
+            return 0.0
+        value, _ = quad(self.law, a, b, limit=500, epsabs=0.0, epsrel=1e-12)
+        return float(value)
+
+
+def _numbers(ss, parameters: Mapping[str, float]) -> dict:
+    return {symbol: sympy.Float(float(parameters.get(name, value)))
+            for name, (symbol, value) in ss.parameters.items()}
+
+
+def _lambdify(symbol, expr):
+    from bondc.symbolic import NUMERIC_FUNCTIONS
+
+    return sympy.lambdify(symbol, expr, modules=[dict(NUMERIC_FUNCTIONS), "numpy"])
+
+
+def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -> dict:
+    """Storage element -> its :class:`_StoredEnergy`, for those that have one.
+
+    Analytic from ``ss.energy``; numeric (``integral of law dx``) for an element
+    in integral causality whose law depends on its own default state alone.
+    """
+    graph = ss.graph
+    numbers = _numbers(ss, parameters or {})
+    found = {}
+    for element in graph.storage_elements:
+        expr = (ss.energy or {}).get(element.name)
+        if expr is not None:
+            expr = sympy.sympify(expr).xreplace(numbers)
+            free = list(expr.free_symbols)
+            if len(free) == 1:
+                found[element.name] = _StoredEnergy("analytic", free[0].name, function=_lambdify(free[0], expr))
+            elif not free:
+                constant = float(expr)
+                found[element.name] = _StoredEnergy("analytic", "", function=lambda x, c=constant: c)
+            continue
+        kind = element.kind_info
+        if (element.name in ss.eliminated or len(element.states) != 1
+                or element.states[0].name != kind.state or element.states[0].rate is not None):
+            continue
+        state_name = element.states[0].qualified
+        state_symbol = ss.symbols.get(state_name)
+        effort, flow = ss.bond_symbols[element.bond]
+        law = ss.substituted(effort if kind.storage == "C" else flow).xreplace(numbers)
+        if state_symbol is None or not law.free_symbols <= {state_symbol}:
+            continue
+        function = _lambdify(state_symbol, law)
+        found[element.name] = _StoredEnergy("numeric", state_name, law=lambda x, f=function: float(f(x)))
+    return found
+
+
+# ----------------------------------------------------------- the account
+
+
+def _at_solver_steps(result) -> bool:
+    """Whether the result's points are the solver's steps (a run without ``dt`` or ``t_eval``)."""
+    settings = getattr(result, "settings", {}) or {}
+    if settings.get("dt") is not None:
+        return False
+    stats = getattr(result, "stats", {}) or {}
+    steps = stats.get("steps")
+    t = np.asarray(result.t, dtype=float)
+    if steps is None or not (steps + 1 <= t.size <= steps + 1 + len(result.events) + 1):
+        return False
+    scale = max(abs(float(t[-1])), 1.0) if t.size else 1.0
+    for time, _ in result.events:
+        if t.size and np.min(np.abs(t - time)) > 1e-9 * scale:
+            return False
+    return True
+
+
+def _resimulate(ss, result):
+    from bondc.simulate import simulate
+
+    settings = dict(result.settings)
+    rerun = simulate(ss, None, t_end=settings.get("t_end", float(result.t[-1])), method=settings.get("method"),
+                     rtol=settings.get("rtol"), atol=settings.get("atol"), max_step=settings.get("max_step"),
+                     overrides=dict(result.parameters))
+    if not result.complete:
+        keep = rerun.t <= result.t[-1]
+        rerun.t = rerun.t[keep]
+        for group in (rerun.states, rerun.outputs, rerun.bonds, rerun.variables):
+            for name in group:
+                group[name] = group[name][keep]
+    return rerun
+
+
+def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
+    """Energies of every element per cycle and the energy balance; see the module docstring.
+
+    ``cycle`` [s]: the window length; None takes the experiment's ``cycle``
+    (the whole run if it has none). Raises :class:`AnalysisError` E930 (the
+    result is not a run of ``ss``), E931 (fewer than two points), E932 (a
+    cycle that is not a positive number).
+    """
+    from bondc.simulate import compile_model
+
+    graph = ss.graph
+    if set(result.states) != set(ss.state_names):
+        raise _error("E930", "the simulation result is not a run of this model: its states are "
+                             f"{', '.join(result.states) or 'none'}, the model's {', '.join(ss.state_names)}",
+                     hint="pass the StateSpace the result was simulated from")
+    t = np.asarray(result.t, dtype=float)
+    if t.size < 2 or not t[-1] > t[0]:
+        raise _error("E931", "the simulation result has no time span to account energy over",
+                     hint="simulate past the start time")
+    if cycle is None:
+        cycle = experiment_cycle(ss, result)
+    windows = cycle_windows(float(t[0]), float(t[-1]), cycle)
+    resimulated = not _at_solver_steps(result)
+    steps = _resimulate(ss, result) if resimulated else result
+
+    namespace = compile_model(ss)
+    model = _Model(namespace, steps.parameters)
+    boundaries = sorted({edge for start, end, _ in windows for edge in (start, end)})
+    trajectory = _Trajectory(model, steps, boundaries)
+    times, values = trajectory.samples()
+
+    # power into each element (per port for two-ports), at the Lobatto nodes
+    def power_into(element, port_index):
+        bond = graph.bond(element.bonds[port_index])
+        product = values[f"{bond.name}.e"] * values[f"{bond.name}.f"]
+        return product if bond.head == element.name else -product
+
+    energies = stored_energy_functions(ss, steps.parameters)
+    step_start, step_end = trajectory.ta, trajectory.tb
+    state_bounds = trajectory.states_at_bounds()
+    scale = max(abs(windows[-1][1]), 1.0)
+    masks = [(step_start >= start - 1e-12 * scale) & (step_end <= end + 1e-12 * scale)
+             for start, end, _ in windows]
+
+    def value_at(name, time, at_end):
+        """A state (or eliminated state) at a window edge: the end of the step ending there, or the
+        start of the step starting there."""
+        index = np.argmin(np.abs((step_end if at_end else step_start) - time))
+        if name in state_bounds:
+            return float(state_bounds[name][1 if at_end else 0][index])
+        return float(values[name][index, -1 if at_end else 0])
+
+    per_element: dict[str, list[ElementEnergy]] = {}
+    diagnostics: list[Diagnostic] = []
+    for element in graph.elements.values():
+        role = ROLES[element.kind]
+        ports = [power_into(element, i) for i in range(len(element.bonds))]
+        integrals = [_integrals(times, p) for p in ports]
+        entries = []
+        for mask, (start, end, _) in zip(masks, windows):
+            net = [float(np.sum(i[0][mask])) for i in integrals]
+            positive = [float(np.sum(i[1][mask])) for i in integrals]
+            negative = [float(np.sum(i[2][mask])) for i in integrals]
+            work_in = sum(net)
+            gross = sum(positive) - sum(negative)
+            common = dict(element=element.name, kind=element.kind, role=role, work_in=work_in, gross=gross)
+            if role == "source":
+                entries.append(ElementEnergy(**common, supplied=-negative[0], returned=positive[0]))
+            elif role == "dissipator":
+                entries.append(ElementEnergy(**common, dissipated=work_in))
+            elif role == "converter":
+                entries.append(ElementEnergy(**common, port_work=(net[0], net[1])))
+            elif element.name in energies:
+                energy = energies[element.name]
+                h0, h1, change = energy.change(value_at(energy.state_name, start, False),
+                                               value_at(energy.state_name, end, True))
+                entries.append(ElementEnergy(**common, stored_start=h0, stored_end=h1, stored_change=change,
+                                             energy_function=energy.kind))
+            else:
+                entries.append(ElementEnergy(**common, net_work_in=work_in))
+        per_element[element.name] = entries
+
+    result_windows = []
+    for index, (start, end, partial) in enumerate(windows):
+        entries = tuple(per_element[name][index] for name in graph.elements)
+        total = lambda attribute: float(sum(getattr(e, attribute) or 0.0 for e in entries))
+        converters = [e for e in entries if e.role == "converter"]
+        balance = Balance(
+            supplied=total("supplied"), returned=total("returned"), dissipated=total("dissipated"),
+            stored_change=total("stored_change"), net_work_in=total("net_work_in"),
+            converter_work=float(sum(e.work_in for e in converters)),
+            throughput=float(sum(e.gross for e in entries if e.role != "converter")))
+        result_windows.append(Window(index, float(start), float(end), partial, entries, balance))
+        for entry in converters:
+            if abs(entry.work_in) > 1e-9 * max(entry.gross, 1e-300):
+                diagnostics.append(Diagnostic(
+                    "warning", "W931", f"two-port '{entry.element}' does not conserve power in cycle {index + 1}: "
+                                       f"the work in at its ports sums to {entry.work_in:.3e} J",
+                    hint="a transformer's or gyrator's port laws must give p1.e*p1.f = p2.e*p2.f"))
+        relative = balance.relative_residual
+        if relative is not None and relative > RESIDUAL_TOLERANCE:
+            settings = getattr(result, "settings", {}) or {}
+            diagnostics.append(Diagnostic(
+                "warning", "W930",
+                f"the energy balance of cycle {index + 1} does not close: residual {balance.residual:.3e} J, "
+                f"{relative:.2e} of the throughput {balance.throughput:.6g} J",
+                hint=f"the residual is the simulation's accumulated error (rtol={settings.get('rtol')}, "
+                     f"atol={settings.get('atol')}); tighten the tolerances to shrink it"))
+    return EnergyAccount(
+        model=getattr(graph, "name", ""), experiment=getattr(result, "experiment", None),
+        cycle=cycle, windows=tuple(result_windows), complete=bool(result.complete), resimulated=resimulated,
+        diagnostics=tuple(diagnostics))

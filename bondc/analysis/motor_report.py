@@ -1,0 +1,159 @@
+"""Motor requirements and catalogue selection for a simulated run: one call for the CLI and the report.
+
+:func:`motor_report` takes a :class:`~bondc.simulate.SimResult`, the
+:class:`~bondc.model.BondGraph` it was simulated from and a motor catalogue
+(``models/data/motors.csv``) and returns ``(text, json_dict)``:
+
+* **the profile**: the motor torque is the output named ``torque`` (the
+  flagship's coupling torque ``K*theta``); the motor speed is the output
+  named ``omega`` or ``speed``, or, when the model has no such output, the
+  input signal of that name that the run records in ``result.variables``
+  (the flagship's imposed servomotor speed ``omega``). Both names can be
+  given explicitly.
+* **the cycle**: the experiment's ``cycle`` setting: the last ``cycle``
+  seconds of the run (the whole run when ``cycle`` equals ``t_end``, as in
+  the flagship; the run's last, settled cycle when several were simulated).
+  Without a ``cycle`` setting, the whole run.
+* **the load inertia** for the inertia-ratio check: given, or estimated
+  from the run as the inertia that the motor shaft sees,
+  J = integral(sum p*f over the I elements) dt / integral(omega^2) dt, i.e.
+  twice the kinetic energy of every I element per omega^2, averaged over the
+  cycle. For a rigid transmission (every I's flow proportional to omega)
+  this is exact: for the flagship it gives M*(lead/2pi)^2 + I_z =
+  6.067e-5 kg*m^2 to within 0.1 % (the compliances and the dwell creep
+  account for the rest).
+* **rotor inertia**: ``include_rotor_inertia`` defaults to True because
+  the torque found this way is the torque *delivered at the coupling*: a
+  real motor must also accelerate its own rotor, tau_motor = tau +
+  J_rotor*d(omega)/dt (see :func:`bondc.analysis.motors.select`). Pass
+  False when the torque output is the motor's electromagnetic torque.
+
+Raises :class:`~bondc.errors.UsageError` (E927) when the torque or the speed
+cannot be found, and whatever :mod:`bondc.analysis.motors` raises for a bad
+catalogue or profile (:class:`~bondc.errors.DataError`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from bondc.analysis.motors import load_catalogue, requirements, select
+from bondc.errors import Diagnostic, UsageError
+
+TORQUE_NAMES: tuple[str, ...] = ("torque",)
+SPEED_NAMES: tuple[str, ...] = ("omega", "speed")
+
+
+def find_signal(result, names: Sequence[str], what: str) -> tuple[str, str, np.ndarray]:
+    """(name, where, values) of the first of ``names`` among the outputs, then the recorded inputs.
+
+    ``where`` is ``"output"`` or ``"input"``. Raises UsageError E927 if none is there.
+    """
+    for name in names:
+        if name in result.outputs:
+            return name, "output", np.asarray(result.outputs[name], dtype=float)
+    for name in names:
+        if name in getattr(result, "variables", {}):
+            return name, "input", np.asarray(result.variables[name], dtype=float)
+    shown = ", ".join(f"'{n}'" for n in names)
+    raise UsageError(Diagnostic(
+        "error", "E927", f"motor selection needs the motor {what}: the model has no output or input named {shown}",
+        hint=f"add e.g. 'output {names[0]} [...] = ...' to the model (outputs: {', '.join(result.outputs) or 'none'})"))
+
+
+def cycle_window(result, graph) -> tuple[float, float]:
+    """The experiment's cycle as (t_start, t_end): the last ``cycle`` seconds, or the whole run."""
+    t_first, t_last = float(result.t[0]), float(result.t[-1])
+    definition = None
+    if graph is not None and getattr(result, "experiment", None):
+        definition = getattr(graph, "experiments", {}).get(result.experiment)
+    cycle = getattr(definition, "cycle", None)
+    if cycle is None or not cycle > 0:
+        return t_first, t_last
+    start = t_last - float(cycle)
+    # a cycle equal to t_end (up to rounding) is the whole run
+    if start < t_first + 1e-9 * max(1.0, abs(t_last)):
+        start = t_first
+    return start, t_last
+
+
+def estimate_load_inertia(result, graph, window: tuple[float, float] | None = None,
+                          speed: np.ndarray | None = None) -> float | None:
+    """The inertia the motor shaft sees, from the run: integral(sum p*f of the I elements)/integral(omega^2).
+
+    ``p`` is each I element's state and ``f`` its bond's flow; None when the
+    model has no I element with a recorded state, or the speed is zero throughout.
+    """
+    if graph is None:
+        return None
+    time = np.asarray(result.t, dtype=float)
+    if speed is None:
+        _, _, speed = find_signal(result, SPEED_NAMES, "speed")
+    twice_kinetic = np.zeros_like(time)
+    found = False
+    for element in graph.elements.values():
+        if element.kind != "I" or not element.states or not element.bonds:
+            continue
+        state = element.states[0].qualified
+        flow = f"b{element.bonds[0]}.f"
+        if state in result.states and flow in result.bonds:
+            twice_kinetic = twice_kinetic + np.asarray(result.states[state]) * np.asarray(result.bonds[flow])
+            found = True
+    if not found:
+        return None
+    inside = np.ones(time.shape, dtype=bool) if window is None else (time >= window[0]) & (time <= window[1])
+    t, energy, omega = time[inside], twice_kinetic[inside], speed[inside]
+    denominator = float(np.sum(np.diff(t) * (omega[1:] ** 2 + omega[:-1] ** 2) / 2))
+    if not denominator > 0:
+        return None
+    value = float(np.sum(np.diff(t) * (energy[1:] + energy[:-1]) / 2)) / denominator
+    return value if math.isfinite(value) and value > 0 else None
+
+
+def motor_report(result, graph, catalogue_path, *, load_inertia: float | None = None,
+                 include_rotor_inertia: bool = True, torque: str | None = None,
+                 speed: str | None = None) -> tuple[str, dict]:
+    """Motor requirements over the experiment's cycle and the catalogue motors that meet them.
+
+    Returns ``(text, json_dict)``: the text is what ``bondc simulate
+    --motors FILE`` prints after the run; the dict holds ``torque`` and
+    ``speed`` (the names and whether each is an output or an input),
+    ``cycle`` [t_start, t_end], ``load_inertia`` and how it was obtained
+    (``load_inertia_source``: "given", "estimated" or None), and everything
+    of :meth:`bondc.analysis.motors.Selection.to_json` (``requirements``,
+    ``include_rotor_inertia``, ``best``, ``candidates``).
+    """
+    torque_name, torque_where, torque_values = find_signal(result, (torque,) if torque else TORQUE_NAMES, "torque")
+    speed_name, speed_where, speed_values = find_signal(result, (speed,) if speed else SPEED_NAMES, "speed")
+    window = cycle_window(result, graph)
+    need = requirements(result.t, torque_values, speed_values, cycle=window)
+    source = "given" if load_inertia is not None else None
+    if load_inertia is None:
+        load_inertia = estimate_load_inertia(result, graph, window, speed_values)
+        source = "estimated" if load_inertia is not None else None
+    catalogue = load_catalogue(catalogue_path)
+    selection = select(need, catalogue, load_inertia=load_inertia, include_rotor_inertia=include_rotor_inertia)
+
+    head = [f"motor selection from {Path(catalogue_path).name} ({len(catalogue)} motors)",
+            f"  torque: {torque_where} '{torque_name}'; speed: {speed_where} '{speed_name}'"]
+    if load_inertia is not None:
+        how = ("given" if source == "given" else
+               "estimated from the run: integral(sum p*f of the I elements)/integral(omega^2)")
+        head.append(f"  load inertia at the motor shaft: {load_inertia:.4g} kg*m^2 ({how})")
+    else:
+        head.append("  load inertia: unknown (no inertia-ratio check)")
+    text = "\n".join(head + ["", selection.to_text()])
+
+    data = {
+        "torque": {"name": torque_name, "from": torque_where},
+        "speed": {"name": speed_name, "from": speed_where},
+        "cycle": [window[0], window[1]],
+        "catalogue": str(catalogue_path),
+        "load_inertia_source": source,
+        **selection.to_json(),
+    }
+    return text, data

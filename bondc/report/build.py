@@ -1,0 +1,940 @@
+"""Report stage: a ``.bg`` file -> one self-contained HTML report, and validation against measurements.
+
+:func:`build_report` is ``bondc report`` without argument parsing. It runs the
+whole pipeline (:func:`run_pipeline`: load with the experiment's overrides,
+causality, equations, simulation), gathers what a reader needs into a
+:class:`~bondc.report.render.ReportContext` (:func:`report_context`: header,
+highlighted source, parameters, the bond graph with causal strokes, the
+causality table, the state equations as MathML, plots of the outputs, power
+of every source, store and dissipator, the energy per cycle with its balance,
+the motor requirements and candidates, the validation against measured data)
+and writes one HTML file. The file is written atomically: it is rendered in
+full first and then renamed over the target, so a failure at any stage leaves
+an earlier report as it was.
+
+A simulation that stops early does not stop the report: it shows what was
+computed up to that point under a prominent "incomplete simulation" notice
+with the diagnostic.
+
+:func:`run_validate` is ``bondc validate``: it simulates, compares simulated
+signals with measured columns (:func:`bondc.report.validate.compare`), prints
+a table, writes JUnit XML and, on request, the report with a validation
+section; its exit code is 1 when any signal fails (or the run is incomplete).
+
+Measured values are compared in SI units, as ``bondc simulate`` writes them;
+a comparison may name an output, a state (``mass.p``), an input or a bond
+variable (``b3.e``).
+
+>>> from pathlib import Path
+>>> import tempfile
+>>> model = Path(__file__).parents[2] / "tests/fixtures/sim/rc.bg"
+>>> target = build_report(model, output=Path(tempfile.mkdtemp()) / "rc.html", date="2024-01-01")
+>>> html = target.read_text(encoding="utf-8")
+>>> html.startswith("<!DOCTYPE html>"), "<script" in html, "<math" in html
+(True, False, True)
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence, TextIO
+
+import numpy as np
+import sympy
+from markupsafe import Markup
+
+from bondc.errors import Diagnostic, UsageError, render as render_diagnostic
+from bondc.io import atomic_write_text
+from bondc.model import KINDS, BondGraph, ExperimentDef
+from bondc.report.diagram import bond_graph_svg
+from bondc.report.lexer import highlight_bg
+from bondc.report.render import (
+    Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection, causality_notes,
+    causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
+)
+from bondc.report.validate import (
+    TIME_KEY, CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
+)
+
+__all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "default_output", "run_validate",
+           "compare_run", "validation_table", "state_equations", "output_groups", "REPORTS_DIR"]
+
+#: Where reports go unless ``output`` says otherwise (relative to the working directory).
+REPORTS_DIR = Path("reports")
+
+#: Most series drawn in one plot; signals that share a unit are drawn together up to this.
+MAX_SERIES_PER_PLOT = 4
+
+#: Signals sharing a unit are drawn apart when their peak magnitudes differ more than this.
+MAX_MAGNITUDE_RATIO = 5.0
+
+#: Element laws whose expanded form has more operations than this are kept as named
+#: quantities in the state equations and written out once under "where".
+LAW_OPERATIONS = 8
+
+
+# ---------------------------------------------------------------- the pipeline
+
+@dataclass(frozen=True)
+class PipelineRun:
+    """What the pipeline computed for one report: each stage's result, the simulation possibly partial.
+
+    ``result`` is None when the model could not be simulated because nothing
+    gives an end time (no experiment sets ``t_end`` and none was passed).
+    ``experiment`` is the experiment applied (None for a model without one),
+    ``default_experiment`` whether it is the model's first.
+    """
+
+    path: Path
+    source_text: str
+    graph: BondGraph
+    causal: Any                     # CausalGraph
+    state_space: Any                # StateSpace
+    experiment: ExperimentDef | None
+    default_experiment: bool
+    result: Any                     # SimResult or None
+    warnings: tuple[Diagnostic, ...]
+    overridden: tuple[str, ...]     # parameters set by the experiment or by ``sets``
+
+    @property
+    def complete(self) -> bool:
+        return self.result is not None and bool(self.result.complete)
+
+
+def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+                 sets: Sequence = (), t_end: float | None = None, progress: bool = False) -> PipelineRun:
+    """Load ``path`` with the experiment's overrides (default: the first), assign causality, derive, simulate.
+
+    ``sets`` are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
+    ``ast.SetValue``; ``t_end`` [s] overrides the experiment's end time.
+    Raises what the stages raise for a bad model (ParseError, ModelError,
+    CausalityError, EquationError, UsageError); a simulation that fails does
+    not raise: see :attr:`PipelineRun.complete`.
+    """
+    from bondc import semantic
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+    from bondc.parse import parse_set_value
+    from bondc.simulate import simulate
+
+    path = Path(path)
+    parsed = [parse_set_value(item, f"--set #{index}") if isinstance(item, str) else item
+              for index, item in enumerate(sets or (), 1)]
+    graph, warnings = semantic.load(path, model=model,
+                                    experiment=experiment if experiment is not None else semantic.FIRST,
+                                    sets=parsed)
+    causal = assign_causality(graph)
+    state_space = derive(causal)
+    chosen = None
+    if graph.experiments:
+        chosen = graph.experiments[experiment] if experiment is not None else next(iter(graph.experiments.values()))
+    default = chosen is None or chosen.name == next(iter(graph.experiments))
+    result = None
+    if t_end is not None or (chosen is not None and chosen.t_end is not None):
+        result = simulate(state_space, chosen, t_end=t_end, progress=progress)
+    notes = list(warnings)
+    for diagnostic in list(causal.diagnostics) + list(state_space.diagnostics):
+        if diagnostic not in notes:
+            notes.append(diagnostic)
+    if result is not None:
+        notes += [d for d in result.warnings if d not in notes]
+    overridden = list(chosen.parameters) if chosen is not None else []
+    overridden += [item.name for item in parsed if item.name not in overridden]
+    source = graph.sources.get(graph.file)
+    text = source.text if source is not None else path.read_text(encoding="utf-8")
+    return PipelineRun(path, text, graph, causal, state_space, chosen, default, result, tuple(notes),
+                       tuple(overridden))
+
+
+def default_output(path: str | Path, run: PipelineRun) -> Path:
+    """``reports/<file stem>.html``, or ``reports/<stem>-<experiment>.html`` for an experiment not the first."""
+    stem = Path(path).stem
+    if run.experiment is not None and not run.default_experiment:
+        stem = f"{stem}-{run.experiment.name}"
+    return REPORTS_DIR / f"{stem}.html"
+
+
+# ---------------------------------------------------------------- building and writing
+
+def build_report(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+                 sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
+                 motors: str | Path | None = None, output: str | Path | None = None,
+                 t_end: float | None = None, date: str | None = None, progress: bool = False) -> Path:
+    """``bondc report``: run the pipeline and write one self-contained HTML report; returns its path.
+
+    ``data`` (a measured CSV) with ``compare`` (``OUT=COLUMN[:nrmse=0.05]``
+    texts or :class:`CompareSpec`) adds a validation section; failing
+    signals are shown, not raised. ``motors`` is a motor catalogue CSV: the
+    report judges its motors against the cycle (a model with signals named
+    ``torque`` and ``omega`` always gets the motor requirements). ``output``
+    defaults to :func:`default_output`; missing directories are made.
+    ``t_end`` [s] overrides the experiment's end time, ``date`` the date in
+    the header (ISO, default today).
+
+    Bad measured data raises :class:`~bondc.errors.DataError` before anything
+    is simulated; a model error raises its stage's error. Either way nothing
+    is written and an earlier report stays as it was.
+    """
+    specs, measured = _measured(data, compare)
+    run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
+    validation = None
+    if specs:
+        results = compare_run(run, measured, specs)
+        validation = validation_section(run, results, data)
+    target = Path(output) if output is not None else default_output(path, run)
+    write_report(report_context(run, validation=validation, motors=motors, date=date), target)
+    return target
+
+
+def write_report(context: ReportContext, target: str | Path) -> None:
+    """Render ``context`` in full, then replace ``target`` with it in one step (its directory is made)."""
+    html = render_report(context)
+    target = Path(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(target, html)
+
+
+def _measured(data, compare_specs) -> tuple[list[CompareSpec], dict[str, np.ndarray] | None]:
+    specs = [spec if isinstance(spec, CompareSpec) else parse_compare_spec(spec) for spec in compare_specs or ()]
+    if data is None and specs:
+        raise UsageError(Diagnostic("error", "E004", "--compare needs measured data",
+                                    hint="give the measured CSV with --data FILE"))
+    if data is not None and not specs:
+        raise UsageError(Diagnostic("error", "E004", "--data needs at least one comparison",
+                                    hint="say which simulated signal each measured column is: --compare OUT=COLUMN"))
+    if data is None:
+        return [], None
+    return specs, load_measured_csv(data, columns=[spec.column for spec in specs])
+
+
+# ---------------------------------------------------------------- validation
+
+def simulated_signals(result) -> dict[str, np.ndarray]:
+    """Every simulated signal by name: bond variables, inputs and other variables, states, outputs (SI)."""
+    signals: dict[str, np.ndarray] = {}
+    for group in (result.bonds, result.variables, result.states, result.outputs):
+        signals.update(group)
+    return signals
+
+
+def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
+                specs: Iterable[CompareSpec]) -> list[SignalResult]:
+    """:func:`~bondc.report.validate.compare` the run's signals with the measured columns."""
+    if run.result is None:
+        raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
+                                    hint="give --t-end, or set t_end in the experiment"))
+    return compare(run.result.t, simulated_signals(run.result), measured, specs)
+
+
+def _signal_unit(graph: BondGraph, name: str) -> tuple[str | None, float]:
+    """The display unit of a signal and the factor SI value / display value (outputs only)."""
+    output = graph.outputs.get(name)
+    if output is not None and output.unit_text:
+        return output.unit_text, output.display_factor
+    return None, 1.0
+
+
+def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_file,
+                       junit_file=None) -> ValidationSection:
+    """The report's validation section: the metrics, and per signal the curves overlaid and the error."""
+    plots = []
+    for result in results:
+        unit, factor = _signal_unit(run.graph, result.output)
+        suffix = f" [{unit}]" if unit else " (SI)"
+        simulated, measured = result.simulated / factor, result.measured / factor
+        title = f"{result.output} simulated and {result.column} measured"
+        plots.append(Plot(title, plot_svg(
+            result.t, {f"{result.column} (measured)": measured, f"{result.output} (simulated)": simulated},
+            title, result.output + suffix,
+            styles={f"{result.column} (measured)": {"color": "#8c959f", "linewidth": 1.0},
+                    f"{result.output} (simulated)": {"color": "#0550ae", "linewidth": 1.4}}),
+            f"NRMSE {result.nrmse:.3g}, R² {result.r2:.4g}: {'pass' if result.passed else 'FAIL'}"))
+        title = f"{result.output} error, simulated − measured"
+        plots.append(Plot(title, plot_svg(result.t, {"error": simulated - measured}, title, "error" + suffix,
+                                          styles={"error": {"color": "#a40e26", "linewidth": 1.0}}),
+                          f"largest |error| {result.maxabs / factor:.4g}{' ' + unit if unit else ''}"))
+    return ValidationSection(results, str(data_file), plots, str(junit_file) if junit_file else None)
+
+
+def validation_table(results: Sequence[SignalResult]) -> str:
+    """The metrics of every compared signal as a text table, then what failed."""
+    header = ("signal", "measured", "samples", "RMSE", "NRMSE", "max |err|", "R²", "result")
+    rows = [(r.output, r.column, str(r.n_samples), f"{r.rmse:.4g}", f"{r.nrmse:.4g}", f"{r.maxabs:.4g}",
+             f"{r.r2:.4g}", "pass" if r.passed else "FAIL") for r in results]
+    widths = [max(len(cell) for cell in column) for column in zip(header, *rows)]
+    numeric = {2, 3, 4, 5, 6}
+
+    def line(cells):
+        return "  ".join(cell.rjust(w) if i in numeric else cell.ljust(w)
+                         for i, (cell, w) in enumerate(zip(cells, widths))).rstrip()
+
+    lines = [line(header), line(["-" * w for w in widths])] + [line(row) for row in rows]
+    for result in results:
+        for check in result.checks:
+            if not check.passed:
+                lines.append(f"{result.name}: {check.describe()}")
+    failed = sum(not r.passed for r in results)
+    lines.append(f"{len(results) - failed} of {len(results)} signal{'s' if len(results) != 1 else ''} passed")
+    return "\n".join(lines)
+
+
+def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | CompareSpec],
+                 junit: str | Path | None = None, output: str | Path | None = None, model: str | None = None,
+                 experiment: str | None = None, sets: Sequence = (), t_end: float | None = None,
+                 motors: str | Path | None = None, date: str | None = None, stream: TextIO | None = None,
+                 progress: bool = False) -> tuple[list[SignalResult], int]:
+    """``bondc validate``: simulate, compare with the measured data, report; returns (results, exit code).
+
+    Prints :func:`validation_table` to ``stream`` (stdout); writes JUnit XML
+    to ``junit`` (one test case per signal) and the HTML report with its
+    validation section to ``output`` when given. The exit code is 0 when
+    every signal passes, 1 when one fails or the simulation stopped early (its
+    diagnostic is printed to stderr). Raises DataError for bad measured data
+    (missing column, time not increasing, no overlap in time) and the
+    stages' errors for a bad model; then nothing is written.
+    """
+    stream = stream if stream is not None else sys.stdout
+    specs, measured = _measured(data, compare)
+    if not specs:
+        raise UsageError(Diagnostic("error", "E004", "validate needs at least one comparison",
+                                    hint="--compare OUT=COLUMN[:nrmse=0.05]"))
+    run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
+    results = compare_run(run, measured, specs)
+    print(validation_table(results), file=stream)
+    if not run.complete:
+        print(render_diagnostic(_failure(run), run.graph.sources), file=sys.stderr)
+    suite = run.graph.name + (f".{run.experiment.name}" if run.experiment is not None else "")
+    if junit is not None:
+        Path(junit).parent.mkdir(parents=True, exist_ok=True)
+        write_junit(results, suite, junit)
+    if output is not None:
+        section = validation_section(run, results, data, junit)
+        write_report(report_context(run, validation=section, motors=motors, date=date), Path(output))
+    passed = all(result.passed for result in results) and run.complete
+    return results, 0 if passed else 1
+
+
+def _failure(run: PipelineRun) -> Diagnostic:
+    result = run.result
+    if result.diagnostics:
+        return result.diagnostics[0]
+    return Diagnostic("error", "E811", f"simulation stopped: {result.message}")
+
+
+# ---------------------------------------------------------------- the report's contents
+
+def report_context(run: PipelineRun, *, validation: ValidationSection | None = None,
+                   motors: str | Path | None = None, date: str | None = None) -> ReportContext:
+    """Everything the report of ``run`` shows (see the module docstring)."""
+    graph, result = run.graph, run.result
+    equations, laws, state_table = state_equations(run.state_space)
+    # The causality section shows the causality stage's own notes.
+    warnings = [_warning_text(d) for d in run.warnings
+                if d.severity != "error" and d not in run.causal.diagnostics]
+    incomplete = None
+    if result is None:
+        warnings.insert(0, "Not simulated: no experiment of this model sets t_end (give an end time to simulate).")
+    elif not result.complete:
+        incomplete = render_diagnostic(_failure(run), graph.sources)
+
+    plots, result_tables, power_plots, power_tables = [], [], [], []
+    summary: list[tuple[str, Any, str | None]] = []
+    motor_requirements = motor_candidates = None
+    if result is not None and result.t.size >= 2:
+        plots = output_plots(graph, result, run.experiment)
+        result_tables = _result_tables(run)
+        power_plots, power_tables, energy_summary, energy_warnings = _energy_sections(run)
+        warnings += energy_warnings
+        motor_requirements, motor_candidates, motor_summary = _motor_sections(run, motors)
+        summary = (motor_summary or _summary(run)) + energy_summary
+    return ReportContext(
+        header=_header(run, date),
+        source_html=highlight_bg(run.source_text),
+        parameters=_parameter_rows(run),
+        diagram_svg=bond_graph_svg(graph, run.causal),
+        causality=causality_rows(run.causal),
+        causality_notes=causality_notes(run.causal),
+        equations=equations,
+        laws=laws,
+        equation_tables=[state_table] if state_table is not None else [],
+        plots=plots,
+        result_tables=result_tables,
+        power_plots=power_plots,
+        power_tables=power_tables,
+        motor_requirements=motor_requirements,
+        motor_candidates=motor_candidates,
+        validation=validation,
+        warnings=warnings,
+        incomplete=incomplete,
+        summary=summary,
+    )
+
+
+def _warning_text(diagnostic: Diagnostic) -> str:
+    where = f"{diagnostic.span}: " if getattr(diagnostic.span, "line", 0) else ""
+    text = f"{where}{diagnostic.code}: {diagnostic.message}"
+    return text + (f" ({diagnostic.hint})" if diagnostic.hint else "")
+
+
+def _header(run: PipelineRun, date: str | None) -> ReportHeader:
+    settings: dict[str, Any] = {}
+    result = run.result
+    if result is not None:
+        used = result.settings
+        for key, name in (("t_end", "t_end"), ("method", "solver"), ("rtol", "rtol"), ("atol", "atol"),
+                          ("max_step", "max_step"), ("dt", "dt")):
+            if used.get(key) is not None:
+                settings[name] = used[key]
+    if run.experiment is not None and run.experiment.cycle is not None:
+        settings["cycle"] = run.experiment.cycle
+    header = ReportHeader.for_graph(run.graph, run.source_text,
+                                    run.experiment.name if run.experiment is not None else None,
+                                    date=date, solver_settings=settings)
+    # The file's name, not the path it was given by: the report does not depend on the working directory.
+    return ReportHeader(**{**header.__dict__, "source_file": Path(run.graph.file).name})
+
+
+def _parameter_rows(run: PipelineRun) -> list[ParameterRow]:
+    rows = []
+    set_by_experiment = set(run.experiment.parameters) if run.experiment is not None else set()
+    for row in parameter_rows(run.graph):
+        if row.name in run.overridden:
+            who = (f"experiment {run.experiment.name}" if row.name in set_by_experiment else "--set")
+            note = f"set by {who}"
+            row = ParameterRow(row.name, row.value, row.unit,
+                               f"{row.description} ({note})" if row.description else f"({note})")
+        rows.append(row)
+    return rows
+
+
+# -- equations
+
+def _display_names(ss) -> dict[sympy.Symbol, sympy.Symbol]:
+    """Symbols renamed for reading: ``mass.p`` -> p_mass, a bond's effort -> e_<element that sets it>."""
+    graph = ss.graph
+    taken = set(ss.symbols)
+    renamed: dict[sympy.Symbol, sympy.Symbol] = {}
+
+    def rename(symbol, name):
+        if name not in taken:
+            taken.add(name)
+            renamed[symbol] = sympy.Symbol(name, real=True)
+
+    for state in ss.states:
+        if state.element is not None and "." in state.name:
+            owner, local = state.name.split(".", 1)
+            rename(state.symbol, f"{local}_{owner}")
+    for name, symbol in ss.eliminated.items():
+        if "." in symbol.name:
+            owner, local = symbol.name.split(".", 1)
+            rename(symbol, f"{local}_{owner}")
+    for number, (effort, flow) in ss.bond_symbols.items():
+        bond = graph.bond(number)
+        for which, symbol in (("e", effort), ("f", flow)):
+            ends = [(end, port) for end, port in ((bond.head, bond.head_port), (bond.tail, bond.tail_port))
+                    if end in graph.elements]
+            setting = [(end, port) for end, port in ends if which in graph.elements[end].laws]
+            chosen = (setting or ends or [(None, None)])[0]
+            if bond.label:
+                rename(symbol, f"{which}_{bond.label}")
+            elif chosen[0] is not None:
+                end, port = chosen
+                rename(symbol, f"{which}_{end}" + (f".{port}" if port else ""))
+    return renamed
+
+
+def _law_owner(ss, symbol) -> str | None:
+    """The element whose own law computes the bond variable ``symbol`` (a store, resistor or source)."""
+    graph = ss.graph
+    for number, (effort, flow) in ss.bond_symbols.items():
+        if symbol in (effort, flow):
+            which = "e" if symbol == effort else "f"
+            bond = graph.bond(number)
+            for end in (bond.head, bond.tail):
+                element = graph.elements.get(end)
+                if element is not None and KINDS[element.kind].ports == 1 and which in element.laws:
+                    return end
+    return None
+
+
+class _CallsKept:
+    """Translates a law as written: calls of the model's ``fn`` functions stay calls (not inlined)."""
+
+    def __init__(self, ss, owner=None):
+        from bondc.symbolic import Translator
+
+        self.ss = ss
+        self.called: list[str] = []
+        graph = ss.graph
+        local: dict = {}
+        if owner is not None:
+            if len(owner.bonds) == 1:
+                local["e"], local["f"] = ss.bond_symbols[owner.bond]
+            for state in owner.states:
+                if state.qualified in ss.symbols:
+                    local[state.name] = ss.symbols[state.qualified]
+
+        def resolve_name(name, node):
+            if name in local:
+                return local[name]
+            if name == "t":
+                return ss.time
+            if name in ss.parameters:
+                return ss.parameters[name][0]
+            if name in ss.inputs:
+                return ss.inputs[name][0]
+            if name in ss.symbols:
+                return ss.symbols[name]
+            if name == "pi":
+                return sympy.pi
+            raise KeyError(name)
+
+        def resolve_ref(node):
+            kind, what = ss.causal.reference(node.parts, owner.name if owner is not None else None)
+            if kind == "state":
+                return ss.symbols[what]
+            return ss.bond_symbols[what][0 if kind == "e" else 1]
+
+        outer = self
+
+        class Translator_(Translator):
+            def _inline(self, node, function):
+                if function.name not in outer.called:
+                    outer.called.append(function.name)
+                return sympy.Function(function.name, real=True)(*[self(arg) for arg in node.args])
+
+        base_dir = Path(graph.file).parent if graph.file else None
+        self.translator = Translator_(resolve_name, resolve_ref, graph.functions, base_dir, ss.time)
+
+    def law(self, element, which: str):
+        return self.translator(element.laws[which])
+
+    def function(self, function) -> tuple[Any, Any]:
+        """``name(params)`` and its body, calls kept."""
+        parameters = [sympy.Symbol(name, real=True) for name in function.params]
+        self.translator._bound.append(dict(zip(function.params, parameters)))
+        try:
+            body = self.translator(function.body)
+        finally:
+            self.translator._bound.pop()
+        return sympy.Function(function.name, real=True)(*parameters), body
+
+
+def state_equations(ss) -> tuple[list[Equation], list[Equation], Table | None]:
+    """The state equations for reading: (d(state)/dt = ..., the laws they name, a table of the states).
+
+    Every assignment is expanded into the derivatives except the inputs (kept
+    by name) and the element laws that are long or piecewise (friction,
+    orifice flow, backlash): those stay named (e_friction) and are written out
+    once under "where", as the model writes them (its ``fn`` functions called,
+    not inlined; the functions follow), in causal order.
+    """
+    names = _display_names(ss)
+    keep = set(ss.input_symbols)
+    mapping: dict = {}
+    laws: list[tuple[sympy.Symbol, str]] = []
+    for symbol, rhs in ss.assignments:
+        if symbol in keep:
+            continue
+        value = rhs.xreplace(mapping)
+        owner = _law_owner(ss, symbol)
+        if owner is not None and (value.has(sympy.Piecewise) or sympy.count_ops(value) > LAW_OPERATIONS):
+            laws.append((symbol, owner))
+            continue
+        mapping[symbol] = value
+
+    def show(expr):
+        return sympy.sympify(expr).xreplace(mapping).xreplace(names)
+
+    time = ss.time
+    equations = []
+    for state in ss.states:
+        lhs = sympy.Derivative(names.get(state.symbol, state.symbol), time)
+        equations.append(Equation(equation_markup(lhs, show(ss.derivatives[state.name])), state.name))
+    where = []
+    functions: list[str] = []
+    for symbol, owner in laws:
+        element = ss.graph.elements[owner]
+        which = "e" if symbol == ss.bond_symbols[element.bond][0] else "f"
+        written = _CallsKept(ss, element)
+        law = written.law(element, which)
+        functions += [name for name in written.called if name not in functions]
+        where.append(Equation(equation_markup(names.get(symbol, symbol), show(law)), f"{element.kind} {owner}"))
+    for name, symbol in ss.eliminated.items():
+        where.append(Equation(equation_markup(names.get(symbol, symbol), show(symbol)),
+                              f"{name} (derivative causality)"))
+    for number, block in enumerate(ss.algebraic_blocks, start=1):
+        for residual in block.residuals:
+            where.append(Equation(equation_markup(sympy.Integer(0), show(residual)), f"algebraic loop {number}"))
+    index = 0
+    while index < len(functions):      # functions called by functions follow the ones that call them
+        written = _CallsKept(ss)
+        head, body = written.function(ss.graph.functions[functions[index]])
+        functions += [name for name in written.called if name not in functions]
+        where.append(Equation(equation_markup(head, body.xreplace(names)), f"fn {functions[index]}"))
+        index += 1
+
+    table = None
+    if ss.states:
+        initial = ss.initial_values()
+        with_units = any(s.unit_text for s in ss.states)
+        rows = []
+        for s in ss.states:
+            row = {"state": s.name}
+            if with_units:
+                row["unit"] = s.unit_text or ""
+            row["initial value (SI)"] = initial[s.name]
+            row["description"] = s.description or _state_description(ss.graph, s)
+            rows.append(row)
+        table = Table.from_dicts("States and their initial values", rows)
+    return equations, where, table
+
+
+def _state_description(graph: BondGraph, state) -> str:
+    if state.element is None or state.element not in graph.elements:
+        return ""
+    element = graph.elements[state.element]
+    local = state.name.split(".", 1)[-1]
+    what = {"q": "generalised displacement", "p": "generalised momentum"}.get(local, "state")
+    return f"{what} of {element.kind} {element.name}"
+
+
+# -- plots of the outputs
+
+def output_groups(graph: BondGraph, result, experiment: ExperimentDef | None) -> list[list[str]]:
+    """The outputs to plot, grouped: the experiment's ``outputs`` first, then the rest in declaration order.
+
+    Outputs that share a unit go in one plot (up to :data:`MAX_SERIES_PER_PLOT`)
+    unless their peak magnitudes differ by more than :data:`MAX_MAGNITUDE_RATIO`.
+    A model without outputs plots its states instead.
+    """
+    names = [n for n in (experiment.outputs if experiment is not None else ()) if n in result.outputs]
+    names += [n for n in result.outputs if n not in names]
+    if not names:
+        return [[name] for name in result.states]
+    groups: list[list[str]] = []
+    keys: list[tuple] = []
+
+    def peak(name):
+        values = np.asarray(result.outputs[name], dtype=float)
+        finite = values[np.isfinite(values)]
+        return float(np.max(np.abs(finite))) if finite.size else 0.0
+
+    for name in names:
+        unit = graph.outputs[name].unit_text if name in graph.outputs else None
+        placed = False
+        for group, key in zip(groups, keys):
+            if unit is None or key != (unit,) or len(group) >= MAX_SERIES_PER_PLOT:
+                continue
+            peaks = [peak(n) for n in group] + [peak(name)]
+            nonzero = [p for p in peaks if p > 0]
+            if nonzero and max(nonzero) / min(nonzero) > MAX_MAGNITUDE_RATIO:
+                continue
+            group.append(name)
+            placed = True
+            break
+        if not placed:
+            groups.append([name])
+            keys.append((unit,))
+    return groups
+
+
+def output_plots(graph: BondGraph, result, experiment: ExperimentDef | None) -> list[Plot]:
+    """One plot per group of :func:`output_groups`, in the outputs' display units."""
+    plots = []
+    for group in output_groups(graph, result, experiment):
+        series, notes = {}, []
+        unit = None
+        for name in group:
+            if name in result.outputs:
+                definition = graph.outputs[name]
+                unit = definition.unit_text
+                series[name] = np.asarray(result.outputs[name], dtype=float) / definition.display_factor
+                if definition.description:
+                    notes.append(f"{name}: {definition.description}" if len(group) > 1 else definition.description)
+            else:
+                state = next(s for s in graph.states if s.qualified == name)
+                unit = state.unit_text
+                series[name] = np.asarray(result.states[name], dtype=float)
+                if state.description:
+                    notes.append(state.description)
+        title = ", ".join(group)
+        ylabel = (group[0] if len(group) == 1 else "") + (f" [{unit}]" if unit else "")
+        plots.append(Plot(title, plot_svg(result.t, series, title, ylabel.strip()), "; ".join(notes)))
+    return plots
+
+
+# -- power and energy
+
+#: Plots of power: (title, roles, sign, caption). ``sign`` turns "power into the element" into what is shown.
+POWER_PLOTS = (
+    ("Power delivered by the sources", ("source",), -1.0, "positive: the source delivers power to the system"),
+    ("Power into the storage elements", ("storage",), 1.0, "positive: the element stores energy"),
+    ("Power dissipated in the resistors", ("dissipator",), 1.0, ""),
+)
+
+
+def element_power(graph: BondGraph, result) -> dict[str, np.ndarray]:
+    """Power into every one-port element [W] over the run: e*f when its bond points at it, else -e*f."""
+    power = {}
+    for element in graph.elements.values():
+        if KINDS[element.kind].ports != 1:
+            continue
+        bond = graph.bond(element.bond)
+        effort, flow = result.bonds.get(f"{bond.name}.e"), result.bonds.get(f"{bond.name}.f")
+        if effort is None or flow is None:
+            continue
+        product = np.asarray(effort, dtype=float) * np.asarray(flow, dtype=float)
+        power[element.name] = product if bond.head == element.name else -product
+    return power
+
+
+def _role(kind: str) -> str:
+    from bondc.analysis.energy import ROLES
+
+    return ROLES[kind]
+
+
+def power_plots(graph: BondGraph, result) -> list[Plot]:
+    """Power of the sources, storage elements and resistors against time, one plot per role."""
+    power = element_power(graph, result)
+    plots = []
+    for title, roles, sign, caption in POWER_PLOTS:
+        series = {name: sign * values for name, values in power.items()
+                  if _role(graph.elements[name].kind) in roles}
+        if series:
+            plots.append(Plot(title, plot_svg(result.t, series, title, "power [W]"), caption))
+    return plots
+
+
+ENERGY_COLUMNS = ("supplied", "returned", "dissipated", "stored_change", "net_work_in")
+ENERGY_HEADINGS = ("supplied [J]", "returned [J]", "dissipated [J]", "Δ stored [J]", "net work in [J]")
+
+#: At most this many cycles get a table of their own; with more, the last one does.
+MAX_CYCLE_TABLES = 3
+
+
+def _energy_decimals(window) -> int:
+    """Decimals that give the largest energy of a table six significant digits (at most nine)."""
+    largest = max([abs(getattr(e, key)) for e in window.elements for key in ENERGY_COLUMNS
+                   if getattr(e, key) is not None] + [abs(window.balance.supplied), 0.0])
+    return 3 if largest == 0 else min(max(5 - int(math.floor(math.log10(largest))), 0), 9)
+
+
+def energy_tables(account) -> list[Table]:
+    """The energy of every element per cycle, each table closed by the balance and its residual.
+
+    Energies are shown to a common number of decimals (six significant digits
+    for the largest): a change of stored energy of 1e-21 J over a cycle that
+    returns to its start is a zero, not a number to read.
+    """
+    tables = []
+    windows = list(account.windows)
+    shown = windows if len(windows) <= MAX_CYCLE_TABLES else windows[-1:]
+    for window in shown:
+        decimals = _energy_decimals(window)
+
+        def cut(value):
+            return None if value is None else round(float(value), decimals) + 0.0
+
+        def text(value):
+            return f"{round(float(value), decimals) + 0.0:.{decimals}f} J"
+
+        rows, converters = [], []
+        for entry in window.elements:
+            if entry.role == "converter":
+                converters.append(entry)
+                continue
+            rows.append((entry.element, entry.kind) + tuple(cut(getattr(entry, key)) for key in ENERGY_COLUMNS))
+        b = window.balance
+        rows.append(("total", "") + tuple(cut(v) for v in (b.supplied, b.returned, b.dissipated, b.stored_change,
+                                                           b.net_work_in)))
+        span = f"t = {window.t_start:g} – {window.t_end:g} s"
+        title = (f"Energy per element, cycle {window.index + 1} of {len(windows)} ({span})"
+                 if account.cycle is not None else f"Energy per element over the run ({span})")
+        if window.partial:
+            title += ", a partial cycle"
+        relative = b.relative_residual
+        notes = [
+            f"Balance: the sources' net energy {text(b.sources_net)} (supplied − returned) = dissipated "
+            f"{text(b.dissipated)} + change of stored energy {text(b.stored_change)} + net work into stores "
+            f"without an energy function {text(b.net_work_in)}; residual {b.residual:.2g} J"
+            + (f", {relative:.2g} of the {text(b.throughput)} that moved through the elements."
+               if relative is not None else "."),
+        ]
+        if converters:
+            notes.append("Two-ports (" + ", ".join(f"{e.kind} {e.element}" for e in converters)
+                         + f") pass power on without loss: net work in {b.converter_work:.2g} J.")
+        notes.append(f"Δ stored is the change of the stored-energy function over the cycle; net work in, the "
+                     f"integral of the power into a store whose law has no energy function (custom state). "
+                     f"Integration: {account.method}.")
+        tables.append(Table(title, ("element", "kind") + ENERGY_HEADINGS, rows, notes=notes))
+    if len(windows) > 1:
+        rows = [(w.index + 1, w.t_start, w.t_end, w.balance.supplied, w.balance.returned, w.balance.dissipated,
+                 w.balance.stored_change, w.balance.net_work_in, w.balance.residual) for w in windows]
+        tables.append(Table("Energy balance per cycle",
+                            ("cycle", "from [s]", "to [s]") + ENERGY_HEADINGS + ("residual [J]",), rows))
+    return tables
+
+
+def _energy_sections(run: PipelineRun) -> tuple[list[Plot], list[Table], list, list[str]]:
+    """(power plots, energy tables, key results, warnings)."""
+    from bondc.analysis.energy import energy_account
+    from bondc.errors import AnalysisError
+
+    plots = power_plots(run.graph, run.result)
+    try:
+        account = energy_account(run.state_space, run.result)
+    except AnalysisError as error:
+        return plots, [], [], [_warning_text(d) for d in error.diagnostics]
+    summary = []
+    if account.windows:
+        balance = account.windows[-1].balance
+        if balance.relative_residual is not None:
+            summary.append(("energy balance residual, relative", balance.relative_residual, None))
+    return plots, energy_tables(account), summary, [_warning_text(d) for d in account.diagnostics]
+
+
+# -- motors
+
+#: The signals the motor analysis reads: the motor torque and the motor speed (an output or an input).
+MOTOR_TORQUE, MOTOR_SPEED = "torque", "omega"
+
+
+def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | None, list]:
+    """Motor requirements when the model has signals ``torque`` and ``omega``; candidates from ``motors``.
+
+    Raises UsageError (E930) when a catalogue is given but the signals are missing.
+    """
+    from bondc.analysis.motor_report import cycle_window, estimate_load_inertia, find_signal, motor_report
+    from bondc.analysis.motors import requirements
+
+    result, graph = run.result, run.graph
+    try:
+        torque = find_signal(result, (MOTOR_TORQUE,), "torque")
+        speed = find_signal(result, (MOTOR_SPEED,), "speed")
+    except UsageError:
+        if motors is not None:
+            raise
+        return None, None, []
+    if motors is not None:
+        _, data = motor_report(result, graph, motors, torque=MOTOR_TORQUE, speed=MOTOR_SPEED)
+        need, load_inertia = data["requirements"], data["load_inertia"]
+    else:
+        window = cycle_window(result, graph)
+        need = requirements(result.t, torque[2], speed[2], cycle=window).to_json()
+        load_inertia = estimate_load_inertia(result, graph, window, speed[2])
+        data = None
+    rows = [
+        ("cycle", f"{need['t_start']:g} – {need['t_end']:g}", "s"),
+        ("peak torque |τ|", need["peak_torque"], "N·m"),
+        ("largest positive torque", need["peak_torque_positive"], "N·m"),
+        ("most negative torque", need["peak_torque_negative"], "N·m"),
+        ("RMS torque", need["rms_torque"], "N·m"),
+        ("peak speed", need["peak_speed"], "rad/s"),
+        ("peak speed", need["peak_speed_rpm"], "rpm"),
+        ("peak power |τ·ω|", need["peak_power"], "W"),
+        ("peak motoring power", need["peak_power_motoring"], "W"),
+        ("peak regenerative power", need["peak_power_regenerative"], "W"),
+        ("motoring energy per cycle", need["energy_positive"], "J"),
+        ("regenerative energy per cycle", need["energy_regenerative"], "J"),
+        ("net energy per cycle", need["energy_net"], "J"),
+    ]
+    if load_inertia is not None:
+        rows.append(("load inertia at the motor shaft (estimated from the run)", load_inertia, "kg·m²"))
+    described = []
+    for name, where, _ in (torque, speed):
+        definition = graph.outputs.get(name) if where == "output" else graph.inputs.get(name)
+        text = f"{where} {name}"
+        if definition is not None and definition.description:
+            text += f" ({definition.description})"
+        described.append(text)
+    requirements_table = Table(
+        "What the cycle asks of the motor", ("quantity", "value", "unit"), rows,
+        caption=f"Torque: {described[0]}; speed: {described[1]}",
+        notes=["Energies integrate τ·ω over the cycle, split at its zero crossings (regenerative energy is "
+               "returned by the load to the motor)."])
+    summary = [("peak torque", need["peak_torque"], "N*m"), ("RMS torque", need["rms_torque"], "N*m"),
+               ("peak power", need["peak_power"], "W"), ("motor energy per cycle", need["energy_net"], "J")]
+    if data is None:
+        return requirements_table, None, summary
+    return requirements_table, _candidates_table(data, motors), summary + _motor_choice(data)
+
+
+def _recommended(data: Mapping) -> Mapping | None:
+    """The smallest qualifying motor without warnings (inertia ratio), else the smallest qualifying one."""
+    qualified = [c for c in data["candidates"] if c["qualifies"]]
+    clean = [c for c in qualified if not c["warnings"]]
+    return (clean or qualified or [None])[0]
+
+
+def _motor_choice(data: Mapping) -> list:
+    choice = _recommended(data)
+    return [("smallest suitable motor", choice["motor"]["name"] if choice is not None else "none in the catalogue",
+             None)]
+
+
+def _candidates_table(data: Mapping, catalogue) -> Table:
+    from bondc.analysis.motors import MAX_INERTIA_RATIO
+
+    rows = []
+    for candidate in data["candidates"]:
+        motor, margins = candidate["motor"], candidate["margins"]
+        ratio = candidate.get("inertia_ratio")
+        if candidate["qualifies"]:
+            verdict = "qualifies" + (f"; J ratio above {MAX_INERTIA_RATIO:g}" if candidate["warnings"] else "")
+        else:
+            failed = [label for key, label in MARGIN_LABELS if (margins.get(key) or math.inf) < 1]
+            verdict = "too small: " + ", ".join(failed)
+        rows.append((motor["name"], motor["rated_power"])
+                    + tuple(_two_decimals(margins.get(key)) for key, _ in MARGIN_LABELS)
+                    + (_two_decimals(ratio), verdict))
+    choice = _recommended(data)
+    notes = ["A margin is available / required: peak τ, the catalogue's peak torque over the cycle's peak "
+             "|τ|; RMS τ, the rated torque over the RMS torque (the thermal check); speed, the rated speed over "
+             "the peak speed; power, the rated power over the peak |τ·ω|. A motor qualifies when every margin "
+             "is at least 1."]
+    if data.get("include_rotor_inertia"):
+        notes.append("Each motor is judged with its own rotor inertia added to the torque: τ + J_rotor·dω/dt.")
+    if data.get("load_inertia") is not None:
+        notes.append(f"J ratio: the load inertia at the motor shaft ({data['load_inertia']:.4g} kg·m², "
+                     f"{data.get('load_inertia_source') or 'given'}) over the rotor inertia; above 10 the servo "
+                     "loop is hard to tune.")
+    if choice is not None:
+        notes.append(f"Choice: {choice['motor']['name']}, the smallest motor that qualifies"
+                     + (" with no warning." if not choice["warnings"] else "."))
+    else:
+        notes.append("No motor of the catalogue qualifies.")
+    return Table(f"Motors of {Path(catalogue).name}, qualifying first, smallest first",
+                 ("motor", "rated power [W]") + tuple(f"{label} margin" for _, label in MARGIN_LABELS)
+                 + ("J ratio", "verdict"), rows, notes=notes)
+
+
+MARGIN_LABELS = (("peak_torque", "peak τ"), ("rms_torque", "RMS τ"), ("speed", "speed"), ("power", "power"))
+
+
+def _two_decimals(value):
+    return None if value is None else round(float(value), 2)
+
+
+# -- statistics
+
+def _result_tables(run: PipelineRun) -> list[Table]:
+    return []
+
+
+def _summary(run: PipelineRun) -> list[tuple[str, Any, str | None]]:
+    """Key results: the peak of each of the experiment's outputs."""
+    result, graph = run.result, run.graph
+    names = [n for n in (run.experiment.outputs if run.experiment is not None else ()) if n in result.outputs]
+    items = []
+    for name in names[:4]:
+        definition = graph.outputs[name]
+        values = np.asarray(result.outputs[name], dtype=float) / definition.display_factor
+        finite = values[np.isfinite(values)]
+        if finite.size:
+            items.append((f"peak {name}", float(finite[np.argmax(np.abs(finite))]), definition.unit_text))
+    return items

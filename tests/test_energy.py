@@ -1,0 +1,385 @@
+"""Tests of the energy account and the output/power statistics against closed-form energies.
+
+Expected values are derived by hand (RC charging, an undamped oscillator, a
+sinusoidally driven RC in steady state, potential energy of a lifted mass),
+never read back from bondc.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bondc import semantic
+from bondc.analysis.energy import BALANCE_KEYS, ROW_KEYS, cycle_windows, energy_account
+from bondc.analysis.stats import (POWER_KEYS, STATISTICS_KEYS, is_power_unit, output_statistics, power_outputs,
+                                  power_rows, power_statistics, statistics_rows)
+from bondc.causality import assign_causality
+from bondc.equations import derive
+from bondc.errors import AnalysisError
+from bondc.simulate import simulate
+
+MODELS = Path(__file__).parent.parent / "models"
+
+
+def load(path: Path):
+    graph, _ = semantic.load(path, experiment=semantic.FIRST)
+    ss = derive(assign_causality(graph))
+    experiment = next(iter(graph.experiments.values()), None)
+    return ss, experiment
+
+
+def load_text(tmp_path, text: str):
+    path = tmp_path / "model.bg"
+    path.write_text(text)
+    return load(path)
+
+
+# ------------------------------------------------------------------ RC charging
+
+RC = """
+model RC
+  param U  = 12   [V]
+  param Rr = 100  [Ohm]
+  param Cc = 1e-3 [F]
+  Se source : e = U
+  R resistor : e = Rr*f
+  C capacitor : e = q/Cc
+  1 loop
+  source -> loop
+  loop -> resistor
+  loop -> capacitor
+end
+"""
+
+
+def test_rc_charging_energies_match_closed_form(tmp_path):
+    ss, _ = load_text(tmp_path, RC)
+    U, R, C = 12.0, 100.0, 1e-3
+    tau = R * C
+    result = simulate(ss, None, t_end=30 * tau, rtol=1e-9, atol=1e-12)
+    window = energy_account(ss, result).windows[0]
+    # after 30 time constants: supplied C*U^2, half dissipated, half stored
+    assert window.element("source").supplied == pytest.approx(C * U**2, rel=1e-6)
+    assert window.element("source").returned < 1e-9 * C * U**2          # only rounding noise at the end
+    assert window.element("resistor").dissipated == pytest.approx(C * U**2 / 2, rel=1e-6)
+    capacitor = window.element("capacitor")
+    assert capacitor.stored_change == pytest.approx(C * U**2 / 2, rel=1e-6)
+    assert capacitor.energy_function == "analytic"
+    assert capacitor.stored_start == 0.0
+    assert window.balance.relative_residual < 1e-6
+
+
+def test_rc_charging_per_window_matches_closed_form(tmp_path):
+    """Windows of one time constant: their edges fall inside solver steps."""
+    ss, _ = load_text(tmp_path, RC)
+    U, R, C = 12.0, 100.0, 1e-3
+    tau = R * C
+    result = simulate(ss, None, t_end=3.5 * tau, rtol=1e-9, atol=1e-12)
+    account = energy_account(ss, result, cycle=tau)
+    assert [w.partial for w in account.windows] == [False, False, False]       # the half window is dropped
+    for window in account.windows:
+        a, b = math.exp(-window.t_start / tau), math.exp(-window.t_end / tau)
+        supplied = C * U**2 * (a - b)                                   # integral of U * U/R * exp(-t/tau)
+        dissipated = C * U**2 / 2 * (a * a - b * b)
+        stored = C * U**2 / 2 * ((1 - b) ** 2 - (1 - a) ** 2)
+        assert window.element("source").supplied == pytest.approx(supplied, rel=1e-6)
+        assert window.element("resistor").dissipated == pytest.approx(dissipated, rel=1e-6)
+        assert window.element("capacitor").stored_change == pytest.approx(stored, rel=1e-6)
+        assert window.balance.relative_residual < 1e-6
+
+
+# ----------------------------------------------------------- undamped oscillator
+
+OSCILLATOR = """
+model Oscillator
+  param m  = 2   [kg]
+  param k  = 800 [N/m]
+  param x0 = 0.05 [m]
+  I mass : f = p/m
+  C spring : e = k*q, q(0) = x0
+  1 j
+  j -> mass
+  j -> spring
+  output P_spring [W] = spring.e*spring.f "power into the spring"
+  output P_mass [kW] = mass.e*mass.f "power into the mass"
+  output x [m] = spring.q
+end
+"""
+
+
+def test_undamped_oscillator_stores_nothing_over_a_period(tmp_path):
+    ss, _ = load_text(tmp_path, OSCILLATOR)
+    m, k, x0 = 2.0, 800.0, 0.05
+    period = 2 * math.pi * math.sqrt(m / k)
+    energy = k * x0**2 / 2
+    result = simulate(ss, None, t_end=3 * period, rtol=1e-9, atol=1e-12)
+    account = energy_account(ss, result, cycle=period)
+    assert len(account.windows) == 3
+    for window in account.windows:
+        for name in ("mass", "spring"):
+            entry = window.element(name)
+            assert abs(entry.stored_change) < 1e-6 * energy
+            # each store takes in and gives back its peak energy twice per period
+            assert entry.gross == pytest.approx(4 * energy, rel=1e-6)
+        assert window.element("spring").stored_start == pytest.approx(energy, rel=1e-6)
+        assert window.balance.sources_net == 0.0
+        assert window.balance.relative_residual < 1e-6
+    # a cycle that does not divide the run: the partial last window is dropped
+    assert len(energy_account(ss, result, cycle=1.4 * period).windows) == 2
+
+
+def test_undamped_oscillator_power_statistics(tmp_path):
+    ss, _ = load_text(tmp_path, OSCILLATOR)
+    m, k, x0 = 2.0, 800.0, 0.05
+    omega = math.sqrt(k / m)
+    period = 2 * math.pi / omega
+    energy = k * x0**2 / 2
+    # p_spring = k*x*v = -(k*x0^2*omega/2) * sin(2*omega*t)
+    amplitude = k * x0**2 * omega / 2
+    result = simulate(ss, None, t_end=2 * period, dt=period / 4000, rtol=1e-10, atol=1e-13)
+    assert power_outputs(ss.graph) == ("P_spring", "P_mass")
+    stats = power_statistics(result, ss, cycle=period)
+    assert set(stats) == {"P_spring", "P_mass"}
+    for name in ("P_spring", "P_mass"):
+        assert len(stats[name]) == 2
+        for row in stats[name]:
+            assert row["peak"] == pytest.approx(amplitude, rel=1e-5)
+            assert row["peak_positive"] == pytest.approx(amplitude, rel=1e-5)
+            assert row["peak_negative"] == pytest.approx(-amplitude, rel=1e-5)
+            assert row["rms"] == pytest.approx(amplitude / math.sqrt(2), rel=1e-5)
+            assert row["positive_energy"] == pytest.approx(2 * energy, rel=1e-5)
+            assert row["negative_energy"] == pytest.approx(-2 * energy, rel=1e-5)
+            assert abs(row["net_energy"]) < 1e-5 * energy
+    # the dt grid is not the solver's steps: the account repeats the run to get them
+    account = energy_account(ss, result, cycle=period)
+    assert account.resimulated
+    assert account.max_relative_residual < 1e-6
+    summary = output_statistics(result)["x"]
+    assert summary["max"] == pytest.approx(x0, rel=1e-6)
+    assert summary["min"] == pytest.approx(-x0, rel=1e-6)
+    assert abs(summary["mean"]) < 1e-6 * x0
+    assert summary["rms"] == pytest.approx(x0 / math.sqrt(2), rel=1e-6)
+    assert summary["final"] == pytest.approx(x0, rel=1e-6)
+    assert [row["output"] for row in statistics_rows(output_statistics(result))] == ["P_spring", "P_mass", "x"]
+    assert all(tuple(row) == ("output",) + POWER_KEYS for row in power_rows(stats))
+
+
+# ----------------------------------------------------- periodic steady state
+
+DRIVEN_RC = """
+model DrivenRC
+  param U  = 10    [V]
+  param w  = 628.3185307179586 [rad/s]
+  param Rr = 2     [Ohm]
+  param Cc = 5e-4  [F]
+  input u [V] = U*sin(w*t)
+  MSe source : e = u
+  R resistor : e = Rr*f
+  C capacitor : e = q/Cc
+  1 loop
+  source -> loop
+  loop -> resistor
+  loop -> capacitor
+  output P_source [W] = source.e*source.f
+  experiment drive
+    t_end = 100 [ms]
+    rtol = 1e-9
+    atol = 1e-12
+    cycle = 10 [ms]
+  end
+end
+"""
+
+
+def test_periodic_forcing_gives_equal_cycles_in_steady_state(tmp_path):
+    ss, experiment = load_text(tmp_path, DRIVEN_RC)
+    U, omega, R, C = 10.0, 2 * math.pi * 100, 2.0, 5e-4
+    period = 2 * math.pi / omega
+    result = simulate(ss, experiment)
+    account = energy_account(ss, result)                    # the experiment's cycle
+    assert account.cycle == pytest.approx(period)
+    assert len(account.windows) == 10
+    # steady state (the transient decays as exp(-t/RC), RC = 1 ms): per period, the resistor
+    # dissipates I^2*R/2*T with I = U/|Z|, and the capacitor ends where it started
+    current = U / math.hypot(R, 1 / (omega * C))
+    dissipated = current**2 * R / 2 * period
+    late = account.windows[5:]
+    for window in late:
+        assert window.element("resistor").dissipated == pytest.approx(dissipated, rel=1e-6)
+        assert abs(window.element("capacitor").stored_change) < 1e-6 * dissipated
+        assert window.balance.relative_residual < 1e-6
+    for key in ("supplied", "returned"):
+        values = [getattr(window.element("source"), key) for window in late]
+        assert max(values) - min(values) < 1e-6 * dissipated, key
+    # the power output's statistics agree with the account (trapezoid on the solver's steps)
+    power = power_statistics(result, ["P_source"], account.cycle)["P_source"]
+    for row, window in zip(power[5:], late):
+        assert row["net_energy"] == pytest.approx(window.balance.sources_net, rel=1e-3)
+
+
+# ------------------------------------------------------------- the models
+
+SMALL_MODELS = ["mass_spring_damper", "series_rlc", "dc_motor_gear", "dc_motor_gear_compliant", "quarter_car"]
+
+
+@pytest.mark.parametrize("name", SMALL_MODELS)
+def test_energy_balance_closes_on_model(name):
+    ss, experiment = load(MODELS / f"{name}.bg")
+    result = simulate(ss, experiment)
+    account = energy_account(ss, result)
+    assert not account.resimulated
+    for window in account.windows:
+        assert window.balance.relative_residual < 1e-6, window.balance
+        assert abs(window.balance.converter_work) <= 1e-9 * window.balance.throughput
+    assert not [d for d in account.diagnostics if d.code == "W930"]
+
+
+def test_series_rlc_energy_as_documented():
+    """models/README.md: the source gives C*U0^2 = 10 mJ, 5 mJ stored in C, 5 mJ dissipated in R."""
+    ss, experiment = load(MODELS / "series_rlc.bg")
+    result = simulate(ss, experiment, t_end=0.1)
+    window = energy_account(ss, result).windows[0]
+    assert window.balance.sources_net == pytest.approx(10e-3, rel=1e-6)
+    assert window.element("resistor").dissipated == pytest.approx(5e-3, rel=1e-6)
+    assert window.element("capacitor").stored_change == pytest.approx(5e-3, rel=1e-6)
+
+
+def test_two_ports_conserve_power_and_rigid_load_is_accounted():
+    ss, experiment = load(MODELS / "dc_motor_gear.bg")
+    result = simulate(ss, experiment)
+    window = energy_account(ss, result).windows[0]
+    for name in ("motor", "gear"):
+        entry = window.element(name)
+        p1, p2 = entry.port_work
+        assert abs(p1) > 1.0 and abs(p1 + p2) <= 1e-9 * abs(p1)
+    # the load inertia is in derivative causality: its stored energy follows the rotor's speed
+    J_L, n = 5.0e-3, 10.0
+    speed = result.variables["j_rotor.f"] if "j_rotor.f" in result.variables else result.outputs["speed_motor"]
+    expected = 0.5 * J_L * ((speed[-1] / n) ** 2 - (speed[0] / n) ** 2)
+    assert window.element("load").stored_change == pytest.approx(expected, rel=1e-6)
+    # the load torque (an Se) takes energy as the load rises: tau_L times the load angle turned
+    turned = np.sum(0.5 * (result.outputs["speed"][1:] + result.outputs["speed"][:-1]) * np.diff(result.t))
+    load_torque = window.element("load_torque")
+    assert load_torque.returned - load_torque.supplied == pytest.approx(0.2 * turned, rel=1e-4)
+
+
+def test_non_polynomial_spring_gets_a_numeric_energy_function():
+    ss, experiment = load(MODELS / "quarter_car.bg")
+    result = simulate(ss, experiment, t_end=1.0)
+    window = energy_account(ss, result).windows[0]
+    tyre = window.element("tyre")            # e = k_t*max(q, 0): not a polynomial law
+    assert tyre.energy_function == "numeric"
+    k_t = 160000.0
+    q = result.states["tyre.q"]
+    assert tyre.stored_start == pytest.approx(0.5 * k_t * q[0] ** 2, rel=1e-9)
+    assert tyre.stored_change == pytest.approx(0.5 * k_t * (q[-1] ** 2 - q[0] ** 2), rel=1e-6, abs=1e-9)
+    assert window.balance.relative_residual < 1e-6
+
+
+@pytest.fixture(scope="module")
+def flagship():
+    ss, experiment = load(MODELS / "electro_pneumatic_hybrid.bg")
+    result = simulate(ss, experiment)
+    assert result.complete
+    return ss, experiment, result, energy_account(ss, result)
+
+
+def test_flagship_energy_balance_closes(flagship):
+    ss, experiment, result, account = flagship
+    assert account.cycle == pytest.approx(4.2)
+    assert len(account.windows) == 1
+    balance = account.windows[0].balance
+    assert balance.relative_residual < 1e-6
+    assert abs(balance.converter_work) <= 1e-12 * balance.throughput
+    assert not [d for d in account.diagnostics if d.code in ("W930", "W931")]
+
+
+def test_flagship_energies_are_physical(flagship):
+    ss, experiment, result, account = flagship
+    window = account.windows[0]
+    # the chamber has its own state P and no energy function: net work in, labelled as such
+    chamber = window.element("chamber")
+    assert chamber.energy_function is None and chamber.stored_change is None
+    assert chamber.net_work_in == window.balance.net_work_in
+    assert window.element("nut").energy_function == "numeric"          # the backlash law
+    # constant-force sources: net work = force times the displacement of the mass
+    M, g, P_atm, Ar = 31.7, 9.81, 101325.0, 2.63e-3
+    rise = float(result.outputs["x"][-1] - result.outputs["x"][0])
+    for name, force in (("gravity", M * g), ("atmosphere", P_atm * Ar)):
+        entry = window.element(name)
+        assert entry.returned - entry.supplied == pytest.approx(force * rise, abs=1e-6 * force * 0.1)
+        assert entry.returned == pytest.approx(force * 0.0999, rel=2e-3)      # lifted by about 100 mm
+    # models/README.md: positive motor energy 54.8 J, regenerative -0.04 J, almost all friction
+    motor = window.element("servomotor")
+    assert motor.supplied == pytest.approx(54.8, abs=0.05)
+    assert motor.returned == pytest.approx(0.04, abs=0.005)
+    assert window.element("friction").dissipated == pytest.approx(54.4, rel=0.01)
+    # the power output is the motor's power: its statistics agree with the account
+    power = power_statistics(result, ss.graph, account.cycle)["power"][0]
+    assert power["positive_energy"] == pytest.approx(motor.supplied, rel=1e-4)
+    assert power["negative_energy"] == pytest.approx(-motor.returned, rel=1e-2)
+    assert power["peak_positive"] == pytest.approx(42.0, abs=0.1)
+    assert power["peak_negative"] == pytest.approx(-8.2, abs=0.1)
+
+
+def test_flagship_account_renders(flagship):
+    ss, experiment, result, account = flagship
+    data = json.loads(json.dumps(account.to_json()))
+    assert data["cycles"][0]["balance"]["relative_residual"] < 1e-6
+    assert [e["element"] for e in data["cycles"][0]["elements"]] == list(ss.graph.elements)
+    rows = account.rows()
+    assert len(rows) == len(ss.graph.elements)
+    assert all(tuple(row) == ROW_KEYS for row in rows)
+    assert [tuple(row) for row in account.balance_rows()] == [BALANCE_KEYS]
+    text = account.to_text()
+    assert "servomotor" in text and "friction" in text and "residual" in text
+    header = next(line for line in text.splitlines() if line.startswith("element"))
+    assert header.split() == ["element", "kind", "supplied", "returned", "dissipated", "Δstored", "net", "work",
+                              "in"]
+
+
+# ------------------------------------------------------------- small pieces
+
+
+def test_cycle_windows():
+    assert cycle_windows(0.0, 4.2, 4.2) == [(0.0, 4.2, False)]
+    assert cycle_windows(0.0, 1.0, None) == [(0.0, 1.0, False)]
+    assert cycle_windows(0.0, 0.3, 0.1)[-1] == (0.2, 0.3, False)          # 0.3/0.1 is 2.9999999999999996
+    with pytest.raises(AnalysisError) as error:
+        cycle_windows(0.0, 1.0, -1.0)
+    assert error.value.diagnostics[0].code == "E932"
+
+
+def test_errors(tmp_path):
+    ss, _ = load_text(tmp_path, RC)
+    other, _ = load_text(tmp_path, OSCILLATOR)
+    result = simulate(other, None, t_end=0.01)
+    with pytest.raises(AnalysisError) as error:
+        energy_account(ss, result)
+    assert error.value.diagnostics[0].code == "E930"
+    with pytest.raises(AnalysisError) as error:
+        energy_account(other, result, cycle=0.0)
+    assert error.value.diagnostics[0].code == "E932"
+    with pytest.raises(AnalysisError) as error:
+        power_statistics(result, ["P_nothing"])
+    assert error.value.diagnostics[0].code == "E933"
+
+
+def test_power_units():
+    assert is_power_unit("W") and is_power_unit("kW") and is_power_unit("mW")
+    assert is_power_unit("N*m*rad/s") and is_power_unit("J/s") and is_power_unit("V*A")
+    assert not is_power_unit("J") and not is_power_unit("N*m") and not is_power_unit("nonsense")
+
+
+def test_doctests():
+    import doctest
+
+    from bondc.analysis import energy, stats
+
+    for module in (energy, stats):
+        assert doctest.testmod(module).failed == 0

@@ -1,0 +1,246 @@
+"""The flagship report in a real browser: headless Chromium driven over the DevTools protocol.
+
+Chromium is started with ``--remote-debugging-pipe`` (the protocol as
+NUL-terminated JSON on file descriptors 3 and 4), so the test needs nothing
+but the standard library and the ``chromium`` binary (Debian package
+``chromium``). It opens the report as a ``file://`` URL and checks that
+
+- nothing is logged to the console and no script error happens,
+- the page fetches nothing but itself (every network request is the file),
+- the bond graph, the SVG plots and the MathML equations are laid out with a
+  non-zero size, and the equations are laid out as MathML (not as text),
+
+and keeps a full-page screenshot in ``tests/artifacts/`` for a human to look at.
+
+Without Chromium the test is skipped, except in CI (``CI`` set), where it fails:
+the CI image must install it (``apt-get install -y chromium``).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import os
+import select
+import shutil
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from test_report_build import flagship_report
+
+ARTIFACTS = Path(__file__).parent / "artifacts"
+CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+TIMEOUT = 60.0
+WIDTH, HEIGHT = 1100, 900
+
+
+def chromium_binary() -> str | None:
+    explicit = os.environ.get("BONDC_CHROMIUM")
+    if explicit:
+        return explicit
+    for name in CHROMIUM_NAMES:
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+class DevTools:
+    """A headless Chromium and one page of it, spoken to over ``--remote-debugging-pipe``."""
+
+    def __init__(self, binary: str):
+        self.profile = tempfile.mkdtemp(prefix="bondc-chromium-")
+        # fds 3 and 4 of the browser: it reads commands from 3 and writes replies and events to 4
+        to_browser_read, self._to_browser = os.pipe()
+        self._from_browser, from_browser_write = os.pipe()
+        flags = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                 "--disable-extensions", "--disable-default-apps", "--mute-audio", "--hide-scrollbars",
+                 f"--user-data-dir={self.profile}", "--remote-debugging-pipe", f"--window-size={WIDTH},{HEIGHT}",
+                 "about:blank"]
+        script = (f'exec "$0" "$@" 3<&{to_browser_read} 4>&{from_browser_write} '
+                  f'{to_browser_read}<&- {from_browser_write}>&-')
+        self.process = subprocess.Popen(["/bin/sh", "-c", script, binary, *flags],
+                                        pass_fds=(to_browser_read, from_browser_write),
+                                        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.PIPE)
+        os.close(to_browser_read)
+        os.close(from_browser_write)
+        self._buffer = b""
+        self._next_id = 0
+        self.events: list[dict] = []
+        self.session: str | None = None
+
+    # -- protocol
+
+    def _send(self, method: str, params: dict | None = None, session: str | None = None) -> int:
+        self._next_id += 1
+        message = {"id": self._next_id, "method": method, "params": params or {}}
+        if session:
+            message["sessionId"] = session
+        os.write(self._to_browser, json.dumps(message).encode() + b"\0")
+        return self._next_id
+
+    def _receive(self, deadline: float) -> dict:
+        while b"\0" not in self._buffer:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise TimeoutError("Chromium did not answer in time")
+            ready, _, _ = select.select([self._from_browser], [], [], remaining)
+            if ready:
+                chunk = os.read(self._from_browser, 1 << 20)
+                if not chunk:
+                    raise ConnectionError("Chromium closed the DevTools pipe: " + self._stderr())
+                self._buffer += chunk
+        message, _, self._buffer = self._buffer.partition(b"\0")
+        return json.loads(message)
+
+    def call(self, method: str, params: dict | None = None, *, page: bool = True) -> dict:
+        """Send a command (to the page's session unless ``page`` is False); return its result."""
+        number = self._send(method, params, self.session if page else None)
+        deadline = time.monotonic() + TIMEOUT
+        while True:
+            message = self._receive(deadline)
+            if message.get("id") == number:
+                if "error" in message:
+                    raise RuntimeError(f"{method}: {message['error']}")
+                return message.get("result", {})
+            if "method" in message:
+                self.events.append(message)
+
+    def wait_for(self, method: str) -> dict:
+        """The first event ``method`` of the page (already received or still to come)."""
+        for event in self.events:
+            if event["method"] == method:
+                return event
+        deadline = time.monotonic() + TIMEOUT
+        while True:
+            message = self._receive(deadline)
+            if "method" in message:
+                self.events.append(message)
+                if message["method"] == method:
+                    return message
+
+    def _stderr(self) -> str:
+        try:
+            return self.process.stderr.read1(4000).decode(errors="replace") if self.process.stderr else ""
+        except (OSError, ValueError):
+            return ""
+
+    # -- the page
+
+    def open(self, url: str) -> None:
+        target = self.call("Target.createTarget", {"url": "about:blank"}, page=False)["targetId"]
+        self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True},
+                                 page=False)["sessionId"]
+        for domain in ("Page", "Runtime", "Log", "Network"):
+            self.call(f"{domain}.enable")
+        self.call("Emulation.setDeviceMetricsOverride",
+                  {"width": WIDTH, "height": HEIGHT, "deviceScaleFactor": 1, "mobile": False})
+        self.call("Page.navigate", {"url": url})
+        self.wait_for("Page.loadEventFired")
+
+    def evaluate(self, expression: str):
+        reply = self.call("Runtime.evaluate", {"expression": expression, "returnByValue": True})
+        if "exceptionDetails" in reply:
+            raise RuntimeError(f"evaluation failed: {reply['exceptionDetails']}")
+        return reply["result"]["value"]
+
+    def screenshot(self, path: Path) -> None:
+        size = self.call("Page.getLayoutMetrics")["cssContentSize"]
+        shot = self.call("Page.captureScreenshot", {
+            "format": "png", "captureBeyondViewport": True,
+            "clip": {"x": 0, "y": 0, "width": size["width"], "height": size["height"], "scale": 1}})
+        path.write_bytes(base64.b64decode(shot["data"]))
+
+    def close(self) -> None:
+        try:
+            self._send("Browser.close")
+            self.process.wait(timeout=10)
+        except (OSError, subprocess.TimeoutExpired):
+            self.process.kill()
+            self.process.wait()
+        finally:
+            for descriptor in (self._to_browser, self._from_browser):
+                try:
+                    os.close(descriptor)
+                except OSError:
+                    pass
+            if self.process.stderr:
+                self.process.stderr.close()
+            shutil.rmtree(self.profile, ignore_errors=True)
+
+
+MEASURE = """JSON.stringify((() => {
+  const box = (element) => { const r = element.getBoundingClientRect(); return [r.width, r.height]; };
+  const all = (selector) => Array.from(document.querySelectorAll(selector));
+  return {
+    title: document.title,
+    diagram: all("svg.bond-graph").map(box),
+    plots: all("svg.plot").map(box),
+    maths: all("math").map(box),
+    mathml: all("math").every((m) => m instanceof MathMLElement),
+    mathDisplay: all("math[display=block]").map((m) => getComputedStyle(m).display),
+    fractions: all("mfrac").map(box),
+    scripts: all("script").length,
+    page: [document.documentElement.scrollWidth, document.documentElement.scrollHeight],
+  };
+})())"""
+
+
+@pytest.fixture(scope="module")
+def browser():
+    binary = chromium_binary()
+    if binary is None:
+        message = ("headless Chromium is needed for the browser test: install the Debian package 'chromium' "
+                   "(apt-get install -y chromium) or set BONDC_CHROMIUM to the binary")
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    devtools = DevTools(binary)
+    try:
+        yield devtools
+    finally:
+        devtools.close()
+
+
+def test_flagship_report_in_chromium(browser):
+    report = flagship_report()
+    url = report.resolve().as_uri()
+    browser.open(url)
+    measured = json.loads(browser.evaluate(MEASURE))
+    ARTIFACTS.mkdir(exist_ok=True)
+    browser.screenshot(ARTIFACTS / "flagship_report.png")
+    assert (ARTIFACTS / "flagship_report.png").stat().st_size > 10_000
+
+    problems = []
+    for event in browser.events:
+        method, params = event["method"], event.get("params", {})
+        if method == "Runtime.consoleAPICalled":
+            problems.append(f"console.{params.get('type')}: {params.get('args')}")
+        elif method == "Runtime.exceptionThrown":
+            problems.append(f"exception: {params.get('exceptionDetails')}")
+        elif method == "Log.entryAdded" and params["entry"]["level"] in ("error", "warning"):
+            problems.append(f"log {params['entry']['level']}: {params['entry'].get('text')} "
+                            f"({params['entry'].get('url', '')})")
+    assert problems == []
+
+    requests = [e["params"]["request"]["url"] for e in browser.events if e["method"] == "Network.requestWillBeSent"]
+    assert requests and set(requests) == {url}, requests          # the page loads nothing but itself
+
+    assert measured["title"].startswith("ElectroPneumaticHybrid")
+    assert measured["scripts"] == 0
+    [diagram] = measured["diagram"]
+    assert diagram[0] > 300 and diagram[1] > 300
+    assert len(measured["plots"]) >= 8                           # outputs, power, validation-free flagship
+    assert all(width > 300 and height > 100 for width, height in measured["plots"])
+    assert len(measured["maths"]) >= 6                           # one per state at least
+    assert all(width > 20 and height > 10 for width, height in measured["maths"])
+    assert measured["mathml"] is True
+    assert set(measured["mathDisplay"]) == {"block math"}        # laid out by the MathML engine
+    assert measured["fractions"] and all(height > 20 for _, height in measured["fractions"])
+    assert measured["page"][0] <= WIDTH                          # nothing forces a horizontal scroll
