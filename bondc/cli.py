@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import traceback
 from pathlib import Path
@@ -26,6 +27,25 @@ class _ArgumentParser(argparse.ArgumentParser):
     def error(self, message):  # noqa: D401 - argparse API
         raise UsageError(Diagnostic("error", "E001", f"{self.prog}: {message}",
                                     hint=f"see '{self.prog} --help'"))
+
+
+def _json_safe(value):
+    """JSON has no nan/inf: write them as strings ("nan", "inf", "-inf")."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, dict):
+        return {str(key): _json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(item) for item in value]
+    if hasattr(value, "item") and callable(value.item) and getattr(value, "ndim", 1) == 0:
+        return _json_safe(value.item())  # numpy scalars
+    if hasattr(value, "tolist"):
+        return _json_safe(value.tolist())
+    return value
+
+
+def _print_json(value) -> None:
+    print(json.dumps(_json_safe(value), indent=2, default=str, allow_nan=False))
 
 
 def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
@@ -148,9 +168,85 @@ def _cmd_linearize(args) -> int:
     _, _, state_space = _derive(args)
     result = linearize(state_space, time=args.time, at=args.at)
     if args.json:
-        print(json.dumps(result.to_json(), indent=2))
+        _print_json(result.to_json())
     else:
         print(result.to_text())
+    return EXIT_OK
+
+
+def _experiment(graph, name):
+    if not graph.experiments:
+        return None
+    return graph.experiments[name] if name is not None else next(iter(graph.experiments.values()))
+
+
+def _cmd_simulate(args) -> int:
+    from bondc.analysis.energy import energy_account
+    from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
+    from bondc.simulate import simulate, write
+
+    graph, _, state_space = _derive(args)
+    experiment = _experiment(graph, args.experiment)
+    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
+    _print_diagnostics(result.warnings, graph.sources)
+    if args.output:
+        write(result, Path(args.output), args.all)
+    error = result.error()
+    summary = result.summary()
+    account = None
+    if result.t.size > 1:
+        summary["statistics"] = output_statistics(result)
+        cycle = experiment.cycle if experiment is not None else None
+        summary["power"] = power_statistics(result, power_outputs(graph), cycle)
+        try:
+            account = energy_account(state_space, result, cycle=cycle)
+            summary["energy"] = account.to_json()
+        except BondcError as problem:
+            _print_diagnostics(problem.diagnostics, graph.sources)
+    motors_text = None
+    if args.motors:
+        from bondc.analysis.motor_report import motor_report
+
+        try:
+            motors_text, summary["motors"] = motor_report(result, graph, Path(args.motors))
+        except BondcError as problem:
+            _print_diagnostics(problem.diagnostics, graph.sources)
+    if args.json:
+        _print_json(summary)
+    else:
+        state = "complete" if result.complete else f"INCOMPLETE at t = {result.t_reached:g} s"
+        print(f"{graph.name}: simulated {summary['points']} points to t = {result.t_reached:g} s ({state}), "
+              f"{len(result.events)} events")
+        if args.output:
+            print(f"results written to {args.output}" + ("" if result.complete else " (incomplete)"))
+        stats = summary.get("statistics", {})
+        if stats:
+            print()
+            print(f"  {'output':<14} {'unit':<8} {'min':>12} {'max':>12} {'rms':>12} {'final':>12}")
+            for name, row in stats.items():
+                unit = graph.outputs[name].unit_text or ""
+                factor = graph.outputs[name].display_factor or 1.0
+                print(f"  {name:<14} {unit:<8} " + " ".join(f"{row[key] / factor:>12.5g}"
+                                                          for key in ("min", "max", "rms", "final")))
+        if account is not None:
+            print()
+            print(account.to_text())
+        if motors_text:
+            print()
+            print(motors_text)
+    if error is not None:
+        _print_diagnostics(error.diagnostics, graph.sources)
+        return EXIT_ERRORS
+    return EXIT_OK
+
+
+def _cmd_compile(args) -> int:
+    from bondc.codegen import compile_file, default_output
+
+    output = Path(args.output) if args.output else default_output(args.file)
+    compile_file(Path(args.file), output, model=args.model, experiment=args.experiment,
+                 sets=_parse_sets(args.set))
+    print(f"wrote {output}")
     return EXIT_OK
 
 
@@ -207,6 +303,24 @@ def build_parser() -> argparse.ArgumentParser:
                         help="linearise at the initial state or at the equilibrium found from it")
     linear.add_argument("--json", action="store_true")
     linear.set_defaults(run=_cmd_linearize)
+
+    compile_ = commands.add_parser("compile", help="generate a standalone Python module (numpy + scipy only)")
+    _add_model_args(compile_)
+    compile_.add_argument("--experiment", help="whose settings become the module's defaults (default: the first)")
+    compile_.add_argument("-o", "--output", help="the module to write (default: MODEL_gen.py beside the model)")
+    compile_.set_defaults(run=_cmd_compile)
+
+    sim = commands.add_parser("simulate", help="simulate an experiment; statistics, energy per cycle, CSV/NPZ")
+    _add_model_args(sim)
+    sim.add_argument("--experiment", help="the experiment to run (default: the first)")
+    sim.add_argument("--t-end", type=float, help="end time, s (overrides the experiment's t_end)")
+    sim.add_argument("--dt", type=float, help="output sampling interval, s")
+    sim.add_argument("-o", "--output", help="write results: .csv (columns t, outputs, states) or .npz")
+    sim.add_argument("--all", action="store_true", help="also write every bond's effort and flow")
+    sim.add_argument("--json", action="store_true", help="print a JSON summary")
+    sim.add_argument("--motors", metavar="CATALOGUE.csv",
+                     help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")
+    sim.set_defaults(run=_cmd_simulate)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")

@@ -1642,6 +1642,29 @@ def _experiment_def(m: _Model, plan: _ExperimentPlan, base_values: Mapping[str, 
 
 # ==================================================================== unused
 
+def check_passive_orientation(m: _Model) -> None:
+    """W304: a resistor or storage element whose bond is drawn leaving it.
+
+    Its ``e`` and ``f`` follow the half-arrow (LANGUAGE.md section 4), so with the
+    bond drawn away from it ``e*f`` is the power it *delivers*: ``e = b*f`` makes a
+    resistor a source, and ``der(q) = f`` fills a capacitor as it discharges. That
+    is legal but almost never meant.
+    """
+    for element in m.elements:
+        if element.kind not in ("R", "C", "I"):
+            continue
+        ends = m.ends.get(element.name, ())
+        if len(ends) != 1 or ends[0].side != "tail":
+            continue
+        bond = m.bonds[ends[0].bond - 1]
+        role = {"R": "it dissipates", "C": "it stores", "I": "it stores"}[element.kind]
+        m.report(_warning(
+            "W304", f"the bond of {element.kind} '{element.name}' is drawn leaving it, so its e*f is the power "
+                    f"it delivers, not the power {role}", element.name_span,
+            related=(Related(bond.span, f"bond {bond.number} points away from '{element.name}'"),),
+            hint=f"draw the bond towards it: '{bond.head} -> {element.name}'"))
+
+
 def check_unused(m: _Model) -> None:
     """W301 unused parameter, W302 unused input."""
     for decl in m.decls.values():
@@ -1736,6 +1759,7 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     check_constants(m, base_values)
     experiment_defs, chosen = check_experiment_values(m, plans, good_sets, base_values, selected)
     chosen_definitions, chosen_values = chosen or (base, base_values)
+    check_passive_orientation(m)
     check_unused(m)
 
     diagnostics = _unique(m.diagnostics)

@@ -160,6 +160,7 @@ def test_undamped_oscillator_power_statistics(tmp_path):
     assert account.resimulated
     assert account.max_relative_residual < 1e-6
     summary = output_statistics(result)["x"]
+    assert tuple(summary) == STATISTICS_KEYS
     assert summary["max"] == pytest.approx(x0, rel=1e-6)
     assert summary["min"] == pytest.approx(-x0, rel=1e-6)
     assert abs(summary["mean"]) < 1e-6 * x0
@@ -258,10 +259,10 @@ def test_two_ports_conserve_power_and_rigid_load_is_accounted():
         p1, p2 = entry.port_work
         assert abs(p1) > 1.0 and abs(p1 + p2) <= 1e-9 * abs(p1)
     # the load inertia is in derivative causality: its stored energy follows the rotor's speed
-    J_L, n = 5.0e-3, 10.0
-    speed = result.variables["j_rotor.f"] if "j_rotor.f" in result.variables else result.outputs["speed_motor"]
-    expected = 0.5 * J_L * ((speed[-1] / n) ** 2 - (speed[0] / n) ** 2)
-    assert window.element("load").stored_change == pytest.approx(expected, rel=1e-6)
+    J_L = 5.0e-3
+    speed = result.outputs["speed"]
+    assert window.element("load").stored_change == pytest.approx(0.5 * J_L * (speed[-1] ** 2 - speed[0] ** 2),
+                                                                 rel=1e-6)
     # the load torque (an Se) takes energy as the load rises: tau_L times the load angle turned
     turned = np.sum(0.5 * (result.outputs["speed"][1:] + result.outputs["speed"][:-1]) * np.diff(result.t))
     load_torque = window.element("load_torque")
@@ -318,7 +319,7 @@ def test_flagship_energies_are_physical(flagship):
     motor = window.element("servomotor")
     assert motor.supplied == pytest.approx(54.8, abs=0.05)
     assert motor.returned == pytest.approx(0.04, abs=0.005)
-    assert window.element("friction").dissipated == pytest.approx(54.4, rel=0.01)
+    assert window.element("friction").dissipated == pytest.approx(36 + 19, rel=0.02)     # "about 36 J up, 19 J down"
     # the power output is the motor's power: its statistics agree with the account
     power = power_statistics(result, ss.graph, account.cycle)["power"][0]
     assert power["positive_energy"] == pytest.approx(motor.supplied, rel=1e-4)

@@ -29,7 +29,7 @@ left out of min, max, mean and RMS; ``final`` is the last value as it is.
 from __future__ import annotations
 
 import math
-from typing import Iterable, Mapping
+from typing import Mapping
 
 import numpy as np
 

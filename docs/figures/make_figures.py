@@ -5,6 +5,7 @@
 writes, next to this script,
 
 * ``flagship_torque.{svg,png}``  -- motor (coupling) torque over the cycle (the paper's Fig. 6);
+* ``flagship_torque_zoom.{svg,png}`` -- the torque transients at the start of each move;
 * ``flagship_power.{svg,png}``   -- motor power tau*omega (the paper's Fig. 7);
 * ``flagship_motion.{svg,png}``  -- speed input, mass position and velocity, chamber pressure;
 * ``flagship_variants.{svg,png}``-- torque of the four experiments;
@@ -64,6 +65,16 @@ def _value(result, name, time):
     return float(np.interp(time, result.t, values))
 
 
+def _trapezoid(values, t):
+    return float(np.sum(np.diff(t) * (values[1:] + values[:-1]) / 2))
+
+
+def _mean(result, name, start, end):
+    inside = (result.t >= start) & (result.t <= end)
+    t, values = result.t[inside], result.outputs[name][inside]
+    return _trapezoid(values, t) / (t[-1] - t[0])
+
+
 def numbers(graph, state_space, result) -> dict:
     """What docs/flagship.md quotes for one experiment."""
     text, motors = motor_report(result, graph, CATALOGUE)
@@ -76,6 +87,7 @@ def numbers(graph, state_space, result) -> dict:
     up = (t >= 0.2) & (t <= 1.45)
     down = (t >= 2.45) & (t <= 3.70)
     torque, power = result.outputs["torque"], result.outputs["power"]
+    friction_power = result.outputs["F_friction"] * result.outputs["v"]
     x = result.outputs["x"]
     return {
         "complete": result.complete,
@@ -90,6 +102,9 @@ def numbers(graph, state_space, result) -> dict:
         "energy_positive": need["energy_positive"],
         "energy_regenerative": need["energy_regenerative"],
         "energy_net": need["energy_net"],
+        # means over the middle of each cruise (the measured_speed torque is noisy sample by sample)
+        "cruise_torque_up_mean": _mean(result, "torque", 0.5, 1.3),
+        "cruise_torque_down_mean": _mean(result, "torque", 2.8, 3.5),
         "cruise_torque_up": _value(result, "torque", 0.8),
         "cruise_torque_down": _value(result, "torque", 3.0),
         "cruise_pressure_up": _value(result, "P", 0.8),
@@ -104,8 +119,7 @@ def numbers(graph, state_space, result) -> dict:
             "motor_net": entry("servomotor").supplied - entry("servomotor").returned,
             "motor_supplied": entry("servomotor").supplied, "motor_returned": entry("servomotor").returned,
             "friction": entry("friction").dissipated,
-            "friction_up": float(np.sum(np.diff(t[up]) * ((result.outputs["F_friction"] * result.outputs["v"])[up][1:]
-                                                          + (result.outputs["F_friction"] * result.outputs["v"])[up][:-1]) / 2)),
+            "friction_up": _trapezoid(friction_power[up], t[up]),
             "nut_damper": entry("nut_damper").dissipated,
             "valve": entry("valve").dissipated,
             "pneumatic_work_on_mass": pneumatic,
@@ -154,6 +168,24 @@ def figures(runs, out: Path) -> None:
     axes.set(xlabel="t [s]", ylabel="torque τ = Kθ [N·m]", xlim=(0, 4.2),
              title="Servomotor torque over the cycle (experiment cycle; cf. the paper's Fig. 6)")
     _save(figure, "flagship_torque", out)
+
+    figure, pair = plt.subplots(1, 2, figsize=(7.0, 3.0), sharey=True)
+    for axes, (start, end, label) in zip(pair, [(0.19, 0.33, "start of the up move"),
+                                                 (2.44, 2.58, "start of the down move")]):
+        inside = (t >= start) & (t <= end)
+        axes.plot(t[inside], cycle.outputs["torque"][inside], color=COLOURS["cycle"], label="torque")
+        speed = axes.twinx()
+        speed.plot(t[inside], cycle.variables["omega"][inside] * 60 / (2 * math.pi), color="0.5",
+                   linestyle=":", label="ω_m")
+        speed.set_ylim(-1100, 1100)
+        speed.grid(False)
+        if axes is pair[1]:
+            speed.set_ylabel("ω_m [rpm] (dotted)")
+        else:
+            speed.set_yticklabels([])
+        axes.set(xlabel="t [s]", xlim=(start, end), title=label)
+    pair[0].set_ylabel("torque [N·m]")
+    _save(figure, "flagship_torque_zoom", out)
 
     figure, axes = plt.subplots(figsize=(7.0, 3.2))
     _shade(axes)

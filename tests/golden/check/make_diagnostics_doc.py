@@ -70,6 +70,7 @@ d("E506", "an element law uses a variable it cannot", "An element law uses one o
 d("W301", "unused parameter", "A parameter is not used by any law, input, output, state, setting or other parameter.", "Remove it or use it.")
 d("W302", "unused input", "An input is not used by any law, output, or other input.", "Remove it or use it (e.g. `MSe src : e = F`).")
 d("W303", "name hidden inside element laws", "A parameter, input, output or state is called `e` or `f`, or a parameter or input is called like a storage element's state: inside element laws that name means the element's own variable, so the model-level name cannot be used there.", "Rename it if you need it in a law.")
+d("W304", "resistor or store drawn with its bond leaving it", "An `R`, `C` or `I` element's bond points away from it. Its `e` and `f` follow the half-arrow, so `e*f` is the power it delivers: `e = b*f` then makes a resistor a source, and `der(q) = f` fills a capacitor while it discharges. The model still compiles as written.", "Draw the bond towards the element (`j -> tank`), which is what the law assumes.")
 
 PARSE_EXAMPLES = {
     "E100": "model M\n  param = 3\nend\n",

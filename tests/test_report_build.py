@@ -1,0 +1,304 @@
+"""``build_report``: the whole pipeline to one self-contained HTML file, for every model of ``models/``."""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bondc.errors import DataError, ModelError, UsageError
+from bondc.report import build
+from bondc.report.build import build_report, default_output, output_groups, run_pipeline, state_equations
+from bondc.report.render import source_sha256
+from test_report_render import check_html
+
+ROOT = Path(__file__).parent.parent
+MODELS = ROOT / "models"
+FLAGSHIP = MODELS / "electro_pneumatic_hybrid.bg"
+CATALOGUE = MODELS / "data" / "motors.csv"
+ARTIFACTS = Path(__file__).parent / "artifacts"
+DATE = "2024-05-01"
+
+
+@functools.lru_cache(maxsize=None)
+def flagship_report() -> Path:
+    """The flagship's report with the motor catalogue, built once per test session (the browser test reads it)."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    return build_report(FLAGSHIP, motors=CATALOGUE, output=ARTIFACTS / "flagship_report.html", date=DATE)
+
+
+def assert_self_contained(html: str) -> None:
+    """No script, no stylesheet link, nothing fetched: the only URLs are xmlns namespace names."""
+    without_namespaces = re.sub(r'\sxmlns(:[\w-]+)?="[^"]*"', "", html)
+    lowered = without_namespaces.lower()
+    for forbidden in ("http://", "https://", "<script", "<link", "@import", "<iframe", "<object", "<embed",
+                      "<img", "javascript:", "url(http", "file://"):
+        assert forbidden not in lowered, forbidden
+    tags = re.findall(r"<[a-z][^>]*>", lowered)                     # text may say "src=", tags may not
+    assert [tag for tag in tags if re.search(r"\s(src|on[a-z]+)\s*=", tag)] == []
+    assert all(ref.startswith("#") for ref in re.findall(r'href="([^"]*)"', without_namespaces))
+
+
+def sections(html: str) -> list[str]:
+    return re.findall(r'<section id="([^"]+)"', html)
+
+
+# ---------------------------------------------------------------- every model builds
+
+SMALL_MODELS = sorted(path.name for path in MODELS.glob("*.bg") if path != FLAGSHIP)
+
+
+def test_models_folder_is_covered():
+    assert "electro_pneumatic_hybrid.bg" not in SMALL_MODELS
+    assert len(SMALL_MODELS) >= 5
+
+
+@pytest.mark.parametrize("name", SMALL_MODELS)
+def test_every_model_report_builds(name, tmp_path):
+    target = build_report(MODELS / name, output=tmp_path / "r.html", date=DATE)
+    html = target.read_text(encoding="utf-8")
+    checker = check_html(html)
+    assert len(checker.ids) == len(set(checker.ids)), "duplicate ids"
+    assert_self_contained(html)
+    found = sections(html)
+    for section in ("bond-graph", "parameters", "causality", "equations", "results", "power", "source"):
+        assert section in found, section
+    assert "Incomplete simulation" not in html
+    assert html.count('class="causal-stroke"') == html.count('class="half-arrow"') > 0
+    for math in re.findall(r"<math .*?</math>", html, flags=re.S):
+        ET.fromstring(math)
+    assert "Energy per element" in html and "residual" in html
+
+
+def test_flagship_report():
+    html = flagship_report().read_text(encoding="utf-8")
+    checker = check_html(html)
+    assert len(checker.ids) == len(set(checker.ids))
+    assert_self_contained(html)
+    assert sections(html) == ["bond-graph", "parameters", "causality", "equations", "results", "power",
+                              "motor-requirements", "motor-candidates", "source"]
+    header = html[:html.index("<nav")]
+    assert "ElectroPneumaticHybrid" in header and "electro_pneumatic_hybrid.bg" in header
+    assert source_sha256(FLAGSHIP.read_text(encoding="utf-8")) in header and "bondc 0." in header and DATE in header
+    assert "<code>cycle</code> — up 100 mm, stop, down 100 mm" in header and "Radau" in header
+    # 20 bonds, each with a half-arrow, a causal stroke and its number
+    diagram = html[html.index('<svg xmlns="http://www.w3.org/2000/svg" class="bond-graph"'):]
+    diagram = diagram[:diagram.index("</svg>")]
+    assert diagram.count('class="half-arrow"') == diagram.count('class="causal-stroke"') == 20
+    assert [int(n) for n in re.findall(r'class="bond-number"[^>]*>(\d+)', diagram)] == list(range(1, 21))
+    # the equations: one per state, the long laws named once, the model's functions as functions
+    equations = html[html.index('<section id="equations">'):html.index('<section id="results">')]
+    assert equations.count('<span class="eq-label">') >= 6 + 3 + 5
+    assert "valve_mdot" in equations and "fn psi_subsonic" in equations
+    # torque and power first, then the other outputs; power per element; the energy balance
+    results = html[html.index('<section id="results">'):html.index('<section id="power">')]
+    captions = re.findall(r'<span class="label">Figure \d+\.</span> ([^.<]+)', results)
+    assert captions[:2] == ["torque", "power"]
+    power = html[html.index('<section id="power">'):html.index('<section id="motor-requirements">')]
+    assert "Power delivered by the sources" in power and "Power into the storage elements" in power
+    assert "Energy per element, cycle 1 of 1" in power and "Balance: the sources" in power
+    for element in ("servomotor", "friction", "chamber", "supply", "mass"):
+        assert f"<td>{element}</td>" in power
+    # the motor: requirements and the catalogue's motors, with the choice
+    motors = html[html.index('<section id="motor-requirements">'):html.index('<section id="source"')]
+    assert "RMS torque" in motors and "SV-200" in motors and "Choice: SV-200" in motors
+    assert "smallest suitable motor" in header + html[:html.index('<section id="bond-graph">')]
+    assert len(html) < 3_000_000
+
+
+def test_flagship_numbers_match_the_reference():
+    """The key results agree with models/README.md (independent scipy reference, about 1 %)."""
+    html = flagship_report().read_text(encoding="utf-8")
+    summary = dict(re.findall(r"<dt>([^<]+)</dt><dd>([^<]+)", html))
+    assert float(summary["peak torque"]) == pytest.approx(0.401, rel=0.01)
+    assert float(summary["RMS torque"]) == pytest.approx(0.175, rel=0.01)
+    assert float(summary["peak power"]) == pytest.approx(42.0, rel=0.01)
+    assert float(summary["motor energy per cycle"]) == pytest.approx(54.7, rel=0.01)
+
+
+def test_non_default_experiment_gets_its_own_file_name(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    target = build_report(FLAGSHIP, experiment="measured_speed", t_end=0.25, date=DATE)
+    assert target == Path("reports/electro_pneumatic_hybrid-measured_speed.html")
+    html = target.read_text(encoding="utf-8")
+    check_html(html)
+    assert "<code>measured_speed</code>" in html
+    assert "<span class=\"setting\">t_end</span> = 0.25 s" in html
+    # the first experiment, named or not, writes the plain name
+    run = run_pipeline(MODELS / "series_rlc.bg")
+    assert default_output(MODELS / "series_rlc.bg", run) == Path("reports/series_rlc.html")
+
+
+def test_overridden_parameters_are_marked(tmp_path):
+    target = build_report(FLAGSHIP, experiment="catalogue_valve", sets=["M=40 [kg]"], t_end=0.05,
+                          output=tmp_path / "r.html", date=DATE)
+    html = target.read_text(encoding="utf-8")
+    assert "(set by experiment catalogue_valve)" in html and "(set by --set)" in html
+    row = re.search(r"<td><code>M</code></td><td class=\"num\">([^<]+)</td>", html)
+    assert row.group(1) == "40"
+
+
+# ---------------------------------------------------------------- escaping, failures, atomic writing
+
+HOSTILE = """\
+model Hostile "Description <script>alert('x')</script> & <b>bold</b>"
+  param m = 1 [kg] "mass </td></tr></table><script>bad()</script>"
+  input F [N] = 1
+  MSe force "a <img src=x onerror=alert(1)> source" : e = F
+  I mass : f = p/m
+  1 j
+  force -> j
+  j -> mass
+  output v [m/s] = mass.f "speed <i>of</i> the mass"
+  experiment run "<style>body{display:none}</style>"
+    t_end = 0.1 [s]
+  end
+end
+"""
+
+
+def test_hostile_text_is_shown_as_text(tmp_path):
+    model = tmp_path / "hostile.bg"
+    model.write_text(HOSTILE, encoding="utf-8")
+    html = build_report(model, output=tmp_path / "h.html", date=DATE).read_text(encoding="utf-8")
+    check_html(html)
+    assert_self_contained(html)
+    assert "Description &lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; &lt;b&gt;bold&lt;/b&gt;" in html
+    assert "<script" not in html and "<b>bold" not in html and "<img" not in html
+    assert "&lt;style&gt;body{display:none}&lt;/style&gt;" in html
+    assert html.count("<style>") == 1
+
+
+FAILING = """\
+model Failing "A force that becomes nan at t = 0.5 s"
+  param m = 1 [kg]
+  Se push : e = sqrt(0.5 - t)
+  I mass : f = p/m
+  1 j
+  push -> j
+  j -> mass
+  output v [m/s] = mass.f
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+def test_incomplete_simulation_still_reports(tmp_path):
+    model = tmp_path / "failing.bg"
+    model.write_text(FAILING, encoding="utf-8")
+    html = build_report(model, output=tmp_path / "f.html", date=DATE).read_text(encoding="utf-8")
+    check_html(html)
+    notice = html[html.index('<aside class="callout incomplete"'):]
+    notice = notice[:notice.index("</aside>")]
+    assert "Incomplete simulation" in notice and "E810" in notice and "sqrt(0.5 - t)" in notice
+    assert html.index("Incomplete simulation") < html.index('<section id="bond-graph">')
+    assert "results" in sections(html) and "power" in sections(html)     # what was computed is shown
+
+
+def test_model_without_end_time_is_reported_unsimulated(tmp_path):
+    model = tmp_path / "static.bg"
+    model.write_text(FAILING.replace("  experiment run\n    t_end = 1 [s]\n  end\n", ""), encoding="utf-8")
+    html = build_report(model, output=tmp_path / "s.html", date=DATE).read_text(encoding="utf-8")
+    check_html(html)
+    assert "Not simulated" in html and "results" not in sections(html) and "equations" in sections(html)
+
+
+def test_a_failure_leaves_the_earlier_report_intact(tmp_path, monkeypatch):
+    model = tmp_path / "m.bg"
+    model.write_text(FAILING.replace("sqrt(0.5 - t)", "1"), encoding="utf-8")
+    target = tmp_path / "out" / "m.html"
+    build_report(model, output=target, date=DATE)
+    earlier = target.read_bytes()
+    assert earlier.startswith(b"<!DOCTYPE html>")
+
+    def listing():
+        return sorted(os.listdir(target.parent))
+
+    # a model error: nothing is written
+    model.write_text(FAILING.replace("I mass : f = p/m", "I mass : f = p/undefined_name"), encoding="utf-8")
+    with pytest.raises(ModelError):
+        build_report(model, output=target, date=DATE)
+    assert target.read_bytes() == earlier
+    # bad measured data: found before anything is simulated
+    model.write_text(FAILING.replace("sqrt(0.5 - t)", "1"), encoding="utf-8")
+    bad = tmp_path / "bad.csv"
+    bad.write_text("t,v\n0,1\n0,2\n", encoding="utf-8")
+    with pytest.raises(DataError):
+        build_report(model, data=bad, compare=["v=v"], output=target, date=DATE)
+    assert target.read_bytes() == earlier
+    # rendering fails half-way
+    monkeypatch.setattr(build, "render_report", lambda context: 1 / 0)
+    with pytest.raises(ZeroDivisionError):
+        build_report(model, output=target, date="2030-01-01")
+    monkeypatch.undo()
+    assert target.read_bytes() == earlier
+    # the write itself fails after the temporary file is complete: the rename never happens
+    import bondc.io
+
+    def broken_replace(source, destination):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(bondc.io.os, "replace", broken_replace)
+    with pytest.raises(OSError, match="disk full"):
+        build_report(model, output=target, date="2030-01-01")
+    monkeypatch.undo()
+    assert target.read_bytes() == earlier
+    assert listing() == ["m.html"]                                       # no temporary file left behind
+    # and a successful build replaces it
+    build_report(model, output=target, date="2030-01-01")
+    assert b"2030-01-01" in target.read_bytes()
+
+
+def test_data_and_compare_go_together(tmp_path):
+    with pytest.raises(UsageError, match="needs measured data"):
+        build_report(MODELS / "series_rlc.bg", compare=["i=i"], output=tmp_path / "x.html")
+    with pytest.raises(UsageError, match="comparison"):
+        build_report(MODELS / "series_rlc.bg", data=tmp_path / "x.csv", output=tmp_path / "x.html")
+    assert not (tmp_path / "x.html").exists()
+
+
+# ---------------------------------------------------------------- pieces
+
+def test_outputs_are_grouped_by_unit_and_magnitude():
+    run = run_pipeline(MODELS / "quarter_car.bg", t_end=0.2)
+    groups = output_groups(run.graph, run.result, run.experiment)
+    flat = [name for group in groups for name in group]
+    assert sorted(flat) == sorted(run.result.outputs)
+    millimetres = [g for g in groups if "body_displacement" in g][0]
+    assert "road_height" in millimetres or "suspension_deflection" in millimetres
+    assert all(len(group) <= build.MAX_SERIES_PER_PLOT for group in groups)
+    flagship = run_pipeline(FLAGSHIP, t_end=0.05)
+    assert output_groups(flagship.graph, flagship.result, flagship.experiment)[:2] == [["torque"], ["power"]]
+
+
+def test_state_equations_keep_long_laws_named():
+    run = run_pipeline(MODELS / "dc_motor_gear.bg", t_end=0.01)
+    equations, laws, table = state_equations(run.state_space)
+    assert [e.label for e in equations] == list(run.state_space.state_names)
+    assert any("derivative causality" in law.label for law in laws)       # the eliminated load inertia
+    assert [row[0] for row in table.rows] == list(run.state_space.state_names)
+    for equation in equations + laws:
+        ET.fromstring(equation.mathml)
+
+
+def test_element_power_sums_to_zero_at_every_instant():
+    """Junctions and two-ports conserve power, so the powers into all one-ports sum to zero."""
+    run = run_pipeline(MODELS / "series_rlc.bg")
+    power = build.element_power(run.graph, run.result)
+    total = sum(power.values())
+    scale = max(np.max(np.abs(values)) for values in power.values())
+    assert np.max(np.abs(total)) < 1e-9 * scale
+
+
+def test_docstring_examples():
+    import doctest
+
+    result = doctest.testmod(build)
+    assert result.attempted > 0 and result.failed == 0
