@@ -16,7 +16,7 @@ $(BIN)/bondc: pyproject.toml
 install: $(BIN)/bondc
 
 report: install
-	$(BIN)/bondc check $(FLAGSHIP) --causality
+	$(BIN)/bondc report $(FLAGSHIP) --motors models/data/motors.csv -o reports/electro_pneumatic_hybrid.html
 
 check: install
 	@for f in models/*.bg; do $(BIN)/bondc check $$f || exit 1; done

@@ -250,6 +250,25 @@ def _cmd_compile(args) -> int:
     return EXIT_OK
 
 
+def _cmd_report(args) -> int:
+    from bondc.report.build import build_report
+
+    target = build_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
+                          data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
+                          t_end=args.t_end, progress=True)
+    print(f"report written to {target}")
+    return EXIT_OK
+
+
+def _cmd_validate(args) -> int:
+    from bondc.report.build import run_validate
+
+    _, code = run_validate(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
+                           output=args.output, model=args.model, experiment=args.experiment,
+                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=True)
+    return code
+
+
 def _cmd_fit_friction(args) -> int:
     from bondc.analysis.friction import run_fit_friction
 
@@ -321,6 +340,30 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--motors", metavar="CATALOGUE.csv",
                      help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")
     sim.set_defaults(run=_cmd_simulate)
+
+    report = commands.add_parser("report", help="one self-contained HTML report: model, bond graph, equations, "
+                                                "plots, energy per cycle, motor choice")
+    _add_model_args(report)
+    report.add_argument("--experiment", help="the experiment to run (default: the first)")
+    report.add_argument("--t-end", type=float, help="end time, s (overrides the experiment's t_end)")
+    report.add_argument("--data", help="measured CSV to compare with (adds a validation section)")
+    report.add_argument("--compare", action="append", metavar="OUT=COLUMN[:nrmse=0.05]",
+                        help="compare output OUT with the measured COLUMN (repeatable)")
+    report.add_argument("--motors", metavar="CATALOGUE.csv", help="judge the motors of this catalogue against the cycle")
+    report.add_argument("-o", "--output", help="the HTML file (default: reports/MODEL.html)")
+    report.set_defaults(run=_cmd_report)
+
+    validate = commands.add_parser("validate", help="compare a simulation with measured data; pass/fail per signal")
+    _add_model_args(validate)
+    validate.add_argument("--experiment", help="the experiment to run (default: the first)")
+    validate.add_argument("--t-end", type=float, help="end time, s (overrides the experiment's t_end)")
+    validate.add_argument("--data", required=True, help="measured CSV (first column or 't'/'time' is time)")
+    validate.add_argument("--compare", action="append", required=True, metavar="OUT=COLUMN[:nrmse=0.05]",
+                          help="output OUT against measured COLUMN with its tolerance (repeatable)")
+    validate.add_argument("--junit", metavar="results.xml", help="write JUnit XML, one test case per signal")
+    validate.add_argument("--motors", metavar="CATALOGUE.csv", help=argparse.SUPPRESS)
+    validate.add_argument("-o", "--output", help="also write the HTML report with the validation section")
+    validate.set_defaults(run=_cmd_validate)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")

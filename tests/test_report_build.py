@@ -98,7 +98,7 @@ def test_flagship_report():
     # torque and power first, then the other outputs; power per element; the energy balance
     results = html[html.index('<section id="results">'):html.index('<section id="power">')]
     captions = re.findall(r'<span class="label">Figure \d+\.</span> ([^.<]+)', results)
-    assert captions[:2] == ["torque", "power"]
+    assert captions[:2] == ["Output torque", "Output power"]
     power = html[html.index('<section id="power">'):html.index('<section id="motor-requirements">')]
     assert "Power delivered by the sources" in power and "Power into the storage elements" in power
     assert "Energy per element, cycle 1 of 1" in power and "Balance: the sources" in power

@@ -37,6 +37,7 @@ variable (``b3.e``).
 from __future__ import annotations
 
 import math
+import re
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -243,17 +244,16 @@ def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_f
     plots = []
     for result in results:
         unit, factor = _signal_unit(run.graph, result.output)
-        suffix = f" [{unit}]" if unit else " (SI)"
         simulated, measured = result.simulated / factor, result.measured / factor
         title = f"{result.output} simulated and {result.column} measured"
         plots.append(Plot(title, plot_svg(
             result.t, {f"{result.column} (measured)": measured, f"{result.output} (simulated)": simulated},
-            title, result.output + suffix,
+            title, result.output + (f" [{plot_unit(unit)}]" if unit else " (SI)"),
             styles={f"{result.column} (measured)": {"color": "#8c959f", "linewidth": 1.0},
                     f"{result.output} (simulated)": {"color": "#0550ae", "linewidth": 1.4}}),
             f"NRMSE {result.nrmse:.3g}, R² {result.r2:.4g}: {'pass' if result.passed else 'FAIL'}"))
         title = f"{result.output} error, simulated − measured"
-        plots.append(Plot(title, plot_svg(result.t, {"error": simulated - measured}, title, "error" + suffix,
+        plots.append(Plot(title, plot_svg(result.t, {"error": simulated - measured}, title, "error" + (f" [{plot_unit(unit)}]" if unit else " (SI)"),
                                           styles={"error": {"color": "#a40e26", "linewidth": 1.0}}),
                           f"largest |error| {result.maxabs / factor:.4g}{' ' + unit if unit else ''}"))
     return ValidationSection(results, str(data_file), plots, str(junit_file) if junit_file else None)
@@ -642,28 +642,53 @@ def output_groups(graph: BondGraph, result, experiment: ExperimentDef | None) ->
     return groups
 
 
+def plot_unit(text: str | None) -> str:
+    """A unit as written, for an axis label: ``N*m/s^2`` -> ``N·m/s²``.
+
+    >>> plot_unit("kg*m^2/s^-1")
+    'kg·m²/s⁻¹'
+    """
+    if not text:
+        return ""
+    superscripts = str.maketrans("0123456789-.", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻·")
+    text = re.sub(r"\^\(?([-0-9.]+)\)?", lambda m: m.group(1).translate(superscripts), text)
+    return text.replace("*", "·")
+
+
+def _names(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _sentence(text: str) -> str:
+    return text[:1].upper() + text[1:] if text else text
+
+
 def output_plots(graph: BondGraph, result, experiment: ExperimentDef | None) -> list[Plot]:
     """One plot per group of :func:`output_groups`, in the outputs' display units."""
     plots = []
     for group in output_groups(graph, result, experiment):
         series, notes = {}, []
         unit = None
+        kind = "output"
         for name in group:
             if name in result.outputs:
                 definition = graph.outputs[name]
                 unit = definition.unit_text
                 series[name] = np.asarray(result.outputs[name], dtype=float) / definition.display_factor
-                if definition.description:
-                    notes.append(f"{name}: {definition.description}" if len(group) > 1 else definition.description)
+                description = definition.description
             else:
+                kind = "state"
                 state = next(s for s in graph.states if s.qualified == name)
                 unit = state.unit_text
                 series[name] = np.asarray(result.states[name], dtype=float)
-                if state.description:
-                    notes.append(state.description)
-        title = ", ".join(group)
-        ylabel = (group[0] if len(group) == 1 else "") + (f" [{unit}]" if unit else "")
-        plots.append(Plot(title, plot_svg(result.t, series, title, ylabel.strip()), "; ".join(notes)))
+                description = state.description
+            if description:
+                notes.append(f"{name}: {description}" if len(group) > 1 else _sentence(description))
+        title = f"{_sentence(kind)}{'s' if len(group) > 1 else ''} {_names(group)}"
+        label = group[0] if len(group) == 1 else ""
+        if unit:
+            label += f" [{plot_unit(unit)}]"
+        plots.append(Plot(title, plot_svg(result.t, series, title, label.strip()), "; ".join(notes)))
     return plots
 
 
@@ -671,8 +696,8 @@ def output_plots(graph: BondGraph, result, experiment: ExperimentDef | None) -> 
 
 #: Plots of power: (title, roles, sign, caption). ``sign`` turns "power into the element" into what is shown.
 POWER_PLOTS = (
-    ("Power delivered by the sources", ("source",), -1.0, "positive: the source delivers power to the system"),
-    ("Power into the storage elements", ("storage",), 1.0, "positive: the element stores energy"),
+    ("Power delivered by the sources", ("source",), -1.0, "Positive: the source delivers power to the system"),
+    ("Power into the storage elements", ("storage",), 1.0, "Positive: the element stores energy"),
     ("Power dissipated in the resistors", ("dissipator",), 1.0, ""),
 )
 
@@ -771,7 +796,7 @@ def energy_tables(account) -> list[Table]:
         notes.append(f"Δ stored is the change of the stored-energy function over the cycle; net work in, the "
                      f"integral of the power into a store whose law has no energy function (custom state). "
                      f"Integration: {account.method}.")
-        tables.append(Table(title, ("element", "kind") + ENERGY_HEADINGS, rows, notes=notes))
+        tables.append(Table(title, ("element", "kind") + ENERGY_HEADINGS, rows, notes=notes, total_row=True))
     if len(windows) > 1:
         rows = [(w.index + 1, w.t_start, w.t_end, w.balance.supplied, w.balance.returned, w.balance.dissipated,
                  w.balance.stored_change, w.balance.net_work_in, w.balance.residual) for w in windows]
@@ -881,10 +906,13 @@ def _candidates_table(data: Mapping, catalogue) -> Table:
     from bondc.analysis.motors import MAX_INERTIA_RATIO
 
     rows = []
+    choice = _recommended(data)
     for candidate in data["candidates"]:
         motor, margins = candidate["motor"], candidate["margins"]
         ratio = candidate.get("inertia_ratio")
-        if candidate["qualifies"]:
+        if candidate is choice:
+            verdict = "qualifies: the choice"
+        elif candidate["qualifies"]:
             verdict = "qualifies" + (f"; J ratio above {MAX_INERTIA_RATIO:g}" if candidate["warnings"] else "")
         else:
             failed = [label for key, label in MARGIN_LABELS if (margins.get(key) or math.inf) < 1]
@@ -892,7 +920,6 @@ def _candidates_table(data: Mapping, catalogue) -> Table:
         rows.append((motor["name"], motor["rated_power"])
                     + tuple(_two_decimals(margins.get(key)) for key, _ in MARGIN_LABELS)
                     + (_two_decimals(ratio), verdict))
-    choice = _recommended(data)
     notes = ["A margin is available / required: peak τ, the catalogue's peak torque over the cycle's peak "
              "|τ|; RMS τ, the rated torque over the RMS torque (the thermal check); speed, the rated speed over "
              "the peak speed; power, the rated power over the peak |τ·ω|. A motor qualifies when every margin "
@@ -923,7 +950,46 @@ def _two_decimals(value):
 # -- statistics
 
 def _result_tables(run: PipelineRun) -> list[Table]:
-    return []
+    """The outputs' minimum, maximum, time average, RMS and final value; the power outputs per cycle."""
+    from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
+
+    graph, result = run.graph, run.result
+    statistics = output_statistics(result)
+    rows = []
+    for name, values in statistics.items():
+        definition = graph.outputs[name]
+        factor = definition.display_factor
+        rows.append((name, format_unit_text(definition.unit_text))
+                    + tuple(values[key] / factor for key in ("min", "max", "mean", "rms", "final")))
+    tables = []
+    if rows:
+        span = f"t = {float(result.t[0]):g} – {float(result.t[-1]):g} s"
+        tables.append(Table(f"Outputs over the run ({span})", ("output", "unit", "min", "max", "mean", "RMS",
+                                                               "final"), rows,
+                            notes=["Mean and RMS are time averages (trapezoid rule over the solver's points)."]))
+    powers = power_outputs(graph)
+    if powers:
+        cycle = run.experiment.cycle if run.experiment is not None else None
+        per_cycle = power_statistics(result, powers, cycle=cycle)
+        rows = []
+        for name, windows in per_cycle.items():
+            factor = graph.outputs[name].display_factor
+            for window in windows:
+                rows.append((name, window["cycle"] + 1, window["peak"] / factor, window["peak_negative"] / factor,
+                             window["rms"] / factor, window["positive_energy"], window["negative_energy"],
+                             window["net_energy"]))
+        unit = format_unit_text(graph.outputs[powers[0]].unit_text) if len(powers) == 1 else "display unit"
+        tables.append(Table(
+            "Power outputs " + ("per cycle" if cycle is not None else "over the run"),
+            ("output", "cycle", f"peak |p| [{unit}]", f"most negative [{unit}]", f"RMS [{unit}]",
+             "positive energy [J]", "negative energy [J]", "net energy [J]"), rows,
+            notes=["Energies integrate the output (in W) with the trapezoid rule, split at its zero crossings."]))
+    return tables
+
+
+def format_unit_text(text: str | None) -> str:
+    """A unit for a table cell (plain text): ``N*m`` -> ``N·m``, ``m/s^2`` -> ``m/s²``."""
+    return plot_unit(text)
 
 
 def _summary(run: PipelineRun) -> list[tuple[str, Any, str | None]]:

@@ -126,6 +126,12 @@ class Table:
     rows: tuple[tuple[Any, ...], ...]
     caption: str = ""
     notes: tuple[str, ...] = ()
+    total_row: bool = False         # the last row sums the others: drawn in bold
+
+    @property
+    def numeric_columns(self) -> tuple[bool, ...]:
+        """Per column: does it hold numbers (its cells, and empty ones, are right-aligned)?"""
+        return tuple(any(_is_number(row[i]) for row in self.rows) for i in range(len(self.columns)))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "columns", tuple(self.columns))
