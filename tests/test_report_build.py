@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import io
 import os
 import re
 import xml.etree.ElementTree as ET
@@ -121,26 +122,20 @@ def test_flagship_numbers_match_the_reference():
     assert float(summary["motor energy per cycle"]) == pytest.approx(54.7, rel=0.01)
 
 
-def test_non_default_experiment_gets_its_own_file_name(tmp_path, monkeypatch):
+def test_non_default_experiment_file_name_and_overrides(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    target = build_report(FLAGSHIP, experiment="measured_speed", t_end=0.25, date=DATE)
-    assert target == Path("reports/electro_pneumatic_hybrid-measured_speed.html")
+    target = build_report(FLAGSHIP, experiment="catalogue_valve", sets=["M=40 [kg]"], t_end=0.05, date=DATE)
+    assert target == Path("reports/electro_pneumatic_hybrid-catalogue_valve.html")
     html = target.read_text(encoding="utf-8")
     check_html(html)
-    assert "<code>measured_speed</code>" in html
-    assert "<span class=\"setting\">t_end</span> = 0.25 s" in html
-    # the first experiment, named or not, writes the plain name
-    run = run_pipeline(MODELS / "series_rlc.bg")
-    assert default_output(MODELS / "series_rlc.bg", run) == Path("reports/series_rlc.html")
-
-
-def test_overridden_parameters_are_marked(tmp_path):
-    target = build_report(FLAGSHIP, experiment="catalogue_valve", sets=["M=40 [kg]"], t_end=0.05,
-                          output=tmp_path / "r.html", date=DATE)
-    html = target.read_text(encoding="utf-8")
+    assert "<code>catalogue_valve</code>" in html
+    assert "<span class=\"setting\">t_end</span> = 0.05 s" in html
     assert "(set by experiment catalogue_valve)" in html and "(set by --set)" in html
     row = re.search(r"<td><code>M</code></td><td class=\"num\">([^<]+)</td>", html)
     assert row.group(1) == "40"
+    # the first experiment, named or not, writes the plain name
+    run = run_pipeline(MODELS / "series_rlc.bg", experiment="step", t_end=1e-3)
+    assert default_output(MODELS / "series_rlc.bg", run) == Path("reports/series_rlc.html")
 
 
 # ---------------------------------------------------------------- escaping, failures, atomic writing
@@ -200,6 +195,21 @@ def test_incomplete_simulation_still_reports(tmp_path):
     assert "Incomplete simulation" in notice and "E810" in notice and "sqrt(0.5 - t)" in notice
     assert html.index("Incomplete simulation") < html.index('<section id="bond-graph">')
     assert "results" in sections(html) and "power" in sections(html)     # what was computed is shown
+
+
+def test_run_report_prints_diagnostics_and_exits_1_when_incomplete(tmp_path):
+    model = tmp_path / "failing.bg"
+    model.write_text(FAILING, encoding="utf-8")
+    errors = io.StringIO()
+    target, code = build.run_report(model, output=tmp_path / "f.html", errors=errors, date=DATE)
+    assert code == 1 and target.exists()
+    text = errors.getvalue()
+    assert "error[E810]" in text and "sqrt(0.5 - t)" in text and "^^^" in text       # with source context
+    assert text.rstrip().endswith(f"wrote {target} (incomplete simulation)")
+    errors = io.StringIO()
+    model.write_text(FAILING.replace("sqrt(0.5 - t)", "1"), encoding="utf-8")
+    assert build.run_report(model, output=tmp_path / "f.html", errors=errors, date=DATE)[1] == 0
+    assert errors.getvalue() == f"wrote {tmp_path / 'f.html'}\n"
 
 
 def test_model_without_end_time_is_reported_unsimulated(tmp_path):

@@ -14,7 +14,9 @@ an earlier report as it was.
 
 A simulation that stops early does not stop the report: it shows what was
 computed up to that point under a prominent "incomplete simulation" notice
-with the diagnostic.
+with the diagnostic. :func:`run_report` is the command-line wrapper: it also
+prints the run's diagnostics and returns an exit code (1 for an incomplete
+simulation).
 
 :func:`run_validate` is ``bondc validate``: it simulates, compares simulated
 signals with measured columns (:func:`bondc.report.validate.compare`), prints
@@ -53,14 +55,15 @@ from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
-    Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection, causality_notes,
-    causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
+    FULL_SIZE, HALF_SIZE, Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection,
+    causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
 )
 from bondc.report.validate import (
-    TIME_KEY, CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
+    CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
 )
 
-__all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "default_output", "run_validate",
+__all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
+           "write_report", "run_validate",
            "compare_run", "validation_table", "state_equations", "output_groups", "REPORTS_DIR"]
 
 #: Where reports go unless ``output`` says otherwise (relative to the working directory).
@@ -179,6 +182,13 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     is simulated; a model error raises its stage's error. Either way nothing
     is written and an earlier report stays as it was.
     """
+    target, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
+                       motors=motors, output=output, t_end=t_end, date=date, progress=progress)
+    return target
+
+
+def _build(path, *, model, experiment, sets, data, compare, motors, output, t_end, date,
+           progress) -> tuple[Path, PipelineRun]:
     specs, measured = _measured(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     validation = None
@@ -187,7 +197,38 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
         validation = validation_section(run, results, data)
     target = Path(output) if output is not None else default_output(path, run)
     write_report(report_context(run, validation=validation, motors=motors, date=date), target)
-    return target
+    return target, run
+
+
+def run_report(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+               sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
+               motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
+               date: str | None = None, progress: bool = False,
+               errors: TextIO | None = None) -> tuple[Path, int]:
+    """``bondc report`` for the command line: :func:`build_report`, then tell the user; returns (path, exit code).
+
+    Prints the run's warnings (and an incomplete simulation's diagnostic)
+    with their source context, then ``wrote PATH``, to ``errors`` (stderr).
+    The exit code is 0, or 1 when the simulation stopped early (the report
+    is written all the same, with its notice). Failing validation signals do
+    not change it: that is ``bondc validate``'s job.
+    """
+    errors = errors if errors is not None else sys.stderr
+    target, run = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
+                         motors=motors, output=output, t_end=t_end, date=date, progress=progress)
+    _print_diagnostics(run, errors)
+    print(f"wrote {target}" + ("" if run.complete else " (incomplete simulation)"), file=errors)
+    return target, 0 if run.complete else 1
+
+
+def _print_diagnostics(run: PipelineRun, stream: TextIO) -> None:
+    from bondc.errors import render_all
+
+    diagnostics = list(run.warnings)
+    if run.result is not None and not run.result.complete:
+        diagnostics.append(_failure(run))
+    if diagnostics:
+        print(render_all(diagnostics, run.graph.sources), file=stream)
 
 
 def write_report(context: ReportContext, target: str | Path) -> None:
@@ -201,10 +242,10 @@ def write_report(context: ReportContext, target: str | Path) -> None:
 def _measured(data, compare_specs) -> tuple[list[CompareSpec], dict[str, np.ndarray] | None]:
     specs = [spec if isinstance(spec, CompareSpec) else parse_compare_spec(spec) for spec in compare_specs or ()]
     if data is None and specs:
-        raise UsageError(Diagnostic("error", "E004", "--compare needs measured data",
+        raise UsageError(Diagnostic("error", "E001", "--compare needs measured data",
                                     hint="give the measured CSV with --data FILE"))
     if data is not None and not specs:
-        raise UsageError(Diagnostic("error", "E004", "--data needs at least one comparison",
+        raise UsageError(Diagnostic("error", "E001", "--data needs at least one comparison",
                                     hint="say which simulated signal each measured column is: --compare OUT=COLUMN"))
     if data is None:
         return [], None
@@ -246,16 +287,17 @@ def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_f
         unit, factor = _signal_unit(run.graph, result.output)
         simulated, measured = result.simulated / factor, result.measured / factor
         title = f"{result.output} simulated and {result.column} measured"
-        plots.append(Plot(title, plot_svg(
+        plots.append(Plot(title, _time_plot(
             result.t, {f"{result.column} (measured)": measured, f"{result.output} (simulated)": simulated},
-            title, result.output + (f" [{plot_unit(unit)}]" if unit else " (SI)"),
+            title, result.output + (f" [{plot_unit(unit)}]" if unit else " (SI)"), half=True,
             styles={f"{result.column} (measured)": {"color": "#8c959f", "linewidth": 1.0},
                     f"{result.output} (simulated)": {"color": "#0550ae", "linewidth": 1.4}}),
-            f"NRMSE {result.nrmse:.3g}, R² {result.r2:.4g}: {'pass' if result.passed else 'FAIL'}"))
+            f"NRMSE {result.nrmse:.3g}, R² {result.r2:.4g}: {'pass' if result.passed else 'FAIL'}", True))
         title = f"{result.output} error, simulated − measured"
-        plots.append(Plot(title, plot_svg(result.t, {"error": simulated - measured}, title, "error" + (f" [{plot_unit(unit)}]" if unit else " (SI)"),
-                                          styles={"error": {"color": "#a40e26", "linewidth": 1.0}}),
-                          f"largest |error| {result.maxabs / factor:.4g}{' ' + unit if unit else ''}"))
+        ylabel = "error" + (f" [{plot_unit(unit)}]" if unit else " (SI)")
+        plots.append(Plot(title, _time_plot(result.t, {"error": simulated - measured}, title, ylabel, half=True,
+                                            styles={"error": {"color": "#a40e26", "linewidth": 1.0}}),
+                          f"Largest |error| {result.maxabs / factor:.4g}{' ' + plot_unit(unit) if unit else ''}", True))
     return ValidationSection(results, str(data_file), plots, str(junit_file) if junit_file else None)
 
 
@@ -285,27 +327,28 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
                  junit: str | Path | None = None, output: str | Path | None = None, model: str | None = None,
                  experiment: str | None = None, sets: Sequence = (), t_end: float | None = None,
                  motors: str | Path | None = None, date: str | None = None, stream: TextIO | None = None,
-                 progress: bool = False) -> tuple[list[SignalResult], int]:
+                 errors: TextIO | None = None, progress: bool = False) -> tuple[list[SignalResult], int]:
     """``bondc validate``: simulate, compare with the measured data, report; returns (results, exit code).
 
-    Prints :func:`validation_table` to ``stream`` (stdout); writes JUnit XML
-    to ``junit`` (one test case per signal) and the HTML report with its
-    validation section to ``output`` when given. The exit code is 0 when
-    every signal passes, 1 when one fails or the simulation stopped early (its
-    diagnostic is printed to stderr). Raises DataError for bad measured data
+    Prints :func:`validation_table` to ``stream`` (stdout) and the run's
+    warnings, with an incomplete simulation's diagnostic, to ``errors``
+    (stderr); writes JUnit XML to ``junit`` (one test case per signal) and
+    the HTML report with its validation section to ``output`` when given.
+    The exit code is 0 when every signal passes, 1 when one fails or the
+    simulation stopped early. Raises DataError for bad measured data
     (missing column, time not increasing, no overlap in time) and the
     stages' errors for a bad model; then nothing is written.
     """
     stream = stream if stream is not None else sys.stdout
+    errors = errors if errors is not None else sys.stderr
     specs, measured = _measured(data, compare)
     if not specs:
-        raise UsageError(Diagnostic("error", "E004", "validate needs at least one comparison",
+        raise UsageError(Diagnostic("error", "E001", "validate needs at least one comparison",
                                     hint="--compare OUT=COLUMN[:nrmse=0.05]"))
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     results = compare_run(run, measured, specs)
+    _print_diagnostics(run, errors)
     print(validation_table(results), file=stream)
-    if not run.complete:
-        print(render_diagnostic(_failure(run), run.graph.sources), file=sys.stderr)
     suite = run.graph.name + (f".{run.experiment.name}" if run.experiment is not None else "")
     if junit is not None:
         Path(junit).parent.mkdir(parents=True, exist_ok=True)
@@ -655,6 +698,25 @@ def plot_unit(text: str | None) -> str:
     return text.replace("*", "·")
 
 
+def time_axis(t) -> tuple[np.ndarray, str]:
+    """Times for a plot's axis and its label: seconds, or milliseconds for a run shorter than 0.1 s.
+
+    >>> time_axis([0.0, 0.02])[1], time_axis([0.0, 4.2])[1]
+    ('t [ms]', 't [s]')
+    """
+    t = np.asarray(t, dtype=float)
+    span = float(t[-1] - t[0]) if t.size else 0.0
+    if 0 < span < 0.1:
+        return t * 1e3, "t [ms]"
+    return t, "t [s]"
+
+
+def _time_plot(t, series, title, ylabel, *, half=False, styles=None) -> Markup:
+    times, xlabel = time_axis(t)
+    return plot_svg(times, series, title, ylabel, xlabel=xlabel, size=HALF_SIZE if half else FULL_SIZE,
+                    styles=styles)
+
+
 def _names(names: Sequence[str]) -> str:
     return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
@@ -666,7 +728,10 @@ def _sentence(text: str) -> str:
 def output_plots(graph: BondGraph, result, experiment: ExperimentDef | None) -> list[Plot]:
     """One plot per group of :func:`output_groups`, in the outputs' display units."""
     plots = []
-    for group in output_groups(graph, result, experiment):
+    featured = set(experiment.outputs if experiment is not None else ())
+    for number, group in enumerate(output_groups(graph, result, experiment)):
+        # the experiment's outputs (else the first plot) full width, the others two to a row
+        half = not (featured & set(group) or (not featured and number == 0))
         series, notes = {}, []
         unit = None
         kind = "output"
@@ -688,7 +753,8 @@ def output_plots(graph: BondGraph, result, experiment: ExperimentDef | None) -> 
         label = group[0] if len(group) == 1 else ""
         if unit:
             label += f" [{plot_unit(unit)}]"
-        plots.append(Plot(title, plot_svg(result.t, series, title, label.strip()), "; ".join(notes)))
+        plots.append(Plot(title, _time_plot(result.t, series, title, label.strip(), half=half), "; ".join(notes),
+                          half))
     return plots
 
 
@@ -731,7 +797,8 @@ def power_plots(graph: BondGraph, result) -> list[Plot]:
         series = {name: sign * values for name, values in power.items()
                   if _role(graph.elements[name].kind) in roles}
         if series:
-            plots.append(Plot(title, plot_svg(result.t, series, title, "power [W]"), caption))
+            half = roles != ("source",)
+            plots.append(Plot(title, _time_plot(result.t, series, title, "power [W]", half=half), caption, half))
     return plots
 
 
@@ -958,9 +1025,8 @@ def _result_tables(run: PipelineRun) -> list[Table]:
     rows = []
     for name, values in statistics.items():
         definition = graph.outputs[name]
-        factor = definition.display_factor
-        rows.append((name, format_unit_text(definition.unit_text))
-                    + tuple(values[key] / factor for key in ("min", "max", "mean", "rms", "final")))
+        shown = [values[key] / definition.display_factor for key in ("min", "max", "mean", "rms", "final")]
+        rows.append((name, format_unit_text(definition.unit_text)) + tuple(_without_noise(shown)))
     tables = []
     if rows:
         span = f"t = {float(result.t[0]):g} – {float(result.t[-1]):g} s"
@@ -971,20 +1037,30 @@ def _result_tables(run: PipelineRun) -> list[Table]:
     if powers:
         cycle = run.experiment.cycle if run.experiment is not None else None
         per_cycle = power_statistics(result, powers, cycle=cycle)
-        rows = []
-        for name, windows in per_cycle.items():
-            factor = graph.outputs[name].display_factor
-            for window in windows:
-                rows.append((name, window["cycle"] + 1, window["peak"] / factor, window["peak_negative"] / factor,
-                             window["rms"] / factor, window["positive_energy"], window["negative_energy"],
-                             window["net_energy"]))
-        unit = format_unit_text(graph.outputs[powers[0]].unit_text) if len(powers) == 1 else "display unit"
+        rows = [(name, window["cycle"] + 1, window["peak"], window["peak_negative"], window["rms"],
+                 window["positive_energy"], window["negative_energy"], window["net_energy"])
+                for name, windows in per_cycle.items() for window in windows]
         tables.append(Table(
             "Power outputs " + ("per cycle" if cycle is not None else "over the run"),
-            ("output", "cycle", f"peak |p| [{unit}]", f"most negative [{unit}]", f"RMS [{unit}]",
-             "positive energy [J]", "negative energy [J]", "net energy [J]"), rows,
-            notes=["Energies integrate the output (in W) with the trapezoid rule, split at its zero crossings."]))
+            ("output", "cycle", "peak |p| [W]", "min [W]", "RMS [W]", "positive [J]", "negative [J]", "net [J]"),
+            rows, caption="Energies: the integral of the positive and of the negative part, and their sum",
+            notes=["Energies integrate the output with the trapezoid rule, split at its zero crossings."]))
     return tables
+
+
+#: Statistics smaller than this fraction of the largest of their row are rounding noise, shown as 0.
+NOISE = 1e-9
+
+
+def _without_noise(values: Sequence[float]) -> list[float]:
+    """``values`` with the ones below :data:`NOISE` times the largest magnitude set to 0 (and no -0).
+
+    >>> _without_noise([-1.3e-15, 0.09992, -0.0])
+    [0.0, 0.09992, 0.0]
+    """
+    finite = [abs(v) for v in values if math.isfinite(v)]
+    scale = max(finite, default=0.0)
+    return [0.0 if math.isfinite(v) and abs(v) <= NOISE * scale else v + 0.0 for v in values]
 
 
 def format_unit_text(text: str | None) -> str:

@@ -165,6 +165,12 @@ class Plot(NamedTuple):
     title: str
     svg: Markup                     # from plot_svg
     caption: str = ""
+    half: bool = False              # drawn at half the width, two to a row (make it with size=HALF_SIZE)
+
+
+#: Figure sizes of plot_svg, inches: a full-width plot and a half-width one (two to a row).
+FULL_SIZE = (7.0, 2.9)
+HALF_SIZE = (4.6, 2.7)
 
 
 @dataclass(frozen=True)
@@ -391,30 +397,28 @@ def decimation_indices(t: np.ndarray, series: Sequence[np.ndarray], max_points: 
 
     >>> t = np.linspace(0, 1, 10001)
     >>> kept = decimation_indices(t, [np.sin(40 * t)], 1000)
-    >>> len(kept) <= 1000, int(kept[0]), int(kept[-1]), bool(np.isclose(np.sin(40 * t[kept]).max(), np.sin(40 * t).max()))
+    >>> peak_kept = np.isclose(np.sin(40 * t[kept]).max(), np.sin(40 * t).max())
+    >>> len(kept) <= 1000, int(kept[0]), int(kept[-1]), bool(peak_kept)
     (True, 0, 10000, True)
     """
     if t.size <= max_points:
         return None
     buckets = max(max_points // (2 + 2 * max(len(series), 1)), 1)
-    edges = np.searchsorted(t, np.linspace(t[0], t[-1], buckets + 1)[1:-1], side="left")
-    starts = np.concatenate(([0], edges))
-    ends = np.concatenate((edges, [t.size]))
-    kept = [0, t.size - 1]
-    for start, end in zip(starts, ends):
-        if end <= start:
-            continue
-        kept += [start, end - 1]
-        for values in series:
-            chunk = values[start:end]
-            if np.all(np.isnan(chunk)):
-                continue
-            kept += [start + int(np.nanargmin(chunk)), start + int(np.nanargmax(chunk))]
-    return np.unique(np.asarray(kept, dtype=int))
+    edges = np.linspace(t[0], t[-1], buckets + 1)[1:-1]
+    bucket = np.searchsorted(edges, t, side="right")               # the interval of every sample
+    change = np.flatnonzero(np.diff(bucket)) + 1
+    kept = [np.array([0, t.size - 1]), change, change - 1]         # first and last sample of each interval
+    for values in series:
+        values = np.asarray(values, dtype=float)
+        for extreme in (np.where(np.isnan(values), np.inf, values), np.where(np.isnan(values), -np.inf, -values)):
+            order = np.lexsort((extreme, bucket))                  # by interval, smallest first within it
+            first = np.concatenate(([True], np.diff(bucket[order]) != 0))
+            kept.append(order[first])
+    return np.unique(np.concatenate(kept).astype(int))
 
 
 def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: str, ylabel: str,
-             xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = (7.0, 2.9),
+             xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = FULL_SIZE,
              max_points: int = 4000, styles: Mapping[str, Mapping[str, Any]] | None = None) -> Markup:
     """A line plot of ``series`` (label -> values over ``t``) as an inline SVG element.
 
@@ -466,7 +470,10 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
         if show_title:
             axes.set_title(title, loc="left")
         if len(arrays) > 1:
-            axes.legend(loc="best")
+            if size[0] >= FULL_SIZE[0]:     # room beside a full-width plot: the legend never hides a curve
+                axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+            else:
+                axes.legend(loc="best")
         buffer = io.StringIO()
         figure.savefig(buffer, format="svg",
                        metadata={"Date": None, "Creator": None, "Format": None, "Type": None})

@@ -1,0 +1,896 @@
+"""Parameter sweeps: a ``.bg`` file + ``--vary`` specs -> :class:`SweepResult` (one row per grid point).
+
+:func:`run_sweep` is ``bondc sweep`` without argument parsing. Each ``vary``
+text names a parameter and its values::
+
+    "k=400,800,1600"          a list, in the parameter's declared unit (as --set)
+    "lead=5,10 [mm]"          a list in the given unit (converted by bondc.units)
+    "M=20:40:5 [kg]"          start:stop:count, count values from start to stop inclusive
+    "k=100, 200:400:3"        items mix: 100, 200, 300, 400
+
+Several specs make a full grid (the cartesian product, the first spec
+varying slowest, rows ordered by grid index), at most :data:`MAX_RUNS` runs.
+
+**How a point is run.** The model is loaded, checked, derived and compiled
+once, with the base ``sets``. For each point the file is loaded again with
+the base ``sets`` plus the point's values as ``--set`` overrides, so units,
+validation and every parameter defined by others (the flagship's ``F_n0 =
+M*g - ...``, ``delta0``, ``theta0``) follow exactly the ``--set`` rules; the
+point's whole parameter vector (SI) is then passed to the compiled module as
+overrides (every parameter given, so nothing is recomputed there). Loading is
+cheap (about 20 ms); deriving and compiling is not (about 1.5 s), so this is
+the fast path (``path`` "fast"). A point whose load gives a different
+structure (other parameters or inputs) is derived and compiled again
+("rederived"); ``rederive=True`` does that for every point, for a model whose
+derivation depends on parameter values (a nonlinear law inverted with
+``sympy.solve`` keeps the branch that reproduces the law at the parameters'
+values).
+
+**What each point gives** (SI in :meth:`SweepResult.to_json` and the csv;
+the text table shows the outputs' declared units):
+
+* for every output: ``NAME.min``, ``NAME.max``, ``NAME.rms``, ``NAME.final``
+  (and ``NAME.mean`` on request), from :func:`~bondc.analysis.stats.output_statistics`;
+* ``energy.residual``: the energy balance residual summed over the cycles
+  [J], and ``energy.relative_residual``: its largest share of a cycle's
+  throughput (:func:`~bondc.analysis.energy.energy_account`);
+* when the model has an output ``torque`` and an output or input ``omega``
+  or ``speed`` (:mod:`bondc.analysis.motor_report`), the motor
+  requirements over the experiment's cycle: ``motor.peak_torque``,
+  ``motor.rms_torque`` [N*m], ``motor.peak_speed`` [rad/s],
+  ``motor.peak_power`` [W], ``motor.energy`` (net energy per cycle) [J].
+
+``metrics`` selects columns (``torque.max``, ``x.final``,
+``energy.residual``, ``x.*``, ``motor.*``); None takes them all (without
+the means). Only what is selected is computed.
+
+**Failures.** A point that cannot be loaded or whose run stops early (a law
+that gives nan, a solver failure) gets ``status`` "failed", its message and
+diagnostics, and the sweep goes on; :attr:`SweepResult.exit_code` is then 1.
+A metric that cannot be computed for a point that ran (energy account, motor
+profile) is nan with a warning.
+
+**Parallel runs.** ``jobs > 1`` runs points in a
+:class:`~concurrent.futures.ProcessPoolExecutor`; every point is computed
+the same way in whichever process, so the result does not depend on ``jobs``.
+
+Problems with the request are :class:`~bondc.errors.UsageError` with codes
+E960 (a vary text that is not ``NAME=VALUES [unit]``, or an empty list),
+E961 (not a parameter), E962 (a value that is not a finite number, a bad
+``start:stop:count``), E963 (a unit bondc does not know, or of another
+quantity than the parameter's), E964 (more than :data:`MAX_RUNS` runs),
+E965 (an unknown metric), E966 (a parameter varied twice, or varied and
+``--set``), E967 (jobs < 1), E969 (an output file that is not .csv or
+.json). E968 is a failed point's diagnostic when it has none of its own
+(the model file changed during the sweep, a worker process died, an
+internal error).
+
+>>> axis = parse_vary("M=20:40:5 [kg]")
+>>> axis.name, axis.values, axis.unit
+('M', (20.0, 25.0, 30.0, 35.0, 40.0), 'kg')
+>>> parse_vary("k=100, 200:400:3").values
+(100.0, 200.0, 300.0, 400.0)
+>>> parse_vary("k=abc")
+Traceback (most recent call last):
+...
+bondc.errors.UsageError: --vary 'k=abc': 'abc' is not a number
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import difflib
+import io
+import itertools
+import json
+import math
+import os
+import re
+import sys
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from bondc.errors import BondcError, Diagnostic, UsageError
+
+#: The most runs one sweep may ask for.
+MAX_RUNS = 200
+
+OUTPUT_STATISTICS = ("min", "max", "mean", "rms", "final")
+DEFAULT_OUTPUT_STATISTICS = ("min", "max", "rms", "final")
+ENERGY_METRICS = {"energy.residual": "J", "energy.relative_residual": None}
+MOTOR_METRICS = {"motor.peak_torque": "N*m", "motor.rms_torque": "N*m", "motor.peak_speed": "rad/s",
+                 "motor.peak_power": "W", "motor.energy": "J"}
+_MOTOR_FIELDS = {"motor.peak_torque": "peak_torque", "motor.rms_torque": "rms_torque",
+                 "motor.peak_speed": "peak_speed", "motor.peak_power": "peak_power", "motor.energy": "energy_net"}
+
+
+def _usage(code: str, message: str, hint: str | None = None) -> UsageError:
+    return UsageError(Diagnostic("error", code, message, hint=hint))
+
+
+# ------------------------------------------------------------------ the request
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One varied parameter: its values as given, in ``unit`` (None: the parameter's declared unit)."""
+
+    name: str
+    values: tuple[float, ...]
+    unit: str | None
+    text: str
+
+
+_VARY = re.compile(r"^\s*(?P<name>[^=\[\]]*?)\s*=\s*(?P<values>[^\[\]]*?)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def _number(text: str, spec: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise _usage("E962", f"--vary '{spec}': '{text}' is not a number",
+                     hint="values are numbers separated by commas, or start:stop:count") from None
+    if not math.isfinite(value):
+        raise _usage("E962", f"--vary '{spec}': '{text}' is not a finite number")
+    return value
+
+
+def _range(item: str, spec: str) -> list[float]:
+    parts = [part.strip() for part in item.split(":")]
+    if len(parts) != 3:
+        raise _usage("E962", f"--vary '{spec}': '{item}' is not start:stop:count",
+                     hint="e.g. M=20:40:5 gives 20, 25, 30, 35, 40")
+    start, stop = _number(parts[0], spec), _number(parts[1], spec)
+    try:
+        count = int(parts[2])
+    except ValueError:
+        count = 0
+    if count < 2 or str(count) != parts[2].lstrip("+"):
+        raise _usage("E962", f"--vary '{spec}': the count in '{item}' must be a whole number >= 2, "
+                             f"got '{parts[2]}'", hint="start:stop:count includes both ends")
+    values = np.linspace(start, stop, count)
+    values[0], values[-1] = start, stop
+    return [float(v) for v in values]
+
+
+def parse_vary(text: str) -> Axis:
+    """``"NAME=v1,v2 [unit]"`` or ``"NAME=start:stop:count [unit]"`` -> :class:`Axis` (E960, E962)."""
+    match = _VARY.match(text)
+    if match is None or "=" not in text:
+        raise _usage("E960", f"--vary '{text}' is not NAME=VALUES [unit]",
+                     hint='e.g. --vary "k=400,800,1600" or --vary "M=20:40:5 [kg]"')
+    name = match["name"]
+    if not _NAME.match(name):
+        raise _usage("E960", f"--vary '{text}': '{name}' is not a parameter name",
+                     hint='e.g. --vary "k=400,800,1600"')
+    unit = match["unit"].strip() if match["unit"] is not None else None
+    if unit == "":
+        raise _usage("E963", f"--vary '{text}': the unit between [ ] is empty",
+                     hint="leave out [ ] to use the parameter's declared unit")
+    items = [item.strip() for item in match["values"].split(",")]
+    if not any(items):
+        raise _usage("E960", f"--vary '{text}' gives no values for '{name}'",
+                     hint="give values separated by commas, or start:stop:count")
+    values: list[float] = []
+    for item in items:
+        if not item:
+            raise _usage("E960", f"--vary '{text}' has an empty value between commas")
+        values += _range(item, text) if ":" in item else [_number(item, text)]
+    return Axis(name, tuple(values), unit, text)
+
+
+def _resolve_unit(text: str, where: str = ""):
+    """The :class:`bondc.units.SIUnit` of a unit as written; raises UsageError E963 (``where`` starts
+    its message)."""
+    from bondc import units
+    from bondc.parse import parse_set_value
+
+    try:
+        unit = parse_set_value(f"_unit = 1 [{text}]").unit
+    except BondcError:
+        raise _usage("E963", f"{where}[{text}] is not a unit") from None
+    si, diagnostics = units.resolve(unit)
+    if si is None:
+        hint = next((d.hint for d in diagnostics if d.hint), None)
+        message = "; ".join(d.message for d in diagnostics) or f"[{text}] is not a unit"
+        raise _usage("E963", where + message, hint=hint)
+    return si
+
+
+def _si_unit_text(unit_text: str | None) -> str | None:
+    """The SI unit of a unit as written: itself when coherent (``N``), else its dimensions (``mm`` -> ``m``)."""
+    if not unit_text:
+        return None
+    try:
+        si = _resolve_unit(unit_text)
+    except UsageError:
+        return unit_text
+    if si.is_coherent:
+        return unit_text
+    text = si.dimension_text()
+    return None if text == "1" else text
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A column: its name, the unit of its SI value and how the text table shows it."""
+
+    name: str
+    si_unit: str | None
+    unit: str | None = None          # the display unit (an output's declared unit)
+    display_factor: float = 1.0      # display value = SI value / display_factor
+
+
+def _available_metrics(graph, motor: bool) -> dict[str, Metric]:
+    found: dict[str, Metric] = {}
+    for name, output in graph.outputs.items():
+        for statistic in OUTPUT_STATISTICS:
+            found[f"{name}.{statistic}"] = Metric(f"{name}.{statistic}", _si_unit_text(output.unit_text),
+                                                  output.unit_text, output.display_factor or 1.0)
+    for name, unit in ENERGY_METRICS.items():
+        found[name] = Metric(name, unit, unit)
+    if motor:
+        for name, unit in MOTOR_METRICS.items():
+            found[name] = Metric(name, unit, unit)
+    return found
+
+
+def _has_motor(graph) -> bool:
+    from bondc.analysis.motor_report import SPEED_NAMES, TORQUE_NAMES
+
+    torque = any(name in graph.outputs for name in TORQUE_NAMES)
+    speed = any(name in graph.outputs or name in graph.inputs for name in SPEED_NAMES)
+    return torque and speed
+
+
+def select_metrics(graph, metrics: Sequence[str] | None) -> tuple[Metric, ...]:
+    """The columns ``metrics`` asks for (None: every default column), in the order asked; E965."""
+    motor = _has_motor(graph)
+    available = _available_metrics(graph, motor)
+    if metrics is None:
+        return tuple(m for name, m in available.items() if _default(name))
+    chosen: dict[str, Metric] = {}
+    for requested in metrics:
+        for text in (part.strip() for part in requested.split(",")):
+            if not text:
+                continue
+            if text.endswith(".*"):
+                head = text[:-2]
+                group = [m for name, m in available.items() if name.rpartition(".")[0] == head and _default(name)]
+                if group:
+                    chosen.update((m.name, m) for m in group)
+                    continue
+            elif text in available:
+                chosen[text] = available[text]
+                continue
+            raise _unknown_metric(text, available, graph, motor)
+    if not chosen:
+        raise _usage("E965", "no metrics selected", hint="e.g. --metric x.max --metric energy.residual")
+    return tuple(chosen.values())
+
+
+def _default(name: str) -> bool:
+    """Whether a metric is a column when none are asked for (every one but the means)."""
+    return name in ENERGY_METRICS or name in MOTOR_METRICS or name.rpartition(".")[2] in DEFAULT_OUTPUT_STATISTICS
+
+
+def _unknown_metric(text: str, available: dict, graph, motor: bool) -> UsageError:
+    if text.startswith("motor.") and not motor:
+        return _usage("E965", f"unknown metric '{text}': motor requirements need an output 'torque' and an "
+                              "output or input 'omega' or 'speed'",
+                      hint=f"outputs: {', '.join(graph.outputs) or 'none'}")
+    head, dot, _ = text.rpartition(".")
+    listing = (f"outputs: {', '.join(graph.outputs) or 'none'}, each with .min .max .mean .rms .final; "
+               "also energy.residual, energy.relative_residual" + (", motor.*" if motor else ""))
+    if dot and head not in graph.outputs and head not in ("energy", "motor"):
+        close = difflib.get_close_matches(head, list(graph.outputs), n=1)
+        return _usage("E965", f"unknown metric '{text}': the model has no output '{head}'",
+                      hint=f"did you mean '{close[0]}'?" if close else listing)
+    close = difflib.get_close_matches(text, list(available), n=1)
+    return _usage("E965", f"unknown metric '{text}'", hint=f"did you mean '{close[0]}'?" if close else listing)
+
+
+# ------------------------------------------------------------------ results
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """One grid point: the values as given, every parameter it ran with (SI) and its metrics (SI)."""
+
+    index: int
+    values: tuple[float, ...]                    # per axis, as given
+    status: str                                  # "ok" or "failed"
+    message: str | None = None
+    path: str | None = None                      # "fast", "rederived" or None (not run)
+    parameters: dict = field(default_factory=dict)   # varied parameter -> SI value
+    metrics: dict = field(default_factory=dict)      # metric -> SI value (nan: not computed)
+    t_reached: float | None = None
+    diagnostics: tuple[Diagnostic, ...] = ()     # why it failed
+    warnings: tuple[Diagnostic, ...] = ()
+    traceback: str | None = None                 # an internal error's traceback
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    """Every point of a sweep, ordered by grid index; see the module docstring."""
+
+    model: str
+    experiment: str | None
+    file: str
+    axes: tuple[Axis, ...]
+    axis_units: tuple[str | None, ...]           # each axis's unit as shown (given, else declared)
+    axis_si_units: tuple[str | None, ...]
+    metrics: tuple[Metric, ...]
+    points: tuple[SweepPoint, ...]
+    settings: dict = field(default_factory=dict)     # t_end, dt, rederive
+    warnings: tuple[Diagnostic, ...] = ()        # from loading and deriving the base model
+
+    @property
+    def failed(self) -> tuple[SweepPoint, ...]:
+        return tuple(point for point in self.points if not point.ok)
+
+    @property
+    def exit_code(self) -> int:
+        """0 when every point ran, 1 when any failed."""
+        return 1 if self.failed else 0
+
+    def describe(self, point: SweepPoint) -> str:
+        """``k=400 N/m, b=12`` for a point, in the units as given."""
+        parts = []
+        for axis, unit, value in zip(self.axes, self.axis_units, point.values):
+            parts.append(f"{axis.name}={value:.6g}" + (f" {unit}" if unit else ""))
+        return ", ".join(parts)
+
+    def diagnostics(self) -> list[Diagnostic]:
+        """Every failed point's diagnostics, each message prefixed with the point, then E968 per point
+        without one."""
+        out = []
+        for point in self.failed:
+            where = f"point {point.index} ({self.describe(point)}): "
+            if point.diagnostics:
+                out += [Diagnostic(d.severity, d.code, where + d.message, d.span, d.hint, d.related)
+                        for d in point.diagnostics]
+            else:
+                out.append(Diagnostic("error", "E968", where + (point.message or "failed")))
+        return out
+
+    def column(self, metric: str) -> list[float]:
+        """One metric over the points, SI (nan where it was not computed)."""
+        return [point.metrics.get(metric, math.nan) for point in self.points]
+
+    # ---------------------------------------------------------------- json
+
+    def to_json(self) -> dict:
+        """A JSON-ready dict (nan/inf as the strings "nan", "inf"); values SI."""
+        data = {
+            "model": self.model,
+            "experiment": self.experiment,
+            "file": self.file,
+            "settings": dict(self.settings),
+            "parameters": [{"name": axis.name, "vary": axis.text, "unit": unit, "si_unit": si_unit,
+                            "values": list(axis.values)}
+                           for axis, unit, si_unit in zip(self.axes, self.axis_units, self.axis_si_units)],
+            "metrics": [{"name": m.name, "si_unit": m.si_unit} for m in self.metrics],
+            "runs": len(self.points),
+            "failed": len(self.failed),
+            "points": [{
+                "index": point.index,
+                "values": list(point.values),
+                "parameters": dict(point.parameters),
+                "status": point.status,
+                "message": point.message,
+                "path": point.path,
+                "t_reached": point.t_reached,
+                "metrics": {m.name: point.metrics.get(m.name) for m in self.metrics} if point.ok else {},
+                "diagnostics": [d.to_json() for d in point.diagnostics],
+                "warnings": [d.to_json() for d in point.warnings],
+                **({"traceback": point.traceback} if point.traceback else {}),
+            } for point in self.points],
+        }
+        return _json_safe(data)
+
+    def to_json_text(self) -> str:
+        return json.dumps(self.to_json(), indent=2, allow_nan=False) + "\n"
+
+    # ---------------------------------------------------------------- csv
+
+    def csv_text(self) -> str:
+        """Columns ``index``, each varied parameter, each metric (SI, the unit in the header), ``status``,
+        ``message``; one row per point; values are the shortest text that reads back to the same float."""
+        out = io.StringIO()
+        writer = csv.writer(out, lineterminator="\n")
+        header = ["index"]
+        header += [_with_unit(axis.name, unit) for axis, unit in zip(self.axes, self.axis_si_units)]
+        header += [_with_unit(m.name, m.si_unit) for m in self.metrics]
+        writer.writerow(header + ["status", "message"])
+        for point in self.points:
+            row = [point.index]
+            row += [_csv_number(point.parameters.get(axis.name)) for axis in self.axes]
+            row += [_csv_number(point.metrics.get(m.name)) if point.ok else "" for m in self.metrics]
+            writer.writerow(row + [point.status, point.message or ""])
+        return out.getvalue()
+
+    def write_csv(self, path) -> None:
+        """Write :meth:`csv_text` atomically."""
+        from bondc.io import atomic_write_text
+
+        atomic_write_text(Path(path), self.csv_text())
+
+    def write(self, path) -> None:
+        """``.json`` -> :meth:`to_json`, ``.csv`` -> :meth:`write_csv` (atomic); E969 otherwise."""
+        from bondc.io import atomic_write_text
+
+        suffix = Path(path).suffix.lower()
+        if suffix == ".json":
+            atomic_write_text(Path(path), self.to_json_text())
+        elif suffix == ".csv":
+            self.write_csv(path)
+        else:
+            raise _usage("E969", f"cannot write '{path}': give a .csv or .json file")
+
+    # ---------------------------------------------------------------- text
+
+    def to_text(self, width: int = 110) -> str:
+        """A table: the varied parameters, then the metrics in display units, then the status.
+
+        Metric columns that do not fit in ``width`` go to further tables that repeat the parameters.
+        """
+        shape = " x ".join(str(len(axis.values)) for axis in self.axes)
+        head = [f"sweep of {self.model}" + (f" ({self.experiment})" if self.experiment else "")
+                + f": {len(self.points)} run{'s' if len(self.points) != 1 else ''}"
+                + (f" ({shape})" if len(self.axes) > 1 else "") + ", "
+                + (f"{len(self.failed)} failed" if self.failed else "all complete")]
+        keys = [_with_unit(axis.name, unit) for axis, unit in zip(self.axes, self.axis_units)]
+        fixed = [[key] + [f"{value:.6g}" for value in (p.values[i] for p in self.points)]
+                 for i, key in enumerate(keys)]
+        status = ["status"] + [point.status for point in self.points]
+        columns = []
+        for metric in self.metrics:
+            cells = [_with_unit(metric.name, metric.unit)]
+            for point in self.points:
+                value = point.metrics.get(metric.name) if point.ok else None
+                cells.append("-" if value is None else _format(value / metric.display_factor))
+            columns.append(cells)
+        blocks, block, used = [], [], sum(_width(c) + 2 for c in fixed) + _width(status)
+        for cells in columns:
+            if block and used + _width(cells) + 2 > width:
+                blocks.append(block)
+                block, used = [], sum(_width(c) + 2 for c in fixed) + _width(status)
+            block.append(cells)
+            used += _width(cells) + 2
+        blocks.append(block)
+        lines = list(head)
+        for block in blocks:
+            table = fixed + block + [status]
+            widths = [_width(c) for c in table]
+            lines.append("")
+            for row in range(len(self.points) + 1):
+                cells = []
+                for number, (cells_of, w) in enumerate(zip(table, widths)):
+                    text = cells_of[row]
+                    left = number >= len(table) - 1      # status is text
+                    cells.append(text.ljust(w) if left else text.rjust(w))
+                lines.append("  ".join(cells).rstrip())
+        notes = []
+        for point in self.points:
+            if not point.ok:
+                # its warnings (outputs not finite, ...) follow from the failure: see to_json()
+                notes.append(f"  point {point.index} ({self.describe(point)}) failed: {point.message}")
+                continue
+            for warning in point.warnings:
+                notes.append(f"  point {point.index}: {warning.severity}[{warning.code}]: {warning.message}")
+        if notes:
+            lines += [""] + notes
+        return "\n".join(lines)
+
+
+def _with_unit(name: str, unit: str | None) -> str:
+    return f"{name} [{unit}]" if unit and unit != "1" else name
+
+
+def _width(cells: list[str]) -> int:
+    return max(len(cell) for cell in cells)
+
+
+def _format(value: float) -> str:
+    return f"{value:.5g}" if math.isfinite(value) else str(value)
+
+
+def _csv_number(value) -> str:
+    if value is None:
+        return ""
+    value = float(value)
+    return repr(value) if math.isfinite(value) else str(value)
+
+
+def _json_safe(value):
+    """JSON has no nan/inf: write them as strings, as ``bondc simulate --json`` does."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, dict):
+        return {str(key): _json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(item) for item in value]
+    if isinstance(value, np.generic):
+        return _json_safe(value.item())
+    return value
+
+
+# ------------------------------------------------------------------ running a point
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """What every point needs, picklable for worker processes. ``key`` finds the compiled base model."""
+
+    key: tuple
+    path: str
+    model: str | None
+    experiment: str | None
+    sets: tuple                  # parsed ast.SetValue, the base --set values
+    names: tuple[str, ...]       # the varied parameters, per axis
+    units: tuple[str | None, ...]            # as given (None: the declared unit)
+    converters: tuple                        # per axis, the SIUnit its values are in (for a point not loaded)
+    metrics: tuple[str, ...]
+    t_end: float | None
+    dt: float | None
+    rederive: bool
+
+
+@dataclass
+class _Base:
+    graph: object
+    state_space: object
+    structure: tuple
+    files: dict                  # file name -> text the base model was read from
+    warnings: list
+
+
+def _file_texts(graph) -> dict:
+    return {name: source.text for name, source in graph.sources.items() if source.path is not None}
+
+
+_BASES: dict[tuple, _Base] = {}
+_COUNTER = itertools.count()
+
+
+def _experiment_selector(setup: _Setup):
+    from bondc import semantic
+
+    return setup.experiment if setup.experiment is not None else semantic.FIRST
+
+
+def _chosen_experiment(graph, name: str | None):
+    if not graph.experiments:
+        return None
+    return graph.experiments[name] if name is not None else next(iter(graph.experiments.values()))
+
+
+def _structure(graph) -> tuple:
+    """What the compiled module is built from besides parameter values: their names, the inputs."""
+    experiment_inputs = tuple(sorted((name, repr(signal)) for experiment in graph.experiments.values()
+                                     for name, signal in experiment.inputs.items()))
+    return (tuple(graph.parameters), tuple((name, repr(signal)) for name, signal in graph.inputs.items()),
+            experiment_inputs)
+
+
+def _derive(graph):
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+
+    causal = assign_causality(graph)
+    state_space = derive(causal)
+    return causal, state_space
+
+
+def _base(setup: _Setup, loaded: tuple | None = None) -> _Base:
+    """The base model of ``setup``, derived and compiled once per process; ``loaded`` is
+    ``semantic.load``'s (graph, warnings) when the caller has them."""
+    base = _BASES.get(setup.key)
+    if base is not None:
+        return base
+    from bondc import semantic
+    from bondc.simulate import compile_model
+
+    graph, warnings = loaded or semantic.load(Path(setup.path), model=setup.model,
+                                              experiment=_experiment_selector(setup), sets=list(setup.sets))
+    causal, state_space = _derive(graph)
+    compile_model(state_space)
+    notes = list(warnings)
+    notes += [d for d in list(causal.diagnostics) + list(state_space.diagnostics) if d not in notes]
+    base = _Base(graph, state_space, _structure(graph), _file_texts(graph), notes)
+    _BASES[setup.key] = base
+    return base
+
+
+def _set_text(name: str, value: float, unit: str | None) -> str:
+    return f"{name}={value!r}" + (f" [{unit}]" if unit else "")
+
+
+def _run_point(setup: _Setup, index: int, values: tuple[float, ...]) -> SweepPoint:
+    """One grid point. Any error becomes a failed point, so that one point cannot stop the others and
+    the result is the same with or without worker processes; an internal error (a bug in bondc) keeps
+    its traceback in the point's ``traceback``."""
+    try:
+        return _measure_point(setup, index, values)
+    except Exception as error:
+        return SweepPoint(index, values, "failed", f"E968: internal error: {type(error).__name__}: {error} "
+                                                   "(a bug in bondc; please report it with the model file)",
+                          traceback=traceback.format_exc())
+
+
+def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> SweepPoint:
+    """Load, simulate and measure one grid point; every bondc error becomes a failed point."""
+    from bondc import semantic
+    from bondc.parse import parse_set_value
+    from bondc.simulate import simulate
+
+    base = _base(setup)
+    parameters = {name: unit.to_si(value) for name, unit, value in zip(setup.names, setup.converters, values)}
+    try:
+        sets = list(setup.sets) + [parse_set_value(_set_text(name, value, unit), f"--vary {name}")
+                                   for name, unit, value in zip(setup.names, setup.units, values)]
+        graph, _ = semantic.load(Path(setup.path), model=setup.model, experiment=_experiment_selector(setup),
+                                 sets=sets)
+        parameters = {name: graph.parameters[name].value for name in setup.names}
+        if _file_texts(graph) != base.files:
+            return SweepPoint(index, values, "failed", "E968: the model file changed during the sweep",
+                              None, parameters, diagnostics=(Diagnostic(
+                                  "error", "E968", "the model file changed during the sweep",
+                                  hint="run the sweep again"),))
+        experiment = _chosen_experiment(graph, setup.experiment)
+        if not setup.rederive and _structure(graph) == base.structure:
+            state_space, path = base.state_space, "fast"
+            # every parameter given: the compiled module recomputes none of them
+            overrides = {name: graph.parameters[name].value for name in state_space.parameters}
+        else:
+            _, state_space = _derive(graph)
+            path, overrides = "rederived", None
+        result = simulate(state_space, experiment, t_end=setup.t_end, dt=setup.dt, overrides=overrides)
+    except BondcError as error:
+        message = "; ".join(f"{d.code}: {d.message}" for d in error.diagnostics) or str(error)
+        return SweepPoint(index, values, "failed", message, None, parameters, diagnostics=tuple(error.diagnostics))
+    warnings = list(result.warnings)
+    if not result.complete:
+        diagnostics = tuple(result.diagnostics) or (Diagnostic("error", "E968", result.message),)
+        message = "; ".join(f"{d.code}: {d.message}" for d in diagnostics)
+        return SweepPoint(index, values, "failed", message, path, parameters, {}, result.t_reached,
+                          diagnostics, tuple(warnings))
+    metrics = _measure(setup, state_space, graph, experiment, result, warnings)
+    return SweepPoint(index, values, "ok", None, path, parameters, metrics, result.t_reached, (), tuple(warnings))
+
+
+def _measure(setup: _Setup, state_space, graph, experiment, result, warnings: list) -> dict:
+    from bondc.analysis.stats import output_statistics
+
+    wanted = setup.metrics
+    metrics: dict[str, float] = {}
+    statistics = output_statistics(result) if result.t.size else {}
+    for name in wanted:
+        output, _, statistic = name.rpartition(".")
+        if output in statistics and statistic in OUTPUT_STATISTICS:
+            metrics[name] = float(statistics[output][statistic])
+    if any(name in ENERGY_METRICS for name in wanted):
+        metrics.update(_energy_metrics(state_space, result, experiment, warnings))
+    if any(name in MOTOR_METRICS for name in wanted):
+        metrics.update(_motor_metrics(result, graph, warnings))
+    return {name: metrics.get(name, math.nan) for name in wanted}
+
+
+def _energy_metrics(state_space, result, experiment, warnings: list) -> dict:
+    from bondc.analysis.energy import energy_account
+
+    cycle = getattr(experiment, "cycle", None)
+    try:
+        account = energy_account(state_space, result, cycle=cycle)
+    except BondcError as error:
+        warnings += [Diagnostic("warning", d.code, f"no energy balance: {d.message}", d.span, d.hint)
+                     for d in error.diagnostics]
+        return {}
+    warnings += [d for d in account.diagnostics if d not in warnings]
+    return {"energy.residual": float(sum(window.balance.residual for window in account.windows)),
+            "energy.relative_residual": float(account.max_relative_residual)}
+
+
+def _motor_metrics(result, graph, warnings: list) -> dict:
+    from bondc.analysis.motor_report import SPEED_NAMES, TORQUE_NAMES, cycle_window, find_signal
+    from bondc.analysis.motors import requirements
+
+    try:
+        _, _, torque = find_signal(result, TORQUE_NAMES, "torque")
+        _, _, speed = find_signal(result, SPEED_NAMES, "speed")
+        need = requirements(result.t, torque, speed, cycle=cycle_window(result, graph))
+    except BondcError as error:
+        warnings += [Diagnostic("warning", d.code, f"no motor requirements: {d.message}", d.span, d.hint)
+                     for d in error.diagnostics]
+        return {}
+    return {name: float(getattr(need, attribute)) for name, attribute in _MOTOR_FIELDS.items()}
+
+
+# ------------------------------------------------------------------ the sweep
+
+
+def _check_axes(graph, axes: Sequence[Axis], sets: Sequence) -> tuple[list, list, list]:
+    """E961 unknown parameter, E963 unit, E966 duplicates.
+
+    Returns per axis the unit its values are shown in, the SI unit text, and the
+    :class:`bondc.units.SIUnit` its values are in.
+    """
+    from bondc import units
+
+    names = list(graph.parameters)
+    seen: set[str] = set()
+    fixed = {item.name for item in sets}
+    shown, si_units, converters = [], [], []
+    for axis in axes:
+        if axis.name not in graph.parameters:
+            close = difflib.get_close_matches(axis.name, names, n=1)
+            hint = f"did you mean '{close[0]}'?" if close else "parameters: " + ", ".join(names)
+            raise _usage("E961", f"--vary '{axis.text}': '{axis.name}' is not a parameter of {graph.name}",
+                         hint=hint)
+        if axis.name in seen:
+            raise _usage("E966", f"'{axis.name}' is varied twice", hint="give all its values in one --vary")
+        if axis.name in fixed:
+            raise _usage("E966", f"'{axis.name}' is both varied and set with --set", hint="drop one of them")
+        seen.add(axis.name)
+        declared_text = graph.parameters[axis.name].unit_text
+        declared = _resolve_unit(declared_text) if declared_text else units.DIMENSIONLESS
+        converter = declared
+        if axis.unit is not None:
+            converter = _resolve_unit(axis.unit, f"--vary '{axis.text}': ")
+            # the same test as --set (semantic's E204): angle counts, rpm is not 1/s
+            if converter.dims != declared.dims:
+                raise _usage("E963", f"--vary '{axis.text}': [{axis.unit}] does not measure the same quantity "
+                                     f"as [{declared_text or '1'}], the unit of '{axis.name}'",
+                             hint=f"give the values in [{declared_text or '1'}] or a unit of the same kind "
+                                  f"({declared.dimension_text()})")
+        shown.append(axis.unit if axis.unit is not None else declared_text)
+        si_units.append(_si_unit_text(declared_text))
+        converters.append(converter)
+    return shown, si_units, converters
+
+
+def run_sweep(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
+              vary: Sequence[str], metrics: Sequence[str] | None = None, output=None, jobs: int = 1,
+              t_end: float | None = None, dt: float | None = None, rederive: bool = False,
+              progress: bool | Callable[[SweepPoint, int, int], None] = False) -> SweepResult:
+    """``bondc sweep``: run the model at every point of the grid of ``vary``; see the module docstring.
+
+    ``sets`` are ``--set`` texts or parsed ``ast.SetValue`` applied to every
+    point; ``experiment`` None takes the first; ``t_end``/``dt`` override the
+    experiment's; ``output`` a ``.csv`` or ``.json`` path written atomically;
+    ``progress`` True draws a line on stderr when it is a terminal, or is
+    called as ``progress(point, done, total)`` in the main process.
+
+    Raises UsageError (E960-E967, E969) for a bad request and the stage
+    errors of loading or deriving the base model; a point that fails is
+    recorded, not raised (:attr:`SweepResult.exit_code`).
+    """
+    from bondc import semantic
+    from bondc.parse import parse_set_value
+
+    if not vary:
+        raise _usage("E960", "nothing to vary", hint='give --vary, e.g. --vary "k=400,800,1600"')
+    if not isinstance(jobs, int) or jobs < 1:
+        raise _usage("E967", f"jobs must be a whole number >= 1, got {jobs!r}")
+    if output is not None and Path(output).suffix.lower() not in (".csv", ".json"):
+        raise _usage("E969", f"cannot write '{output}': give a .csv or .json file")
+    axes = [parse_vary(text) for text in vary]
+    runs = math.prod(len(axis.values) for axis in axes)
+    if runs > MAX_RUNS:
+        shape = f" ({' x '.join(str(len(axis.values)) for axis in axes)})" if len(axes) > 1 else ""
+        raise _usage("E964", f"the sweep has {runs} runs{shape}; at most {MAX_RUNS} are allowed",
+                     hint="use fewer values, or split the sweep")
+    parsed_sets = tuple(parse_set_value(item, f"--set #{number}") if isinstance(item, str) else item
+                        for number, item in enumerate(sets or (), 1))
+
+    # load to check the request before deriving anything
+    graph, warnings = semantic.load(Path(path), model=model,
+                                    experiment=experiment if experiment is not None else semantic.FIRST,
+                                    sets=list(parsed_sets))
+    shown_units, si_units, converters = _check_axes(graph, axes, parsed_sets)
+    chosen_metrics = select_metrics(graph, metrics)
+    chosen = _chosen_experiment(graph, experiment)
+    if t_end is None and getattr(chosen, "t_end", None) is None:
+        raise _usage("E801", "no end time for the simulation", hint="give --t-end, or set t_end in the experiment")
+
+    setup = _Setup(key=(os.getpid(), next(_COUNTER)), path=str(path), model=model, experiment=experiment,
+                   sets=parsed_sets, names=tuple(axis.name for axis in axes),
+                   units=tuple(axis.unit for axis in axes), converters=tuple(converters),
+                   metrics=tuple(m.name for m in chosen_metrics), t_end=t_end, dt=dt, rederive=rederive)
+    base = _base(setup, (graph, warnings))     # before any worker starts: forked workers inherit it
+    grid = list(itertools.product(*(axis.values for axis in axes)))
+    report = _progress_reporter(progress)
+    try:
+        points = _run_all(setup, grid, jobs, report)
+    finally:
+        _BASES.pop(setup.key, None)
+        if report is not None and hasattr(report, "close"):
+            report.close()
+    result = SweepResult(
+        model=graph.name, experiment=getattr(chosen, "name", None), file=str(path), axes=tuple(axes),
+        axis_units=tuple(shown_units), axis_si_units=tuple(si_units), metrics=chosen_metrics,
+        points=tuple(points), settings={"t_end": t_end if t_end is not None else chosen.t_end, "dt": dt,
+                                        "rederive": rederive},
+        warnings=tuple(base.warnings))
+    if output is not None:
+        result.write(output)
+    return result
+
+
+def _run_all(setup: _Setup, grid: list, jobs: int, report) -> list[SweepPoint]:
+    if jobs == 1 or len(grid) == 1:
+        points = []
+        for index, values in enumerate(grid):
+            points.append(_run_point(setup, index, values))
+            if report is not None:
+                report(points[-1], len(points), len(grid))
+        return points
+    from concurrent.futures.process import BrokenProcessPool
+
+    done: dict[int, SweepPoint] = {}
+    executor = concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(grid)))
+    try:
+        futures = {executor.submit(_run_point, setup, index, values): index for index, values in enumerate(grid)}
+        for future in concurrent.futures.as_completed(futures):
+            index = futures[future]
+            try:
+                done[index] = future.result()
+            except BrokenProcessPool as error:
+                done[index] = SweepPoint(index, grid[index], "failed",
+                                         f"E968: a worker process died ({error or 'no reason given'})")
+            except Exception as error:   # e.g. a value that does not pickle: record it, keep the others
+                done[index] = SweepPoint(index, grid[index], "failed",
+                                         f"E968: internal error: {type(error).__name__}: {error}",
+                                         traceback="".join(traceback.format_exception(error)))
+            if report is not None:
+                report(done[index], len(done), len(grid))
+    except BaseException:
+        executor.shutdown(wait=True, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
+    return [done[index] for index in range(len(grid))]
+
+
+class _ProgressLine:
+    """``sweep: 3/12 runs (1 failed)`` on stderr, redrawn in place, only on a terminal."""
+
+    def __init__(self, stream=None):
+        self.stream = stream or sys.stderr
+        self.failed = 0
+        self.drawn = False
+
+    def __call__(self, point: SweepPoint, done: int, total: int) -> None:
+        self.failed += not point.ok
+        text = f"sweep: {done}/{total} runs" + (f" ({self.failed} failed)" if self.failed else "")
+        self.stream.write("\r" + text.ljust(40))
+        self.stream.flush()
+        self.drawn = True
+
+    def close(self) -> None:
+        if self.drawn:
+            self.stream.write("\r" + " " * 40 + "\r")
+            self.stream.flush()
+
+
+def _progress_reporter(progress):
+    if callable(progress):
+        return progress
+    if not progress:
+        return None
+    try:
+        if not sys.stderr.isatty():
+            return None
+    except (AttributeError, ValueError):
+        return None
+    return _ProgressLine()

@@ -1,0 +1,130 @@
+"""``run_validate`` (``bondc validate``) and the validation section of ``bondc report``, on real runs."""
+
+from __future__ import annotations
+
+import io
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bondc.errors import DataError
+from bondc.report.build import build_report, run_validate
+from bondc.simulate import run as simulate_run
+from test_report_build import assert_self_contained, check_html
+
+MODEL = Path(__file__).parent.parent / "models" / "series_rlc.bg"
+SPECS = ["i=i_meas", "v_C=v_C_meas:nrmse=0.05,r2=0.95"]
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    """A real run of the series RLC circuit: t, i [A], v_C [V] (SI, as bondc simulate writes them)."""
+    result = simulate_run(MODEL)
+    return result.t, result.outputs["i"], result.outputs["v_C"]
+
+
+def write_measured(path: Path, t, i, v) -> Path:
+    lines = ["# measured on the bench (here: simulated, perturbed)", "time,i_meas,v_C_meas"]
+    lines += [f"{float(a)!r},{float(b)!r},{float(c)!r}" for a, b, c in zip(t, i, v)]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+def noisy(simulated, scale: float = 1.0):
+    """The run resampled on a 0.1 ms grid with 1 % (of the range) Gaussian noise, seeded, times ``scale``."""
+    t, i, v = simulated
+    rng = np.random.default_rng(20240501)
+    grid = np.arange(0.0, float(t[-1]) + 1e-12, 1e-4)
+    out = []
+    for values in (i, v):
+        resampled = np.interp(grid, t, values)
+        noise = 0.01 * (resampled.max() - resampled.min()) * rng.standard_normal(grid.size)
+        out.append(scale * (resampled + noise))
+    return grid, out[0], out[1]
+
+
+def test_measurements_within_noise_pass(simulated, tmp_path):
+    data = write_measured(tmp_path / "bench.csv", *noisy(simulated))
+    stream = io.StringIO()
+    results, code = run_validate(MODEL, data=data, compare=SPECS, junit=tmp_path / "junit.xml", stream=stream)
+    assert code == 0
+    assert [r.passed for r in results] == [True, True]
+    for result in results:
+        assert result.nrmse == pytest.approx(0.01, rel=0.3)       # the noise put in, found again
+        assert result.r2 > 0.99
+    text = stream.getvalue()
+    assert "RMSE" in text and "NRMSE" in text and "R²" in text and "2 of 2 signals passed" in text
+    assert text.count("pass") >= 2 and "FAIL" not in text
+    suite = ET.parse(tmp_path / "junit.xml").getroot()
+    assert suite.get("tests") == "2" and suite.get("failures") == "0"
+
+
+def test_scaled_measurements_fail_with_exit_1(simulated, tmp_path):
+    data = write_measured(tmp_path / "bench.csv", *noisy(simulated, scale=1.3))
+    stream = io.StringIO()
+    junit = tmp_path / "results" / "junit.xml"
+    report = tmp_path / "out" / "validation.html"
+    results, code = run_validate(MODEL, data=data, compare=SPECS, junit=junit, output=report, stream=stream,
+                                 date="2024-05-01")
+    assert code == 1
+    assert [r.passed for r in results] == [False, False]
+    text = stream.getvalue()
+    assert text.count("FAIL") >= 2 and "0 of 2 signals passed" in text
+    assert re.search(r"v_C=v_C_meas: nrmse = [0-9.]+ \(required <= 0.05\): FAILED", text)
+
+    root = ET.parse(junit).getroot()
+    cases = root.iter("testcase")
+    names = [case.get("name") for case in cases]
+    assert names == ["i=i_meas", "v_C=v_C_meas"]
+    assert root.get("tests") == "2" and root.get("failures") == "2"
+    assert all(case.find("failure") is not None for case in root.iter("testcase"))
+
+    html = report.read_text(encoding="utf-8")
+    check_html(html)
+    assert_self_contained(html)
+    section = html[html.index('<section id="validation">'):html.index('<section id="source"')]
+    assert section.count('<span class="badge fail">FAIL</span>') == 2
+    assert "bench.csv" in section and "junit.xml" in section
+    assert section.count('<svg ') == 4                            # overlay and error for each signal
+    assert "i_meas (measured)" in section and "i (simulated)" in section
+
+
+def test_report_with_data_adds_the_section_without_failing(simulated, tmp_path):
+    data = write_measured(tmp_path / "bench.csv", *noisy(simulated, scale=1.3))
+    target = build_report(MODEL, data=data, compare=SPECS, output=tmp_path / "r.html", date="2024-05-01")
+    html = target.read_text(encoding="utf-8")
+    assert '<section id="validation">' in html and html.count("badge fail") == 2
+
+
+@pytest.mark.parametrize("csv, spec, code, words", [
+    ("time,i_meas\n0,1\n0.001,2\n", "i=current", "E953", "no column 'current'"),
+    ("time,i_meas\n0,1\n0.002,2\n0.001,3\n", "i=i_meas", "E952", "time must increase strictly"),
+    ("time,i_meas\n5,1\n6,2\n", "i=i_meas", "E956", "share no time"),
+    ("time,i_meas\n0,1\n0.001,2\n", "speed=i_meas", "E954", "not a simulated signal"),
+])
+def test_bad_measured_data_is_a_clear_data_error(tmp_path, csv, spec, code, words):
+    data = tmp_path / "bad.csv"
+    data.write_text(csv, encoding="utf-8")
+    junit = tmp_path / "junit.xml"
+    with pytest.raises(DataError) as excinfo:
+        run_validate(MODEL, data=data, compare=[spec], junit=junit, output=tmp_path / "r.html")
+    [diagnostic] = excinfo.value.diagnostics
+    assert diagnostic.code == code and words in diagnostic.message
+    assert not junit.exists() and not (tmp_path / "r.html").exists()
+
+
+def test_incomplete_simulation_does_not_validate(simulated, tmp_path, capsys):
+    """A run that stops early is compared over what it computed, and validation fails (exit 1)."""
+    model = tmp_path / "failing.bg"
+    text = MODEL.read_text(encoding="utf-8").replace("input u [V] = step(t, t_step) * U0",
+                                                     "input u [V] = step(t, t_step) * U0 * sqrt(0.01 - t)/0.1")
+    model.write_text(text, encoding="utf-8")
+    data = write_measured(tmp_path / "bench.csv", *noisy(simulated))
+    results, code = run_validate(model, data=data, compare=["v_C=v_C_meas:r2=-100,nrmse=10"],
+                                 stream=io.StringIO())
+    assert code == 1 and results[0].passed
+    assert results[0].t_end < 0.0101
+    assert "E810" in capsys.readouterr().err
