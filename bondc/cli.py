@@ -269,6 +269,22 @@ def _cmd_validate(args) -> int:
     return code
 
 
+def _cmd_sweep(args) -> int:
+    from bondc.analysis.sweep import run_sweep
+
+    result = run_sweep(args.file, model=args.model, experiment=args.experiment, sets=args.set or (),
+                       vary=args.vary or (), metrics=args.metric, output=args.output, jobs=args.jobs,
+                       t_end=args.t_end, dt=args.dt, rederive=args.rederive, progress=not args.json)
+    _print_diagnostics(list(result.warnings) + result.diagnostics())
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(result.to_text())
+        if args.output:
+            print(f"results written to {args.output}")
+    return EXIT_ERRORS if result.exit_code else EXIT_OK
+
+
 def _cmd_fit_friction(args) -> int:
     from bondc.analysis.friction import run_fit_friction
 
@@ -364,6 +380,26 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--motors", metavar="CATALOGUE.csv", help=argparse.SUPPRESS)
     validate.add_argument("-o", "--output", help="also write the HTML report with the validation section")
     validate.set_defaults(run=_cmd_validate)
+
+    sweep = commands.add_parser("sweep", help="parameter study: simulate over a grid of parameter values")
+    _add_model_args(sweep)
+    sweep.add_argument("--experiment", help="the experiment to run (default: the first)")
+    sweep.add_argument("--vary", action="append", metavar="NAME=VALUES",
+                       help='values of a parameter: "k=400,800,1600", "lead=5,10 [mm]" or "M=20:40:5 [kg]" '
+                            "(start:stop:count, both ends included); without a unit, the parameter's declared "
+                            "unit; several --vary make a grid (at most 200 runs)")
+    sweep.add_argument("--metric", action="append", metavar="NAME",
+                       help="a column: OUTPUT.min, .max, .mean, .rms, .final, OUTPUT.*, energy.residual, "
+                            "energy.relative_residual, motor.* (default: all but the means; repeatable)")
+    sweep.add_argument("--t-end", type=float, help="end time, s (overrides the experiment's t_end)")
+    sweep.add_argument("--dt", type=float, help="output sampling interval, s")
+    sweep.add_argument("-j", "--jobs", type=int, default=1, help="points run in parallel (default 1)")
+    sweep.add_argument("--rederive", action="store_true",
+                       help="derive and compile the model again for every point (slower; for laws whose "
+                            "inversion depends on parameter values)")
+    sweep.add_argument("-o", "--output", help="write the table: .csv (SI) or .json")
+    sweep.add_argument("--json", action="store_true", help="print the result as JSON")
+    sweep.set_defaults(run=_cmd_sweep)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")
