@@ -18,7 +18,7 @@ m.bg:1:17: error[E201]: unknown unit 'kgg'
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping
 

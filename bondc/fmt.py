@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bondc import ast
-from bondc.parse import parse_text
+from bondc.io import read_source
+from bondc.parse import parse_source, parse_text
 from bondc.source import Source, Span
 
 MAX_WIDTH = 100  # a line of laws continues after a comma rather than pass this column
@@ -723,6 +724,5 @@ def fmt(text: str, name: str = "<text>") -> str:
 
 def format_path(path: str | Path) -> tuple[str, str]:
     """``(original, formatted)`` text of a ``.bg`` file, for ``bondc fmt``."""
-    path = Path(path)
-    original = path.read_text(encoding="utf-8")
-    return original, format_file(parse_text(original, str(path)), original)
+    source = read_source(path)
+    return source.text, format_file(parse_source(source), source.text)

@@ -48,3 +48,29 @@ def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8
         except FileNotFoundError:
             pass
         raise
+
+
+def read_source(path, name: str | None = None):
+    """Read a model file as a :class:`~bondc.source.Source`; an unreadable file is a UsageError (E002).
+
+    >>> read_source("/nonexistent.bg")
+    Traceback (most recent call last):
+    bondc.errors.UsageError: cannot read '/nonexistent.bg': no such file
+    """
+    from bondc.errors import Diagnostic, UsageError
+    from bondc.source import Source
+
+    path = Path(path)
+    name = str(path) if name is None else name
+    hint = None
+    try:
+        return Source(name, path.read_text(encoding="utf-8"), path)
+    except FileNotFoundError:
+        reason, hint = "no such file", "check the path (relative paths start from the current directory)"
+    except IsADirectoryError:
+        reason = "it is a directory"
+    except UnicodeDecodeError:
+        reason, hint = "it is not UTF-8 text", "save the model as UTF-8"
+    except OSError as error:
+        reason = error.strerror or str(error)
+    raise UsageError(Diagnostic("error", "E002", f"cannot read '{name}': {reason}", hint=hint))

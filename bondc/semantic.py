@@ -41,7 +41,8 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 from bondc import ast, units
-from bondc.errors import Diagnostic, ModelError, Related, UsageError, sort_key
+from bondc.io import read_source
+from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import (
     JUNCTION_KINDS, KINDS, PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
@@ -1132,8 +1133,8 @@ def _own_variable_rules(kind_name: str, target: str, name: str,
         return ({target: itself,
                  other: f"the law {target} = ... of source {own} cannot use its own {other_word} {other}: a "
                         f"source is independent of its load"},
-                f"a source's law may use parameters, inputs, t and other elements' variables, not its own e or f "
-                f"(for a load-dependent source use an R)")
+                "a source's law may use parameters, inputs, t and other elements' variables, not its own e or f "
+                "(for a load-dependent source use an R)")
     if kind.storage:
         listing = ", ".join(states)
         return ({target: itself,
@@ -1906,16 +1907,7 @@ def build(file: ast.File, sources: Mapping[str, Source] | None = None, *, model:
 # ====================================================================== load
 
 def _read(path: Path, name: str) -> Source:
-    try:
-        return Source(name, path.read_text(encoding="utf-8"), path)
-    except FileNotFoundError:
-        raise UsageError(f"cannot read '{name}': no such file") from None
-    except IsADirectoryError:
-        raise UsageError(f"cannot read '{name}': it is a directory") from None
-    except UnicodeDecodeError:
-        raise UsageError(f"cannot read '{name}': it is not UTF-8 text") from None
-    except OSError as error:
-        raise UsageError(f"cannot read '{name}': {error.strerror or error}") from None
+    return read_source(path, name)
 
 
 def load_files(path: str | Path) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:

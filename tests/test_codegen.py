@@ -10,7 +10,6 @@ standalone run.
 import ast
 import hashlib
 import os
-import shutil
 import subprocess
 import sys
 import textwrap

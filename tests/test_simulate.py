@@ -10,9 +10,8 @@ import json
 import numpy as np
 import pytest
 
-from bondc import causality, equations, semantic
 from bondc.errors import SimulationError, UsageError
-from bondc.simulate import ProgressBar, SimResult, csv_text, run, simulate, write_csv, write_npz
+from bondc.simulate import ProgressBar, run, simulate, write_csv, write_npz
 
 from test_codegen import SIM, derive
 
