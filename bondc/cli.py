@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import traceback
 from pathlib import Path
 
 from bondc import __version__
 from bondc.errors import BondcError, Diagnostic, UsageError, render_all
+from bondc.io import json_safe
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
 
@@ -29,23 +29,8 @@ class _ArgumentParser(argparse.ArgumentParser):
                                     hint=f"see '{self.prog} --help'"))
 
 
-def _json_safe(value):
-    """JSON has no nan/inf: write them as strings ("nan", "inf", "-inf")."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, dict):
-        return {str(key): _json_safe(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(item) for item in value]
-    if hasattr(value, "item") and callable(value.item) and getattr(value, "ndim", 1) == 0:
-        return _json_safe(value.item())  # numpy scalars
-    if hasattr(value, "tolist"):
-        return _json_safe(value.tolist())
-    return value
-
-
 def _print_json(value) -> None:
-    print(json.dumps(_json_safe(value), indent=2, default=str, allow_nan=False))
+    print(json.dumps(json_safe(value), indent=2, default=str, allow_nan=False))
 
 
 def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:

@@ -14,14 +14,21 @@ existing file keeps its permission bits.
 
 from __future__ import annotations
 
+import math
 import os
 import stat
 import tempfile
 from pathlib import Path
+from typing import BinaryIO, Callable
 
 
-def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
-    """Replace the contents of ``path`` by ``text`` in one step (see the module docstring)."""
+def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], None]) -> None:
+    """Replace ``path`` by what ``write(handle)`` writes to a binary handle, in one step.
+
+    The temporary file sits in the same directory (``os.replace`` is atomic only
+    within one file system); on any failure it is removed and ``path`` is left
+    as it was. An existing file keeps its permission bits.
+    """
     path = Path(path)
     directory = path.parent if str(path.parent) else Path(".")
     try:
@@ -30,9 +37,8 @@ def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8
         mode = None
     descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
     try:
-        # newline="" writes "\n" as it is, on every platform
-        with os.fdopen(descriptor, "w", encoding=encoding, newline="") as handle:
-            handle.write(text)
+        with os.fdopen(descriptor, "wb") as handle:
+            write(handle)
             handle.flush()
             os.fsync(handle.fileno())
         if mode is not None:
@@ -48,6 +54,38 @@ def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8
         except FileNotFoundError:
             pass
         raise
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> None:
+    """Replace the contents of ``path`` by ``text`` in one step (see the module docstring).
+
+    The text is written as it is: ``"\\n"`` stays ``"\\n"`` on every platform.
+    """
+    def write(handle: BinaryIO) -> None:
+        if not isinstance(text, str):
+            raise TypeError(f"atomic_write_text needs str, not {type(text).__name__}")
+        handle.write(text.encode(encoding))
+
+    atomic_write(path, write)
+
+
+def json_safe(value):
+    """A JSON-ready copy of ``value``: JSON has no nan/inf, so they become "nan", "inf", "-inf".
+
+    >>> json_safe({"a": float("nan"), "b": [1.0, float("-inf")]})
+    {'a': 'nan', 'b': [1.0, '-inf']}
+    """
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, dict):
+        return {str(key): json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(item) for item in value]
+    if hasattr(value, "item") and getattr(value, "ndim", None) == 0:
+        return json_safe(value.item())  # numpy scalars
+    if hasattr(value, "tolist"):
+        return json_safe(value.tolist())  # numpy arrays
+    return value
 
 
 def read_source(path, name: str | None = None):

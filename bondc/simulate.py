@@ -41,9 +41,7 @@ from __future__ import annotations
 
 import difflib
 import io
-import os
 import sys
-import tempfile
 import time
 import weakref
 from dataclasses import dataclass, field
@@ -53,6 +51,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
+from bondc.io import atomic_write
 
 _COMPILED: dict = {}
 
@@ -382,27 +381,6 @@ def _columns(result: SimResult, all_bonds: bool):
     return names, columns
 
 
-def _atomic_write(path: Path, write) -> None:
-    path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    descriptor, temporary = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(descriptor, "wb") as handle:
-            write(handle)
-            handle.flush()
-            os.fsync(handle.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(temporary, 0o666 & ~umask)
-        os.replace(temporary, path)
-    except BaseException:
-        try:
-            os.unlink(temporary)
-        except FileNotFoundError:
-            pass
-        raise
-
-
 def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     names, columns = _columns(result, all_bonds)
     out = io.StringIO()
@@ -416,7 +394,7 @@ def csv_text(result: SimResult, all_bonds: bool = False) -> str:
 def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
     """Write ``t``, outputs, states (and bonds) as csv, atomically (see the module docstring)."""
     text = csv_text(result, all_bonds)
-    _atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
+    atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
 
 
 def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
@@ -434,7 +412,7 @@ def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
     arrays["event_labels"] = np.array([e[1] for e in result.events], dtype=str)
     arrays["parameter_names"] = np.array(list(result.parameters), dtype=str)
     arrays["parameter_values"] = np.array(list(result.parameters.values()), dtype=float)
-    _atomic_write(Path(path), lambda handle: np.savez_compressed(handle, **arrays))
+    atomic_write(Path(path), lambda handle: np.savez_compressed(handle, **arrays))
 
 
 def write(result: SimResult, path, all_bonds: bool = False) -> None:

@@ -96,6 +96,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from bondc.errors import BondcError, Diagnostic, UsageError
+from bondc.io import json_safe
 
 #: The most runs one sweep may ask for.
 MAX_RUNS = 200
@@ -397,7 +398,7 @@ class SweepResult:
                 **({"traceback": point.traceback} if point.traceback else {}),
             } for point in self.points],
         }
-        return _json_safe(data)
+        return json_safe(data)
 
     def to_json_text(self) -> str:
         return json.dumps(self.to_json(), indent=2, allow_nan=False) + "\n"
@@ -511,19 +512,6 @@ def _csv_number(value) -> str:
         return ""
     value = float(value)
     return repr(value) if math.isfinite(value) else str(value)
-
-
-def _json_safe(value):
-    """JSON has no nan/inf: write them as strings, as ``bondc simulate --json`` does."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else str(value)
-    if isinstance(value, dict):
-        return {str(key): _json_safe(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(item) for item in value]
-    if isinstance(value, np.generic):
-        return _json_safe(value.item())
-    return value
 
 
 # ------------------------------------------------------------------ running a point
