@@ -236,13 +236,12 @@ def _cmd_compile(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from bondc.report.build import build_report
+    from bondc.report.build import run_report
 
-    target = build_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
-                          data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
-                          t_end=args.t_end, progress=True)
-    print(f"report written to {target}")
-    return EXIT_OK
+    _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
+                         data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
+                         t_end=args.t_end, progress=True)
+    return code  # run_report prints the diagnostics and where it wrote the report
 
 
 def _cmd_validate(args) -> int:
@@ -351,7 +350,8 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--compare", action="append", metavar="OUT=COLUMN[:nrmse=0.05]",
                         help="compare output OUT with the measured COLUMN (repeatable)")
     report.add_argument("--motors", metavar="CATALOGUE.csv", help="judge the motors of this catalogue against the cycle")
-    report.add_argument("-o", "--output", help="the HTML file (default: reports/MODEL.html)")
+    report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
+                                                   "reports/<file>-<experiment>.html for a non-first experiment)")
     report.set_defaults(run=_cmd_report)
 
     validate = commands.add_parser("validate", help="compare a simulation with measured data; pass/fail per signal")

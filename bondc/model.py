@@ -127,11 +127,12 @@ class Bond:
     head_port: str | None = None
     label: str | None = None
     span: Span = NO_SPAN
+    default_name: str | None = None  # set when another bond's label is "b<number>" (then "bond<number>")
 
     @property
     def name(self) -> str:
-        """``label`` if the bond has one, else ``b<number>``."""
-        return self.label or f"b{self.number}"
+        """``label`` if the bond has one, else ``b<number>`` (``bond<number>`` if a label took that)."""
+        return self.label or self.default_name or f"b{self.number}"
 
 
 @dataclass(frozen=True)

@@ -406,6 +406,8 @@ _METHODS = {"rk45": "RK45", "rk23": "RK23", "dop853": "DOP853", "radau": "Radau"
             "lsoda": "LSODA"}
 _IMPLICIT = ("Radau", "BDF", "LSODA")
 _EPS = np.finfo(float).eps
+_CREEP = 1e-12        # a step this small relative to t does not advance the solution
+_CREEP_STEPS = 200    # ... and this many of them in a row mean the run is stuck
 
 
 def solver_class(method):
@@ -743,12 +745,21 @@ class _Run:
         signs = modes[index] if index.size else np.zeros(0)
         values_old = self.switches_at(t, y, modes, index)
         deadband = self.deadbands(t, y, modes, index)
+        creeping = 0
         while True:
             message = solver.step()
             self.stats["steps"] += 1
             if solver.status == "failed":
                 self.collect(solver)
                 raise _Stop(self.solver_failure(solver.t, message))
+            # A solver creeping towards a singularity (a law like 1/(t0 - t)) may never fail by
+            # itself: it takes ever smaller steps. Give up once steps stay at rounding size.
+            step = abs(solver.t - solver.t_old) if solver.t_old is not None else np.inf
+            creeping = creeping + 1 if step <= _CREEP * max(abs(solver.t), 1.0) else 0
+            if creeping >= _CREEP_STEPS:
+                self.collect(solver)
+                raise _Stop(self.solver_failure(solver.t, f"{_CREEP_STEPS} steps in a row shorter than "
+                                                          f"{_CREEP:g} relative: the solution is not advancing"))
             t_new, y_new = solver.t, solver.y
             derivative = getattr(solver, "f", None)
             if derivative is None or self.method.__name__ == "LSODA":

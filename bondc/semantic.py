@@ -1666,6 +1666,23 @@ def check_passive_orientation(m: _Model) -> None:
             hint=f"draw the bond towards it: '{bond.head} -> {element.name}'"))
 
 
+def check_label_names(m: _Model) -> None:
+    """W305: a bond label of the form ``b<N>`` that is also the default name of bond N."""
+    for bond in m.bonds:
+        if not bond.label or not bond.label[1:].isdigit() or bond.label[0] != "b":
+            continue
+        number = int(bond.label[1:])
+        if number == bond.number or not 1 <= number <= len(m.bonds) or m.bonds[number - 1].label:
+            continue
+        other = m.bonds[number - 1]
+        m.report(_warning(
+            "W305", f"label '{bond.label}' names bond {bond.number}, but '{bond.label}' is also bond {number}'s "
+                    f"default name; bond {number} is called 'bond{number}' in equations and results",
+            bond.label_span if hasattr(bond, "label_span") else bond.span,
+            related=(Related(other.span, f"bond {number}"),),
+            hint=f"choose a label that is not b<number>, e.g. '{bond.label}_'"))
+
+
 def check_unused(m: _Model) -> None:
     """W301 unused parameter, W302 unused input."""
     for decl in m.decls.values():
@@ -1761,6 +1778,7 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     experiment_defs, chosen = check_experiment_values(m, plans, good_sets, base_values, selected)
     chosen_definitions, chosen_values = chosen or (base, base_values)
     check_passive_orientation(m)
+    check_label_names(m)
     check_unused(m)
 
     diagnostics = _unique(m.diagnostics)
@@ -1829,7 +1847,10 @@ def _unique(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
 
 def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, Signal],
            experiments: Mapping[str, ExperimentDef]) -> BondGraph:
-    bonds = list(m.bonds)
+    labels = {bond.label for bond in m.bonds if bond.label}
+    # A label "b9" on another bond takes the name bond 9 would have (W305 says so).
+    bonds = [dataclasses.replace(bond, default_name=f"bond{bond.number}")
+             if bond.label is None and f"b{bond.number}" in labels else bond for bond in m.bonds]
     elements = {}
     for element in m.elements:
         laws = m.element_laws[element.name]

@@ -232,6 +232,19 @@ def test_nan_is_reported_with_time_variable_and_law(tmp_path):
     np.testing.assert_allclose(data[:, 2], 2.0 - data[:, 0], atol=1e-9)
 
 
+def test_a_singularity_stops_the_run_instead_of_creeping_forever():
+    with pytest.raises(SimulationError) as caught:
+        run(SIM / "singular_force.bg")
+    result = caught.value.result
+    assert not result.complete
+    assert caught.value.diagnostics[0].code == "E811"
+    assert 0.49 < result.t[-1] <= 0.5
+    # Up to where it stopped the trajectory is the analytic one: p = log(0.5) - log(0.5 - t).
+    inside = result.t < 0.49
+    exact = np.log(0.5) - np.log(0.5 - result.t[inside])
+    np.testing.assert_allclose(result.states["mass.p"][inside], exact, rtol=1e-4, atol=1e-6)
+
+
 def test_missing_end_time_is_a_usage_error():
     _, ss, _ = derive("rc")
     with pytest.raises(UsageError, match="no end time"):

@@ -41,7 +41,7 @@ from __future__ import annotations
 import math
 import re
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence, TextIO
 
@@ -61,6 +61,7 @@ from bondc.report.render import (
 from bondc.report.validate import (
     CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
 )
+from bondc.symbolic import Translator
 
 __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
            "write_report", "run_validate",
@@ -437,7 +438,7 @@ def _header(run: PipelineRun, date: str | None) -> ReportHeader:
                                     run.experiment.name if run.experiment is not None else None,
                                     date=date, solver_settings=settings)
     # The file's name, not the path it was given by: the report does not depend on the working directory.
-    return ReportHeader(**{**header.__dict__, "source_file": Path(run.graph.file).name})
+    return replace(header, source_file=Path(run.graph.file).name)
 
 
 def _parameter_rows(run: PipelineRun) -> list[ParameterRow]:
@@ -503,15 +504,17 @@ def _law_owner(ss, symbol) -> str | None:
     return None
 
 
-class _CallsKept:
-    """Translates a law as written: calls of the model's ``fn`` functions stay calls (not inlined)."""
+class _CallsKept(Translator):
+    """Translates a law as the model writes it: calls of its ``fn`` functions stay calls, recorded in ``called``.
+
+    The equations stage inlines every function; for reading, ``f_valve =
+    valve_mdot(P1, P_chamber, ...)`` and the function once are clearer than
+    the function's body pasted into every law that calls it.
+    """
 
     def __init__(self, ss, owner=None):
-        from bondc.symbolic import Translator
-
         self.ss = ss
         self.called: list[str] = []
-        graph = ss.graph
         local: dict = {}
         if owner is not None:
             if len(owner.bonds) == 1:
@@ -533,7 +536,7 @@ class _CallsKept:
                 return ss.symbols[name]
             if name == "pi":
                 return sympy.pi
-            raise KeyError(name)
+            raise KeyError(f"'{name}' is not a name of the model (the equations stage accepted it)")
 
         def resolve_ref(node):
             kind, what = ss.causal.reference(node.parts, owner.name if owner is not None else None)
@@ -541,28 +544,27 @@ class _CallsKept:
                 return ss.symbols[what]
             return ss.bond_symbols[what][0 if kind == "e" else 1]
 
-        outer = self
+        graph = ss.graph
+        super().__init__(resolve_name, resolve_ref, graph.functions,
+                         Path(graph.file).parent if graph.file else None, ss.time)
 
-        class Translator_(Translator):
-            def _inline(self, node, function):
-                if function.name not in outer.called:
-                    outer.called.append(function.name)
-                return sympy.Function(function.name, real=True)(*[self(arg) for arg in node.args])
-
-        base_dir = Path(graph.file).parent if graph.file else None
-        self.translator = Translator_(resolve_name, resolve_ref, graph.functions, base_dir, ss.time)
+    def _inline(self, node, function):
+        if function.name not in self.called:
+            self.called.append(function.name)
+        return sympy.Function(function.name, real=True)(*[self(arg) for arg in node.args])
 
     def law(self, element, which: str):
-        return self.translator(element.laws[which])
+        """The law of ``element`` for its ``which`` ("e" or "f") variable."""
+        return self(element.laws[which])
 
     def function(self, function) -> tuple[Any, Any]:
         """``name(params)`` and its body, calls kept."""
         parameters = [sympy.Symbol(name, real=True) for name in function.params]
-        self.translator._bound.append(dict(zip(function.params, parameters)))
+        self._bound.append(dict(zip(function.params, parameters)))
         try:
-            body = self.translator(function.body)
+            body = self(function.body)
         finally:
-            self.translator._bound.pop()
+            self._bound.pop()
         return sympy.Function(function.name, real=True)(*parameters), body
 
 
@@ -899,7 +901,7 @@ MOTOR_TORQUE, MOTOR_SPEED = "torque", "omega"
 def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | None, list]:
     """Motor requirements when the model has signals ``torque`` and ``omega``; candidates from ``motors``.
 
-    Raises UsageError (E930) when a catalogue is given but the signals are missing.
+    Raises UsageError (E927) when a catalogue is given but the signals are missing.
     """
     from bondc.analysis.motor_report import cycle_window, estimate_load_inertia, find_signal, motor_report
     from bondc.analysis.motors import requirements
@@ -978,9 +980,9 @@ def _candidates_table(data: Mapping, catalogue) -> Table:
         motor, margins = candidate["motor"], candidate["margins"]
         ratio = candidate.get("inertia_ratio")
         if candidate is choice:
-            verdict = "qualifies: the choice"
+            verdict = "the choice"
         elif candidate["qualifies"]:
-            verdict = "qualifies" + (f"; J ratio above {MAX_INERTIA_RATIO:g}" if candidate["warnings"] else "")
+            verdict = "qualifies" + (f"; J ratio > {MAX_INERTIA_RATIO:g}" if candidate["warnings"] else "")
         else:
             failed = [label for key, label in MARGIN_LABELS if (margins.get(key) or math.inf) < 1]
             verdict = "too small: " + ", ".join(failed)
@@ -1003,8 +1005,9 @@ def _candidates_table(data: Mapping, catalogue) -> Table:
     else:
         notes.append("No motor of the catalogue qualifies.")
     return Table(f"Motors of {Path(catalogue).name}, qualifying first, smallest first",
-                 ("motor", "rated power [W]") + tuple(f"{label} margin" for _, label in MARGIN_LABELS)
-                 + ("J ratio", "verdict"), rows, notes=notes)
+                 ("motor", "rated power [W]") + tuple(label for _, label in MARGIN_LABELS) + ("J ratio", "verdict"),
+                 rows, caption="The columns peak τ, RMS τ, speed and power are margins: available / required",
+                 notes=notes)
 
 
 MARGIN_LABELS = (("peak_torque", "peak τ"), ("rms_torque", "RMS τ"), ("speed", "speed"), ("power", "power"))

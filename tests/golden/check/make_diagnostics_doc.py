@@ -71,6 +71,7 @@ d("W301", "unused parameter", "A parameter is not used by any law, input, output
 d("W302", "unused input", "An input is not used by any law, output, or other input.", "Remove it or use it (e.g. `MSe src : e = F`).")
 d("W303", "name hidden inside element laws", "A parameter, input, output or state is called `e` or `f`, or a parameter or input is called like a storage element's state: inside element laws that name means the element's own variable, so the model-level name cannot be used there.", "Rename it if you need it in a law.")
 d("W304", "resistor or store drawn with its bond leaving it", "An `R`, `C` or `I` element's bond points away from it. Its `e` and `f` follow the half-arrow, so `e*f` is the power it delivers: `e = b*f` then makes a resistor a source, and `der(q) = f` fills a capacitor while it discharges. The model still compiles as written.", "Draw the bond towards the element (`j -> tank`), which is what the law assumes.")
+d("W305", "a label that is another bond's default name", "A bond is labelled `b<N>` while bond number N has no label of its own. `b<N>.e` then means the labelled bond (labels win), and bond N is called `bond<N>` in equations, CSV columns and reports.", "Choose a label that does not look like a bond number (`b9_`, `motor_bond`).")
 
 PARSE_EXAMPLES = {
     "E100": "model M\n  param = 3\nend\n",
