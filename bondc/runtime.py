@@ -208,14 +208,25 @@ def solve_block(residual, number, guess):
     start = _BLOCK_SOLUTIONS.get(number)
     if start is None or not np.all(np.isfinite(start)):
         start = np.asarray(guess, dtype=float)
-    solution = _optimize.root(lambda z: np.asarray(residual(z), dtype=float), start, method="hybr",
-                              options={"xtol": 1e-12})
-    if not solution.success or not np.all(np.isfinite(solution.x)):
-        retry = _optimize.root(lambda z: np.asarray(residual(z), dtype=float), np.asarray(guess, dtype=float),
-                               method="hybr", options={"xtol": 1e-12})
-        if not retry.success:
+    function = lambda z: np.asarray(residual(z), dtype=float)
+
+    def solved(attempt):
+        # hybr reports "not making good progress" when it cannot reach xtol although the
+        # residual is already at rounding level; judge by the residual itself.
+        if not np.all(np.isfinite(attempt.x)):
+            return False
+        if attempt.success:
+            return True
+        with np.errstate(all="ignore"):
+            left = function(attempt.x)
+        return bool(np.all(np.isfinite(left))
+                    and np.max(np.abs(left)) <= 1e-10 * max(1.0, float(np.max(np.abs(attempt.x)))))
+
+    solution = _optimize.root(function, start, method="hybr", options={"xtol": 1e-12})
+    if not solved(solution):
+        solution = _optimize.root(function, np.asarray(guess, dtype=float), method="hybr", options={"xtol": 1e-12})
+        if not solved(solution):
             return tuple(np.full(len(start), np.nan))
-        solution = retry
     _BLOCK_SOLUTIONS[number] = solution.x
     return tuple(solution.x)
 

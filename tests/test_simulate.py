@@ -190,23 +190,28 @@ def test_dense_csv_signal_caps_the_step_instead_of_splitting(tmp_path):
     np.testing.assert_allclose(result.states["mass.p"], exact[i] + force[i] * s + slope * s**2 / 2, atol=1e-7)
 
 
-def test_nonlinear_algebraic_loop_is_solved_at_every_step():
+@pytest.mark.parametrize("tolerances", [{"rtol": 1e-10, "atol": 1e-12}, {}], ids=["tight", "experiment"])
+def test_nonlinear_algebraic_loop_is_solved_at_every_step(tolerances):
     from scipy.integrate import solve_ivp
     from scipy.optimize import brentq
 
     _, ss, experiment = derive("nonlinear_loop")
     assert len(ss.algebraic_blocks) == 1
     grid = np.linspace(0.0, 1.0, 11)
-    result = simulate(ss, experiment, t_eval=grid, rtol=1e-10, atol=1e-12)
+    # With the experiment's own (default) tolerances the loop's solver once gave up on a
+    # residual already at rounding level; the run must complete either way.
+    result = simulate(ss, experiment, t_eval=grid, **tolerances)
     assert result.complete
+    loose = not tolerances
 
     def voltage(i):         # r2 (u = f^3 + f) and r3 (u = 3 f) in parallel carry i
         return brentq(lambda u: brentq(lambda f: f**3 + f - u, -50, 50) + u / 3.0 - i, -100, 100, xtol=1e-14)
 
     reference = solve_ivp(lambda t, y: [(10.0 - 2.0 * y[0] - voltage(y[0])) / 0.5], (0.0, 1.0), [0.0],
                           t_eval=grid, rtol=1e-11, atol=1e-13)
-    np.testing.assert_allclose(result.outputs["i"], reference.y[0], atol=1e-7)
-    np.testing.assert_allclose(result.outputs["u"], [voltage(i) for i in reference.y[0]], atol=1e-6)
+    np.testing.assert_allclose(result.outputs["i"], reference.y[0], atol=1e-4 if loose else 1e-7)
+    np.testing.assert_allclose(result.outputs["u"], [voltage(i) for i in reference.y[0]],
+                               atol=1e-4 if loose else 1e-6)
 
 
 # ----------------------------------------------------------------- failures
