@@ -1,18 +1,46 @@
-"""Writes docs/diagnostics.md: the explanations below, with the golden cases and their output.
+"""Writes docs/diagnostics.md: every diagnostic code bondc can emit, with an example of each.
 
 Run ``python tests/golden/check/make_diagnostics_doc.py`` after ``pytest --update-golden``
-changed a golden ``.txt``, or to edit an explanation (edit it here, not in the page).
-``tests/test_golden_check.py`` fails when the page and the golden files disagree.
+changed a golden ``.txt``, after a diagnostic's wording changed, or to edit an explanation
+(edit it here, with :func:`d`, never the page). The tests fail when the page is stale:
+``tests/test_golden_check.py`` and ``tests/test_golden_stages.py`` check that it quotes every
+golden case, that every code in ``bondc/`` has a section, and that the page is what this
+script writes.
+
+Each section's examples come from, in this order:
+
+* ``PARSE_EXAMPLES``: small inputs to the parser (E1xx);
+* the golden cases of ``tests/golden/check/`` (E2xx-E5xx, W3xx: ``bondc check``) and of
+  ``tests/golden/stages/`` (E6xx-E8xx, E94x: causality, equations, simulation, linearisation),
+  quoted with their expected output;
+* ``LIVE``: examples run here, each in a fresh temporary directory, for what a model cannot
+  show -- data files, command-line arguments, the Python API. A ``Cli`` example runs the real
+  ``bondc`` command line in-process and shows what it prints; an ``Api`` example executes its
+  code as shown and renders the diagnostics it raises (or leaves in ``shown``).
+
+The script stops with an error when an example does not show its code, or when ``bondc/``
+emits a code that has no explanation here.
 """
 
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import re
+import shlex
+import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from bondc.errors import ParseError, render_all
+from bondc.errors import BondcError, ParseError, render_all
 from bondc.parse import parse_text
 from bondc.source import Source
 
 GOLDEN = Path(__file__).resolve().parent
+STAGES_GOLDEN = GOLDEN.parent / "stages"
 ROOT = GOLDEN.parent.parent.parent
+PAGE = ROOT / "docs" / "diagnostics.md"
 
 EXPLANATIONS: dict[str, tuple[str, str, str]] = {}  # code -> (title, what it means, how to fix it)
 
@@ -20,6 +48,8 @@ EXPLANATIONS: dict[str, tuple[str, str, str]] = {}  # code -> (title, what it me
 def d(code: str, title: str, meaning: str, fix: str) -> None:
     EXPLANATIONS[code] = (title, meaning, fix)
 
+
+# ================================================================== explanations
 
 d("E100", "unexpected token", "The parser met a word or symbol the grammar does not allow at that place. The message says what it expected.", "Compare the statement with the forms in `docs/language.md`. A statement ends at the end of its line; to continue it, end the line with `,` or stay inside `( )` or `[ ]`.")
 d("E101", "unexpected character", "A character that cannot start any token (for example `$`, `;`, `@`).", "Remove it. Names are letters, digits and `_`; comments start with `#`.")
@@ -73,6 +103,364 @@ d("W303", "name hidden inside element laws", "A parameter, input, output or stat
 d("W304", "resistor or store drawn with its bond leaving it", "An `R`, `C` or `I` element's bond points away from it. Its `e` and `f` follow the half-arrow, so `e*f` is the power it delivers: `e = b*f` then makes a resistor a source, and `der(q) = f` fills a capacitor while it discharges. The model still compiles as written.", "Draw the bond towards the element (`j -> tank`), which is what the law assumes.")
 d("W305", "a label that is another bond's default name", "A bond is labelled `b<N>` while bond number N has no label of its own. `b<N>.e` then means the labelled bond (labels win), and bond N is called `bond<N>` in equations, CSV columns and reports.", "Choose a label that does not look like a bond number (`b9_`, `motor_bond`).")
 
+# -- causality (bondc/causality.py; E605 and W604 are reported by bondc/equations.py)
+
+d("E601", "causal conflict",
+  "Two elements impose the same variable, so no causality satisfies both: two flow sources on one 1-junction "
+  "(both set its common flow), two effort sources on one 0-junction, effort sources on both sides of a "
+  "transformer, or a storage element squeezed between such constraints. The error points at the element whose "
+  "causality could not be assigned; notes show the other element(s), the junction or two-port, and the bonds "
+  "involved. Every conflict in the graph is reported.",
+  "Remove one of the sources, or put what really sits between them in the graph: a resistor (a pipe, a "
+  "contact) or a storage element (a compliance, an inertia). If both describe one physical source, keep one.")
+d("W602", "storage element in derivative causality",
+  "A `C` whose effort, or an `I` whose flow, is fixed by the rest of the graph: a capacitor across an effort "
+  "source, two inertias rigidly joined by a transformer. Its state is not independent; the equations stage "
+  "expresses it through the others (two geared inertias become one state with the combined inertia). Notes "
+  "show what fixes it. Its initial value is ignored (W704).",
+  "Nothing, if the parts are rigidly coupled on purpose. Otherwise put the compliance (`C`) or inertia (`I`) "
+  "that really separates them into the graph, e.g. a shaft stiffness between the two inertias.")
+d("I603", "algebraic loop",
+  "Information, not a problem: variables depend on each other in a cycle that passes through no storage "
+  "element (typically resistors on both sides of a junction, as in a resistor ladder). The equations stage "
+  "solves the loop: symbolically when it is linear, numerically otherwise (W604); E702 when it has no "
+  "solution.",
+  "Nothing needed. To avoid the loop, add a small storage element where the physics has one (a line "
+  "capacitance, a mass), or write a resistor's law in the other form (`f = ...` instead of `e = ...`).")
+d("W604", "nonlinear algebraic loop",
+  "An algebraic loop (I603) whose equations are not linear in the loop's unknowns (a diode, a turbulent "
+  "orifice, a friction law), so bondc cannot solve it symbolically. It is kept as an implicit equation and "
+  "solved numerically (`scipy.optimize.root`, warm-started) at every evaluation of the state equations.",
+  "Usually nothing: the run is slower, and where the solve fails its unknowns become nan and the run stops "
+  "(E810). To remove the loop, add a small storage element, or give the resistor's law in the form the loop needs.")
+d("E605", "law cannot be inverted",
+  "Causality needs a law in the other form than the one written: a resistor in conductance causality "
+  "(it receives the effort and must give the flow) with only `e = ...`, or a storage element in derivative "
+  "causality whose state must be computed from its effort or flow. bondc inverts a law that is linear in the "
+  "variable, and another law when `sympy` finds exactly one inverse that reproduces it; a nonlinear law that "
+  "uses `abs`, `sign`, `min`, `max`, `if`, `table` or `step`, or that has several inverses, cannot be "
+  "inverted. The caret is under the law.",
+  "Give the other form too: an `R` may have both `e = ...` and `f = ...` (they must be inverses of each "
+  "other). For a storage element, give an invertible law or add compliance or inertia so that it gets "
+  "integral causality.")
+
+# -- equations (bondc/equations.py, bondc/symbolic.py)
+
+d("E701", "expression cannot be translated",
+  "An internal guard of the equations stage: it translates every law to `sympy` and stops at anything it "
+  "cannot translate (an unknown name, a string or a list in arithmetic, a call with the wrong arguments, one "
+  "name for two quantities). The semantic checks report each of these first (E301, E302, E306, E312, E313, "
+  "E316), so a model that passes `bondc check` does not get E701: it cannot be triggered from a model. If "
+  "you see it, it is a bug in bondc.",
+  "Report it with the model file. The message and caret show the expression; rewriting it (e.g. with a "
+  "helper parameter or output) usually works around it.")
+d("E702", "singular algebraic loop",
+  "The equations of an algebraic loop do not determine its unknowns: the loop's laws cancel each other, as "
+  "with two resistances whose parallel combination is infinite (a negative resistance balancing a positive "
+  "one), or two ideal paths in parallel with nothing on them. The error points at the first element or "
+  "junction on the loop; notes show the others.",
+  "Check the signs of the laws and the bond directions; put a resistor or storage element on one of two "
+  "parallel ideal paths.")
+d("E703", "derivative causality that cannot be eliminated",
+  "A storage element in derivative causality (W602) whose state bondc cannot express through the other "
+  "states: it has several states (a custom `C` with `state P, state T`), it feeds a nonlinear algebraic "
+  "loop, its state depends on another eliminated element's rate, or eliminating it needs the time derivative "
+  "of a signal that cannot be differentiated (a measured `csv(...)` signal). The message says which; only the "
+  "last case has no source location.",
+  "Add compliance or inertia so that the element gets integral causality (e.g. the source's internal "
+  "resistance in front of a capacitor); for a measured signal, drive the element through a resistor.")
+d("W704", "initial value ignored",
+  "A storage element in derivative causality (W602) has an initial value, but its state follows from the "
+  "other states, so the value given is not used.",
+  "Remove the initial value, or give it to the element that is in integral causality (for two geared "
+  "inertias, the motor's momentum sets the load's).")
+
+# -- simulation (bondc/simulate.py, bondc/runtime.py)
+
+d("E801", "no end time",
+  "`bondc simulate` (and `report`, `validate`, `sweep`) needs an end time: `--t-end`, or `t_end` in the "
+  "experiment that runs. The model has no experiment, or its experiment has no `t_end`.",
+  "Give `--t-end 2`, or add an experiment: `experiment run` / `t_end = 2 [s]` / `end`.")
+d("E802", "unknown parameter override",
+  "Python API only: `bondc.simulate.simulate(ss, overrides={...})` was given a name that is not a parameter "
+  "of the model. (On the command line an unknown `--set` name is E301.)",
+  "Use one of the parameters the hint lists; `StateSpace.parameters` names them.")
+d("E803", "cannot start the simulation",
+  "The runtime rejected the settings before integrating: an end time that is not after the start time "
+  "(`--t-end 0` or a negative one); through the Python API, also output times that do not increase, an "
+  "unknown solver or a parameter vector of the wrong size. (The experiment's own settings are checked "
+  "earlier, as E317.)",
+  "Give a positive `--t-end`; the message says which setting is wrong.")
+d("E804", "measured signal unreadable at run time",
+  "A `csv(\"file\", \"column\")` signal passed the checks of `bondc check` (the file exists, the header has "
+  "the column, E310) but its rows cannot be used when the run reads them: a cell that is not a number, a time "
+  "column that goes backwards, no data rows, or a file changed since it was checked. The message gives the "
+  "file's absolute path and the row; it has no source location.",
+  "Fix the row the message names; the time column (`t`, `time`, or else the first) must not decrease.")
+d("E810", "a value became nan or inf",
+  "The run stopped because a state, a variable or a state derivative became `nan` or `inf`. The message "
+  "names the first non-finite variable in causal order, its law and the time; the caret is under that law, and "
+  "the hint gives the states at that time. Everything computed before is kept (and written with `-o`); the "
+  "command exits with status 1.",
+  "A law was evaluated outside its domain: the square root or logarithm of a negative number (a tank that "
+  "emptied, a pressure that went negative), a division by zero. Guard the law (`sqrt(max(q - 1, 0))`), or "
+  "stop the experiment before the state leaves its physical range.")
+d("E811", "solver failure",
+  "The ODE solver gave up: its step size became too small. The model is stiffer than the method can handle "
+  "(an explicit solver on a stiff model), a variable grows without bound (here `x` reaches infinity at "
+  "t = 1 s), or the right-hand side has a discontinuity bondc cannot see. Results up to that time are kept.",
+  "For a stiff model use a stiff solver (`solver = \"LSODA\"`, the default, or `\"Radau\"`); for a "
+  "variable that grows without bound, check its law or end the run before; otherwise check the laws near the "
+  "time given, or loosen `rtol`/`atol`.")
+d("E812", "too many events",
+  "A switch (`if`, `abs`, `sign`, `min`, `max`, `step`) changed mode more than 100000 times: the run stops "
+  "instead of creeping on. Chattering that the sliding-mode and chattering guards absorb does not count "
+  "(W820). Reaching the limit takes a long run; the example lowers it through the runtime's `max_events` "
+  "argument to show the message.",
+  "Smooth the law near its switching surface (a narrow linear band around zero speed instead of "
+  "`sign(v)`), or simulate a shorter time.")
+d("E813", "interrupted",
+  "The run was interrupted (Ctrl-C). It cannot be triggered from a model. What was computed is kept and "
+  "written with `-o`; the command exits with status 1. The example interrupts a run from its progress "
+  "callback.",
+  "Nothing to fix; simulate a shorter time with `--t-end` if the run is too slow.")
+d("W820", "chattering",
+  "A switch kept changing mode faster than events can be located (a sliding mode that the Filippov "
+  "treatment does not cover, or a switching signal much faster than the solver's steps), so bondc integrated "
+  "short intervals with the law unfrozen (modes recomputed at every evaluation). The switching instants there "
+  "are not located: the results are only as good as the solver's steps resolve the switching. The episodes are "
+  "listed in the run's events.",
+  "For a fast switching input, set `max_step` in the experiment below half its period so that every switch is "
+  "located (here `max_step = 2e-5 [s]` removes the warning and gives the exact average), or model its average "
+  "(a duty cycle instead of the pulses). For friction, make the switching surface smooth (a narrow band "
+  "around zero speed).")
+d("W821", "output not finite",
+  "An output (or a bond variable) is `nan` or `inf` from some time on, but the states are finite: its law is "
+  "evaluated outside its domain, and nothing else uses it. The caret is under the output (or the law of the "
+  "bond variable).",
+  "Guard the output's law (`log(max(tank.q - 0.5, 1e-9))`), or end the run before it leaves its domain.")
+
+# -- analyses and data files (bondc/analysis/)
+
+d("E901", "no data rows",
+  "`bondc fit-friction`, or a motor catalogue (`--motors`): the file is empty, or has a header but no data "
+  "rows (lines starting with `#` are comments).",
+  "Add the measured rows under the header.")
+d("E902", "friction data column missing or repeated",
+  "`bondc fit-friction` needs a velocity column (`v` or `velocity`), a torque column (`tau`, `τ` or "
+  "`torque`) and a pressure column (`P` or `pressure`), named in any case, each optionally with a unit in "
+  "brackets; other columns are ignored. A column is missing (the hint guesses which header cell was meant), "
+  "or two columns hold the same quantity.",
+  "Rename the header cell, e.g. `velocity [m/s],torque [N*m],pressure [Pa]`; separate columns with commas.")
+d("E903", "not a number",
+  "A data cell (friction data, motor catalogue) is empty, not a number, or not finite. The caret is under the "
+  "cell.",
+  "Write plain numbers (`0.05`, `2.24e5`); units belong in the header.")
+d("E904", "wrong number of cells",
+  "A row of a friction data file or a motor catalogue has more or fewer cells than the header (or, through "
+  "the Python API, the columns given have different lengths).",
+  "Look for a missing or extra comma in the row.")
+d("E905", "data file cannot be read",
+  "`bondc fit-friction` (or a motor catalogue) names a file that does not exist or cannot be read as UTF-8. "
+  "`bondc fit-friction` exits with status 2.",
+  "Fix the path; it is relative to the current directory.")
+d("E906", "unit of a data column",
+  "The unit in a friction data header (`velocity [mm/s]`) cannot be read, is unknown, or measures another "
+  "quantity than the column (a velocity in `[N]`). Known units are converted to SI (`mm/s`, `MPa`, `kN*m`).",
+  "Write a unit of the column's quantity: `m/s` (or `mm/s`), `N*m`, `Pa` (or `bar`, `kPa`); without a unit "
+  "SI is assumed.")
+d("E910", "zero velocity",
+  "A friction test row has velocity 0, so the friction coefficient C = F/v is undefined.",
+  "Friction is identified from steady motion: drop standstill rows.")
+d("E911", "too few rows for a direction",
+  "The power law C = a*|v|^b is fitted separately for upward (v > 0) and downward (v < 0) motion, each from "
+  "at least 3 rows; a direction has fewer.",
+  "Measure at three or more steady speeds in each direction.")
+d("E912", "friction coefficient not positive",
+  "For a row, the friction force from eq. 17, F = 2*pi/lead*tau + (P - P_atm)*A - M*g, does not oppose the "
+  "motion, so C = F/v is zero or negative and cannot be fitted in log space. Usual causes: gauge pressure read "
+  "as absolute, a sign convention different from bondc's (v and tau positive upward), or wrong "
+  "`--lead`/`--area`/`--mass`.",
+  "Pass `--patm 0` for gauge pressure; check the signs and the rig's parameters.")
+d("E913", "exponent cannot be fitted",
+  "All rows of one direction are at the same speed, so the exponent b is undetermined; or the nonlinear "
+  "least-squares refinement did not converge.",
+  "Measure at two or more different speeds in each direction (three or more: E911).")
+d("E914", "invalid rig parameter",
+  "A parameter of `bondc fit-friction` is not a finite number, or has the wrong sign: `--lead` and `--area` "
+  "must be positive, `--mass`, `--gravity` and `--patm` at least 0.",
+  "Give the rig's values in SI: `--lead 0.005` (m per revolution), `--area 2.63e-3` (m^2).")
+d("E915", "pressure not above atmospheric (warning)",
+  "A warning, despite its `E` code: the median chamber pressure is not above `--patm` (101325 Pa by "
+  "default). bondc reads the pressure as absolute and uses (P - P_atm)*A, so data logged as gauge pressure "
+  "give a wrong piston force. The fit is still made and printed, with this warning after it.",
+  "For gauge data pass `--patm 0`; if the chamber really is below atmospheric, ignore it.")
+d("E920", "motor catalogue header",
+  "A motor catalogue (`--motors FILE`) must have exactly the header "
+  "`name,rated_torque,peak_torque,rated_speed,rated_power,rotor_inertia` (units N*m, N*m, rpm, W, kg*m^2). "
+  "The message lists missing and unexpected columns, with a guess for a misspelt one.",
+  "Write the header exactly as the hint shows, in that order.")
+d("E921", "motor catalogue value out of range",
+  "A catalogue row has no name, a value that is not positive, or a peak torque below the rated torque.",
+  "Fix the row; if the two torque columns are swapped, swap them back.")
+d("E922", "motor listed twice",
+  "Two catalogue rows have the same motor name.",
+  "Remove the duplicate or rename one of them.")
+d("E923", "motor profile samples",
+  "Python API (`bondc.analysis.motors.requirements`, `select`): the time, torque and speed arrays have "
+  "different lengths, fewer than 2 samples, non-finite values or more than one dimension; or rotor inertia "
+  "was to be added to requirements built without a profile. `bondc simulate --motors` builds the profile from "
+  "the run, so there it appears only when the `torque` or speed output is not finite.",
+  "Pass the samples at the same instants, all finite.")
+d("E924", "motor profile time not increasing",
+  "Python API (`requirements`): the time samples are not strictly increasing. A simulated run always is.",
+  "Sort the samples and drop repeated instants.")
+d("E925", "motor cycle window",
+  "Python API (`requirements(..., cycle=(t_start, t_end))`): the window is not two numbers, is empty, or "
+  "lies outside the record. (`bondc simulate --motors` takes the window from the experiment's `cycle`, "
+  "clipped to the run.)",
+  "Give t_start < t_end inside the record.")
+d("E926", "inertia ratio above 10 (warning)",
+  "A warning, despite its `E` code: for a catalogue motor, the load inertia seen by the motor shaft is more "
+  "than 10 times its rotor inertia, which makes the servo loop hard to tune. It does not disqualify the "
+  "motor; `bondc simulate --motors` prints it under the motor as a line starting with `!`.",
+  "Prefer a motor with a larger rotor inertia (the `M` variants), or a gearbox.")
+d("E927", "no torque or speed signal for motor selection",
+  "`bondc simulate --motors` (and `report --motors`) sizes the motor from an output named `torque` and an "
+  "output or input named `omega` (or `speed`); the model lacks one of them. The run itself is unaffected: the error "
+  "is printed and the selection is left out.",
+  "Add the outputs, e.g. `output torque [N*m] = coupling.e` and `output omega [rad/s] = rotor.f`.")
+d("E930", "result of another model",
+  "Python API (`bondc.analysis.energy.energy_account(ss, result)`): the simulation result's states are not "
+  "the model's, i.e. it was simulated from another StateSpace.",
+  "Pass the StateSpace the result was simulated from.")
+d("E931", "no time span",
+  "Python API (`energy_account`): the result has fewer than two time points, so there is no energy to "
+  "account. (`bondc simulate` skips the account for such a run.)",
+  "Simulate past the start time.")
+d("E932", "cycle length not positive",
+  "Python API (`energy_account(..., cycle=...)`, `power_statistics`): the cycle length is not a positive "
+  "number of seconds. (An experiment's `cycle` setting is checked as E317.)",
+  "Give the cycle length in seconds, > 0, or None for the whole run.")
+d("E933", "no such output",
+  "Python API (`bondc.analysis.stats.power_statistics(result, names)`): a name is not an output of the "
+  "simulation result.",
+  "Use one of the outputs the hint lists.")
+d("W930", "energy balance does not close",
+  "After a run, bondc accounts the energy of every element per cycle; for a cycle, the sources' net energy "
+  "differs from dissipated + stored + net work in by more than 1e-6 of the energy throughput. The residual is "
+  "the simulation's accumulated error. `bondc simulate` prints it as the last line of the energy account "
+  "(`--json`: in `energy.diagnostics`, with the hint).",
+  "Tighten `rtol` and `atol` in the experiment.")
+d("W931", "two-port does not conserve power",
+  "A transformer's or gyrator's work in at its two ports does not sum to zero over a cycle. bondc writes the "
+  "two-port equations so that p1.e*p1.f = p2.e*p2.f holds exactly, so this is an internal consistency check of "
+  "the energy account: it cannot be triggered from a model, and seeing it means a bug in bondc.",
+  "Report it with the model file.")
+d("E940", "no equilibrium",
+  "`bondc linearize --at equilibrium` looks for a state where every rate is zero, starting from the initial "
+  "state with the inputs held at `--time`, and found none: some rate stays away from zero (a constant force "
+  "on a free mass, an integrator fed a constant), or the search ran away.",
+  "Linearise at the initial state (`--at initial`, the default), or change the inputs so that an equilibrium "
+  "exists.")
+d("E941", "derivative cannot be evaluated",
+  "`bondc linearize` evaluates the partial derivatives of the state equations at the operating point, and one "
+  "is not a finite number there (`zoo` is sympy's complex infinity): e.g. d/dq sqrt(q) at q = 0. The message "
+  "shows the derivative.",
+  "Linearise at another point (another initial value, or `--at equilibrium`), or make the law smooth at the "
+  "operating point.")
+
+d("E960", "--vary not understood",
+  "`bondc sweep`: a `--vary` is not `NAME=VALUES [unit]` (no `=`, a name that is not a name, no values, an "
+  "empty value between commas), or no `--vary` is given.",
+  "Write e.g. `--vary \"k=400,800,1600\"`, `--vary \"M=20:40:5 [kg]\"` (start:stop:count).")
+d("E961", "--vary of something that is not a parameter",
+  "`bondc sweep`: the name before `=` is not a parameter of the model (inputs and elements cannot be "
+  "varied).",
+  "Use one of the parameters the hint lists (names are case-sensitive).")
+d("E962", "--vary value",
+  "`bondc sweep`: a value is not a finite number, or a range is not `start:stop:count` with a whole count "
+  ">= 2 (both ends are included).",
+  "Write numbers (`400,800`) or a range (`20:40:5` gives 20, 25, 30, 35, 40).")
+d("E963", "--vary unit",
+  "`bondc sweep`: the unit in `[ ]` is empty, unknown, or measures another quantity than the parameter's "
+  "declared unit (the same rule as `--set`, E204).",
+  "Give the values in the parameter's unit (leave out `[ ]`) or in a unit of the same kind.")
+d("E964", "too many runs",
+  "`bondc sweep`: the grid (the product of the numbers of values of every `--vary`) has more than 200 runs.",
+  "Use fewer values, or split the sweep into several.")
+d("E965", "unknown metric",
+  "`bondc sweep --metric`: not a column the sweep can compute. Columns are `OUTPUT.min .max .mean .rms "
+  ".final` (or `OUTPUT.*`), `energy.residual`, `energy.relative_residual`, and `motor.*` when the model has "
+  "an output `torque` and an output or input `omega`/`speed`.",
+  "Use a column the hint suggests or lists.")
+d("E966", "parameter varied twice",
+  "`bondc sweep`: the same parameter is given in two `--vary`, or both varied and fixed with `--set`.",
+  "Give all its values in one `--vary`, and drop the `--set`.")
+d("E967", "--jobs",
+  "`bondc sweep --jobs`: the number of points run in parallel is not a whole number >= 1.",
+  "Give `--jobs 1` (the default) or more.")
+d("E968", "a sweep point failed without a diagnostic of its own",
+  "`bondc sweep`: a point failed for a reason that is not a diagnostic of the model (a point whose model "
+  "fails to load or whose run stops reports that diagnostic instead, e.g. E810): the model file changed on "
+  "disk while the sweep ran, a worker process died (`--jobs`), or an internal error occurred. It is reported "
+  "per point, and the sweep goes on (exit status 1). It cannot be triggered from a model.",
+  "Do not edit the model during a sweep; rerun with `--jobs 1`; report an internal error with the model.")
+d("E969", "sweep output file",
+  "`bondc sweep -o FILE`: the file name does not end in `.csv` or `.json`.",
+  "Name the output `results.csv` (SI values) or `results.json`.")
+
+# -- validation against measured data (bondc/report/validate.py)
+
+d("E950", "measured data file",
+  "`bondc validate --data FILE` (and `report --data`): the file does not exist, cannot be read, is empty or "
+  "has a header but no data rows.",
+  "Fix the path (relative to the current directory) or the file: a header line such as `t,omega` and then "
+  "rows of numbers.")
+d("E951", "measured value not a number",
+  "A cell of the measured data is empty, not a number, or not finite. The caret is under the cell.",
+  "Write a number in every cell; remove incomplete rows.")
+d("E952", "measured time not increasing",
+  "The time column (`t` or `time`, else the first column) of the measured data must increase strictly; the "
+  "caret is under the first value that does not.",
+  "Sort the rows by time and drop repeated instants.")
+d("E953", "measured column missing",
+  "A `--compare OUT=COLUMN` names a column the measured data does not have.",
+  "Use the column name of the data file's header (the hint suggests the closest).")
+d("E954", "not a simulated signal",
+  "A `--compare OUT=COLUMN` names a signal the simulation does not record. Signals are the outputs, states "
+  "(`mass.p`), inputs and bond variables (`b3.e`, or a bond label).",
+  "Use the name of an output (or add one: `output omega [rad/s] = rotor.f`).")
+d("E955", "comparison not understood",
+  "A `--compare` is not `OUT=COLUMN[:metric=value,...]`: no `=`, a name that is not a signal name, an unknown "
+  "metric (`nrmse rmse maxabs r2`), a tolerance that is not a number, negative, twice given, or `r2` above 1.",
+  "Write e.g. `--compare omega=omega_meas:nrmse=0.05,r2=0.95`; without tolerances, `nrmse=0.05` applies.")
+d("E956", "simulation and measurement do not overlap",
+  "The simulated and measured time ranges share fewer than two simulated samples, so nothing can be "
+  "compared: usually the data is in another time unit (ms) or starts later than the run ends.",
+  "Check the experiment's `t_end` (or `--t-end`) and that the time column is in seconds.")
+d("E957", "measured data header or row shape",
+  "The measured data's header has an empty or repeated column name, or a row has more or fewer cells than the "
+  "header.",
+  "Give every column a unique name; look for a missing or extra comma in the row.")
+
+# -- command line and files
+
+d("E000", "error without a specific code",
+  "The code of an error raised with a bare message. Every error bondc reports to a user has a specific code, "
+  "so E000 cannot be triggered; seeing it means a bug in bondc.",
+  "Report it with the command line and the model file.")
+d("E001", "command-line usage",
+  "The command line is not understood: a missing argument, an unknown option, an option's value of the wrong "
+  "type, or options that need each other (`--compare` without `--data`). The command exits with status 2.",
+  "See `bondc COMMAND --help`.")
+d("E002", "model file cannot be read",
+  "The `.bg` file named on the command line does not exist, is a directory, or is not UTF-8 text. The "
+  "command exits with status 2. (A file named by `import` is E307; a `csv(...)` file, E310.)",
+  "Check the path (relative to the current directory); save the model as UTF-8.")
+
+# ================================================================== examples
+
 PARSE_EXAMPLES = {
     "E100": "model M\n  param = 3\nend\n",
     "E101": "model M\n  param k = 3 $\nend\n",
@@ -80,6 +468,248 @@ PARSE_EXAMPLES = {
     "E103": "model M\n  param k = 3\n",
     "E104": "model M\n  param end = 3\nend\n",
 }
+
+
+@dataclass
+class Cli:
+    """``bondc ...`` run in-process in a fresh directory holding ``files``; shows what it prints.
+
+    ``stream``: "stderr" (diagnostics) or "stdout"; ``lines``: keep only the lines containing
+    this text (for a warning inside a long report).
+    """
+
+    command: str
+    files: dict[str, str] = field(default_factory=dict)
+    stream: str = "stderr"
+    lines: str | None = None
+    note: str | None = None
+    expect: str | None = None       # what the output must contain; default "[CODE]"
+
+
+@dataclass
+class Api:
+    """Python code executed in a fresh directory holding ``files``; shows the diagnostics it raises
+    (a BondcError) or leaves in a variable ``shown``."""
+
+    code: str
+    files: dict[str, str] = field(default_factory=dict)
+    note: str | None = None
+
+
+LIVE: dict[str, list] = {}
+
+
+def live(code: str, *examples) -> None:
+    LIVE.setdefault(code, []).extend(examples)
+
+
+# -- files shared by the examples
+
+SPIN = """model Spin
+  param J = 2e-4 [kg*m^2]
+  param b = 1e-3 [N*m*s]
+  Se motor : e = 0.5
+  I  rotor : f = p/J
+  R  drag  : e = b*f
+  1  shaft
+  motor -> shaft
+  shaft -> rotor
+  shaft -> drag
+  output omega [rad/s] = rotor.f
+  output torque [N*m] = motor.e
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+SPIN_NO_TORQUE = SPIN.replace("  output torque [N*m] = motor.e\n", "")
+LOOSE = """model Bounce
+  Se push   : e = 10
+  I  mass   : f = p/1
+  C  spring : e = 1e4*q
+  R  damper : e = 2*f
+  1  j
+  push -> j
+  j -> mass
+  j -> spring
+  j -> damper
+  experiment run
+    t_end = 1 [s]
+    rtol = 1e-2
+    atol = 1e-3
+  end
+end
+"""
+MEASURED = "t,omega_meas\n0,0\n0.5,1210\n1,2150\n"
+CATALOGUE_HEADER = "name,rated_torque,peak_torque,rated_speed,rated_power,rotor_inertia\n"
+CATALOGUE = CATALOGUE_HEADER + "SV-750,2.39,7.16,3000,750,1.7e-4\nSV-1000M,3.18,9.55,3000,1000,6.5e-4\n"
+FRICTION_HEADER = "velocity [m/s],torque [N*m],pressure [Pa]\n"
+UP = "0.02,0.18626,224000\n0.05,0.24115,224000\n0.1,0.29269,224000\n"
+DOWN = "-0.02,-0.10095,224000\n-0.05,-0.13446,224000\n-0.1,-0.16773,224000\n"
+FRICTION = FRICTION_HEADER + UP + DOWN
+
+# -- analyses and data files
+
+live("E901", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION_HEADER}))
+live("E902", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION.replace("velocity", "speed", 1)}))
+live("E903", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION.replace("0.24115", "n/a")}))
+live("E904", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION.replace("0.05,0.24115,224000",
+                                                                                 "0.05,0.24115")}))
+live("E905", Cli("bondc fit-friction test.csv", {"tests.csv": FRICTION}, note="The file is `tests.csv`."))
+live("E906", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION.replace("[m/s]", "[N]")}))
+live("E910", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION + "0,0.2,224000\n"}))
+live("E911", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION_HEADER + UP + DOWN.split("\n", 1)[1]}))
+live("E912", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION.replace("224000", "122675")},
+                 note="The pressures are gauge pressures (absolute minus 101325 Pa), read as absolute."))
+live("E913", Cli("bondc fit-friction tests.csv",
+                 {"tests.csv": FRICTION_HEADER + "0.05,0.24115,224000\n" * 3 + DOWN}))
+live("E914", Cli("bondc fit-friction tests.csv --lead 0", {"tests.csv": FRICTION}))
+live("E915", Cli("bondc fit-friction tests.csv", {"tests.csv": FRICTION_HEADER
+                 + "0.02,0.52950,60000\n0.05,0.58438,60000\n0.1,0.63592,60000\n"
+                 + "-0.02,0.24228,60000\n-0.05,0.20878,60000\n-0.1,0.17551,60000\n"}, stream="stdout"))
+live("E920", Cli("bondc simulate spin.bg --motors motors.csv",
+                 {"spin.bg": SPIN, "motors.csv": CATALOGUE.replace("rotor_inertia", "rotor_inertai")}))
+live("E921", Cli("bondc simulate spin.bg --motors motors.csv",
+                 {"spin.bg": SPIN, "motors.csv": CATALOGUE.replace("2.39,7.16", "7.16,2.39")}))
+live("E922", Cli("bondc simulate spin.bg --motors motors.csv",
+                 {"spin.bg": SPIN, "motors.csv": CATALOGUE + "SV-750,2.4,7.2,3000,750,1.7e-4\n"}))
+live("E923", Api("from bondc.analysis.motors import requirements\n"
+                 "requirements([0.0, 0.5, 1.0], [0.2, 0.4], [100.0, 150.0, 200.0])"))
+live("E924", Api("from bondc.analysis.motors import requirements\n"
+                 "requirements([0.0, 0.5, 0.5], [0.2, 0.3, 0.4], [100.0, 150.0, 200.0])"))
+live("E925", Api("from bondc.analysis.motors import requirements\n"
+                 "requirements([0.0, 0.5, 1.0], [0.2, 0.3, 0.4], [100.0, 150.0, 200.0], cycle=(0.5, 2.0))"))
+live("E926", Cli("bondc simulate spin.bg --motors motors.csv",
+                 {"spin.bg": SPIN, "motors.csv": CATALOGUE_HEADER + "SV-100,0.32,0.95,3000,100,5e-6\n"},
+                 stream="stdout", lines="inertia ratio", expect="inertia ratio",
+                 note="The rotor has 2e-4 kg*m^2, 40 times SV-100's. Of the selection, only the line under the "
+                      "motor is shown here; `bondc simulate --json --motors` gives the warning in full."))
+live("E927", Cli("bondc simulate spin.bg --motors motors.csv", {"spin.bg": SPIN_NO_TORQUE, "motors.csv": CATALOGUE}))
+
+_IMPORTS = ("from bondc import semantic\n"
+            "from bondc.causality import assign_causality\n"
+            "from bondc.equations import derive\n"
+            "from bondc.simulate import simulate\n")
+_SPIN_API = (_IMPORTS
+             + "graph, _ = semantic.load(\"spin.bg\")\n"
+             "ss = derive(assign_causality(graph))\n"
+             "result = simulate(ss, graph.experiments[\"run\"])\n")
+
+
+def _with(imports: str, code: str) -> str:
+    """``code`` with more import lines after the first ones."""
+    return code.replace(_IMPORTS, _IMPORTS + imports, 1)
+
+
+_ENERGY = "from bondc.analysis.energy import energy_account\n"
+live("E930", Api(_with(_ENERGY, _SPIN_API.replace("result = ", "other_graph, _ = semantic.load(\"bounce.bg\")\n"
+                                                  "other = derive(assign_causality(other_graph))\nresult = "))
+                 + "energy_account(other, result)", {"spin.bg": SPIN, "bounce.bg": LOOSE}))
+live("E931", Api(_with(_ENERGY, _SPIN_API.replace("simulate(ss, graph.experiments[\"run\"])",
+                                                  "simulate(ss, graph.experiments[\"run\"], t_eval=[0.0])"))
+                 + "energy_account(ss, result)", {"spin.bg": SPIN}))
+live("E932", Api(_with(_ENERGY, _SPIN_API) + "energy_account(ss, result, cycle=0)", {"spin.bg": SPIN}))
+live("E933", Api(_with("from bondc.analysis.stats import power_statistics\n", _SPIN_API)
+                 + "power_statistics(result, [\"power\"])", {"spin.bg": SPIN}))
+live("W930", Cli("bondc simulate bounce.bg", {"bounce.bg": LOOSE}, stream="stdout", lines="[W930]",
+                 note="Of the energy account `bondc simulate` prints, only its last line is shown here."))
+
+# -- sweeps
+
+_SWEEP = "bondc sweep spin.bg "
+live("E960", Cli(_SWEEP + "--vary J", {"spin.bg": SPIN}))
+live("E961", Cli(_SWEEP + "--vary j=1e-4,2e-4", {"spin.bg": SPIN}))
+live("E962", Cli(_SWEEP + "--vary J=1e-4:4e-4:1", {"spin.bg": SPIN}))
+live("E963", Cli(_SWEEP + "--vary 'J=1,2 [kg]'", {"spin.bg": SPIN}))
+live("E964", Cli(_SWEEP + "--vary J=1e-4:4e-4:201", {"spin.bg": SPIN}))
+live("E965", Cli(_SWEEP + "--vary J=1e-4,2e-4 --metric omgea.max", {"spin.bg": SPIN}))
+live("E966", Cli(_SWEEP + "--vary J=1e-4 --vary J=2e-4", {"spin.bg": SPIN}))
+live("E967", Cli(_SWEEP + "--vary J=1e-4 --jobs 0", {"spin.bg": SPIN}))
+live("E969", Cli(_SWEEP + "--vary J=1e-4,2e-4 -o results.txt", {"spin.bg": SPIN}))
+
+# -- validation
+
+_VALIDATE = "bondc validate spin.bg --data measured.csv --compare omega=omega_meas"
+live("E950", Cli(_VALIDATE.replace("measured.csv", "measurd.csv"), {"spin.bg": SPIN, "measured.csv": MEASURED}))
+live("E951", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": MEASURED.replace("1210", "")}))
+live("E952", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": MEASURED.replace("\n1,", "\n0.5,")}))
+live("E953", Cli(_VALIDATE.replace("omega_meas", "omega_measured"), {"spin.bg": SPIN, "measured.csv": MEASURED}))
+live("E954", Cli(_VALIDATE.replace("omega=", "speed="), {"spin.bg": SPIN, "measured.csv": MEASURED}))
+live("E955", Cli(_VALIDATE + ":nrmse=5%", {"spin.bg": SPIN, "measured.csv": MEASURED}))
+live("E956", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": "t,omega_meas\n5,2300\n6,2310\n"}))
+live("E957", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": MEASURED.replace("0.5,1210", "0.5,1210,3")}))
+
+# -- simulation (what a model cannot show)
+
+live("E802", Api(_SPIN_API.replace("result = simulate(ss, graph.experiments[\"run\"])",
+                                   "simulate(ss, graph.experiments[\"run\"], overrides={\"damping\": 2e-3})"),
+                 {"spin.bg": SPIN}))
+_PWM = """model Pwm
+  input u = step(sin(2*pi*1000*t), 0)
+  MSf heater : f = 2*u
+  C   tank   : e = q/1
+  R   loss   : f = e/1
+  0   node
+  heater -> node
+  node -> tank
+  node -> loss
+end
+"""
+_RUNTIME = ("from bondc import semantic\n"
+            "from bondc.causality import assign_causality\n"
+            "from bondc.equations import derive\n"
+            "from bondc.simulate import _result, compile_model   # _result: what simulate() makes of a raw run\n"
+            "graph, _ = semantic.load(\"{file}\")\n"
+            "ss = derive(assign_causality(graph))\n"
+            "module = compile_model(ss)    # the module `bondc compile` writes\n")
+live("E812", Api(_RUNTIME.format(file="pwm.bg")
+                 + "raw = module[\"simulate_model\"](module[\"_MODEL\"], 1.0, max_events=20)\n"
+                   "shown = _result(ss, None, module, raw, {}).diagnostics", {"pwm.bg": _PWM}))
+
+
+live("E813", Api(_RUNTIME.format(file="spin.bg")
+                 + "def progress(t):             # what Ctrl-C does during a run\n"
+                   "    if t > 0.5:\n"
+                   "        raise KeyboardInterrupt\n"
+                   "raw = module[\"simulate_model\"](module[\"_MODEL\"], 1.0, progress=progress)\n"
+                   "shown = _result(ss, None, module, raw, {}).diagnostics", {"spin.bg": SPIN}))
+
+# -- command line and files
+
+live("E001", Cli("bondc simulate --t-end 2"), Cli("bondc report spin.bg --compare omega=omega_meas", {"spin.bg": SPIN}))
+live("E002", Cli("bondc check spin.gb", {"spin.bg": SPIN}))
+
+# ================================================================== the page
+
+STAGES = (  # (title, modules), in the order of the page
+    ("Syntax", "`bondc/parse.py`"),
+    ("Units", "`bondc/units.py`, `bondc/semantic.py`"),
+    ("Names, expressions, files and experiments", "`bondc/semantic.py`, `bondc/evaluate.py`"),
+    ("Graph structure", "`bondc/semantic.py`"),
+    ("Element laws and states", "`bondc/semantic.py`"),
+    ("Causality", "`bondc/causality.py`, `bondc/equations.py`"),
+    ("Equations", "`bondc/equations.py`, `bondc/symbolic.py`"),
+    ("Simulation", "`bondc/simulate.py`, `bondc/runtime.py`"),
+    ("Analyses and data files", "`bondc/analysis/`"),
+    ("Validation against measured data", "`bondc/report/validate.py`"),
+    ("Command line and files", "`bondc/cli.py`, `bondc/io.py`, `bondc/errors.py`"),
+)
+
+
+def stage_of(code: str) -> str:
+    """The stage a code belongs to, by its number (W304 is about the graph; the other W3xx about names)."""
+    number = int(code[1:])
+    if code == "W304":
+        return "Graph structure"
+    if number < 100:
+        return "Command line and files"
+    if 950 <= number < 960:
+        return "Validation against measured data"
+    by_hundred = {1: "Syntax", 2: "Units", 3: "Names, expressions, files and experiments", 4: "Graph structure",
+                  5: "Element laws and states", 6: "Causality", 7: "Equations", 8: "Simulation",
+                  9: "Analyses and data files"}
+    return by_hundred[number // 100]
+
 
 HEADER = """# Diagnostics
 
@@ -89,87 +719,165 @@ places, and a hint. One run reports every problem it can find, sorted by
 position. `bondc check --json` prints the same diagnostics as JSON
 (`Diagnostic.to_json()`).
 
-| range | stage | module |
-| --- | --- | --- |
-| E0xx | command line and files | `bondc/cli.py`, `bondc/semantic.py` |
-| E1xx | syntax | `bondc/parse.py` |
-| E2xx | units | `bondc/units.py`, `bondc/semantic.py` |
-| E3xx, W3xx | names, expressions, files, experiments | `bondc/semantic.py`, `bondc/evaluate.py` |
-| E4xx | graph structure: bonds, ports, junctions | `bondc/semantic.py` |
-| E5xx | element laws and states | `bondc/semantic.py` |
-| E6xx, W6xx, I6xx | causality | `bondc/causality.py` |
-| E7xx, W7xx | equations | `bondc/equations.py`, `bondc/symbolic.py` |
-| E9xx | data files and analyses | `bondc/analysis/` |
+A code's letter is its severity: `E` an error, `W` a warning, `I` information
+(two warnings have an `E` code: E915 and E926). Errors stop the command with
+exit status 1, or 2 when the command line is at fault (a bad option, a file that
+cannot be read); warnings and information are printed and the command goes on.
 
-Errors stop the command (exit status 1); warnings (`W...`) are printed and the
-command goes on. A file that cannot be read at all (missing, a directory, not
-UTF-8) is a usage error (exit status 2), with no code of its own beyond E000.
-
-The examples below are the golden test cases of `tests/golden/check/` (and, for
-syntax errors, small inputs to the parser); the output is exactly what bondc
-prints for them. This page is generated by
-`tests/golden/check/make_diagnostics_doc.py`; edit the explanations there.
+This page lists every code bondc can emit, by stage, each with what it means,
+an example and how to fix it. The examples are the golden test cases of
+`tests/golden/check/` (a first line `# check: --model M` gives the options the
+case is checked with) and `tests/golden/stages/` (a first line `# bondc simulate`
+gives the command), small inputs to the parser, commands run on small data
+files, and calls of the Python API for the codes only the API raises; the
+output is exactly what bondc prints for them, on stderr unless said otherwise.
+A few codes cannot be triggered from a model or a command (internal guards);
+their sections say so and describe the situation instead. This page is
+generated by `tests/golden/check/make_diagnostics_doc.py`; edit the
+explanations there.
 """
 
-LATER_STAGES = """
-# Later stages
 
-These codes are reported by the causality, equation and analysis stages; their
-modules' docstrings and tests describe them in detail.
-
-| code | meaning |
-| --- | --- |
-| E000 | a usage error without a more specific code (e.g. a model file that cannot be read) |
-| E001 | bad command-line arguments |
-| E601 | causal conflict: sources (or storage elements) that cannot all hold, e.g. two Sf on one 1-junction |
-| W602 | a storage element in derivative causality: its state follows from the others' |
-| I603 | an algebraic loop (no storage element in between); the equations stage solves it |
-| W604 | nonlinear algebraic loop, solved numerically |
-| E605 | a law that must be inverted for the assigned causality cannot be inverted |
-| E701 | an expression the equation stage cannot translate |
-| E702 | a singular algebraic loop |
-| E703 | a storage element in derivative causality that cannot be eliminated |
-| W704 | an initial value ignored because its element is in derivative causality |
-| E9xx | data files and analyses (friction fit, motor data): unreadable or malformed data, failed fits |
-"""
-
-SECTIONS = {"E1": "Syntax (E1xx)", "E2": "Units (E2xx)", "E3": "Names, expressions, files and experiments (E3xx)",
-            "E4": "Graph structure (E4xx)", "E5": "Element laws and states (E5xx)", "W3": "Warnings (W3xx)"}
+def slug(heading: str) -> str:
+    """The anchor GitHub gives a heading."""
+    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return text.replace(" ", "-")
 
 
-def _examples(code: str) -> list[tuple[str, str, str]]:
-    """(file name, model text, rendered diagnostics) for one code."""
-    examples = []
-    if code in PARSE_EXAMPLES:
-        text = PARSE_EXAMPLES[code]
-        try:
-            parse_text(text, "m.bg")
-        except ParseError as error:
-            assert error.diagnostics[0].code == code, code
-            examples.append(("m.bg", text, render_all(error.diagnostics, {"m.bg": Source("m.bg", text)})))
-        else:
-            raise SystemExit(f"the {code} example parses")
+def _block(text: str) -> str:
+    return f"```\n{text.rstrip()}\n```\n"
+
+
+def _golden_examples(code: str) -> list[str]:
+    out = []
     for path in sorted(GOLDEN.glob(f"{code}_*.bg")):
-        examples.append((path.name, path.read_text(encoding="utf-8"),
-                         path.with_suffix(".txt").read_text(encoding="utf-8").rstrip("\n")))
-    return examples
+        out.append(f"`{path.name}`:\n\n" + _block(path.read_text(encoding="utf-8")) + "\n"
+                   + _block(path.with_suffix(".txt").read_text(encoding="utf-8")))
+    for path in sorted(STAGES_GOLDEN.glob(f"{code}_*.bg")):
+        text = path.read_text(encoding="utf-8")
+        command = shlex.split(text.splitlines()[0].lstrip("#"))
+        shown = " ".join([*command[:2], path.name, *(shlex.quote(word) for word in command[2:])])
+        part = f"`{path.name}`:\n\n" + _block(text) + "\n"
+        for data in re.findall(r'csv\("([^"]+)"', text):
+            part += f"`{data}`:\n\n" + _block((STAGES_GOLDEN / data).read_text(encoding="utf-8")) + "\n"
+        part += _block(f"$ {shown}\n" + path.with_suffix(".txt").read_text(encoding="utf-8"))
+        out.append(part)
+    return out
+
+
+def _parse_example(code: str) -> str:
+    text = PARSE_EXAMPLES[code]
+    try:
+        parse_text(text, "m.bg")
+    except ParseError as error:
+        if error.diagnostics[0].code != code:
+            raise SystemExit(f"the {code} example gives {error.diagnostics[0].code}")
+        rendered = render_all(error.diagnostics, {"m.bg": Source("m.bg", text)})
+        return "`m.bg`:\n\n" + _block(text) + "\n" + _block(rendered)
+    raise SystemExit(f"the {code} example parses")
+
+
+@contextlib.contextmanager
+def _workspace(files: dict[str, str]):
+    """A fresh temporary directory holding ``files``, as the current directory."""
+    before = Path.cwd()
+    with tempfile.TemporaryDirectory() as folder:
+        for name, text in files.items():
+            (Path(folder) / name).write_text(text, encoding="utf-8")
+        os.chdir(folder)
+        try:
+            yield Path(folder)
+        finally:
+            os.chdir(before)
+
+
+def _run(example) -> str:
+    """What the example shows: the command's output, or the diagnostics the code raises."""
+    with _workspace(example.files):
+        if isinstance(example, Cli):
+            from bondc.cli import main
+
+            out, err = io.StringIO(), io.StringIO()
+            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+                main(shlex.split(example.command)[1:])
+            text = (err if example.stream == "stderr" else out).getvalue()
+            if example.lines is not None:
+                text = "\n".join(line for line in text.splitlines() if example.lines in line)
+            return text.rstrip()
+        namespace: dict = {}
+        try:
+            exec(compile(example.code, "<example>", "exec"), namespace)  # noqa: S102 - the page's own examples
+        except BondcError as error:
+            return render_all(error.diagnostics, error.sources)
+        return render_all(namespace["shown"])
+
+
+def _live_example(code: str, example, seen: dict) -> str:
+    """The example's files (a file already shown on the page is referred to), code or command, and output.
+
+    ``seen`` maps (file name, text) to the link of the section that showed it first.
+    """
+    output = _run(example)
+    if (getattr(example, "expect", None) or f"[{code}]") not in output:
+        raise SystemExit(f"the {code} example does not show {code}:\n{output}")
+    part = ""
+    for name, text in example.files.items():
+        if (name, text) in seen:
+            part += f"`{name}` is the file shown under {seen[name, text]}.\n\n"
+        else:
+            seen[name, text] = f"[{code}](#{slug(code + ' ' + EXPLANATIONS[code][0])})"
+            part += f"`{name}`:\n\n" + _block(text) + "\n"
+    note = f"{example.note}\n\n" if example.note else ""
+    if isinstance(example, Cli):
+        where = "It prints on stdout:\n\n" if example.stream == "stdout" else ""
+        part += note + where + _block(f"$ {example.command}\n{output}")
+    else:
+        part += _block(example.code) + "\n" + note + _block(output)
+    return part
+
+
+def _examples(code: str, seen: dict) -> list[str]:
+    out = [_parse_example(code)] if code in PARSE_EXAMPLES else []
+    out += _golden_examples(code)
+    out += [_live_example(code, example, seen) for example in LIVE.get(code, ())]
+    return out
+
+
+def emitted_codes() -> set[str]:
+    """Every code written in bondc's source as a string literal ("E601")."""
+    codes = set()
+    for path in (ROOT / "bondc").rglob("*.py"):
+        codes |= set(re.findall(r'"([EWI][0-9]{3})"', path.read_text(encoding="utf-8")))
+    return codes
+
+
+def render_page() -> str:
+    """The text of docs/diagnostics.md."""
+    missing = emitted_codes() - set(EXPLANATIONS)
+    if missing:
+        raise SystemExit(f"codes without an explanation (add d(...) for them): {', '.join(sorted(missing))}")
+    by_stage: dict[str, list[str]] = {title: [] for title, _ in STAGES}
+    for code in EXPLANATIONS:
+        by_stage[stage_of(code)].append(code)
+    out = [HEADER, "## Contents\n", "| stage | codes | module |", "| --- | --- | --- |"]
+    for title, modules in STAGES:
+        links = " ".join(f"[{code}](#{slug(code + ' ' + EXPLANATIONS[code][0])})" for code in by_stage[title])
+        out.append(f"| [{title}](#{slug(title)}) | {links} | {modules} |")
+    out.append("")
+    seen: dict = {}
+    for title, _ in STAGES:
+        out.append(f"# {title}\n")
+        for code in by_stage[title]:
+            heading, meaning, fix = EXPLANATIONS[code]
+            out.append(f"## {code} {heading}\n\n{meaning}\n")
+            out += _examples(code, seen)
+            out.append(f"**Fix:** {fix}\n")
+    return "\n".join(out).replace("\n\n\n", "\n\n")
 
 
 def main() -> None:
     """Write docs/diagnostics.md."""
-    out = [HEADER]
-    section = None
-    for code, (title, meaning, fix) in EXPLANATIONS.items():
-        if SECTIONS[code[:2]] != section:
-            section = SECTIONS[code[:2]]
-            out.append(f"\n# {section}\n")
-        out.append(f"## {code} {title}\n\n{meaning}\n")
-        for name, text, rendered in _examples(code):
-            out.append(f"`{name}`:\n\n```\n{text.rstrip()}\n```\n\n```\n{rendered}\n```\n")
-        out.append(f"**Fix:** {fix}\n")
-    out.append(LATER_STAGES)
-    page = "\n".join(out).replace("\n\n\n", "\n\n")
-    (ROOT / "docs" / "diagnostics.md").write_text(page, encoding="utf-8")
+    PAGE.write_text(render_page(), encoding="utf-8")
 
 
 if __name__ == "__main__":
