@@ -166,6 +166,13 @@ def _settings(experiment, t_end, dt, method, rtol, atol, max_step) -> dict:
         "dt": dt if dt is not None else extra.get("dt"),
         "first_step": extra.get("first_step"),
     }
+    # Settings from the model are checked by the semantic stage; these can come from the command line.
+    for name in ("t_end", "dt", "max_step", "rtol", "atol", "first_step"):
+        value = settings[name]
+        if value is not None and not (np.isfinite(float(value)) and float(value) > 0):
+            raise UsageError(Diagnostic("error", "E803", f"cannot simulate: {name} must be a positive number, "
+                                                         f"not {value:g}",
+                                        hint=f"give a positive {name} (seconds for times)"))
     return settings
 
 
