@@ -52,7 +52,7 @@ from bondc.errors import Diagnostic, EquationError, Related
 from bondc.model import ElementNode, JunctionNode
 from bondc.source import NO_SPAN
 from bondc.statespace import AlgebraicBlock, StateInfo, StateSpace
-from bondc.symbolic import (Csv, Step, Table, Translator, discontinuities, strip_impulses)
+from bondc.symbolic import (Csv, Step, Table, Translator, discontinuities, strip_impulses, as_sympy)
 
 _OPAQUE = (sympy.Piecewise, sympy.Abs, sympy.sign, sympy.Min, sympy.Max, sympy.Heaviside, Table, Step, Csv)
 
@@ -159,7 +159,7 @@ class _Deriver:
         return self.translate(element.laws[target], element, local)
 
     def add(self, target, rhs, node: str, role: str) -> None:
-        self.equations.append(_Equation(target, sympy.sympify(rhs), node, role, len(self.equations)))
+        self.equations.append(_Equation(target, as_sympy(rhs), node, role, len(self.equations)))
 
     # ------------------------------------------------------------- inversion
 
@@ -649,7 +649,7 @@ def _display(ss: StateSpace):
     """Expansions shown by ``bondc equations``: in states, inputs, parameters and t."""
     keep = ss.input_symbols
     mapping = ss.substitution(keep)
-    return lambda expr: sympy.sympify(expr).xreplace(mapping)
+    return lambda expr: as_sympy(expr).xreplace(mapping)
 
 
 def _initial_value(ss: StateSpace, state: StateInfo) -> float:
@@ -716,7 +716,7 @@ def _format_text(ss: StateSpace, show) -> str:
     unit_width = max([len(u) for u in units] + [0])
     rows = []
     for s, unit in zip(ss.states, units):
-        initial = sympy.sympify(s.initial)
+        initial = as_sympy(s.initial)
         value = repr(_initial_value(ss, s))
         shown = value if initial.is_number else f"{sympy.sstr(initial)} = {value}"
         cells = [s.name.ljust(width)] + ([unit.ljust(unit_width)] if unit_width else []) + [f"initial {shown}"]

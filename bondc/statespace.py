@@ -80,6 +80,8 @@ from typing import Mapping
 
 import sympy
 
+from bondc.symbolic import as_sympy
+
 
 @dataclass(frozen=True)
 class StateInfo:
@@ -149,7 +151,7 @@ class StateSpace:
     def initial_values(self, overrides: Mapping[str, float] | None = None) -> dict[str, float]:
         """State name -> initial value (SI), with parameter ``overrides`` applied."""
         numbers = {symbol: sympy.Float(value) for symbol, value in self.parameter_values(overrides).items()}
-        return {s.name: float(sympy.sympify(sympy.sympify(s.initial).xreplace(numbers)).evalf())
+        return {s.name: float(as_sympy(as_sympy(s.initial).xreplace(numbers)).evalf())
                 for s in self.states}
 
     # -- expansion (linearisation and tests only: the runtime evaluates the assignments)
@@ -170,7 +172,7 @@ class StateSpace:
 
     def substituted(self, expr, keep=()) -> sympy.Expr:
         """``expr`` with every assignment expanded (see :meth:`substitution`)."""
-        return sympy.sympify(expr).xreplace(self.substitution(keep))
+        return as_sympy(expr).xreplace(self.substitution(keep))
 
     # -- numeric evaluation (analysis and tests; the simulator runs generated code)
 
@@ -216,7 +218,7 @@ class NumericModel:
         printer = NumPyPrinter({"allow_unknown_functions": True, "fully_qualified_modules": True})
 
         def code(expr):
-            expr = sympy.sympify(sympy.sympify(expr).xreplace(numbers))
+            expr = as_sympy(as_sympy(expr).xreplace(numbers))
             expr = expr.xreplace({s: ident(s) for s in expr.free_symbols if s in names})
             free = [s for s in expr.free_symbols if not s.name.startswith("_v")]
             if free:
@@ -256,11 +258,11 @@ class NumericModel:
         lines.append(f"    _out = [{', '.join(code(expr) for expr in ss.outputs.values())}]")
         lines.append("    return _values, _der, _out")
         self.source = "\n".join(lines)
-        self._guesses = {n: numpy.array([float(sympy.sympify(g).xreplace(numbers)) for g in b.guesses], dtype=float)
+        self._guesses = {n: numpy.array([float(as_sympy(g).xreplace(numbers)) for g in b.guesses], dtype=float)
                          for n, b in enumerate(ss.algebraic_blocks)}
         namespace = {"numpy": numpy, "functools": __import__("functools"), "_solve": self._solve_block}
         namespace.update(NUMERIC_FUNCTIONS)
-        exec(compile(self.source, "<bondc numeric model>", "exec"), namespace)  # generated from sympy, not user text
+        exec(compile(self.source, "<bondc numeric model>", "exec"), namespace)  # safe: generated from sympy, not model text
         self._run = namespace["_run"]
         self._assigned_names = [symbol.name for symbol, _ in ss.assignments] + [
             u.name for block in ss.algebraic_blocks for u in block.unknowns]

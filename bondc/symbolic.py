@@ -167,6 +167,24 @@ class Csv(sympy.Function):
 
 # --------------------------------------------------- numeric implementations
 
+def as_sympy(value):
+    """A sympy object for a value that is already sympy or a Python number.
+
+    bondc never turns model text into sympy by parsing it: laws are translated
+    from the AST (:class:`Translator`). This is the one place other stages
+    convert numbers and sympy objects, and it refuses text outright.
+
+    >>> as_sympy(2) + as_sympy(sympy.Symbol("x"))
+    x + 2
+    >>> as_sympy("x + 1")
+    Traceback (most recent call last):
+    TypeError: bondc does not turn text into sympy expressions ('x + 1')
+    """
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"bondc does not turn text into sympy expressions ({value!r})")
+    return sympy.sympify(value)  # safe: text is refused above
+
+
 def table_value(x, breakpoints, values):
     """Numeric ``table``: ``numpy.interp`` holds the end values."""
     return float(np.interp(x, np.asarray(breakpoints, dtype=float), np.asarray(values, dtype=float)))
@@ -433,7 +451,7 @@ def discontinuities(expr) -> list:
     found: list = []
 
     def add(candidate):
-        candidate = sympy.sympify(candidate)
+        candidate = as_sympy(candidate)
         if candidate.is_number:
             return
         if candidate not in found and -candidate not in found:
@@ -468,7 +486,7 @@ def discontinuities(expr) -> list:
             if isinstance(arg, sympy.Basic):
                 visit(arg)
 
-    visit(sympy.sympify(expr))
+    visit(as_sympy(expr))
     return found
 
 

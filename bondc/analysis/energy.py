@@ -78,6 +78,7 @@ import numpy as np
 import sympy
 
 from bondc.errors import AnalysisError, Diagnostic
+from bondc.symbolic import as_sympy
 
 # Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
 _LOBATTO_NODES = np.array([-1.0, -math.sqrt(3.0 / 7.0), 0.0, math.sqrt(3.0 / 7.0), 1.0])
@@ -707,7 +708,7 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
     for element in graph.storage_elements:
         expr = (ss.energy or {}).get(element.name)
         if expr is not None:
-            expr = sympy.sympify(expr).xreplace(numbers)
+            expr = as_sympy(expr).xreplace(numbers)
             free = list(expr.free_symbols)
             if len(free) == 1:
                 found[element.name] = _StoredEnergy("analytic", free[0].name, function=_lambdify(free[0], expr))

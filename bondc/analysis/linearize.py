@@ -53,7 +53,7 @@ import sympy
 
 from bondc.errors import AnalysisError, Diagnostic
 from bondc.statespace import StateSpace
-from bondc.symbolic import strip_impulses
+from bondc.symbolic import strip_impulses, as_sympy
 
 AT = ("initial", "equilibrium")
 
@@ -154,14 +154,14 @@ class _Jacobian:
         self.output_partials = [self._partials(expr) for expr in ss.outputs.values()]
 
     def _partials(self, expr):
-        expr = sympy.sympify(expr)
+        expr = as_sympy(expr)
         symbols = sorted((s for s in expr.free_symbols if s not in self.parameter_values and s != self.ss.time),
                          key=lambda s: s.name)
         return tuple((s, strip_impulses(sympy.diff(expr, s))) for s in symbols)
 
     def _value(self, expr, values) -> float:
-        number = sympy.sympify(expr).xreplace(values).xreplace(self.parameter_values)
-        number = sympy.sympify(number).evalf()
+        number = as_sympy(expr).xreplace(values).xreplace(self.parameter_values)
+        number = as_sympy(number).evalf()
         try:
             return float(number)
         except TypeError as error:

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import sympy
 from sympy.core.relational import Relational
 
-from bondc.symbolic import Csv, Table
+from bondc.symbolic import Csv, Table, as_sympy
 
 _LABEL_LIMIT = 120
 
@@ -123,7 +123,7 @@ class Freezer:
 
     def switch(self, g, label: str, kind: str):
         """The mode expression (``m`` or ``-m``) of switching function ``g``, registering it if new."""
-        g = sympy.sympify(g)
+        g = as_sympy(g)
         if g.is_number:
             value = float(g)
             return sympy.Integer(0 if value == 0 else (1 if value > 0 else -1))
@@ -156,7 +156,7 @@ class Freezer:
     def freeze(self, expr, owner: str = ""):
         """``expr`` with every discontinuity frozen; ``owner`` names it in switch labels."""
         self._owner = owner
-        return self._freeze(sympy.sympify(expr))
+        return self._freeze(as_sympy(expr))
 
     def _freeze(self, expr):
         if expr.is_Atom:

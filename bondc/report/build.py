@@ -61,7 +61,7 @@ from bondc.report.render import (
 from bondc.report.validate import (
     CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
 )
-from bondc.symbolic import Translator
+from bondc.symbolic import Translator, as_sympy
 
 __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
            "write_report", "run_validate",
@@ -592,7 +592,7 @@ def state_equations(ss) -> tuple[list[Equation], list[Equation], Table | None]:
         mapping[symbol] = value
 
     def show(expr):
-        return sympy.sympify(expr).xreplace(mapping).xreplace(names)
+        return as_sympy(expr).xreplace(mapping).xreplace(names)
 
     time = ss.time
     equations = []
