@@ -418,6 +418,9 @@ _METHODS = {"rk45": "RK45", "rk23": "RK23", "dop853": "DOP853", "radau": "Radau"
 _IMPLICIT = ("Radau", "BDF", "LSODA")
 _EPS = np.finfo(float).eps
 _CREEP = 1e-12        # a step this small relative to t does not advance the solution
+_STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction of the run ...
+_STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
+_UNFROZEN_STEPS = 20000  # steps in one short unfrozen interval: the solver is fighting a discontinuity
 _CREEP_STEPS = 200    # ... and this many of them in a row mean the run is stuck
 
 
@@ -657,6 +660,8 @@ class _Run:
         modes, chattering = self.restart_modes(t, y, None)
         self.record_start(t, y, self.mode_id(modes))
         zero_progress = 0
+        # Time must advance: restarts that together move it less than this are a stall.
+        stall_time, stall_count, stall_span = t, 0, _STALL_FRACTION * max(self.t_end - self.t_start, 1e-300)
         try:
             if not np.all(np.isfinite(y)):
                 raise _Stop(self.diagnose(t, y, modes, "the initial state is not finite: "))
@@ -693,6 +698,18 @@ class _Run:
                     zero_progress = 0 if progress_made else zero_progress + 1
                     old_modes = modes
                     t, y = t_new, y_new
+                    if t - stall_time > stall_span:
+                        stall_time, stall_count = t, 0
+                    else:
+                        stall_count += 1
+                        if stall_count > _STALL_RESTARTS:
+                            raise _Stop({"message": f"the simulation stalled at t={t:.6g}: {_STALL_RESTARTS} "
+                                                    f"restarts advanced time by less than {stall_span:.3g} s",
+                                         "time": float(t), "variable": None, "law": None, "kind": "events",
+                                         "cause": "several switches (sign, abs, if) keep changing mode together, "
+                                                  "e.g. friction laws that make the motion stick",
+                                         "hint": "smooth the laws near their switching surfaces (a small "
+                                                 "linear band around zero velocity, for instance)"})
                     at_break = break_index < len(breaks) and t >= breaks[break_index][0]
                     if t >= self.t_end:
                         if at_break:
@@ -1070,9 +1087,23 @@ class _Run:
             options = {key: value for key, value in self.options.items() if key != "first_step"}
             solver = solver_class(method)(fun, t, y, t_stop, **options)
         blocks = len(self.blocks_t), self.eval_index
+        creeping, steps_before = 0, self.stats["steps"]
         while True:
             message = solver.step()
             self.stats["steps"] += 1
+            step = abs(solver.t - solver.t_old) if solver.t_old is not None else np.inf
+            creeping = creeping + 1 if step <= _CREEP * max(abs(solver.t), 1.0) else 0
+            steps_here = self.stats["steps"] - steps_before
+            if creeping >= _CREEP_STEPS or steps_here > _UNFROZEN_STEPS:
+                self.collect(solver)
+                raise _Stop({"message": f"the simulation stalled at t={solver.t:.6g}: the discontinuous law "
+                                        f"(switches changing mode at every evaluation) lets the solver take "
+                                        f"only rounding-size steps",
+                             "time": float(solver.t), "variable": None, "law": None, "kind": "events",
+                             "cause": "several switches (sign, abs, if) keep changing mode together, e.g. "
+                                      "friction laws that make the motion stick",
+                             "hint": "smooth the laws near their switching surfaces (a small linear band "
+                                     "around zero velocity, for instance)"})
             if solver.status == "failed":
                 self.collect(solver)
                 if method is None:      # forget this attempt's points and retry explicitly

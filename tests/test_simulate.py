@@ -250,6 +250,17 @@ def test_a_singularity_stops_the_run_instead_of_creeping_forever():
     np.testing.assert_allclose(result.states["mass.p"][inside], exact, rtol=1e-4, atol=1e-6)
 
 
+def test_switches_that_stall_the_run_stop_it_with_a_diagnosis():
+    with pytest.raises(SimulationError) as caught:
+        run(SIM / "stuck_two_frictions.bg")
+    diagnostic = caught.value.diagnostics[0]
+    assert diagnostic.code == "E812" and "stalled" in diagnostic.message
+    result = caught.value.result
+    assert not result.complete
+    # The 5 N of friction exceed the 2 N push: up to where it stopped, the mass has not moved.
+    np.testing.assert_allclose(result.states["mass.p"], 0.0, atol=1e-9)
+
+
 def test_missing_end_time_is_a_usage_error():
     _, ss, _ = derive("rc")
     with pytest.raises(UsageError, match="no end time"):
