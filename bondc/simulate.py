@@ -268,7 +268,7 @@ def _failure_diagnostic(graph, failure, raw) -> Diagnostic:
     alias = _alias(graph, variable)
     if alias:
         text = text.replace(f"'{variable}'", f"'{variable}' ({alias})", 1)
-    message = f"simulation stopped: {text}; results up to t={reached:.6g} s were kept (incomplete)"
+    message = f"simulation stopped: {text.rstrip('. ')}; results up to t={reached:.6g} s were kept (incomplete)"
     if failure.get("cause"):
         message += f". Likely cause: {failure['cause']}"
     from bondc.source import NO_SPAN
