@@ -6,6 +6,8 @@ import itertools
 import math
 import xml.etree.ElementTree as ET
 
+from pathlib import Path
+
 import pytest
 
 from bondc.causality import assign_causality
@@ -16,23 +18,8 @@ from bondc.semantic import build
 
 NS = {"svg": "http://www.w3.org/2000/svg"}
 
-MSD = """\
-model MassSpringDamper "Force step on a mass-spring-damper"
-  param m = 2.0 [kg]
-  param k = 800 [N/m]
-  param b = 12  [N*s/m]
-  input F [N] = step(t, 0.1) * 10
-  MSe force  : e = F
-  I   mass   : f = p/m
-  C   spring : e = k*q
-  R   damper : e = b*f
-  1   j
-  force -> j
-  j -> mass
-  j -> spring
-  j -> damper
-end
-"""
+# The complete model of LANGUAGE.md section 10, shared with the language-example tests.
+MSD = (Path(__file__).parent / "fixtures" / "language" / "s10_complete_model.bg").read_text(encoding="utf-8")
 
 # About twenty elements and junctions, after the flagship's structure (MODEL-NOTES.md).
 HYBRID = """\

@@ -170,30 +170,8 @@ def test_format_expr_rejects_unknown_nodes():
 
 # ------------------------------------------------------------------ layout
 
-SMALL = """\
-model MassSpringDamper "Force step on a mass-spring-damper"
-  param m = 2.0 [kg]
-  param k = 800 [N/m]
-  param b = 12  [N*s/m]
-  input F [N] = step(t, 0.1) * 10
-
-  MSe force  : e = F
-  I   mass   : f = p/m
-  C   spring : e = k*q
-  R   damper : e = b*f
-  1   j
-
-  force -> j
-  j -> mass
-  j -> spring
-  j -> damper
-
-  output x [m] = spring.q
-  experiment step
-    t_end = 2 [s]
-  end
-end
-"""
+# The complete model of LANGUAGE.md section 10, shared with the language-example tests.
+SMALL = (Path(__file__).parent / "fixtures" / "language" / "s10_complete_model.bg").read_text(encoding="utf-8")
 
 
 def test_reference_model_is_nearly_canonical():

@@ -13,30 +13,8 @@ from bondc.errors import ModelError, UsageError
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.parse import parse_set_value, parse_text
 
-MSD = """\
-model MassSpringDamper
-  param m = 2.0 [kg]
-  param k = 800 [N/m]
-  param b = 12  [N*s/m]
-  input F [N] = step(t, 0.1) * 10
-
-  MSe force  : e = F
-  I   mass   : f = p/m
-  C   spring : e = k*q
-  R   damper : e = b*f
-  1   j
-
-  force -> j
-  j -> mass
-  j -> spring
-  j -> damper
-
-  output x [m] = spring.q
-  experiment step
-    t_end = 2 [s]
-  end
-end
-"""
+# The complete model of LANGUAGE.md section 10, shared with the language-example tests.
+MSD = (Path(__file__).parent / "fixtures" / "language" / "s10_complete_model.bg").read_text(encoding="utf-8")
 
 
 def write(tmp_path: Path, text: str, name: str = "m.bg") -> Path:
