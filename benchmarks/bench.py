@@ -76,32 +76,25 @@ def hand_mass_spring_damper(t_end: float, rtol: float, atol: float, method: str)
 # ------------------------------------------------------------------ bondc runs
 
 def pipeline(path: Path):
-    from bondc import semantic
-    from bondc.causality import assign_causality
     from bondc.codegen import emit
-    from bondc.equations import derive
+    from bondc.pipeline import derive_file
 
     def run():
-        graph, _ = semantic.load(path, experiment=semantic.FIRST)
-        state_space = derive(assign_causality(graph))
-        emit(state_space, next(iter(graph.experiments.values()), None))
+        derived = derive_file(path)
+        emit(derived.state_space, derived.experiment)
 
     return run
 
 
 def prepared(path: Path, **settings):
     """Everything up to the simulation done once; the returned function simulates."""
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
+    from bondc.pipeline import derive_file
     from bondc.simulate import simulate
 
-    graph, _ = semantic.load(path, experiment=semantic.FIRST)
-    state_space = derive(assign_causality(graph))
-    experiment = next(iter(graph.experiments.values()), None)
-    simulate(state_space, experiment, **settings)  # compile once, outside the timing
+    derived = derive_file(path)
+    simulate(derived.state_space, derived.experiment, **settings)  # compile once, outside the timing
 
-    return lambda: simulate(state_space, experiment, **settings)
+    return lambda: simulate(derived.state_space, derived.experiment, **settings)
 
 
 def main(argv=None) -> int:

@@ -39,16 +39,9 @@ def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
 
 
 def _parse_sets(values) -> list:
-    from bondc.parse import parse_set_value
+    from bondc.pipeline import parse_sets
 
-    return [parse_set_value(text, f"--set #{index}") for index, text in enumerate(values or (), 1)]
-
-
-def _load(args, *, experiment=None):
-    from bondc import semantic
-
-    return semantic.load(Path(args.file), model=getattr(args, "model", None), experiment=experiment,
-                         sets=_parse_sets(getattr(args, "set", None)))
+    return parse_sets(values)
 
 
 def _derive(args):
@@ -56,18 +49,12 @@ def _derive(args):
 
     Warnings (derivative causality, unused parameters, ...) go to stderr.
     """
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
+    from bondc.pipeline import derive_file
 
-    experiment = getattr(args, "experiment", None)
-    graph, warnings = _load(args, experiment=experiment if experiment is not None else semantic.FIRST)
-    causal = assign_causality(graph)
-    state_space = derive(causal)
-    notes = list(warnings)
-    notes += [d for d in list(causal.diagnostics) + list(state_space.diagnostics) if d not in notes]
-    _print_diagnostics(notes, graph.sources)
-    return graph, causal, state_space
+    derived = derive_file(Path(args.file), model=getattr(args, "model", None),
+                          experiment=getattr(args, "experiment", None), sets=getattr(args, "set", None) or ())
+    _print_diagnostics(derived.notes, derived.graph.sources)
+    return derived.graph, derived.causal, derived.state_space, derived.experiment
 
 
 # ------------------------------------------------------------------ commands
@@ -141,7 +128,7 @@ def _cmd_fmt(args) -> int:
 def _cmd_equations(args) -> int:
     from bondc.equations import format_equations
 
-    _, _, state_space = _derive(args)
+    _, _, state_space, _ = _derive(args)
     text = format_equations(state_space, args.format)
     sys.stdout.write(text if text.endswith("\n") else text + "\n")
     return EXIT_OK
@@ -150,7 +137,7 @@ def _cmd_equations(args) -> int:
 def _cmd_linearize(args) -> int:
     from bondc.analysis.linearize import linearize
 
-    _, _, state_space = _derive(args)
+    _, _, state_space, _ = _derive(args)
     result = linearize(state_space, time=args.time, at=args.at)
     if args.json:
         _print_json(result.to_json())
@@ -159,19 +146,12 @@ def _cmd_linearize(args) -> int:
     return EXIT_OK
 
 
-def _experiment(graph, name):
-    if not graph.experiments:
-        return None
-    return graph.experiments[name] if name is not None else next(iter(graph.experiments.values()))
-
-
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
     from bondc.simulate import simulate, write
 
-    graph, _, state_space = _derive(args)
-    experiment = _experiment(graph, args.experiment)
+    graph, _, state_space, experiment = _derive(args)
     result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:

@@ -1023,7 +1023,7 @@ class _Run:
             fired = [j for j in range(new.size) if old[j] > 0 >= new[j] or (old[j] >= 0 > new[j])]
             for j in fired:
                 if old[j] <= 0:
-                    root = t_old = solver.t_old
+                    root = solver.t_old
                 else:
                     try:
                         root = _optimize.brentq(lambda tt: exits(tt, dense(tt))[j], solver.t_old, t_new,

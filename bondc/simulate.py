@@ -445,22 +445,11 @@ def run(path, *, model: str | None = None, experiment: str | None = None, sets: 
     model or usage problem. A failed run writes what it computed, then raises
     :class:`SimulationError` whose ``.result`` is the incomplete result.
     """
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
-    from bondc.parse import parse_set_value
+    from bondc.pipeline import derive_file
 
-    parsed = [parse_set_value(item) if isinstance(item, str) else item for item in sets or ()]
-    graph, warnings = semantic.load(Path(path), model=model,
-                                    experiment=experiment if experiment is not None else semantic.FIRST,
-                                    sets=parsed)
-    causal = assign_causality(graph)
-    ss = derive(causal)
-    chosen = None
-    if graph.experiments:
-        chosen = graph.experiments[experiment] if experiment is not None else next(iter(graph.experiments.values()))
-    result = simulate(ss, chosen, t_end=t_end, dt=dt, progress=progress)
-    result.warnings = list(warnings) + list(getattr(ss, "diagnostics", ())) + result.warnings
+    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
+    result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress)
+    result.warnings = list(derived.notes) + result.warnings
     if output is not None:
         write(result, output, all_bonds)
     error = result.error()

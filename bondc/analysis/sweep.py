@@ -97,6 +97,7 @@ import numpy as np
 
 from bondc.errors import BondcError, Diagnostic, UsageError
 from bondc.io import json_safe
+from bondc.pipeline import chosen_experiment
 
 #: The most runs one sweep may ask for.
 MAX_RUNS = 200
@@ -558,12 +559,6 @@ def _experiment_selector(setup: _Setup):
     return setup.experiment if setup.experiment is not None else semantic.FIRST
 
 
-def _chosen_experiment(graph, name: str | None):
-    if not graph.experiments:
-        return None
-    return graph.experiments[name] if name is not None else next(iter(graph.experiments.values()))
-
-
 def _structure(graph) -> tuple:
     """What the compiled module is built from besides parameter values: their names, the inputs."""
     experiment_inputs = tuple(sorted((name, repr(signal)) for experiment in graph.experiments.values()
@@ -636,7 +631,7 @@ def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> Swee
                               None, parameters, diagnostics=(Diagnostic(
                                   "error", "E968", "the model file changed during the sweep",
                                   hint="run the sweep again"),))
-        experiment = _chosen_experiment(graph, setup.experiment)
+        experiment = chosen_experiment(graph, setup.experiment)
         if not setup.rederive and _structure(graph) == base.structure:
             state_space, path = base.state_space, "fast"
             # every parameter given: the compiled module recomputes none of them
@@ -788,7 +783,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
                                     sets=list(parsed_sets))
     shown_units, si_units, converters = _check_axes(graph, axes, parsed_sets)
     chosen_metrics = select_metrics(graph, metrics)
-    chosen = _chosen_experiment(graph, experiment)
+    chosen = chosen_experiment(graph, experiment)
     if t_end is None and getattr(chosen, "t_end", None) is None:
         raise _usage("E801", "no end time for the simulation", hint="give --t-end, or set t_end in the experiment")
 

@@ -33,21 +33,12 @@ def compile_file(path, output=None, *, model: str | None = None, experiment: str
     module's source. Raises the stage errors (ModelError, CausalityError,
     EquationError, UsageError) for a model that cannot be compiled.
     """
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
     from bondc.io import atomic_write_text
-    from bondc.parse import parse_set_value
+    from bondc.pipeline import derive_file
 
-    parsed = [parse_set_value(item) if isinstance(item, str) else item for item in sets or ()]
-    graph, _ = semantic.load(Path(path), model=model,
-                             experiment=experiment if experiment is not None else semantic.FIRST, sets=parsed)
-    ss = derive(assign_causality(graph))
-    chosen = None
-    if graph.experiments:
-        chosen = graph.experiments[experiment] if experiment is not None else next(iter(graph.experiments.values()))
+    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
     module_dir = Path(output).resolve().parent if output is not None else Path(path).resolve().parent
-    source = emit(ss, chosen, source=Path(path).name, module_dir=module_dir)
+    source = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir)
     if output is not None:
         atomic_write_text(Path(output), source)
     return source

@@ -510,7 +510,6 @@ class _Emitter:
         n = len(plan.states)
         graph = getattr(ss, "graph", None)
         model_name = getattr(graph, "name", None) or "model"
-        experiment = self.experiment
         parts = [self.header(model_name), self.runtime_banner(), runtime_source().rstrip("\n"),
                  self.model_banner()]
         parts.append(self.constants(model_name))

@@ -119,31 +119,18 @@ def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str 
     CausalityError, EquationError, UsageError); a simulation that fails does
     not raise: see :attr:`PipelineRun.complete`.
     """
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
-    from bondc.parse import parse_set_value
+    from bondc.pipeline import derive_file
     from bondc.simulate import simulate
 
     path = Path(path)
-    parsed = [parse_set_value(item, f"--set #{index}") if isinstance(item, str) else item
-              for index, item in enumerate(sets or (), 1)]
-    graph, warnings = semantic.load(path, model=model,
-                                    experiment=experiment if experiment is not None else semantic.FIRST,
-                                    sets=parsed)
-    causal = assign_causality(graph)
-    state_space = derive(causal)
-    chosen = None
-    if graph.experiments:
-        chosen = graph.experiments[experiment] if experiment is not None else next(iter(graph.experiments.values()))
+    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
+    graph, causal, state_space, chosen, parsed = (derived.graph, derived.causal, derived.state_space,
+                                                  derived.experiment, derived.sets)
     default = chosen is None or chosen.name == next(iter(graph.experiments))
     result = None
     if t_end is not None or (chosen is not None and chosen.t_end is not None):
         result = simulate(state_space, chosen, t_end=t_end, progress=progress)
-    notes = list(warnings)
-    for diagnostic in list(causal.diagnostics) + list(state_space.diagnostics):
-        if diagnostic not in notes:
-            notes.append(diagnostic)
+    notes = list(derived.notes)
     if result is not None:
         notes += [d for d in result.warnings if d not in notes]
     overridden = list(chosen.parameters) if chosen is not None else []

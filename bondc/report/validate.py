@@ -380,7 +380,7 @@ def compare(sim_t: Sequence[float], sim_values: Mapping[str, Sequence[float]],
                 "E956",
                 f"comparison '{spec}': the simulation covers t = {sim_t[0]:g} .. {sim_t[-1]:g} s and the "
                 f"measurement t = {meas_t[0]:g} .. {meas_t[-1]:g} s; they share "
-                f"{'no time' if high < low else f'fewer than two simulated samples'}",
+                f"{'no time' if high < low else 'fewer than two simulated samples'}",
                 hint="check the experiment's t_end and the time column (seconds) of the data")
         t = sim_t[inside]
         sim = simulated[inside]
