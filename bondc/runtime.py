@@ -417,11 +417,17 @@ _METHODS = {"rk45": "RK45", "rk23": "RK23", "dop853": "DOP853", "radau": "Radau"
             "lsoda": "LSODA"}
 _IMPLICIT = ("Radau", "BDF", "LSODA")
 _EPS = np.finfo(float).eps
-_CREEP = 1e-12        # a step this small relative to t does not advance the solution
+_CREEP = 1e-12          # a step this small relative to t does not advance the solution ...
+_CREEP_STEPS = 200      # ... and this many of them in a row mean the run is stuck
 _STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction of the run ...
 _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
 _UNFROZEN_STEPS = 20000  # steps in one short unfrozen interval: the solver is fighting a discontinuity
-_CREEP_STEPS = 200    # ... and this many of them in a row mean the run is stuck
+
+
+def _creeping(solver, count: int) -> int:
+    """``count`` + 1 if the solver's last step was of rounding size (it is not advancing), else 0."""
+    step = abs(solver.t - solver.t_old) if solver.t_old is not None else np.inf
+    return count + 1 if step <= _CREEP * max(abs(solver.t), 1.0) else 0
 
 
 def solver_class(method):
@@ -782,8 +788,7 @@ class _Run:
                 raise _Stop(self.solver_failure(solver.t, message))
             # A solver creeping towards a singularity (a law like 1/(t0 - t)) may never fail by
             # itself: it takes ever smaller steps. Give up once steps stay at rounding size.
-            step = abs(solver.t - solver.t_old) if solver.t_old is not None else np.inf
-            creeping = creeping + 1 if step <= _CREEP * max(abs(solver.t), 1.0) else 0
+            creeping = _creeping(solver, creeping)
             if creeping >= _CREEP_STEPS:
                 self.collect(solver)
                 raise _Stop(self.solver_failure(solver.t, f"{_CREEP_STEPS} steps in a row shorter than "
@@ -1091,8 +1096,7 @@ class _Run:
         while True:
             message = solver.step()
             self.stats["steps"] += 1
-            step = abs(solver.t - solver.t_old) if solver.t_old is not None else np.inf
-            creeping = creeping + 1 if step <= _CREEP * max(abs(solver.t), 1.0) else 0
+            creeping = _creeping(solver, creeping)
             steps_here = self.stats["steps"] - steps_before
             if creeping >= _CREEP_STEPS or steps_here > _UNFROZEN_STEPS:
                 self.collect(solver)
