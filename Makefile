@@ -5,7 +5,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 FLAGSHIP := models/electro_pneumatic_hybrid.bg
 
-.PHONY: install report test check clean
+.PHONY: install report test test-fast check clean
 
 $(BIN)/bondc: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -23,6 +23,10 @@ check: install
 
 test: install
 	$(BIN)/python -m pytest
+
+# the inner loop: everything but the tests marked slow
+test-fast: install
+	$(BIN)/python -m pytest -m "not slow"
 
 clean:
 	rm -rf $(VENV) build *.egg-info

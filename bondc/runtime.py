@@ -264,6 +264,10 @@ class _Model:
             self.SWITCH_DEPENDS = tuple(tuple(d) for d in get("SWITCH_DEPENDS"))
         except (KeyError, AttributeError):
             self.SWITCH_DEPENDS = None
+        try:
+            self.SWITCH_VERTICES = tuple(float(v) for v in get("SWITCH_VERTICES"))
+        except (KeyError, AttributeError):
+            self.SWITCH_VERTICES = (1.0,) * len(self.SWITCHES)
         self.parameter_names = tuple(self.PARAMETERS)
 
 
@@ -415,13 +419,14 @@ def write_csv(result, path, variables=False):
 
 _METHODS = {"rk45": "RK45", "rk23": "RK23", "dop853": "DOP853", "radau": "Radau", "bdf": "BDF",
             "lsoda": "LSODA"}
-_IMPLICIT = ("Radau", "BDF", "LSODA")
+_IMPLICIT = ("Radau", "BDF", "LSODA", "CVODE")
 _EPS = np.finfo(float).eps
 _CREEP = 1e-12          # a step this small relative to t does not advance the solution ...
 _CREEP_STEPS = 200      # ... and this many of them in a row mean the run is stuck
 _STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction of the run ...
 _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
-_UNFROZEN_STEPS = 20000  # steps in one short unfrozen interval: the solver is fighting a discontinuity
+_UNFROZEN_STEPS = 20000
+_MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippov combination)  # steps in one short unfrozen interval: the solver is fighting a discontinuity
 
 
 def _creeping(solver, count: int) -> int:
@@ -430,13 +435,143 @@ def _creeping(solver, count: int) -> int:
     return count + 1 if step <= _CREEP * max(abs(solver.t), 1.0) else 0
 
 
+_CVODE_METHODS = {"cvode": "BDF", "cvode-bdf": "BDF", "cvode-adams": "Adams"}
+#: Every solver name an experiment may give: SUNDIALS CVODE, then scipy's ``solve_ivp`` methods.
+SOLVER_NAMES = ("CVODE", "CVODE-BDF", "CVODE-Adams") + tuple(_METHODS.values())
+DEFAULT_SOLVER = "CVODE"
+
+
+def sundials_available() -> bool:
+    """Whether SUNDIALS (scikit-sundae) can be imported here."""
+    try:
+        import sksundae.cvode  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class CvodeSolver:
+    """SUNDIALS CVODE (through scikit-sundae) behind the stepping interface of scipy's ``OdeSolver``.
+
+    ``step()`` takes one internal CVODE step, never past ``t_bound`` (CVODE's
+    stop time); ``dense_output()`` interpolates within the last step with
+    CVODE's own Nordsieck history (``CVode`` in normal mode with an output time
+    inside that step). The event logic of :class:`_Run` therefore drives CVODE
+    exactly as it drives scipy's solvers. ``jac`` is the analytic Jacobian;
+    where it is not finite (``sqrt`` at 0, a law's kink) a forward-difference
+    Jacobian of ``fun`` replaces it for that evaluation and ``jacobian_fallbacks``
+    counts how often.
+
+    >>> solver = CvodeSolver(lambda t, y: -y, 0.0, np.array([1.0]), 1.0, rtol=1e-10, atol=1e-12)
+    >>> while solver.status == "running":
+    ...     _ = solver.step()
+    >>> round(float(solver.y[0]), 8), solver.t
+    (0.36787944, 1.0)
+    """
+
+    variant = "BDF"
+
+    def __init__(self, fun, t0, y0, t_bound, *, rtol=1e-6, atol=1e-9, max_step=np.inf, first_step=None,
+                 jac=None, vectorized=False):
+        # SUNDIALS warns on stderr when a step is at rounding size; the run's own guards report that
+        os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", os.devnull)
+        from sksundae.cvode import CVODE as SundialsCvode
+
+        self.fun, self.jac_function = fun, jac
+        self.t_bound = float(t_bound)
+        self.t, self.t_old = float(t0), None
+        self.y = np.array(y0, dtype=float)
+        self.n = self.y.size
+        self.status = "running" if self.t < self.t_bound else "finished"
+        self.nfev = self.njev = self.nlu = 0
+        self.jacobian_fallbacks = 0
+        method = self.variant
+        options = {"method": method, "rtol": float(rtol), "atol": float(atol),
+                   "max_step": 0.0 if not np.isfinite(max_step) else float(max_step),
+                   "first_step": float(first_step or 0.0), "max_num_steps": 100000}
+        if jac is not None and method == "BDF":
+            options["jacfn"] = self._jacobian
+        self._cvode = SundialsCvode(self._rhs, **options)
+        self._cvode.init_step(self.t, self.y)
+
+    def _rhs(self, t, y, yp):
+        self.nfev += 1
+        yp[:] = self.fun(t, y)
+
+    def _jacobian(self, t, y, yp, JJ):
+        self.njev += 1
+        matrix = np.asarray(self.jac_function(t, y), dtype=float)
+        if not np.all(np.isfinite(matrix)):
+            matrix = self.difference_jacobian(t, np.array(y), np.array(yp))
+            self.jacobian_fallbacks += 1
+        JJ[:, :] = matrix
+
+    def difference_jacobian(self, t, y, f0):
+        """Forward differences of ``fun``; a column that is not finite is taken as zero."""
+        matrix = np.empty((self.n, self.n))
+        for j in range(self.n):
+            h = 1.5e-8 * max(abs(y[j]), 1e-6)
+            shifted = y.copy()
+            shifted[j] += h
+            with np.errstate(all="ignore"):
+                column = (np.asarray(self.fun(t, shifted), dtype=float) - f0) / h
+            self.nfev += 1
+            matrix[:, j] = np.where(np.isfinite(column), column, 0.0)
+        return matrix
+
+    def step(self):
+        """One internal step towards ``t_bound``; None, or the solver's message when it failed."""
+        if self.status != "running":
+            raise RuntimeError("the solver is not running")
+        for _ in range(2):      # after an interpolation CVODE first returns the step it had already taken
+            result = self._cvode.step(self.t_bound, "onestep", self.t_bound)
+            if not result.success:
+                self.status = "failed"
+                return f"CVODE: {result.message}"
+            if result.t != self.t:
+                break
+        self.t_old, self.t = self.t, float(result.t)
+        self.y = np.array(result.y, dtype=float)
+        if self.t >= self.t_bound:
+            self.status = "finished"
+        return None
+
+    def dense_output(self):
+        """``y(t)`` for ``t`` inside the last step, from CVODE's interpolating polynomial."""
+        t_old, t_new, y_new = self.t_old, self.t, self.y.copy()
+
+        def interpolate(tt):
+            tt = float(tt)
+            if tt == t_new:
+                return y_new.copy()
+            tt = min(max(tt, t_old), t_new)
+            return np.array(self._cvode.step(tt, "normal").y, dtype=float)
+
+        return interpolate
+
+
+class CVODE(CvodeSolver):
+    """CVODE with variable-order BDF and Newton iteration: the default, for stiff and non-stiff models."""
+
+    variant = "BDF"
+
+
+class CVODE_Adams(CvodeSolver):  # noqa: N801  (named like the solver name users write)
+    """CVODE with Adams-Moulton: cheaper per step for smooth, non-stiff models."""
+
+    variant = "Adams"
+
+
 def solver_class(method):
-    """The scipy ``OdeSolver`` class for a ``solve_ivp`` method name (any case)."""
+    """The ``OdeSolver``-like class for a solver name (any case): CVODE, or a ``solve_ivp`` method."""
     if isinstance(method, type):
         return method
-    name = _METHODS.get(str(method).lower())
+    lowered = str(method).lower()
+    if lowered in _CVODE_METHODS:
+        return CVODE_Adams if _CVODE_METHODS[lowered] == "Adams" else CVODE
+    name = _METHODS.get(lowered)
     if name is None:
-        raise ValueError(f"unknown solver {method!r}; use one of {', '.join(_METHODS.values())}")
+        raise ValueError(f"unknown solver {method!r}; use one of {', '.join(SOLVER_NAMES)}")
     return getattr(_integrate, name)
 
 
@@ -482,7 +617,7 @@ class _Run:
                       "chattering_intervals": 0}
         self.bad = None
         self.last_relevant = np.ones(self.switch_count, dtype=bool)
-        self.last_sliding = None
+        self.sliding_now = []          # the switches of the last sliding segment
         self._dense = None
 
     # -- evaluation helpers
@@ -664,6 +799,7 @@ class _Run:
         breaks = self.breaks()
         break_index = 0
         modes, chattering = self.restart_modes(t, y, None)
+        candidates = self.sliding_candidates(t, y, modes, chattering)
         self.record_start(t, y, self.mode_id(modes))
         zero_progress = 0
         # Time must advance: restarts that together move it less than this are a stall.
@@ -679,20 +815,21 @@ class _Run:
                     while break_index < len(breaks) and breaks[break_index][0] <= t:
                         break_index += 1
                     t_stop = breaks[break_index][0] if break_index < len(breaks) else self.t_end
-                    sliding = None
+                    sliding, held_now = None, []
                     if t_stop - t <= 16 * _EPS * max(abs(t), abs(t_stop), 1.0):
                         # a sliver too short for any solver (a switch just before a known time): one Euler step
                         slope = self.rhs(t, y, modes)
                         t_new, y_new = t_stop, y + (t_stop - t) * slope
                         self.record(t, t_new, y_new, lambda tt, t0=t, y0=y, s=slope: y0 + (tt - t0) * s,
                                     self.mode_id(modes))
-                    elif len(chattering) == 1 and zero_progress <= 8 and \
-                            self.sliding_segment(t, y, modes, chattering[0], t_stop)[0] is not None:
-                        sliding = chattering[0]
-                        t_new, y_new = self.last_sliding
-                    elif len(chattering) == 1 and zero_progress <= 8:
-                        modes = self.last_sliding[1]        # the side that leaves the surface
-                        t_new, y_new, hit = self.segment(t, y, modes, t_stop)
+                    elif candidates and zero_progress <= 8 and len(candidates) <= _MAX_SLIDING:
+                        held, modes, alpha = self.consistent_sliding_set(t, y, modes, candidates)
+                        if held:
+                            sliding = held
+                            t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
+                        else:               # every side leaves its surface: a frozen segment
+                            t_new, y_new, hit = self.segment(t, y, modes, t_stop)
+                        held_now = held
                     elif chattering or zero_progress > 8 or self.too_many_events(t):
                         t_new, y_new = self.unfrozen_interval(t, y, modes, min(t_stop, t + self.tau))
                         zero_progress = 0
@@ -700,6 +837,7 @@ class _Run:
                         t_new, y_new, hit = self.segment(t, y, modes, t_stop)
                         if hit is None and t_new - t > self.tau:
                             self.tau, self.chattering_since = self.tau_min, None
+                    self.sliding_now = held_now
                     progress_made = t_new - t > 64 * _EPS * max(abs(t), 1.0)
                     zero_progress = 0 if progress_made else zero_progress + 1
                     old_modes = modes
@@ -722,6 +860,8 @@ class _Run:
                             self.note_event(breaks[break_index][0], breaks[break_index][1])
                         break
                     modes, chattering = self.restart_modes(t, y, old_modes)
+                    candidates = self.sliding_candidates(t, y, modes, chattering)
+                    chattering = sorted(set(chattering) | set(candidates))
                     relevant_now = self.relevant(t, y, modes) | self.last_relevant
                     self.last_relevant = np.ones(self.switch_count, dtype=bool)
                     changed = [k for k in range(self.switch_count) if modes[k] != old_modes[k]
@@ -752,6 +892,26 @@ class _Run:
         self.stats["wall_time"] = _time_module.perf_counter() - started
         return self.result(complete, failure)
 
+    def sliding_candidates(self, t, y, modes, chattering):
+        """Switches that may slide at (t, y): those that chatter, and those on their surface that
+        either slid until now or are ``coulomb`` frictions (whose static limit can hold them even
+        where each side's sliding law alone would move away)."""
+        candidates = set(chattering)
+        vertices = self.model.SWITCH_VERTICES
+        keep = [k for k in self.event_switches
+                if k not in candidates and (vertices[k] != 1.0 or k in self.sliding_now)]
+        if keep:
+            relevant = self.relevant(t, y, modes)
+            for k in list(keep):
+                probe = np.array(modes, dtype=float)
+                if not relevant[k]:
+                    continue
+                index = np.array([k])
+                value = abs(self.switches_at(t, y, probe, index)[0])
+                if value <= max(self.deadbands(t, y, probe, index)[0], 1e-300) or value == 0.0:
+                    candidates.add(k)
+        return sorted(candidates)
+
     def too_many_events(self, t):
         window = self.span / 1000.0
         self.recent_events = [te for te in self.recent_events if te > t - window]
@@ -778,7 +938,9 @@ class _Run:
         index = np.array([k for k in self.event_switches if relevant[k]], dtype=int)
         signs = modes[index] if index.size else np.zeros(0)
         values_old = self.switches_at(t, y, modes, index)
-        deadband = self.deadbands(t, y, modes, index)
+        # a restart may leave a switch a little on the far side of its surface (a sliding segment
+        # drifts by the solver's tolerance): its crossing counts from where it starts
+        deadband = self.deadbands(t, y, modes, index) + np.maximum(0.0, -signs * values_old)
         creeping = 0
         while True:
             message = solver.step()
@@ -947,6 +1109,12 @@ class _Run:
     def collect(self, solver):
         self.stats["njev"] += int(getattr(solver, "njev", 0) or 0)
         self.stats["nlu"] += int(getattr(solver, "nlu", 0) or 0)
+        fallbacks = int(getattr(solver, "jacobian_fallbacks", 0) or 0)
+        if fallbacks:
+            if not self.stats.get("jacobian_fallbacks"):
+                self.note_event(solver.t, "the analytic Jacobian is not finite here (a law with an infinite "
+                                          "slope, like sqrt at 0): finite differences replace it where needed")
+            self.stats["jacobian_fallbacks"] = self.stats.get("jacobian_fallbacks", 0) + fallbacks
 
     def switch_rate(self, t, y, slope, modes, k):
         """d g_k / dt along ``slope`` with the modes frozen (central difference over the probe step)."""
@@ -955,63 +1123,181 @@ class _Run:
         behind = self.model.switches(t - h, y - h * slope, self.p, modes)[k]
         return (ahead - behind) / (2 * h)
 
-    def sliding_segment(self, t, y, modes, k, t_stop):
-        """Integrate a sliding mode on switch ``k`` (Filippov): the convex combination
-        ``a*f(m_k=+1) + (1-a)*f(m_k=-1)`` that keeps ``g_k`` constant, until one side stops
-        pushing towards the surface, another switch crosses, or ``t_stop``."""
+    def sliding_corners(self, modes, sliding):
+        """The mode vectors at the corners of the sliding set and their sides (+1/-1 per switch).
+
+        Each sliding switch takes its vertex value on each side: 1 for a sign or an if, 2 for a
+        ``coulomb`` friction (its frozen law gives the static limit there).
+        """
+        vertices = self.model.SWITCH_VERTICES
+        sides = np.array([[1.0 if (c >> i) & 1 else -1.0 for i in range(len(sliding))]
+                          for c in range(2 ** len(sliding))])
+        corners = np.repeat(np.asarray(modes, dtype=float)[None, :], len(sides), axis=0)
+        for i, k in enumerate(sliding):
+            corners[:, k] = sides[:, i] * vertices[k]
+        return corners, sides
+
+    @staticmethod
+    def corner_weights(alpha, sides):
+        """Multilinear weights of the corners: prod_i alpha_i (side +) or 1 - alpha_i (side -)."""
+        factors = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
+        return np.prod(factors, axis=1)
+
+    def sliding_rates(self, t, y, corners, sliding):
+        """Right-hand side at each corner and the rate of each sliding switch's g along it."""
+        values = np.array([self.rhs(t, y, corner) for corner in corners])
+        rates = np.array([[self.switch_rate(t, y, values[c], corners[c], k) for k in sliding]
+                          for c in range(len(corners))])
+        return values, rates
+
+    def solve_alpha(self, rates, sides, guess=None):
+        """The weights alpha (one per sliding switch) that make every sliding switch's rate zero.
+
+        The rate is multilinear in alpha (exactly the Filippov / equivalent-control combination);
+        Newton's method with least squares, so a switch whose rate does not depend on its own
+        weight (a free clutch) keeps its guess. The result is not clipped: a weight outside
+        [0, 1] means that switch cannot be held on its surface.
+        """
+        count = sides.shape[1]
+        alpha = np.full(count, 0.5) if guess is None else np.clip(np.array(guess, dtype=float), 0.0, 1.0)
+        for _ in range(20):
+            weights = self.corner_weights(alpha, sides)
+            residual = weights @ rates
+            jacobian = np.empty((count, count))
+            for j in range(count):
+                others = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
+                others[:, j] = sides[:, j]          # d/d alpha_j of alpha_j or 1 - alpha_j
+                jacobian[:, j] = np.prod(others, axis=1) @ rates
+            if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residual))):
+                return np.full(count, np.nan)
+            delta = np.linalg.lstsq(jacobian, -residual, rcond=1e-12)[0]
+            alpha = alpha + delta
+            if np.max(np.abs(delta)) <= 1e-13:
+                break
+        return alpha
+
+    def sliding_set(self, t, y, modes, candidates):
+        """Which of ``candidates`` slide at (t, y) (complementarity by active set) and the modes of
+        the others: a switch whose weight leaves [0, 1] cannot be held and takes that side.
+
+        Returns (sliding switches, modes, alpha).
+        """
+        modes = np.array(modes, dtype=float)
+        sliding = list(candidates)
+        tolerance = 1e-9
+        while sliding:
+            corners, sides = self.sliding_corners(modes, sliding)
+            values, rates = self.sliding_rates(t, y, corners, sliding)
+            alpha = self.solve_alpha(rates, sides)
+            if not np.all(np.isfinite(alpha)):
+                return [], modes, None
+            if np.any(np.minimum(alpha, 1.0 - alpha) < 1e-6):
+                # at the edge (a holding force at its limit, as at the instant a sliding segment ended):
+                # decide by where the weights go just after t
+                h = self.probe
+                slope = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ values
+                _, rates_ahead = self.sliding_rates(t + h, y + h * slope, corners, sliding)
+                ahead = self.solve_alpha(rates_ahead, sides, alpha)
+                if np.all(np.isfinite(ahead)):
+                    alpha = np.where(np.minimum(alpha, 1.0 - alpha) < 1e-6, ahead, alpha)
+            residual = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ rates
+            scale = np.max(np.abs(rates), axis=0)
+            unheld = np.flatnonzero(np.abs(residual) > 1e-8 * np.maximum(scale, 1e-300))
+            if unheld.size:
+                # no weight stops it (its own law does not act on it: a free clutch): it moves on
+                worst = int(unheld[np.argmax(np.abs(residual[unheld]) / scale[unheld])])
+                modes[sliding[worst]] = self.leaving_side(t, y, modes, sliding[worst], residual[worst] > 0)
+                del sliding[worst]
+                continue
+            violation = np.maximum(alpha - 1.0, -alpha)
+            worst = int(np.argmax(violation))
+            if violation[worst] <= tolerance:
+                return sliding, modes, np.clip(alpha, 0.0, 1.0)
+            # the force needed to hold it exceeds its limit: it leaves towards that side
+            modes[sliding[worst]] = self.leaving_side(t, y, modes, sliding[worst], alpha[worst] > 1.0)
+            del sliding[worst]
+        return [], modes, None
+
+    @staticmethod
+    def leaving_side(t, y, modes, k, upwards):
+        """The mode of switch ``k`` as it leaves its surface, ``g`` growing (``upwards``) or falling."""
+        return 1.0 if upwards else -1.0
+
+    def consistent_sliding_set(self, t, y, modes, candidates):
+        """:meth:`sliding_set`, with the modes of the other switches chosen just after (t, y) along the
+        sliding motion itself (not along either side's law): a switch that flips there takes its new
+        mode; one that flips back and forth joins the sliding set."""
+        candidates, flipped = list(candidates), set()
+        for _ in range(2 * _MAX_SLIDING):
+            held, modes, alpha = self.sliding_set(t, y, modes, candidates)
+            if not held:
+                return held, modes, alpha
+            corners, sides = self.sliding_corners(modes, held)
+            values, _ = self.sliding_rates(t, y, corners, held)
+            slope = self.corner_weights(alpha, sides) @ values
+            ahead = self.modes_at(t + self.probe, y + self.probe * slope, modes)
+            relevant = self.relevant(t, y, modes)
+            changed = [j for j in self.event_switches if j not in held and relevant[j] and ahead[j] != modes[j]]
+            if not changed:
+                return held, modes, alpha
+            for j in changed:
+                if j in flipped and len(candidates) < _MAX_SLIDING:
+                    candidates.append(j)
+                else:
+                    modes[j] = ahead[j]
+                    flipped.add(j)
+        return held, modes, alpha
+
+    def sliding_segment(self, t, y, modes, sliding, alpha0, t_stop):
+        """Integrate a sliding mode on the switches ``sliding`` (Filippov, any number at once).
+
+        The right-hand side is the multilinear combination of the corners of the sliding set
+        whose weights keep every sliding ``g`` constant (for friction: the holding forces), until
+        a weight reaches 0 or 1 (a holding force reaches its limit: break-away), another switch
+        crosses, or ``t_stop``. Returns (t, y).
+        """
         self.stats["segments"] += 1
         self.stats["sliding_segments"] = self.stats.get("sliding_segments", 0) + 1
-        plus = np.array(modes, dtype=float)
-        plus[k] = 1.0
-        minus = plus.copy()
-        minus[k] = -1.0
-        id_plus, id_minus = self.mode_id(plus), self.mode_id(minus)
-        label = self.model.SWITCHES[k]
-        self.note_event(t, f"sliding on {label}")
-        others = np.array([j for j in self.event_switches if j != k and plus[j] != 0], dtype=int)
+        corners, sides = self.sliding_corners(modes, sliding)
+        corner_ids = [self.mode_id(corner) for corner in corners]
+        labels = "; ".join(self.model.SWITCHES[k] for k in sliding)
+        self.note_event(t, f"sliding on {labels}")
+        others = np.array([j for j in self.event_switches if j not in sliding and modes[j] != 0], dtype=int)
+        memory = {"alpha": np.array(alpha0, dtype=float)}
 
-        def parts(tt, yy):
-            f_plus, f_minus = self.rhs(tt, yy, plus), self.rhs(tt, yy, minus)
-            return (f_plus, f_minus, self.switch_rate(tt, yy, f_plus, plus, k),
-                    self.switch_rate(tt, yy, f_minus, minus, k))
-
-        def weight(rate_plus, rate_minus):
-            span = rate_minus - rate_plus
-            if not (span > 0 and np.isfinite(span)):
-                return 0.5
-            return min(max(rate_minus / span, 0.0), 1.0)
+        def combination(tt, yy):
+            values, rates = self.sliding_rates(tt, yy, corners, sliding)
+            alpha = self.solve_alpha(rates, sides, memory["alpha"])
+            if np.all(np.isfinite(alpha)):
+                memory["alpha"] = alpha
+            return values, alpha
 
         def fun(tt, yy):
-            f_plus, f_minus, rate_plus, rate_minus = parts(tt, yy)
-            a = weight(rate_plus, rate_minus)
-            return a * f_plus + (1 - a) * f_minus
+            values, alpha = combination(tt, yy)
+            return self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ values
 
         def jac(tt, yy):
-            _, _, rate_plus, rate_minus = parts(tt, yy)
-            a = weight(rate_plus, rate_minus)
-            return a * self.jac(tt, yy, plus) + (1 - a) * self.jac(tt, yy, minus)
+            _, alpha = combination(tt, yy)
+            weights = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides)
+            return sum(w * self.jac(tt, yy, corner) for w, corner in zip(weights, corners) if w != 0)
 
         def exits(tt, yy):      # every entry stays positive while sliding lasts
-            _, _, rate_plus, rate_minus = parts(tt, yy)
-            values = [rate_minus, -rate_plus]
+            _, alpha = combination(tt, yy)
+            values = list(alpha) + list(1.0 - alpha)
             if others.size:
-                values += list(plus[others] * self.model.switches(tt, yy, self.p, plus)[others])
+                values += list(modes[others] * self.model.switches(tt, yy, self.p, modes)[others])
             return np.array(values, dtype=float)
 
-        def alphas(times, states):
-            return np.array([weight(*parts(ti, states[:, i])[2:]) for i, ti in enumerate(times)])
+        def weights_at(times, states):
+            return np.array([self.corner_weights(np.clip(combination(ti, states[:, i])[1], 0.0, 1.0), sides)
+                             for i, ti in enumerate(times)]).T
 
-        _, _, rate_plus, rate_minus = parts(t, y)
-        if not (rate_minus > 0 and rate_plus < 0):
-            # at the edge of the sliding region one side already moves away from the surface: no
-            # sliding, follow that side (the caller integrates it frozen)
-            self.events.pop()
-            self.stats["sliding_segments"] -= 1
-            self.stats["segments"] -= 1
-            self.last_sliding = (None, minus if not rate_minus > 0 else plus)
-            return self.last_sliding
+        if (len(self.blocks_t) == 1 and self.blocks_t[0].size == 1 and self.blocks_t[0][0] == t
+                and t == self.t_start):
+            # the initial point: its outputs are those of the sliding combination too
+            self.blocks_mode[0] = ("slide", tuple(corner_ids), weights_at(self.blocks_t[0], self.blocks_x[0]))
         solver = self.new_solver(fun, jac, t, y, t_stop)
-        old = exits(t, y)
+        old = np.maximum(exits(t, y), 0.0)      # at the edge of the sliding region: leaving counts from here
         while True:
             message = solver.step()
             self.stats["steps"] += 1
@@ -1021,7 +1307,7 @@ class _Run:
             t_new, y_new = solver.t, solver.y
             if not (np.all(np.isfinite(y_new)) and np.all(np.isfinite(fun(t_new, y_new)))):
                 self.collect(solver)
-                self.stop_nonfinite(solver, fun, lambda tt, yy: plus, id_plus)
+                self.stop_nonfinite(solver, fun, lambda tt, yy: corners[-1], corner_ids[-1])
             new = exits(t_new, y_new)
             dense = solver.dense_output()
             hit = None
@@ -1038,18 +1324,17 @@ class _Run:
                 hit = root if hit is None else min(hit, root)
             end = t_new if hit is None else hit
             y_end = y_new if hit is None else dense(hit)
-            self.record_sliding(solver.t_old, end, y_end, dense, id_plus, id_minus, alphas)
+            self.record_sliding(solver.t_old, end, y_end, dense, corner_ids, weights_at)
             if self.progress is not None:
                 self.progress(end)
             if hit is not None or solver.status == "finished":
                 self.collect(solver)
                 if hit is not None:
-                    self.note_event(end, f"sliding on {label} ends")
-                self.last_sliding = (end, np.array(y_end))
-                return self.last_sliding
+                    self.note_event(end, f"sliding on {labels} ends")
+                return end, np.array(y_end)
             old = new
 
-    def record_sliding(self, t_old, t_new, y_new, dense, id_plus, id_minus, alphas):
+    def record_sliding(self, t_old, t_new, y_new, dense, corner_ids, weights_at):
         if self.t_eval is None:
             times = np.array([t_new])
             states = np.asarray(y_new, dtype=float).reshape(-1, 1)
@@ -1062,7 +1347,7 @@ class _Run:
             states = np.column_stack([y_new if ti == t_new else dense(ti) for ti in times])
         self.blocks_t.append(times)
         self.blocks_x.append(states)
-        self.blocks_mode.append(("slide", id_plus, id_minus, alphas(times, states)))
+        self.blocks_mode.append(("slide", tuple(corner_ids), weights_at(times, states)))
 
     def unfrozen_interval(self, t, y, modes, t_stop, method=None):
         """Integrate the unfrozen law (modes recomputed at every evaluation) over a short interval.
@@ -1196,13 +1481,16 @@ class _Run:
                 columns = np.arange(start, start + times.size)
                 start += times.size
                 if isinstance(mode, tuple) and mode[0] == "slide":     # the Filippov combination
-                    _, id_plus, id_minus, alpha = mode
+                    _, corner_ids, weights = mode
                     xx = x[:, columns]
                     for target, function, rows in ((outputs, model.outputs, n_out),
                                                     (variables, model.variables, n_var)):
-                        upper = self.evaluate_columns(function, times, xx, modes_by_id[id_plus], rows)
-                        lower = self.evaluate_columns(function, times, xx, modes_by_id[id_minus], rows)
-                        target[:, columns] = alpha * upper + (1 - alpha) * lower
+                        blend = np.zeros((rows, times.size))
+                        for corner_id, weight in zip(corner_ids, weights):
+                            if np.any(weight != 0):
+                                corner = self.evaluate_columns(function, times, xx, modes_by_id[corner_id], rows)
+                                blend += weight * np.where(weight != 0, corner, 0.0)
+                        target[:, columns] = blend
                     continue
                 key = (mode[1], mode[2]) if isinstance(mode, tuple) else (mode, all_relevant)
                 groups.setdefault(key, []).append(columns)
@@ -1217,6 +1505,11 @@ class _Run:
                     outputs[:, cols] = self.evaluate_columns(model.outputs, tt[chosen], xx[:, chosen], row, n_out)
                     variables[:, cols] = self.evaluate_columns(model.variables, tt[chosen], xx[:, chosen], row,
                                                                n_var)
+        if t.size:
+            # restarts that made no progress (a switch re-decided at the same instant) repeat a point:
+            # keep its first record, so the time of the result strictly increases
+            keep = np.concatenate([[True], np.diff(t) > 0])
+            t, x, outputs, variables = t[keep], x[:, keep], outputs[:, keep], variables[:, keep]
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
             message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
@@ -1276,7 +1569,7 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
         if np.any(np.diff(t_eval) < 0):
             raise ValueError("t_eval must be increasing")
         t_eval = t_eval[(t_eval >= t_start) & (t_eval <= t_end)]
-    method = method or defaults.get("method") or "LSODA"
+    method = method or defaults.get("method") or (DEFAULT_SOLVER if sundials_available() else "LSODA")
     rtol = float(rtol if rtol is not None else defaults.get("rtol") or 1e-6)
     atol = float(atol if atol is not None else defaults.get("atol") or 1e-9)
     max_step = float(max_step if max_step is not None else defaults.get("max_step") or np.inf)

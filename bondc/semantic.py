@@ -59,12 +59,13 @@ BUILTINS: Mapping[str, tuple[int, int | None]] = {
     "max": (2, None),
     "table": (3, 3),
     "step": (2, 2),
+    "coulomb": (2, 3),
     "csv": (2, 2),
 }
 
 RESERVED = {"t": "time", "pi": "the constant pi"}
 
-SOLVERS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+SOLVERS = ("CVODE", "CVODE-BDF", "CVODE-Adams", "RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 
 # Experiment settings: name -> what its value is.
 SETTINGS: Mapping[str, str] = {
@@ -1561,7 +1562,7 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
         if item.value.value not in SOLVERS:
             m.report(_error("E317", f"unknown solver '{item.value.value}'", item.value.span,
                             hint=_join_hints(_did_you_mean(item.value.value, SOLVERS),
-                                             "solvers (scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
+                                             "solvers (SUNDIALS CVODE, or scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
             return
     elif kind == "outputs":
         items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)

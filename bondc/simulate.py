@@ -3,16 +3,22 @@
 :func:`simulate` generates the model's module with :func:`bondc.codegen.emit`,
 executes it in-process (the very code ``bondc compile`` writes, runtime
 included) and runs :func:`bondc.runtime.simulate_model`: the experiment's
-solver, by default LSODA (it switches to BDF when the problem is stiff, with
-the analytic Jacobian), every discontinuity located as an event or a known
-time (see :mod:`bondc.runtime`), every state and derivative checked for
-nan/inf.
+solver, by default SUNDIALS CVODE (variable-order BDF with Newton iteration and
+the analytic Jacobian, through scikit-sundae), every discontinuity located as
+an event or a known time (see :mod:`bondc.runtime`), every state and
+derivative checked for nan/inf.
 
-Why LSODA by default: scipy's Python Radau and BDF test Newton convergence on
-the ratio of successive corrections, which fails when a model sits at an
-equilibrium whose right-hand side is rounding noise (a car at rest on its
-springs); they then creep with thousands of Jacobian updates (the quarter car
-takes 130000 evaluations with Radau, 6700 with LSODA, and BDF gives up).
+Why CVODE by default: it is the reference implementation of variable-order BDF
+(compiled, with CVODE's own step-size and order control and its convergence
+tests), it handles stiff and non-stiff models alike, and a non-finite
+right-hand side at a trial point is a convergence failure that makes it retry
+with a shorter step instead of failing the run. scipy's Python Radau and BDF
+test Newton convergence on the ratio of successive corrections, which fails
+when a model sits at an equilibrium whose right-hand side is rounding noise (a
+car at rest on its springs); they then creep with thousands of Jacobian
+updates. The scipy methods (``solver = "LSODA"``, ``"Radau"``, ...) stay
+available for comparison; without scikit-sundae the default falls back to
+LSODA.
 
 A run that fails (solver failure, a nan or inf, too many events) still
 returns what it computed: ``complete`` is False, ``message`` says what
@@ -159,7 +165,7 @@ def _settings(experiment, t_end, dt, method, rtol, atol, max_step) -> dict:
         else default)
     settings = {
         "t_end": pick(t_end, "t_end"),
-        "method": pick(method, "solver", "LSODA"),
+        "method": pick(method, "solver", None),
         "rtol": float(pick(rtol, "rtol", 1e-6)),
         "atol": float(pick(atol, "atol", 1e-9)),
         "max_step": pick(max_step, "max_step"),

@@ -117,6 +117,32 @@ class Step(sympy.Function):
         return sympy.Float(step_value(float(x), float(x0)), prec)
 
 
+class Coulomb(sympy.Function):
+    """``coulomb(v, F_slide, F_static)``: dry friction, ``F_slide*sign(v)`` while sliding.
+
+    At ``v = 0`` it sticks while the holding force is at most ``F_static``
+    (the simulator solves for that force); both limits are magnitudes.
+    """
+
+    nargs = 3
+    is_real = True
+
+    def fdiff(self, argindex=1):
+        # away from v = 0 the force is F_slide(v)*sign(v): sign's impulse at 0 no ODE can carry
+        if argindex == 2:
+            return sympy.sign(self.args[0])
+        return sympy.Integer(0)
+
+    def _latex(self, printer):
+        return r"\operatorname{coulomb}\left(%s\right)" % ", ".join(printer._print(a) for a in self.args)
+
+    def _eval_evalf(self, prec):
+        v, slide = self.args[0], self.args[1]
+        if not (v.is_number and slide.is_number):
+            return None
+        return sympy.Float(max(float(slide), 0.0) * float(np.sign(float(v))), prec)
+
+
 class Csv(sympy.Function):
     """``csv("file", "column")``: a measured signal of time, linearly interpolated.
 
@@ -419,6 +445,16 @@ class Translator:
             raise _fail(node, "step() takes 2 arguments: step(t, t0)")
         return Step(self(node.args[0]), self(node.args[1]))
 
+    def _call_coulomb(self, node: ast.Call):
+        if len(node.args) not in (2, 3):
+            raise _fail(node, "coulomb() takes 2 or 3 arguments: coulomb(v, F_slide, F_static)")
+        velocity, slide = self(node.args[0]), self(node.args[1])
+        if len(node.args) == 3:
+            static = self(node.args[2])
+        else:   # the static limit defaults to the sliding force at v = 0
+            static = slide.xreplace({velocity: sympy.Integer(0)}) if velocity.is_Symbol else slide
+        return Coulomb(velocity, slide, static)
+
     def _call_csv(self, node: ast.Call):
         if len(node.args) != 2 or not all(isinstance(arg, ast.Str) for arg in node.args):
             raise _fail(node, 'csv() takes 2 strings: csv("file.csv", "column")')
@@ -468,7 +504,7 @@ def discontinuities(expr) -> list:
         if isinstance(node, sympy.Piecewise):
             for _, cond in node.args:
                 conditions(cond)
-        elif isinstance(node, (sympy.Abs, sympy.sign, sympy.Heaviside)):
+        elif isinstance(node, (sympy.Abs, sympy.sign, sympy.Heaviside, Coulomb)):
             add(node.args[0])
         elif isinstance(node, (sympy.Min, sympy.Max)):
             args = list(node.args)

@@ -98,10 +98,15 @@ def test_freezer_shares_modes_and_labels_switches():
     freezer = Freezer(t, states={f}, parameters={v0, F0})
     law = sympy.Piecewise((5 * f, sympy.Abs(f) < v0), (f + F0 * sympy.sign(f), True))
     frozen = freezer.freeze(law, "R.e")
-    assert [s.g for s in freezer.switches] == [f, v0 - m0 * f]
+    # abs is continuous: evaluated as it is, never frozen; the if and the sign are switches
+    assert [s.g for s in freezer.switches] == [v0 - sympy.Abs(f), f]
     assert all(s.event for s in freezer.switches)
-    assert frozen == sympy.Piecewise((5 * f, m1 > 0), (f + F0 * m0, True))
-    assert freezer.switches[0].label == "abs(f) in R.e"
+    assert frozen == sympy.Piecewise((5 * f, m0 > 0), (f + F0 * m1, True))
+    assert freezer.switches[1].label == "sign(f) in R.e"
+    # the same sign elsewhere shares its mode; abs, min and max never make a switch
+    assert freezer.freeze(2 * sympy.sign(f) + sympy.Max(f, 0) + sympy.Abs(f - 1), "C.e") == \
+        2 * m1 + sympy.Max(f, 0) + sympy.Abs(f - 1)
+    assert len(freezer.switches) == 2
 
 
 def test_freezer_turns_time_switches_into_known_times():
@@ -134,16 +139,22 @@ def test_header_names_the_source_file_only():
     assert str(SIM) not in source
 
 
-def test_module_imports_only_numpy_scipy_and_the_standard_library():
+def test_module_imports_only_numpy_scipy_sundials_and_the_standard_library():
     _, ss, experiment = derive("friction")
     tree = ast.parse(emit(ss, experiment))
-    imported = set()
+    imported, top_level = set(), set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             imported |= {a.name.split(".")[0] for a in node.names}
         elif isinstance(node, ast.ImportFrom):
             imported.add(node.module.split(".")[0])
-    assert imported <= {"numpy", "scipy", "math", "os", "sys", "time", "argparse"}
+    for node in tree.body:
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            top_level |= {(node.module if isinstance(node, ast.ImportFrom) else a.name).split(".")[0]
+                          for a in node.names}
+    assert imported <= {"numpy", "scipy", "math", "os", "sys", "time", "argparse", "sksundae"}
+    # SUNDIALS is imported only where CVODE runs: without it the module loads and falls back to LSODA
+    assert "sksundae" not in top_level
 
 
 def test_module_constants():
@@ -221,8 +232,8 @@ def test_event_functions_work_with_plain_solve_ivp():
     module = load_module(emit(ss, experiment))
     events = module["event_functions"]()
     assert len(events) == len(module["SWITCHES"]) == 2
-    # switch 0 is abs(f), zero at the start (solve_ivp would stop there at once); switch 1 the threshold
-    solution = solve_ivp(lambda t, x: module["rhs"](t, x), (0.0, 1.0), [0.0, 0.0], events=events[1], rtol=1e-10,
+    # switch 0 is the threshold abs(f) < v0; switch 1 is sign(f), zero at the start (solve_ivp would stop there)
+    solution = solve_ivp(lambda t, x: module["rhs"](t, x), (0.0, 1.0), [0.0, 0.0], events=events[0], rtol=1e-10,
                          atol=1e-12)
     assert solution.status == 1                                    # stopped by the threshold event
     assert solution.t_events[0][0] == pytest.approx(np.log(2) / 5, abs=1e-8)

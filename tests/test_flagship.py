@@ -20,6 +20,7 @@ import pytest
 from scipy.optimize import brentq
 
 from bondc import semantic
+from bondc.analysis.motors import requirements
 from bondc.causality import assign_causality
 from bondc.equations import derive
 from bondc.simulate import run
@@ -98,10 +99,10 @@ def steady_pressure(v, area):
     return brentq(balance, P1, 1.1 * P1, xtol=1e-9, rtol=1e-15)   # compressed: relieved, P > P1
 
 
-def cruise_torque(v, area=NOTES["Ae"], law=TABLE3):
+def cruise_torque(v, area=NOTES["Ae"], law=TABLE3, mass=M):
     """Motor torque at steady speed: tau = r*(F_friction(v) + M*g - (P - P_atm)*Ar)."""
     pressure = steady_pressure(v, area)
-    return R_SCREW * (float(friction(v, law)) + M * G - (pressure - P_ATM) * AR), pressure
+    return R_SCREW * (float(friction(v, law)) + mass * G - (pressure - P_ATM) * AR), pressure
 
 
 def at(result, time, name):
@@ -541,3 +542,21 @@ def test_motor_report_without_a_torque_output_is_a_usage_error():
     with pytest.raises(UsageError) as info:
         motor_report(result, graph, CATALOGUE)
     assert [d.code for d in info.value.diagnostics] == ["E927"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mass", [20.0, 25.0, 30.0, 35.0, 40.0, 45.0])
+def test_every_mass_from_20_to_45_kg_completes_with_the_hand_calculated_cruise_torque(mass):
+    """The cycle for other payloads: it completes without chattering, the steady cruise torque up and
+    down is the hand calculation at that mass, and the motor requirements can be computed."""
+    result = run(MODEL, experiment="cycle", sets=[f"M={mass}"])
+    assert result.complete, result.message
+    assert not [label for _, label in result.events if label.startswith("chattering")]
+    assert np.all(np.diff(result.t) > 0)
+    for time, direction in ((0.8, +1), (3.0, -1)):
+        tau, pressure = cruise_torque(direction * V_MAX, mass=mass)
+        assert at(result, time, "P") == pytest.approx(pressure, abs=1.0)
+        assert at(result, time, "torque") == pytest.approx(tau, rel=1e-3)
+    need = requirements(result.t, result.outputs["torque"], result.variables["omega"])
+    assert need.peak_torque >= max(abs(cruise_torque(V_MAX, mass=mass)[0]), abs(cruise_torque(-V_MAX, mass=mass)[0]))
+    assert need.energy_net > 0

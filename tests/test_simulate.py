@@ -49,8 +49,12 @@ def test_mass_spring_damper_step_response_is_the_underdamped_solution(method):
     assert [e[0] for e in result.events] == [t0]
 
 
-def test_undamped_oscillator_period_and_energy():
-    result = run(SIM / "oscillator.bg")
+@pytest.mark.parametrize("method, drift", [("CVODE", 1e-6), ("CVODE-Adams", 1e-6), ("LSODA", 1e-7)])
+def test_undamped_oscillator_period_and_energy(method, drift):
+    # 20 periods at rtol 1e-9: CVODE's error control (per step, in the weighted RMS norm) lets the
+    # energy drift by a few parts in 1e7 (BDF damps a little); LSODA's by less than 1e-7
+    _, ss, experiment = derive("oscillator")
+    result = simulate(ss, experiment, method=method)
     assert result.complete
     q, t = result.states["spring.q"], result.t
     down = np.flatnonzero((q[:-1] > 0) & (q[1:] <= 0))
@@ -66,7 +70,7 @@ def test_undamped_oscillator_period_and_energy():
     np.testing.assert_allclose(np.diff(crossings), period, rtol=1e-6)
     energy = result.outputs["E"]
     assert energy[0] == pytest.approx(0.5 * 200.0 * 0.01**2)
-    assert np.ptp(energy) / energy[0] < 1e-7
+    assert np.ptp(energy) / energy[0] < drift
 
 
 def test_overrides_change_the_physics():
@@ -250,15 +254,15 @@ def test_a_singularity_stops_the_run_instead_of_creeping_forever():
     np.testing.assert_allclose(result.states["mass.p"][inside], exact, rtol=1e-4, atol=1e-6)
 
 
-def test_switches_that_stall_the_run_stop_it_with_a_diagnosis():
-    with pytest.raises(SimulationError) as caught:
-        run(SIM / "stuck_two_frictions.bg")
-    diagnostic = caught.value.diagnostics[0]
-    assert diagnostic.code == "E812" and "stalled" in diagnostic.message
-    result = caught.value.result
-    assert not result.complete
-    # The 5 N of friction exceed the 2 N push: up to where it stopped, the mass has not moved.
-    np.testing.assert_allclose(result.states["mass.p"], 0.0, atol=1e-9)
+def test_two_frictions_on_one_mass_hold_it_with_the_pushing_force():
+    # 3 N + 2 N of sign() friction against a 2 N push: the mass sticks (a sliding mode on v = 0)
+    # and the two frictions together hold exactly the push
+    result = run(SIM / "stuck_two_frictions.bg")
+    assert result.complete, result.message
+    np.testing.assert_allclose(result.states["mass.p"], 0.0, atol=1e-12)
+    held = result.variables["b3.e"] + result.variables["b4.e"]
+    np.testing.assert_allclose(held, 2.0, rtol=1e-9)
+    assert any("sliding on sign" in label for _, label in result.events)
 
 
 def test_missing_end_time_is_a_usage_error():

@@ -1,7 +1,7 @@
-"""Freezing discontinuities: laws with if/abs/sign/min/max/step/table -> smooth laws of mode symbols.
+"""Freezing discontinuities: laws with if/sign/step/table -> smooth laws of mode symbols.
 
 :class:`Freezer` takes the expressions of a StateSpace in causal order and
-returns them with every discontinuous construct replaced by a smooth piece
+returns them with every *discontinuous* construct replaced by a smooth piece
 selected by a *mode symbol* ``_m<k>`` (-1, 0 or +1: the sign of the switching
 function ``g_k``), and the list of :class:`Switch` es it found:
 
@@ -9,15 +9,22 @@ function ``g_k``), and the list of :class:`Switch` es it found:
 construct                  switching function g   frozen form
 =========================  =====================  ==================================
 ``if a < b then u else v``  ``a - b``             ``Piecewise((u, m < 0), (v, True))``
-``abs(a)``                 ``a``                  ``m*a``
 ``sign(a)``                ``a``                  ``m``
-``min(a, b)``              ``a - b``              ``Piecewise((a, m <= 0), (b, True))``
 ``step(x, x0)``            ``x - x0``             ``Piecewise((1, m >= 0), (0, True))``
 ``table(x, xs, vs)``       ``x - xs[i]`` each     the linear piece of the segment
 =========================  =====================  ==================================
 
+``abs``, ``min`` and ``max`` are continuous: they are *not* frozen but
+evaluated as they are at every point. A frozen ``abs(a)`` would be ``m*a``,
+which is negative at the solver's trial points beyond its switch, so
+``sign(e)*sqrt(abs(e))`` (the turbulent orifice) or ``sqrt(max(1 - q, 0))``
+would be evaluated outside the square root's domain. Only a construct whose
+value jumps needs a frozen mode and a located switch; the solver's error
+control handles the kinks of continuous ones (and ``sign(e)*sqrt(abs(e))``
+stays finite on both sides of its frozen ``sign``: it is continuous at 0).
+
 Identical switching functions (or opposite ones) share one mode. A switching
-function is itself frozen (``abs(f) < v0`` has ``g = m1*f - v0``), so it is
+function is itself frozen (a ``sign`` inside a condition is its mode), so it is
 smooth along a frozen segment and its zero is found by root finding.
 
 Switches of time only are *known in advance*: when ``g`` (with the inputs it
@@ -30,9 +37,9 @@ and the sample times of a ``csv`` signal are listed the same way.
 >>> t, f, v0 = sympy.symbols("t f v0", real=True)
 >>> freezer = Freezer(t, states={f}, parameters={v0})
 >>> freezer.freeze(sympy.Piecewise((f, sympy.Abs(f) < v0), (2*f, True)), "R.e")
-Piecewise((f, _m1 > 0), (2*f, True))
+Piecewise((f, _m0 > 0), (2*f, True))
 >>> [(s.g, s.label) for s in freezer.switches]
-[(f, 'abs(f) in R.e'), (-_m0*f + v0, 'if v0 > Abs(f) in R.e')]
+[(v0 - Abs(f), 'if v0 > Abs(f) in R.e')]
 """
 
 from __future__ import annotations
@@ -56,6 +63,7 @@ class Switch:
     mode: sympy.Symbol
     label: str
     event: bool = True              # located by root finding; False: changes only at known times
+    vertex: float = 1.0             # mode value of each side while sliding (2: coulomb's static limit)
     breaks: list = field(default_factory=list)   # [(time expr, label)] when known in advance
 
 
@@ -121,15 +129,19 @@ class Freezer:
             return None
         return -offset / slope
 
-    def switch(self, g, label: str, kind: str):
-        """The mode expression (``m`` or ``-m``) of switching function ``g``, registering it if new."""
+    def switch(self, g, label: str, kind: str, shared: bool = True):
+        """The mode expression (``m`` or ``-m``) of switching function ``g``, registering it if new.
+
+        ``shared=False`` gives a switch of its own even when another has the same ``g``
+        (a ``coulomb`` friction, whose sliding sides are its static limits).
+        """
         g = as_sympy(g)
         if g.is_number:
             value = float(g)
             return sympy.Integer(0 if value == 0 else (1 if value > 0 else -1))
-        if g in self._by_g:
+        if shared and g in self._by_g:
             return self._by_g[g].mode
-        if -g in self._by_g:
+        if shared and -g in self._by_g:
             return -self._by_g[-g].mode
         index = len(self.switches)
         mode = sympy.Symbol(f"_m{index}", real=True)
@@ -144,7 +156,8 @@ class Freezer:
         if self.is_time_only(g):
             self._time_modes.add(mode)
         self.switches.append(switch)
-        self._by_g[g] = switch
+        if shared:
+            self._by_g[g] = switch
         return mode
 
     @property
@@ -192,12 +205,22 @@ class Freezer:
         return self._freeze(cond)
 
     def _freeze_Abs(self, expr):
-        arg = self._freeze(expr.args[0])
-        return self.switch(arg, f"abs({_short(expr.args[0])})", "abs") * arg
+        return sympy.Abs(self._freeze(expr.args[0]))
 
     def _freeze_sign(self, expr):
         arg = self._freeze(expr.args[0])
         return self.switch(arg, f"sign({_short(expr.args[0])})", "sign")
+
+    def _freeze_Coulomb(self, expr):
+        """``F_slide*m`` for the sliding modes m = -1, 0, +1; ``F_static*m/2`` for the sticking
+        vertices m = -2, +2 that the sliding-mode solver blends to find the holding force."""
+        velocity, slide, static = (self._freeze(arg) for arg in expr.args)
+        mode = self.switch(velocity, f"coulomb({_short(expr.args[0])})", "coulomb", shared=False)
+        self.switches[-1].vertex = 2.0
+        slide, static = sympy.Max(slide, 0), sympy.Max(static, 0)
+        return sympy.Piecewise((static * mode / 2, sympy.Or(sympy.StrictGreaterThan(mode, 1),
+                                                              sympy.StrictLessThan(mode, -1))),
+                               (slide * mode, True))
 
     def _freeze_Heaviside(self, expr):
         arg = self._freeze(expr.args[0])
@@ -206,21 +229,11 @@ class Freezer:
         return sympy.Piecewise((1, sympy.StrictGreaterThan(mode, 0)), (h0, sympy.Eq(mode, 0, evaluate=False)),
                                (0, True))
 
-    def _min_max(self, expr, name, relation):
-        args = [self._freeze(arg) for arg in expr.args]
-        originals = list(expr.args)
-        value, text = args[0], _short(originals[0])
-        for arg, original in zip(args[1:], originals[1:]):
-            text = f"{name}({text}, {_short(original)})"
-            mode = self.switch(value - arg, text, name)
-            value = sympy.Piecewise((value, relation(mode, 0)), (arg, True))
-        return value
-
     def _freeze_Min(self, expr):
-        return self._min_max(expr, "min", sympy.LessThan)
+        return sympy.Min(*[self._freeze(arg) for arg in expr.args])
 
     def _freeze_Max(self, expr):
-        return self._min_max(expr, "max", sympy.GreaterThan)
+        return sympy.Max(*[self._freeze(arg) for arg in expr.args])
 
     def _freeze_Step(self, expr):
         arg, x0 = self._freeze(expr.args[0]), self._freeze(expr.args[1])

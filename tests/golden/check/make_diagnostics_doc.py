@@ -79,7 +79,7 @@ d("E313", "string or list where a number is expected (or the reverse)", "A strin
 d("E314", "unknown experiment setting", "A setting inside `experiment ... end` is not one of `t_end solver rtol atol max_step cycle outputs first_step dt`.", "Use the suggested setting.")
 d("E315", "reserved name", "`t` (time) and `pi` cannot be defined as names, and a function cannot take the name of a built-in.", "Choose another name.")
 d("E316", "name not allowed here", "A name that exists but cannot be used where it is written: a parameter (a constant) using an input, `t` or a graph variable; an input (a signal of `t` and parameters) using a graph variable, output or state; a function body using anything but its arguments; `csv(...)` outside an input or law; an element or function used as a value. The hint says what the place may use.", "Pass the value as a function argument, move the expression into an output or element law, or use the element's variables (`X.e`, `X.f`).")
-d("E317", "invalid setting value", "A setting has a value outside its range: an unknown solver (solvers are the `scipy.integrate.solve_ivp` methods `RK45 RK23 DOP853 Radau BDF LSODA`), or a time or tolerance that is not positive.", "Use one of the listed solvers, or a positive value.")
+d("E317", "invalid setting value", "A setting has a value outside its range: an unknown solver (solvers are SUNDIALS `CVODE` (BDF, the default), `CVODE-BDF`, `CVODE-Adams` and the `scipy.integrate.solve_ivp` methods `RK45 RK23 DOP853 Radau BDF LSODA`), or a time or tolerance that is not positive.", "Use one of the listed solvers, or a positive value.")
 d("E318", "unknown experiment", "`--experiment NAME` names an experiment the model does not have.", "Use one of the listed experiments.")
 
 d("E401", "one-port element without exactly one bond", "An `Se Sf MSe MSf R C I` element has no bond, or two or more. Notes list each bond.", "Connect it with exactly one bond; where several bonds meet, put a 0- or 1-junction and connect the element to it.")
@@ -209,11 +209,11 @@ d("E811", "solver failure",
   "The ODE solver gave up: its step size became too small. The model is stiffer than the method can handle "
   "(an explicit solver on a stiff model), a variable grows without bound (here `x` reaches infinity at "
   "t = 1 s), or the right-hand side has a discontinuity bondc cannot see. Results up to that time are kept.",
-  "For a stiff model use a stiff solver (`solver = \"LSODA\"`, the default, or `\"Radau\"`); for a "
+  "For a stiff model use a stiff solver (`solver = \"CVODE\"`, the default, or `\"Radau\"`); for a "
   "variable that grows without bound, check its law or end the run before; otherwise check the laws near the "
   "time given, or loosen `rtol`/`atol`.")
 d("E812", "too many events",
-  "A switch (`if`, `abs`, `sign`, `min`, `max`, `step`) changed mode more than 100000 times: the run stops "
+  "A switch (`if`, `sign`, `step`, a `table` corner) changed mode more than 100000 times: the run stops "
   "instead of creeping on. Chattering that the sliding-mode and chattering guards absorb does not count "
   "(W820). Reaching the limit takes a long run; the example lowers it through the runtime's `max_events` "
   "argument to show the message.",
