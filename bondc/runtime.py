@@ -16,61 +16,79 @@ itself, or any object) with these names, all written by ``bondc.codegen``:
 
 Returns :class:`Result` from :func:`simulate_model`.
 
-This file imports only numpy, scipy and the standard library: bondc copies it
-verbatim into every generated module, so a generated module runs where bondc
+This file imports only numpy, scipy and the standard library (and SUNDIALS'
+scikit-sundae where CVODE runs, with LSODA as the fallback without it): bondc
+copies it verbatim into every generated module, so a generated module runs where bondc
 is not installed, and ``bondc simulate`` runs the same code in-process.
+
+The integrator
+--------------
+By default SUNDIALS CVODE (BDF, Newton, the analytic Jacobian) through
+scikit-sundae, driven one internal step at a time by :class:`CvodeSolver`;
+scipy's ``solve_ivp`` methods by name. No integrator is written here.
 
 How discontinuities are handled
 -------------------------------
-Every ``if`` condition, ``abs``, ``sign``, ``min``/``max``, ``step`` and
-``table`` corner of a model is a *switch*: a continuous switching function
-``g`` (``lhs - rhs`` of a condition, the argument of abs/sign, ``a - b`` of a
-min/max, ``x - x_i`` of a table corner) whose sign selects a smooth piece of
-the law. The integrator never steps across a switch blindly:
+Every ``if`` condition, ``sign``, ``step``, ``table`` corner, ``floor`` (and
+``ceil``, ``mod``), ``pwm`` and ``coulomb`` of a model is a *switch*: a
+continuous switching function ``g`` (``lhs - rhs`` of a condition, the argument
+of sign/coulomb/floor, ``x - x_i`` of a table corner) whose sign (for ``floor``:
+whose integer part) selects a smooth piece of the law. ``abs``, ``min`` and
+``max`` are continuous and evaluated as they are. The integrator never steps
+across a switch blindly:
 
 1. A *segment* is integrated with every switch frozen in its mode
-   ``m = sign(g)`` (-1, 0 or +1), so the right-hand side and the analytic
-   Jacobian the solver sees are smooth (``abs(v)`` is ``m*v``, an ``if`` takes
-   one branch, a table one linear piece).
+   ``m = sign(g)`` (-1, 0 or +1; ``floor(g)`` for a floor switch), so the
+   right-hand side and the analytic Jacobian the solver sees are smooth (an
+   ``if`` takes one branch, a table one linear piece).
 2. The switches the frozen law actually reads (only the active branch of an
    ``if`` reads its modes; ``SWITCH_DEPENDS`` adds what their switching
    functions read) are event functions: after each step, a switch whose
    ``m*g`` fell below ``-deadband`` has crossed (a mode-0 switch, sitting
-   exactly on its surface, when ``|g|`` leaves the band). The crossing time is
-   found with ``brentq`` on the solver's dense output (the zero of ``g``
-   itself when it lies in that step), the segment ends there and the mode
-   change is recorded as an event. The deadband is how far ``g`` moves when
-   the state moves by its error tolerance (``atol + rtol*|x|``): shallower
-   crossings are integration noise (a chamber pressure sitting at its
-   regulator's set point), not events. Crossings of switches the law does not
-   read change nothing the solver sees; outputs still get the right mode at
-   every point (``sign(g)`` there).
-3. Switches of time only (``step(t, t0)``, table corners in ``t``, conditions
-   like ``t < t1``, csv sample times when there are at most 200) are known in
-   advance: segments simply end at those times; nothing is root-found. A
-   denser measured signal instead caps ``max_step`` at its median sample
-   spacing (linear interpolation is continuous; only its slope jumps).
+   exactly on its surface, when ``|g|`` leaves the band; a floor switch when
+   ``g`` leaves ``[m, m + 1)``). The crossing time is found with ``brentq`` on
+   the solver's dense output (the zero of ``g`` itself when it lies in that
+   step), the segment ends there and the mode change is recorded as an event.
+   The deadband is how far ``g`` moves when the state moves by its error
+   tolerance (``atol + rtol*|x|``): shallower crossings are integration noise
+   (a chamber pressure sitting at its regulator's set point), not events.
+   Crossings of switches the law does not read change nothing the solver
+   sees; outputs still get the right mode at every point.
+3. Switches of time only are known in advance: segments simply end at those
+   times; nothing is root-found. Linear ones (``step(t, t0)``, table corners in
+   ``t``, ``t < t1``) from their parameter expressions; the others
+   (``TIME_SWITCHES``: ``pwm(t, f, d)``, ``if sin(2*pi*f*t) > c``, ``floor(t*f)``)
+   by sampling ``g`` on a grid refined until its number of sign changes is
+   stable, each refined by ``brentq``: a pulse shorter than a solver step is
+   never skipped. csv sample times are listed when there are at most 200; a
+   denser measured signal instead caps ``max_step`` at its median spacing.
 4. At every restart the modes are chosen *just after* the restart point: the
    state is advanced by a probe ``h = 1e-8 * span`` along the frozen law and
    ``m = sign(g)`` is taken there, iterated until the modes agree with the law
    they select.
-5. Sliding and chattering. When no mode vector agrees with itself at a
-   restart (each side's law pushes the state back across the surface, as
-   friction does when it sticks at a velocity threshold), one switch ``k`` is
-   sliding: the segment follows Filippov's convex combination
-   ``a*f(m_k=+1) + (1-a)*f(m_k=-1)`` with ``a`` chosen so that ``g_k`` stays
-   put (its rates on each side by central differences), until either side
-   stops pushing towards the surface, another switch crosses, or a known
-   time; outputs are the same combination (the friction force that holds the
-   speed). At the edge of the sliding region, the side that leaves is
-   followed. When several switches chatter at once, when events come faster
-   than ``max_event_rate`` per 1/1000 of the run, or when events repeat
-   without time advancing, the next short interval ``tau`` is integrated with
-   the *unfrozen* law (modes recomputed at every evaluation, no events; the
-   solver's error control bounds the chatter; retried with RK23 if the
-   implicit solver gives up); ``tau`` starts at 1e-6 of the run and doubles
-   while this continues (at most 1/100 of the run). Every sliding and
-   chattering episode is listed in ``Result.events``.
+5. Sliding. When modes do not agree with themselves at a restart (each side's
+   law pushes the state back across the surface, as friction does when it
+   sticks), or a ``coulomb`` friction or a switch that slid until now sits on
+   its surface, those switches are candidates for a sliding mode, any number
+   at once (at most ``_MAX_SLIDING``). The segment follows Filippov's
+   combination: the multilinear blend of the right-hand sides at the corners
+   of the candidates' modes (``+-1``; ``+-2`` for a ``coulomb`` friction, whose
+   frozen law gives its static limit there), with weights ``alpha`` solved by
+   Newton's method so that every sliding ``g`` stays put (rates by central
+   differences). A switch whose weight leaves [0, 1] cannot be held (the force
+   needed exceeds its limit) and leaves on that side; the others are solved
+   again (complementarity by active set). The segment ends when a weight
+   reaches 0 or 1 (break-away), another switch crosses, or a known time;
+   outputs are the same combination (the friction forces that hold).
+6. Chattering. When events come faster than ``max_event_rate`` per 1/1000 of
+   the run, or repeat without time advancing, the next short interval ``tau``
+   is integrated with the *unfrozen* law (modes recomputed at every
+   evaluation, no events; retried with RK23 if the implicit solver gives up);
+   ``tau`` starts at 1e-6 of the run and doubles while this continues (at most
+   1/100 of the run). Where that stalls (switching accumulating at a point,
+   the motion coming to rest), the switches near their surfaces there are
+   held as a sliding mode; if they cannot be, the run stops (E812). Every
+   sliding and chattering episode is listed in ``Result.events``.
 
 A non-finite state or derivative ends the run: the result keeps every point
 computed before it, ``complete`` is False and ``failure`` names the time, the
@@ -268,6 +286,12 @@ class _Model:
             self.SWITCH_VERTICES = tuple(float(v) for v in get("SWITCH_VERTICES"))
         except (KeyError, AttributeError):
             self.SWITCH_VERTICES = (1.0,) * len(self.SWITCHES)
+        try:
+            self.SWITCH_KINDS = tuple(get("SWITCH_KINDS"))
+            self.TIME_SWITCHES = tuple(int(k) for k in get("TIME_SWITCHES"))
+        except (KeyError, AttributeError):
+            self.SWITCH_KINDS, self.TIME_SWITCHES = ("sign",) * len(self.SWITCHES), ()
+        self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
         self.parameter_names = tuple(self.PARAMETERS)
 
 
@@ -296,8 +320,13 @@ def param_array(parameters, p=None, derive=None):
     return array
 
 
-def _sign(values):
-    modes = np.sign(np.asarray(values, dtype=float))
+def _sign(values, floors=None):
+    """Modes from switching-function values: their signs, and for ``floor`` switches their floors
+    (``floors`` a boolean mask over the first axis); nan gives 0."""
+    values = np.asarray(values, dtype=float)
+    modes = np.sign(values)
+    if floors is not None and np.any(floors):
+        modes[floors] = np.floor(values[floors])
     modes[np.isnan(modes)] = 0.0
     return modes
 
@@ -313,7 +342,7 @@ def modes_at(model, t, x, p, guess=None):
         return np.zeros(0)
     modes = np.ones(count) if guess is None else np.array(guess, dtype=float)
     for _ in range(count + 1):
-        new = _sign(model.switches(t, x, p, modes))
+        new = _sign(model.switches(t, x, p, modes), getattr(model, "floor_switches", None))
         if np.array_equal(new, modes):
             break
         modes = new
@@ -484,7 +513,7 @@ class CvodeSolver:
         self.n = self.y.size
         self.status = "running" if self.t < self.t_bound else "finished"
         self.nfev = self.njev = self.nlu = 0
-        self.jacobian_fallbacks = 0
+        self.jacobian_fallbacks, self.first_fallback = 0, None
         method = self.variant
         options = {"method": method, "rtol": float(rtol), "atol": float(atol),
                    "max_step": 0.0 if not np.isfinite(max_step) else float(max_step),
@@ -503,6 +532,8 @@ class CvodeSolver:
         matrix = np.asarray(self.jac_function(t, y), dtype=float)
         if not np.all(np.isfinite(matrix)):
             matrix = self.difference_jacobian(t, np.array(y), np.array(yp))
+            if not self.jacobian_fallbacks:
+                self.first_fallback = float(t)
             self.jacobian_fallbacks += 1
         JJ[:, :] = matrix
 
@@ -583,6 +614,14 @@ class _Stop(Exception):
         self.failure = failure
 
 
+class _Stalled(_Stop):
+    """The unfrozen law stalled at (t, y): the switches there may be held on their surfaces."""
+
+    def __init__(self, failure, t, y):
+        super().__init__(failure)
+        self.t, self.y = float(t), np.array(y, dtype=float)
+
+
 class _Run:
     """One simulation run of a model: segments between events, recorded points."""
 
@@ -609,6 +648,7 @@ class _Run:
         self.tau = self.tau_min
         self.chattering_since = None
         self.recent_events = []
+        self.recent_switches = []      # (time, switch) of the latest located mode changes
         # recorded points: lists of time arrays, state blocks (n, k) and mode ids
         self.blocks_t, self.blocks_x, self.blocks_mode = [], [], []
         self.mode_table = {}
@@ -618,6 +658,7 @@ class _Run:
         self.bad = None
         self.last_relevant = np.ones(self.switch_count, dtype=bool)
         self.sliding_now = []          # the switches of the last sliding segment
+        self.vertex_override = {}      # coulomb switches held between their sliding forces
         self._dense = None
 
     # -- evaluation helpers
@@ -743,7 +784,7 @@ class _Run:
             if spacing > 0 and spacing < self.options["max_step"]:
                 self.options["max_step"] = spacing
             csv = []
-        found = sorted(inside(other) + csv)
+        found = sorted(inside(other) + csv + self.time_switch_roots())
         merged = []
         tolerance = 4 * _EPS * max(abs(self.t_end), abs(self.t_start), 1.0)
         for tb, label in found:
@@ -753,6 +794,70 @@ class _Run:
             else:
                 merged.append((tb, [label]))
         return [(tb, "; ".join(labels)) for tb, labels in merged]
+
+    def time_switch_roots(self):
+        """The zeros inside the run of the switches of time alone (``if sin(2*pi*f*t) > c``, ``pwm``,
+        ``floor(t*f)``), found before integrating: such a switch can change twice within one solver
+        step, so it is not left to event location. ``g`` is sampled on a grid refined until the
+        number of sign changes (level crossings for ``floor``) stops changing, and every change
+        is refined by ``brentq``. Those switches then end segments at known times."""
+        model = self.model
+        if not model.TIME_SWITCHES or not getattr(model, "VECTORIZED", True):
+            return []
+        n = len(model.STATE_NAMES)
+        ones = np.ones(self.switch_count)
+
+        def values(times, k):
+            out = np.empty(times.size)
+            for start in range(0, times.size, 65536):
+                chunk = times[start:start + 65536]
+                with np.errstate(all="ignore"):
+                    rows = np.broadcast_to(model.switches(chunk, np.zeros((n, chunk.size)), self.p, ones),
+                                           (self.switch_count, chunk.size))
+                out[start:start + chunk.size] = rows[k]
+            return out
+
+        def changes(g, k):
+            if model.floor_switches[k]:
+                return np.flatnonzero(np.diff(np.floor(g)) != 0)
+            signs = np.sign(g)
+            return np.flatnonzero(signs[:-1] * signs[1:] < 0)
+
+        roots, located = [], set()
+        for k in model.TIME_SWITCHES:
+            count, previous, size, settled = None, None, 4096, False
+            while size <= 2 ** 22:
+                grid = np.linspace(self.t_start, self.t_end, size + 1)
+                g = values(grid, k)
+                if not np.all(np.isfinite(g)):
+                    break
+                count = changes(g, k).size
+                if count == previous:
+                    settled = True
+                    break
+                previous, size = count, 2 * size
+            if not settled:
+                continue            # not resolvable by sampling: left to event location
+            label = model.SWITCHES[k]
+            scalar = lambda tt, k=k: float(model.switches(tt, np.zeros(n), self.p, ones)[k])
+            for i in changes(g, k):
+                a, b = grid[i], grid[i + 1]
+                if model.floor_switches[k]:
+                    level = np.floor(g[i + 1]) if g[i + 1] > g[i] else np.floor(g[i])
+                    function = lambda tt, lv=level: scalar(tt) - lv
+                else:
+                    function = scalar
+                with np.errstate(all="ignore"):
+                    try:
+                        root = _optimize.brentq(function, a, b, xtol=4 * _EPS, rtol=4 * _EPS)
+                    except ValueError:
+                        root = b
+                roots.append((float(root), label))
+            located.add(k)
+        if located:
+            self.event_switches = np.array([k for k in self.event_switches if k not in located], dtype=int)
+            self.stats["switches_found_ahead"] = len(located)
+        return roots
 
     def restart_modes(self, t, y, guess):
         """Modes just after (t, y), and the switches that chatter there.
@@ -831,7 +936,13 @@ class _Run:
                             t_new, y_new, hit = self.segment(t, y, modes, t_stop)
                         held_now = held
                     elif chattering or zero_progress > 8 or self.too_many_events(t):
-                        t_new, y_new = self.unfrozen_interval(t, y, modes, min(t_stop, t + self.tau))
+                        try:
+                            t_new, y_new = self.unfrozen_interval(t, y, modes, min(t_stop, t + self.tau))
+                        except _Stalled as stalled:
+                            # switches accumulating at a point (a Zeno approach to rest): hold the
+                            # ones that sit on their surfaces there, all at once
+                            t_new, y_new, held_now = self.hold_at_stall(stalled, t_stop)
+                            sliding = held_now
                         zero_progress = 0
                     else:
                         t_new, y_new, hit = self.segment(t, y, modes, t_stop)
@@ -875,7 +986,9 @@ class _Run:
                             self.note_event(t, f"{model.SWITCHES[k]} -> {int(modes[k]):+d}")
                     if changed:
                         self.stats["events"] += 1
-                        self.recent_events.append(t)
+                        if not at_break:            # changes at known times are no chattering
+                            self.recent_events.append(t)
+                            self.recent_switches = self.recent_switches[-200:] + [(t, k) for k in changed]
                     if self.stats["events"] > self.max_events:
                         raise _Stop({"message": f"more than {self.max_events} events by t={t:.6g}",
                                      "time": float(t), "variable": None, "law": None, "kind": "events",
@@ -892,11 +1005,31 @@ class _Run:
         self.stats["wall_time"] = _time_module.perf_counter() - started
         return self.result(complete, failure)
 
+    def hold_at_stall(self, stalled, t_stop):
+        """After the unfrozen law stalled at (t, y): slide on every switch close to its surface
+        there, or stop the run with the stall's diagnosis when they cannot be held."""
+        t, y = stalled.t, stalled.y
+        modes = self.modes_at(t, y)
+        index = np.array([k for k in self.event_switches if not self.model.floor_switches[k]], dtype=int)
+        near = []
+        if index.size:
+            values = np.abs(self.switches_at(t, y, modes, index))
+            bands = np.maximum(100 * self.deadbands(t, y, modes, index), 1e-12)
+            relevant = self.relevant(t, y, modes)
+            near = [int(k) for k, value, band in zip(index, values, bands) if value <= band and relevant[k]]
+        if near and len(near) <= _MAX_SLIDING:
+            held, modes, alpha = self.consistent_sliding_set(t, y, modes, near)
+            if held:
+                t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
+                return t_new, y_new, held
+        raise _Stop(stalled.failure)
+
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that
         either slid until now or are ``coulomb`` frictions (whose static limit can hold them even
         where each side's sliding law alone would move away)."""
-        candidates = set(chattering)
+        floors = self.model.floor_switches
+        candidates = {k for k in chattering if not floors[k]}       # an integer mode cannot slide
         vertices = self.model.SWITCH_VERTICES
         keep = [k for k in self.event_switches
                 if k not in candidates and (vertices[k] != 1.0 or k in self.sliding_now)]
@@ -940,7 +1073,9 @@ class _Run:
         values_old = self.switches_at(t, y, modes, index)
         # a restart may leave a switch a little on the far side of its surface (a sliding segment
         # drifts by the solver's tolerance): its crossing counts from where it starts
-        deadband = self.deadbands(t, y, modes, index) + np.maximum(0.0, -signs * values_old)
+        drift = np.where(self.model.floor_switches[index], 0.0, np.maximum(0.0, -signs * values_old)) \
+            if index.size else np.zeros(0)
+        deadband = self.deadbands(t, y, modes, index) + drift
         creeping = 0
         while True:
             message = solver.step()
@@ -1071,8 +1206,29 @@ class _Run:
         """
         t_old, t_new = solver.t_old, solver.t
         found = []
+        floors = self.model.floor_switches
         for j, k in enumerate(index):
             sign, band = signs[j], deadband[j]
+            if floors[k]:
+                # m = floor(g) holds while g stays in [m, m + 1): the distance to the nearer end
+                level = sign
+                inside = lambda g, lv=level: min(g - lv, lv + 1.0 - g)
+                before, after = inside(old[j]) + band, inside(new[j]) + band
+                if not after < 0:
+                    continue
+                if before <= 0:
+                    found.append((t_old, k))
+                    continue
+                if self._dense is None:
+                    self._dense = solver.dense_output()
+                function = lambda tt, k=k, f=inside: f(self.model.switches(tt, self._dense(tt), self.p, modes)[k])
+                with np.errstate(all="ignore"):
+                    try:
+                        root = _optimize.brentq(function, t_old, t_new, xtol=4 * _EPS, rtol=4 * _EPS)
+                    except ValueError:
+                        root = t_new
+                found.append((root, k))
+                continue
             if sign != 0:
                 before, after = sign * old[j] + band, sign * new[j] + band
                 if not (after < 0 or (after == 0 and before > 0)):
@@ -1112,7 +1268,7 @@ class _Run:
         fallbacks = int(getattr(solver, "jacobian_fallbacks", 0) or 0)
         if fallbacks:
             if not self.stats.get("jacobian_fallbacks"):
-                self.note_event(solver.t, "the analytic Jacobian is not finite here (a law with an infinite "
+                self.note_event(solver.first_fallback, "the analytic Jacobian is not finite here (a law with an infinite "
                                           "slope, like sqrt at 0): finite differences replace it where needed")
             self.stats["jacobian_fallbacks"] = self.stats.get("jacobian_fallbacks", 0) + fallbacks
 
@@ -1130,6 +1286,7 @@ class _Run:
         ``coulomb`` friction (its frozen law gives the static limit there).
         """
         vertices = self.model.SWITCH_VERTICES
+        vertices = [self.vertex_override.get(k, vertices[k]) for k in range(len(vertices))]
         sides = np.array([[1.0 if (c >> i) & 1 else -1.0 for i in range(len(sliding))]
                           for c in range(2 ** len(sliding))])
         corners = np.repeat(np.asarray(modes, dtype=float)[None, :], len(sides), axis=0)
@@ -1185,6 +1342,7 @@ class _Run:
         modes = np.array(modes, dtype=float)
         sliding = list(candidates)
         tolerance = 1e-9
+        self.vertex_override = {}
         while sliding:
             corners, sides = self.sliding_corners(modes, sliding)
             values, rates = self.sliding_rates(t, y, corners, sliding)
@@ -1202,10 +1360,15 @@ class _Run:
                     alpha = np.where(np.minimum(alpha, 1.0 - alpha) < 1e-6, ahead, alpha)
             residual = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ rates
             scale = np.max(np.abs(rates), axis=0)
-            unheld = np.flatnonzero(np.abs(residual) > 1e-8 * np.maximum(scale, 1e-300))
+            # a rate that would move g by less than its deadband over a millionth of the run is nil
+            # (a surface whose own rate is a state held at zero by the others: second-order sliding)
+            nil = self.deadbands(t, y, modes, np.asarray(sliding, dtype=int)) / (1e-6 * self.span)
+            unheld = np.flatnonzero(np.abs(residual) > np.maximum(1e-8 * scale, np.maximum(nil, 1e-300)))
             if unheld.size:
                 # no weight stops it (its own law does not act on it: a free clutch): it moves on
                 worst = int(unheld[np.argmax(np.abs(residual[unheld]) / scale[unheld])])
+                if self.relax_static_limit(sliding[worst]):
+                    continue
                 modes[sliding[worst]] = self.leaving_side(t, y, modes, sliding[worst], residual[worst] > 0)
                 del sliding[worst]
                 continue
@@ -1214,9 +1377,20 @@ class _Run:
             if violation[worst] <= tolerance:
                 return sliding, modes, np.clip(alpha, 0.0, 1.0)
             # the force needed to hold it exceeds its limit: it leaves towards that side
+            if self.relax_static_limit(sliding[worst]):
+                continue
             modes[sliding[worst]] = self.leaving_side(t, y, modes, sliding[worst], alpha[worst] > 1.0)
             del sliding[worst]
         return [], modes, None
+
+    def relax_static_limit(self, k):
+        """A ``coulomb`` friction that its static limit cannot hold may still be held between its
+        sliding forces (a static limit below the sliding force: each side's sliding law pushes
+        back across v = 0, which is a Filippov sliding mode): try those as the corners."""
+        if self.model.SWITCH_VERTICES[k] != 1.0 and self.vertex_override.get(k) is None:
+            self.vertex_override[k] = 1.0
+            return True
+        return False
 
     @staticmethod
     def leaving_side(t, y, modes, k, upwards):
@@ -1358,7 +1532,14 @@ class _Run:
         self.stats["chattering_intervals"] += 1
         if self.chattering_since is None:
             self.chattering_since = t
-            labels = [self.model.SWITCHES[k] for k in range(self.switch_count)] if self.switch_count else []
+            # name the switches that changed most often lately (all of them when none did)
+            window = self.span / 1000.0
+            counts = {}
+            for time, k in self.recent_switches:
+                if time > t - 10 * window:
+                    counts[k] = counts.get(k, 0) + 1
+            order = sorted(counts, key=lambda k: (-counts[k], k)) or list(range(self.switch_count))
+            labels = [self.model.SWITCHES[k] for k in order]
             self.note_event(t, "chattering: integrating the unfrozen law (" + "; ".join(labels[:3])
                             + ("; ..." if len(labels) > 3 else "") + ")")
         else:
@@ -1385,14 +1566,14 @@ class _Run:
             steps_here = self.stats["steps"] - steps_before
             if creeping >= _CREEP_STEPS or steps_here > _UNFROZEN_STEPS:
                 self.collect(solver)
-                raise _Stop({"message": f"the simulation stalled at t={solver.t:.6g}: the discontinuous law "
+                raise _Stalled({"message": f"the simulation stalled at t={solver.t:.6g}: the discontinuous law "
                                         f"(switches changing mode at every evaluation) lets the solver take "
                                         f"only rounding-size steps",
                              "time": float(solver.t), "variable": None, "law": None, "kind": "events",
                              "cause": "several switches (sign, abs, if) keep changing mode together, e.g. "
                                       "friction laws that make the motion stick",
                              "hint": "smooth the laws near their switching surfaces (a small linear band "
-                                     "around zero velocity, for instance)"})
+                                     "around zero velocity, for instance)"}, solver.t, solver.y)
             if solver.status == "failed":
                 self.collect(solver)
                 if method is None:      # forget this attempt's points and retry explicitly
@@ -1442,7 +1623,8 @@ class _Run:
             unique, inverse = np.unique(rows, axis=0, return_inverse=True)
             for r, row in enumerate(unique):
                 columns = np.flatnonzero(inverse.ravel() == r)
-                new = _sign(self.switch_columns(t[columns], x[:, columns], row)[free]).T
+                new = _sign(self.switch_columns(t[columns], x[:, columns], row)[free],
+                            self.model.floor_switches[free]).T
                 if not np.array_equal(new, rows[np.ix_(columns, free)]):
                     rows[np.ix_(columns, free)] = new
                     changed = True

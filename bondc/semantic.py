@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 from bondc import ast, units
-from bondc.io import read_source
+from bondc.io import csv_data_rows, read_source
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import (
@@ -60,6 +60,10 @@ BUILTINS: Mapping[str, tuple[int, int | None]] = {
     "table": (3, 3),
     "step": (2, 2),
     "coulomb": (2, 3),
+    "pwm": (3, 3),
+    "mod": (2, 2),
+    "floor": (1, 1),
+    "ceil": (1, 1),
     "csv": (2, 2),
 }
 
@@ -966,6 +970,16 @@ class _ExpressionChecker:
                 self.report(_error("E306", "table() needs at least two points", node.span,
                                    hint="for a constant, write the value itself"))
 
+    def _call_mod(self, node: ast.Call) -> None:
+        self._call_builtin(node)
+        if len(node.args) == 2:
+            divisor = node.args[1]
+            while isinstance(divisor, ast.Unary) and divisor.op in "+-":
+                divisor = divisor.operand
+            if isinstance(divisor, ast.Num) and divisor.value == 0:
+                self.report(_error("E306", "mod(x, 0): the divisor is zero", node.args[1].span,
+                                   hint="the remainder of a division by zero is undefined; give a non-zero divisor"))
+
     def _call_csv(self, node: ast.Call) -> None:
         if "csv" not in self.scope.allowed:
             self._not_allowed(node, "csv(...)")
@@ -993,7 +1007,8 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     if key not in m.csv_headers:
         try:
             with open(path, newline="", encoding="utf-8") as handle:
-                m.csv_headers[key] = [cell.strip() for cell in next(csv.reader(handle), [])]
+                rows = csv_data_rows(handle)
+                m.csv_headers[key] = [cell.strip() for cell in rows[0]] if rows else []
         except (OSError, UnicodeDecodeError, csv.Error):
             m.csv_headers[key] = None
     header = m.csv_headers[key]

@@ -253,14 +253,19 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
                     _span_of(graph, name) or _no_span(),
                     hint="its law is evaluated outside its domain there; the states are unaffected"))
                 break
-    chattering = [label for _, label in raw.events if label.startswith("chattering")]
+    chattering = [(time, label) for time, label in raw.events if label.startswith("chattering")]
     if chattering:
+        first_time, first_label = chattering[0]
+        switches = first_label.partition("(")[2].rstrip(")")
+        more = f" (and {len(chattering) - 1} more episode{'s' if len(chattering) > 2 else ''})" \
+            if len(chattering) > 1 else ""
         result.warnings.append(Diagnostic(
             "warning", "W820",
-            f"{len(chattering)} chattering episode{'s' if len(chattering) > 1 else ''}: a switch kept changing "
-            "mode and was integrated with its unfrozen law",
-            hint="usually a sliding mode (friction sticking at a velocity threshold); results there are "
-                 "accurate to the solver tolerance, not exact"))
+            f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
+            "be located; integrated with the unfrozen law there",
+            hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
+                 "switching instants there are not located, so results there are only as good as the solver's "
+                 "steps (lower rtol for a tighter result)"))
     return result
 
 

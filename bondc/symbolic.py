@@ -32,6 +32,7 @@ Piecewise((k*spring.q, Abs(spring.q) < 1), (k*spring.q**3, True))
 from __future__ import annotations
 
 import csv as _csv
+import math
 import functools
 from pathlib import Path
 from typing import Callable, Mapping
@@ -41,6 +42,7 @@ import sympy
 from sympy.core.symbol import Str as _SymStr
 
 from bondc import ast
+from bondc.io import csv_data_rows
 from bondc.errors import Diagnostic, EquationError
 
 # ------------------------------------------------------------ signal functions
@@ -143,6 +145,39 @@ class Coulomb(sympy.Function):
         return sympy.Float(max(float(slide), 0.0) * float(np.sign(float(v))), prec)
 
 
+class Pwm(sympy.Function):
+    """``pwm(x, f, d)``: 1 on ``[k/f, (k + d)/f)`` for every integer k, else 0 (a duty ``d`` in [0, 1])."""
+
+    nargs = 3
+    is_real = True
+
+    def fdiff(self, argindex=1):
+        # piecewise constant: its jumps are impulses no ODE can carry
+        return sympy.Integer(0)
+
+    def _eval_derivative(self, symbol):
+        return sympy.Integer(0)
+
+    def _latex(self, printer):
+        return r"\operatorname{pwm}\left(%s\right)" % ", ".join(printer._print(a) for a in self.args)
+
+    def _eval_evalf(self, prec):
+        if not all(a.is_number for a in self.args):
+            return None
+        x, f, d = (float(a) for a in self.args)
+        return sympy.Float(pwm_value(x, f, d), prec)
+
+
+def pwm_value(x, f, d):
+    """``pwm(x, f, d)`` at numbers.
+
+    >>> pwm_value(0.0, 10.0, 0.3), pwm_value(0.029, 10.0, 0.3), pwm_value(0.03, 10.0, 0.3)
+    (1.0, 1.0, 0.0)
+    """
+    phase = x * f - math.floor(x * f)
+    return 1.0 if phase < d else 0.0
+
+
 class Csv(sympy.Function):
     """``csv("file", "column")``: a measured signal of time, linearly interpolated.
 
@@ -222,9 +257,12 @@ def step_value(x, x0):
 
 @functools.lru_cache(maxsize=32)
 def read_csv_column(path: str, column: str) -> tuple[np.ndarray, np.ndarray]:
-    """Time and value columns of a csv file: time is the ``t``/``time`` column, else the first."""
+    """Time and value columns of a csv file: time is the ``t``/``time`` column, else the first.
+
+    Rows as :func:`csv_data_rows` gives them.
+    """
     with open(path, newline="", encoding="utf-8") as handle:
-        rows = list(_csv.reader(handle))
+        rows = csv_data_rows(handle)
     header = [cell.strip() for cell in rows[0]]
     time_index = next((i for i, name in enumerate(header) if name.lower() in ("t", "time")), 0)
     value_index = header.index(column)
@@ -454,6 +492,30 @@ class Translator:
         else:   # the static limit defaults to the sliding force at v = 0
             static = slide.xreplace({velocity: sympy.Integer(0)}) if velocity.is_Symbol else slide
         return Coulomb(velocity, slide, static)
+
+    def _call_pwm(self, node: ast.Call):
+        if len(node.args) != 3:
+            raise _fail(node, "pwm() takes 3 arguments: pwm(t, frequency, duty)")
+        return Pwm(*[self(arg) for arg in node.args])
+
+    def _call_mod(self, node: ast.Call):
+        if len(node.args) != 2:
+            raise _fail(node, "mod() takes 2 arguments: mod(x, y)")
+        x, y = self(node.args[0]), self(node.args[1])
+        if y.is_number and y == 0:
+            raise _fail(node.args[1], "mod(x, 0): the divisor is zero")
+        # the remainder with the sign of y, as written (no evaluation of a symbolic Mod)
+        return x - y * sympy.floor(x / y)
+
+    def _call_floor(self, node: ast.Call):
+        if len(node.args) != 1:
+            raise _fail(node, "floor() takes 1 argument")
+        return sympy.floor(self(node.args[0]))
+
+    def _call_ceil(self, node: ast.Call):
+        if len(node.args) != 1:
+            raise _fail(node, "ceil() takes 1 argument")
+        return sympy.ceiling(self(node.args[0]))
 
     def _call_csv(self, node: ast.Call):
         if len(node.args) != 2 or not all(isinstance(arg, ast.Str) for arg in node.args):

@@ -130,3 +130,200 @@ def test_two_masses_stick_at_once_and_the_first_friction_holds_the_push():
     np.testing.assert_allclose(result.outputs["x"], 0.0, atol=1e-12)
     np.testing.assert_allclose(result.outputs["F1"], 3.0, rtol=1e-9)
     np.testing.assert_allclose(result.outputs["F2"], 0.0, atol=1e-9)
+
+
+# ----------------------------------------------------------------------- PWM
+
+def _rl_closed_form(times, edges, levels, R, L):
+    """Current of an R-L load from i(0) = 0 under a piecewise-constant voltage: ``levels[j]`` on
+    ``[edges[j], edges[j + 1])`` (edges[0] = 0), each phase an exact exponential."""
+    tau = L / R
+    starts = np.asarray(edges, dtype=float)
+    currents = np.zeros(len(starts))
+    for j in range(1, len(starts)):
+        final = levels[j - 1] / R
+        currents[j] = final + (currents[j - 1] - final) * np.exp(-(starts[j] - starts[j - 1]) / tau)
+    phase = np.searchsorted(starts, times, side="right") - 1
+    final = np.asarray(levels)[phase] / R
+    return final + (currents[phase] - final) * np.exp(-(times - starts[phase]) / tau)
+
+
+def _edge_events(result, prefix):
+    return np.array([time for time, label in result.events if label.startswith(prefix)])
+
+
+def test_pwm_at_20_khz_has_every_edge_at_its_time_and_the_exact_current():
+    result = run(ENGINE / "pwm_rl.bg")
+    assert result.complete, result.message
+    f, duty, V, R, L = 20e3, 0.3, 24.0, 2.0, 1e-3
+    periods = 100                                  # 5 ms
+    rising = np.arange(1, periods) / f
+    falling = (np.arange(periods) + duty) / f
+    expected = np.sort(np.concatenate([rising, falling]))
+    edges = _edge_events(result, "pwm(")
+    assert edges.size == expected.size == 2 * periods - 1
+    np.testing.assert_allclose(edges, expected, rtol=0, atol=1e-15)
+    levels = [V if k % 2 == 0 else 0.0 for k in range(expected.size + 1)]
+    current = _rl_closed_form(result.t, np.concatenate([[0.0], expected]), levels, R, L)
+    np.testing.assert_allclose(result.outputs["i"], current, rtol=0, atol=1e-7 * V / R)
+    # the applied voltage averages V*duty over whole periods
+    u = result.variables["u"]
+    t = result.t
+    average = np.sum(np.diff(t) * u[1:]) / t[-1]     # each point carries the value of the step that ends there
+    assert average == pytest.approx(V * duty, rel=1e-9)
+
+
+def test_pwm_by_sine_comparison_never_skips_an_edge():
+    result = run(ENGINE / "pwm_sine_compare.bg")
+    assert result.complete, result.message
+    fc, c, V, R, L = 5e3, 0.95, 12.0, 2.0, 1e-2
+    periods = 1000                                 # 0.2 s
+    k = np.arange(periods)
+    up = (np.arcsin(c) / (2 * np.pi) + k) / fc
+    down = ((np.pi - np.arcsin(c)) / (2 * np.pi) + k) / fc
+    expected = np.sort(np.concatenate([up, down]))
+    edges = _edge_events(result, "if ")
+    assert edges.size == expected.size == 2000
+    np.testing.assert_allclose(edges, expected, rtol=0, atol=1e-14)
+    levels = [0.0 if j % 2 == 0 else V for j in range(expected.size + 1)]
+    current = _rl_closed_form(result.t, np.concatenate([[0.0], expected]), levels, R, L)
+    np.testing.assert_allclose(result.outputs["i"], current, rtol=0, atol=1e-7 * V / R)
+
+
+# ------------------------------------------------------------ floor, ceil, mod
+
+def test_floor_in_a_law_is_located_and_ceil_and_mod_follow_numpy():
+    result = run(ENGINE / "quantized_drain.bg")
+    assert result.complete, result.message
+    t, level = result.t, result.outputs["level"]
+    expected = np.where(t < 1, t, np.where(t < 3, 1 + (t - 1) / 2, 2.0))
+    np.testing.assert_allclose(level, expected, rtol=0, atol=1e-8)
+    events = [(time, label) for time, label in result.events if label.startswith("floor(")]
+    assert [label.split(" -> ")[1] for _, label in events] == ["+1", "+2"]
+    np.testing.assert_allclose([time for time, _ in events], [1.0, 3.0], rtol=0, atol=1e-9)
+    inside = (t > 0) & (np.abs(level - np.round(level)) > 1e-6)
+    np.testing.assert_array_equal(result.outputs["up"][inside], np.ceil(level[inside]))
+    away = np.abs(level / 0.3 - np.round(level / 0.3)) > 1e-6
+    np.testing.assert_allclose(result.outputs["rest"][away], np.mod(level[away], 0.3), rtol=0, atol=1e-12)
+
+
+def test_mod_by_a_constant_zero_is_an_error_at_its_position(tmp_path):
+    from bondc.errors import BondcError
+    text = (ENGINE / "quantized_drain.bg").read_text().replace("mod(tank.q, 0.3)", "mod(tank.q, 0)")
+    model = tmp_path / "mod_zero.bg"
+    model.write_text(text)
+    with pytest.raises(BondcError) as caught:
+        run(model)
+    diagnostic = caught.value.diagnostics[0]
+    assert "mod(x, 0)" in diagnostic.message
+    line = next(i for i, row in enumerate(text.splitlines(), start=1) if "mod(tank.q, 0)" in row)
+    assert diagnostic.span.line == line
+
+
+# --------------------------------------------------------------------- energy
+
+def test_chamber_with_its_own_pressure_state_stores_v_p2_over_2_beta_and_the_balance_closes():
+    from bondc.analysis.energy import energy_account
+
+    ss, experiment = _derive("hydraulic_chamber")
+    result = simulate(ss, experiment)
+    assert result.complete, result.message
+    account = energy_account(ss, result)
+    window = account.windows[0]
+    chamber = window.element("chamber")
+    p0, p1 = result.outputs["P"][0], result.outputs["P"][-1]
+    beta, V = 1.4e9, 1e-3
+    assert chamber.energy_function == "numeric" and chamber.net_work_in is None
+    assert chamber.stored_change == pytest.approx(V * (p1**2 - p0**2) / (2 * beta), rel=1e-9)
+    # the port power integrates to the same change (the account's own quadrature of e*f), to the
+    # solver's accuracy: a small part of the energy that moved through the circuit
+    assert chamber.work_in == pytest.approx(chamber.stored_change, abs=1e-10 * window.balance.throughput)
+    assert abs(window.balance.relative_residual) < 1e-9
+    # the orifice and the leak dissipate what the pump supplies less what is stored
+    dissipated = window.element("orifice").dissipated + window.element("leak").dissipated
+    assert dissipated == pytest.approx(window.balance.sources_net - window.balance.stored_change, rel=1e-9)
+
+
+# ------------------------------------------- piecewise laws in an algebraic loop
+
+def _bridge_network(vs, vc, Rs=1.0, Ron=0.1, Roff=1e6, RL=100.0):
+    """Nodal analysis of the bridge (node b = 0 V): v_a, v_p, v_n and the capacitor current for
+    source voltage ``vs`` and capacitor voltage ``vc``, with the one set of diode states that is
+    consistent (a diode conducts exactly when its voltage is positive)."""
+    import itertools
+
+    for states in itertools.product((True, False), repeat=4):
+        G = [1 / Ron if on else 1 / Roff for on in states]
+        # unknowns v_a, v_p, v_n, i_c; KCL at a, p, n and v_p - v_n = vc
+        A = np.array([
+            [-1 / Rs - G[0] - G[2], G[0], G[2], 0.0],
+            [G[0], -G[0] - G[1] - 1 / RL, 1 / RL, -1.0],
+            [G[2], 1 / RL, -1 / RL - G[2] - G[3], 1.0],
+            [0.0, 1.0, -1.0, 0.0],
+        ])
+        b = np.array([-vs / Rs, 0.0, 0.0, vc])
+        va, vp, vn, ic = np.linalg.solve(A, b)
+        voltages = (va - vp, -vp, vn - va, vn)
+        if all((v > 0) == on or abs(v) < 1e-12 for v, on in zip(voltages, states)):
+            return ic
+    raise AssertionError("no consistent diode states")
+
+
+def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
+    result = run(ENGINE / "diode_bridge.bg")
+    assert result.complete, result.message
+    V, fs, Cf = 10.0, 50.0, 200e-6
+    reference = solve_ivp(lambda t, y: [_bridge_network(V * np.sin(2 * np.pi * fs * t), y[0]) / Cf],
+                          (0.0, 0.06), [0.0], method="DOP853", rtol=1e-11, atol=1e-12, dense_output=True)
+    expected = reference.sol(result.t)[0]
+    np.testing.assert_allclose(result.outputs["vout"], expected, rtol=0, atol=1e-5 * V)
+    np.testing.assert_allclose(result.outputs["i_load"], result.outputs["vout"] / 100.0, rtol=1e-9)
+    # two diodes switch on and two off at each change of conduction: events in pairs
+    switching = [time for time, label in result.events if label.startswith("if ")]
+    assert len(switching) >= 8 and len(switching) % 2 == 0
+
+
+def test_nozzle_fills_choked_then_subsonic_to_the_supply_pressure_and_stays():
+    # ISO 6358 nozzle, isothermal tank: dP/dt = k*psi with k = Rg*T0*Cs*Ps/V. Choked (psi = 1) while
+    # P <= b*Ps: P = P0 + k*t until t_b. Subsonic: u = (P/Ps - b)/(1 - b) = sin(c*(t - t_b)) with
+    # c = k/(Ps*(1 - b)), up to P = Ps at t_f = t_b + pi/(2c); then P stays at Ps.
+    result = run(ENGINE / "nozzle_filling.bg")
+    assert result.complete, result.message
+    Ps, P0, b, Cs, Rg, T0, V = 6e5, 1e5, 0.3, 6e-9, 287.0, 293.0, 1e-3
+    k = Rg * T0 * Cs * Ps / V
+    t_b = (b * Ps - P0) / k
+    c = k / (Ps * (1 - b))
+    t_f = t_b + np.pi / (2 * c)
+    t, P = result.t, result.outputs["P"]
+    expected = np.where(t <= t_b, P0 + k * t,
+                        np.where(t <= t_f, Ps * (b + (1 - b) * np.sin(c * (t - t_b))), Ps))
+    assert np.all(np.isfinite(P)) and np.all(np.isfinite(result.outputs["mdot"]))
+    np.testing.assert_allclose(P, expected, rtol=0, atol=1e-6 * Ps)
+    assert P.max() <= Ps * (1 + 1e-9)
+    choked = [time for time, label in result.events if label.startswith("if b >=")]
+    assert choked == [pytest.approx(t_b, rel=1e-9)]
+
+
+# ------------------------------------------------------------------ chattering
+
+def test_twisting_switches_at_the_analytic_instants_then_rests_at_the_origin():
+    # x'' = -2 sign(x) - sign(v) from x = 1 at rest: towards the origin a = -1 (v^2 = 2A at the
+    # crossing), away from it a = 3 (the next rest at A/3). Crossings and rests follow a geometric
+    # series converging at T = (4*sqrt(2)/3) / (1 - 1/sqrt(3)); bondc locates the switches, integrates
+    # their accumulation unfrozen (W820) and then holds the mass at the origin.
+    result = run(ENGINE / "twisting.bg")
+    assert result.complete, result.message
+    expected, t, amplitude = [], 0.0, 1.0
+    for _ in range(6):
+        t += np.sqrt(2 * amplitude)
+        expected.append(t)
+        t += np.sqrt(2 * amplitude) / 3
+        expected.append(t)
+        amplitude /= 3
+    located = [time for time, label in result.events if label.startswith("sign(")][:12]
+    np.testing.assert_allclose(located, expected, rtol=0, atol=1e-5)
+    rest = (4 * np.sqrt(2) / 3) / (1 - 1 / np.sqrt(3))
+    assert any(label.startswith("chattering") for _, label in result.events)
+    after = result.t > rest + 5e-3
+    np.testing.assert_allclose(result.states["spring.q"][after], 0.0, atol=1e-6)
+    np.testing.assert_allclose(result.states["mass.p"][after], 0.0, atol=1e-6)

@@ -227,3 +227,17 @@ def test_json_and_text_reports():
                                    [pytest.approx(-3.0), pytest.approx(math.sqrt(400 - 9))]]
     text = lin.to_text()
     assert "A (2 x 2)" in text and "eigenvalues" in text and "rad/s" in text
+
+
+def test_a_comment_row_in_an_input_csv_reads_as_the_simulator_reads_it(tmp_path):
+    # the csv reader of the equations stage skips blank and '#' lines like the runtime's
+    sim = Path(__file__).parent / "fixtures" / "sim"
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "push.csv").write_text(
+        "# measured on the rig\n" + (sim / "data" / "push.csv").read_text() + "\n# end\n")
+    (tmp_path / "model.bg").write_text((sim / "csv_force.bg").read_text())
+    graph, _ = semantic.load(tmp_path / "model.bg")
+    result = linearize(derive(assign_causality(graph)))
+    # a free mass: x' = p/m has no dynamics of its own, and the force enters through B = [1]
+    np.testing.assert_allclose(result.A, [[0.0]])
+    np.testing.assert_allclose(result.B, [[1.0]])

@@ -86,7 +86,7 @@ def test_flagship_report():
     header = html[:html.index("<nav")]
     assert "ElectroPneumaticHybrid" in header and "electro_pneumatic_hybrid.bg" in header
     assert source_sha256(FLAGSHIP.read_text(encoding="utf-8")) in header and "bondc 0." in header and DATE in header
-    assert "<code>cycle</code> — up 100 mm, stop, down 100 mm" in header and "Radau" in header
+    assert "<code>cycle</code> — up 100 mm, stop, down 100 mm" in header and "CVODE" in header
     # 20 bonds, each with a half-arrow, a causal stroke and its number
     diagram = html[html.index('<svg xmlns="http://www.w3.org/2000/svg" class="bond-graph"'):]
     diagram = diagram[:diagram.index("</svg>")]

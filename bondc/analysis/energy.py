@@ -15,8 +15,13 @@ gives:
   of the element's own default state alone that is not polynomial (a spring
   with backlash, a tyre that lifts off), ``integral of law dx`` between the two
   end states by adaptive quadrature ("numeric");
-- storage elements without one (custom states such as a chamber with
-  ``state P``, laws that depend on other variables): the *net work in*, the
+- a storage element with a state of its own whose rate is proportional to
+  its port flow (C) or effort (I), ``der(x) = k(x)*f``, and whose law depends
+  on that state alone (a hydraulic chamber ``state p, der(p) = beta/V*f,
+  e = p``): the port power is ``e(x)/k(x) * dx/dt``, so its stored energy is
+  the integral of ``e/k dx`` ("numeric", like the above);
+- storage elements without one (a chamber whose volume changes with a
+  piston, laws that depend on other variables): the *net work in*, the
   integral of the power into the element;
 - two-ports: the power in at each port and their sum, which must be ~0.
 
@@ -717,16 +722,30 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
                 found[element.name] = _StoredEnergy("analytic", "", function=lambda x, c=constant: c)
             continue
         kind = element.kind_info
-        if (element.name in ss.eliminated or len(element.states) != 1
-                or element.states[0].name != kind.state or element.states[0].rate is not None):
+        if element.name in ss.eliminated or len(element.states) != 1:
             continue
-        state_name = element.states[0].qualified
+        state = element.states[0]
+        state_name = state.qualified
         state_symbol = ss.symbols.get(state_name)
+        if state_symbol is None:
+            continue
         effort, flow = ss.bond_symbols[element.bond]
         law = ss.substituted(effort if kind.storage == "C" else flow).xreplace(numbers)
-        if state_symbol is None or not law.free_symbols <= {state_symbol}:
+        if not law.free_symbols <= {state_symbol}:
             continue
-        function = _lambdify(state_symbol, law)
+        if state.name == kind.state and state.rate is None:
+            density = law                       # dH/dq = e(q), dH/dp = f(p)
+        else:
+            # a state of its own, der(x) = k(x)*f (C) or k(x)*e (I): the port power e*f is
+            # law(x)/k(x) * dx/dt, so H(x) is the integral of law/k
+            port = flow if kind.storage == "C" else effort
+            rate = as_sympy(ss.derivatives.get(state_name, sympy.nan)).xreplace(numbers)
+            gain = sympy.diff(rate, port)
+            if (gain.free_symbols - {state_symbol} or gain == 0
+                    or sympy.simplify(rate - gain * port) != 0):
+                continue
+            density = law / gain
+        function = _lambdify(state_symbol, density)
         found[element.name] = _StoredEnergy("numeric", state_name, law=lambda x, f=function: float(f(x)))
     return found
 

@@ -63,7 +63,7 @@ ARGUMENTS = ("t", "x", "p", "m")
 MODULE_NAMES = (
     "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "BOND_VARIABLES",
     "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "SWITCH_VERTICES",
-    "DEFAULTS",
+    "SWITCH_KINDS", "TIME_SWITCHES", "DEFAULTS",
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
     "_time_breaks", "_MODEL",
@@ -616,6 +616,8 @@ class _Emitter:
         lines.append("SWITCH_DEPENDS = " + _tuple((tuple(d) for d in _switch_depends(plan)),
                                                   multiline=len(plan.switches) > 8))
         lines.append("SWITCH_VERTICES = " + _tuple(float(s.vertex) for s in plan.switches))
+        lines.append("SWITCH_KINDS = " + _tuple(s.kind for s in plan.switches))
+        lines.append("TIME_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event and s.time_only))
         lines.append(f"VECTORIZED = {plan.blocks == 0}")
         defaults = {}
         if experiment is not None:

@@ -46,10 +46,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 import sympy
 from sympy.core.relational import Relational
 
-from bondc.symbolic import Csv, Table, as_sympy
+from bondc.symbolic import Csv, Pwm, Table, as_sympy
 
 _LABEL_LIMIT = 120
 
@@ -64,6 +65,8 @@ class Switch:
     label: str
     event: bool = True              # located by root finding; False: changes only at known times
     vertex: float = 1.0             # mode value of each side while sliding (2: coulomb's static limit)
+    kind: str = "sign"              # "sign": m = sign(g); "floor": m = floor(g), an integer held between events
+    time_only: bool = False         # g is a function of time alone (no state, no mode): its zeros can be found ahead
     breaks: list = field(default_factory=list)   # [(time expr, label)] when known in advance
 
 
@@ -155,6 +158,7 @@ class Freezer:
             self.time_breaks.append(TimeBreak(root, switch.label, kind))
         if self.is_time_only(g):
             self._time_modes.add(mode)
+            switch.time_only = not (g.free_symbols & set(self.mode_symbols))
         self.switches.append(switch)
         if shared:
             self._by_g[g] = switch
@@ -221,6 +225,39 @@ class Freezer:
         return sympy.Piecewise((static * mode / 2, sympy.Or(sympy.StrictGreaterThan(mode, 1),
                                                               sympy.StrictLessThan(mode, -1))),
                                (slide * mode, True))
+
+    def _freeze_floor(self, expr):
+        """``floor(a)``: an integer mode ``m = floor(g)``, held until ``g`` leaves ``[m, m + 1)``."""
+        g = as_sympy(self._freeze(expr.args[0]))
+        if g.is_number:
+            return sympy.Integer(int(np.floor(float(g))))
+        key = ("floor", g)
+        if key in self._by_g:
+            return self._by_g[key].mode
+        index = len(self.switches)
+        mode = sympy.Symbol(f"_m{index}", real=True)
+        label = f"floor({_short(expr.args[0])})"
+        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label, kind="floor")
+        if not (g.free_symbols - self.parameters):
+            switch.event = False
+        if self.is_time_only(g):
+            self._time_modes.add(mode)
+            switch.time_only = not (g.free_symbols & set(self.mode_symbols))
+        self.switches.append(switch)
+        self._by_g[key] = switch
+        return mode
+
+    def _freeze_ceiling(self, expr):
+        return -self._freeze_floor(sympy.floor(-expr.args[0]))
+
+    def _freeze_Pwm(self, expr):
+        """``pwm(x, f, d)`` is 1 where ``g = cos(2*pi*(x*f - d/2)) - cos(pi*d)`` is positive: ``g``
+        is smooth and vanishes exactly at the edges ``x*f = k`` and ``x*f = k + d``."""
+        x, frequency, duty = (self._freeze(arg) for arg in expr.args)
+        duty = sympy.Min(sympy.Max(duty, 0), 1)
+        g = sympy.cos(2 * sympy.pi * (x * frequency - duty / 2)) - sympy.cos(sympy.pi * duty)
+        mode = self.switch(g, f"pwm({', '.join(_short(a) for a in expr.args)})", "pwm")
+        return sympy.Piecewise((sympy.Integer(1), sympy.StrictGreaterThan(mode, 0)), (sympy.Integer(0), True))
 
     def _freeze_Heaviside(self, expr):
         arg = self._freeze(expr.args[0])

@@ -225,15 +225,16 @@ d("E813", "interrupted",
   "callback.",
   "Nothing to fix; simulate a shorter time with `--t-end` if the run is too slow.")
 d("W820", "chattering",
-  "A switch kept changing mode faster than events can be located (a sliding mode that the Filippov "
-  "treatment does not cover, or a switching signal much faster than the solver's steps), so bondc integrated "
-  "short intervals with the law unfrozen (modes recomputed at every evaluation). The switching instants there "
-  "are not located: the results are only as good as the solver's steps resolve the switching. The episodes are "
-  "listed in the run's events.",
-  "For a fast switching input, set `max_step` in the experiment below half its period so that every switch is "
-  "located (here `max_step = 2e-5 [s]` removes the warning and gives the exact average), or model its average "
-  "(a duty cycle instead of the pulses). For friction, make the switching surface smooth (a narrow band "
-  "around zero speed).")
+  "Switches changed mode faster than events can be located: they accumulate at an instant (a Zeno "
+  "approach, like the twisting example, whose switching times shrink geometrically as it comes to rest), "
+  "or several switches chatter in a way the Filippov treatment (any number of sliding switches at once) does "
+  "not resolve. bondc integrated short intervals with the law unfrozen (modes recomputed at every "
+  "evaluation); where the motion then sits on its switching surfaces it is held there as a sliding mode. The "
+  "switching instants inside those intervals are not located: results there are as good as the solver's "
+  "steps resolve them. The episodes are listed in the run's events. (Switches of time alone, a PWM or "
+  "`if sin(2*pi*f*t) > c`, never chatter: their instants are found before integrating.)",
+  "Nothing is wrong with the model when the switching really accumulates; for a tighter result there, lower "
+  "`rtol`. For friction, a `coulomb(v, F_slide, F_static)` law sticks without chattering.")
 d("W821", "output not finite",
   "An output (or a bond variable) is `nan` or `inf` from some time on, but the states are finite: its law is "
   "evaluated outside its domain, and nothing else uses it. The caret is under the output (or the law of the "
