@@ -210,7 +210,7 @@ def _cmd_compile(args) -> int:
 
     output = Path(args.output) if args.output else default_output(args.file)
     compile_file(Path(args.file), output, model=args.model, experiment=args.experiment,
-                 sets=_parse_sets(args.set))
+                 sets=_parse_sets(args.set), standalone=args.standalone)
     print(f"wrote {output}")
     return EXIT_OK
 
@@ -303,10 +303,13 @@ def build_parser() -> argparse.ArgumentParser:
     linear.add_argument("--json", action="store_true")
     linear.set_defaults(run=_cmd_linearize)
 
-    compile_ = commands.add_parser("compile", help="generate a standalone Python module (numpy + scipy only)")
+    compile_ = commands.add_parser("compile", help="generate the model's Python module (imports bondc.runtime; "
+                                                   "--standalone: numpy + scipy only)")
     _add_model_args(compile_)
     compile_.add_argument("--experiment", help="whose settings become the module's defaults (default: the first)")
     compile_.add_argument("-o", "--output", help="the module to write (default: MODEL_gen.py beside the model)")
+    compile_.add_argument("--standalone", action="store_true",
+                          help="copy bondc's runtime into the module, so that it runs where bondc is not installed")
     compile_.set_defaults(run=_cmd_compile)
 
     sim = commands.add_parser("simulate", help="simulate an experiment; statistics, energy per cycle, CSV/NPZ")

@@ -223,7 +223,8 @@ def solve_block(residual, number, guess):
     Returns nan for every unknown when it does not converge, so the caller's
     non-finite check names the loop's unknowns.
     """
-    start = _BLOCK_SOLUTIONS.get(number)
+    key = (residual.__code__, number)       # per model: modules importing this runtime share it
+    start = _BLOCK_SOLUTIONS.get(key)
     if start is None or not np.all(np.isfinite(start)):
         start = np.asarray(guess, dtype=float)
     function = lambda z: np.asarray(residual(z), dtype=float)
@@ -245,7 +246,7 @@ def solve_block(residual, number, guess):
         solution = _optimize.root(function, np.asarray(guess, dtype=float), method="hybr", options={"xtol": 1e-12})
         if not solved(solution):
             return tuple(np.full(len(start), np.nan))
-    _BLOCK_SOLUTIONS[number] = solution.x
+    _BLOCK_SOLUTIONS[key] = solution.x
     return tuple(solution.x)
 
 

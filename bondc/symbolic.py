@@ -96,21 +96,29 @@ class Table(sympy.Function):
         return sympy.Float(value, prec)
 
 
-class Step(sympy.Function):
-    """``step(x, x0)``: 0 before ``x0``, 1 from it."""
+class _PiecewiseConstant(sympy.Function):
+    """A signal that is constant between jumps: its derivative is 0 wherever it exists (the
+    jumps are Dirac impulses, which no ODE can carry). ``_latex`` prints ``name(args)``."""
 
-    nargs = 2
     is_real = True
+    latex_name = ""
 
     def fdiff(self, argindex=1):
-        # The derivative is a Dirac impulse at x0, which no ODE can carry: 0 elsewhere.
         return sympy.Integer(0)
 
     def _eval_derivative(self, symbol):
         return sympy.Integer(0)
 
     def _latex(self, printer):
-        return r"\operatorname{step}\left(%s, %s\right)" % (printer._print(self.args[0]), printer._print(self.args[1]))
+        return r"\operatorname{%s}\left(%s\right)" % (self.latex_name,
+                                                       ", ".join(printer._print(a) for a in self.args))
+
+
+class Step(_PiecewiseConstant):
+    """``step(x, x0)``: 0 before ``x0``, 1 from it."""
+
+    nargs = 2
+    latex_name = "step"
 
     def _eval_evalf(self, prec):
         x, x0 = self.args
@@ -145,21 +153,11 @@ class Coulomb(sympy.Function):
         return sympy.Float(max(float(slide), 0.0) * float(np.sign(float(v))), prec)
 
 
-class Pwm(sympy.Function):
+class Pwm(_PiecewiseConstant):
     """``pwm(x, f, d)``: 1 on ``[k/f, (k + d)/f)`` for every integer k, else 0 (a duty ``d`` in [0, 1])."""
 
     nargs = 3
-    is_real = True
-
-    def fdiff(self, argindex=1):
-        # piecewise constant: its jumps are impulses no ODE can carry
-        return sympy.Integer(0)
-
-    def _eval_derivative(self, symbol):
-        return sympy.Integer(0)
-
-    def _latex(self, printer):
-        return r"\operatorname{pwm}\left(%s\right)" % ", ".join(printer._print(a) for a in self.args)
+    latex_name = "pwm"
 
     def _eval_evalf(self, prec):
         if not all(a.is_number for a in self.args):

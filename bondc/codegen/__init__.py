@@ -24,8 +24,11 @@ def default_output(path) -> Path:
 
 
 def compile_file(path, output=None, *, model: str | None = None, experiment: str | None = None,
-                 sets: Sequence = ()) -> str:
+                 sets: Sequence = (), standalone: bool = False) -> str:
     """``bondc compile``: load, check, derive and emit; write ``output`` (atomically) if given.
+
+    The module imports ``bondc.runtime``; ``standalone`` copies the runtime in instead, so the
+    module runs where bondc is not installed (numpy and scipy, and scikit-sundae for CVODE).
 
     ``experiment`` None takes the model's first experiment (its settings become
     the module's defaults); ``sets`` are ``--set`` texts or parsed SetValues;
@@ -38,7 +41,8 @@ def compile_file(path, output=None, *, model: str | None = None, experiment: str
 
     derived = derive_file(path, model=model, experiment=experiment, sets=sets)
     module_dir = Path(output).resolve().parent if output is not None else Path(path).resolve().parent
-    source = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir)
+    source = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir,
+                  standalone=standalone)
     if output is not None:
         atomic_write_text(Path(output), source)
     return source
