@@ -252,6 +252,47 @@ class StateDecl:
 
 
 @dataclass(frozen=True)
+class Discrete:
+    """``discrete heater [1] = 0 "relay state"``: piecewise constant, changed only by ``when``."""
+
+    name: str
+    unit: Unit | None
+    value: Expr
+    description: str | None
+    span: Span = _span()
+    name_span: Span = _span()
+
+
+@dataclass(frozen=True)
+class WhenAssign:
+    """``heater = 1`` inside a ``when``: a discrete variable takes a new value."""
+
+    name: str
+    value: Expr
+    span: Span = _span()
+    name_span: Span = _span()
+
+
+@dataclass(frozen=True)
+class WhenCall:
+    """``reinit(ball.p, -e*ball.p)`` inside a ``when``."""
+
+    func: str
+    args: tuple[Expr, ...]
+    span: Span = _span()
+    func_span: Span = _span()
+
+
+@dataclass(frozen=True)
+class When:
+    """``when CONDITION then STATEMENT, ... end``: runs at the instant the condition becomes true."""
+
+    condition: Expr
+    actions: tuple[Union[WhenAssign, WhenCall], ...]
+    span: Span = _span()
+
+
+@dataclass(frozen=True)
 class Setting:
     name: str
     value: Expr
@@ -271,7 +312,7 @@ class Experiment:
     name_span: Span = _span()
 
 
-Statement = Union[Param, Element, Junction, BondChain, FnDef, Input, Output, StateDecl, Experiment]
+Statement = Union[Param, Element, Junction, BondChain, FnDef, Input, Output, StateDecl, Discrete, When, Experiment]
 
 
 @dataclass(frozen=True)

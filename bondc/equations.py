@@ -594,7 +594,24 @@ class _Deriver:
             inputs=inputs, time=self.t, assignments=tuple(self.assignments), derivatives=derivatives,
             outputs=outputs, algebraic_blocks=tuple(self.blocks), discontinuities=tuple(found),
             energy=self._energy(), eliminated=eliminated, symbols=dict(self.symbols),
-            bond_symbols=dict(self.bond_symbols), diagnostics=tuple(self.diagnostics))
+            bond_symbols=dict(self.bond_symbols), diagnostics=tuple(self.diagnostics), events=self._events())
+
+    def _events(self) -> tuple:
+        """The when clauses: condition and (state, value) pairs, in sympy."""
+        events = []
+        for when in getattr(self.graph, "whens", ()):
+            actions = []
+            for kind, target, value in when.actions:
+                if isinstance(target, ast.Name):
+                    name = target.name
+                else:
+                    found = self.causal.reference(target.parts, None)
+                    if found is None or found[0] != "state":
+                        raise _error("E701", f"'{target.dotted}' is not a state", target.span)
+                    name = found[1]
+                actions.append((name, self.translate(value)))
+            events.append((when.text, self.translate(when.condition), tuple(actions)))
+        return tuple(events)
 
     def _energy(self) -> dict:
         energy = {}

@@ -174,6 +174,12 @@ def _unit(unit: ast.Unit | None) -> str:
     return "" if unit is None else unit_text(unit)
 
 
+def _when_action(action) -> str:
+    if isinstance(action, ast.WhenAssign):
+        return f"{action.name} = {format_expr(action.value)}"
+    return f"{action.func}({', '.join(format_expr(arg) for arg in action.args)})"
+
+
 def _desc(description: str | None) -> str:
     return "" if description is None else quote(description)
 
@@ -624,6 +630,17 @@ class _Formatter:
     def _stmt_StateDecl(self, stmt: ast.StateDecl, indent, widths, attached) -> None:
         head = _words("state", stmt.name, _unit(stmt.unit), _desc(stmt.description))
         self._laws(head + " : " if stmt.laws else head, list(stmt.laws), indent, attached)
+
+    def _stmt_Discrete(self, stmt: ast.Discrete, indent, widths, attached) -> None:
+        head = _words("discrete", stmt.name, _unit(stmt.unit)) + " = "
+        self.code(indent, _words(head + _value(stmt.value, len(indent + head)), _desc(stmt.description)),
+                  attached.trailing)
+
+    def _stmt_When(self, stmt: ast.When, indent, widths, attached) -> None:
+        """``when COND then A, B end`` on one line; past the width, one action a line."""
+        actions = [_when_action(action) for action in stmt.actions]
+        self._laws(f"when {format_expr(stmt.condition)} then ", actions[:-1] + [actions[-1] + " end"], indent,
+                   attached)
 
     # params: param NAME = VALUE [UNIT] "DESC"
     def _widths_param(self, run, block) -> dict:

@@ -184,6 +184,17 @@ class ExperimentDef:
 
 
 @dataclass(frozen=True)
+class WhenDef:
+    """A ``when`` clause: its condition and its statements as (kind, target, value), kind
+    ``"assign"`` (a discrete variable, by name) or ``"reinit"`` (a state: a Name or a Ref)."""
+
+    condition: ast.Expr
+    actions: tuple
+    text: str
+    span: Span = NO_SPAN
+
+
+@dataclass(frozen=True)
 class BondGraph:
     name: str
     description: str | None
@@ -199,6 +210,9 @@ class BondGraph:
     experiments: Mapping[str, ExperimentDef]
     sources: Mapping[str, Source] = field(default_factory=dict, compare=False)
     span: Span = NO_SPAN
+    # discrete variables are model states whose rate is 0 (they change only in when clauses)
+    discrete: tuple[str, ...] = ()
+    whens: tuple[WhenDef, ...] = ()
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]

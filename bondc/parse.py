@@ -36,6 +36,9 @@ KEYWORDS = frozenset(
     "model end param input output state fn experiment import if then else and or not".split()
 )
 
+# Keywords only at the start of a statement (LANGUAGE.md section 11): names everywhere else.
+STATEMENT_KEYWORDS = frozenset({"discrete", "when"})
+
 # What an expected terminal means to a user.
 TERMINAL_NAMES = {
     "NAME": "a name",
@@ -73,8 +76,31 @@ class _LinePostLexer:
 
     def __init__(self) -> None:
         self.comments: list[Token] = []
+        self.text = ""
 
     def process(self, stream):
+        return self._lines(self._statement_keywords(stream))
+
+    def _statement_keywords(self, stream):
+        """``discrete`` and ``when`` are keywords only at the start of a statement (after a line
+        break) and where they begin a declaration: ``discrete NAME``, and ``when`` not followed by
+        ``->``, ``.`` or ``:`` (a bond from an element called ``when``). The text after the word is
+        looked at directly: the contextual lexer cannot read ahead of the parser's state."""
+        start = True
+        for token in stream:
+            if token.type == "NAME" and start and token.value in STATEMENT_KEYWORDS:
+                rest = self.text[token.end_pos:token.end_pos + 200].lstrip(" \t")
+                if token.value == "discrete":
+                    keyword = rest[:1].isalpha() or rest[:1] == "_"
+                else:
+                    keyword = not rest.startswith(("->", ".", ":", "\n", "#")) and rest != ""
+                if keyword:
+                    token = Token.new_borrow_pos(token.value.upper(), token.value, token)
+            if token.type != "COMMENT":
+                start = token.type == "_NL"
+            yield token
+
+    def _lines(self, stream):
         self.comments = []
         depth = 0
         previous = None
@@ -321,6 +347,26 @@ class _ToAst(Transformer):
         return ast.StateDecl(str(name), unit, _opt_str(description), laws or (), self._meta(meta), self._tok(name))
 
     @v_args(meta=True)
+    def discrete_decl(self, meta, children):
+        _, name, unit, value, description = children
+        return ast.Discrete(str(name), unit, value, _opt_str(description), self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def when_assign(self, meta, children):
+        name, value = children
+        return ast.WhenAssign(str(name), value, self._meta(meta), self._tok(name))
+
+    @v_args(meta=True)
+    def when_call(self, meta, children):
+        func, args = children
+        return ast.WhenCall(str(func), tuple(args or ()), self._meta(meta), self._tok(func))
+
+    @v_args(meta=True)
+    def when_clause(self, meta, children):
+        actions = tuple(child for child in children[2:] if isinstance(child, (ast.WhenAssign, ast.WhenCall)))
+        return ast.When(children[1], actions, self._meta(meta))
+
+    @v_args(meta=True)
     def element(self, meta, children):
         kind, name, description, laws = children
         return ast.Element(str(kind), str(name), _opt_str(description), laws or (), self._meta(meta),
@@ -479,6 +525,7 @@ def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnost
 
 def _parse_tree(text: str, start: str):
     parser, postlex = _parser()
+    postlex.text = text
     tree = parser.parse(text, start=start)
     return tree, list(postlex.comments)
 

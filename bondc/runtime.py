@@ -288,6 +288,15 @@ class _Model:
         except (KeyError, AttributeError):
             self.SWITCH_VERTICES = (1.0,) * len(self.SWITCHES)
         try:
+            self.WHEN_LABELS = tuple(get("WHEN_LABELS"))
+            self.WHEN_TARGETS = tuple(tuple(t) for t in get("WHEN_TARGETS"))
+            self.WHEN_SWITCHES = tuple(get("WHEN_SWITCHES"))
+            self.WHEN_ACTIONS = tuple(get("WHEN_ACTIONS"))
+            self.when_conditions = get("_when_conditions")
+        except (KeyError, AttributeError):
+            self.WHEN_LABELS = self.WHEN_TARGETS = self.WHEN_SWITCHES = self.WHEN_ACTIONS = ()
+            self.when_conditions = None
+        try:
             self.SWITCH_KINDS = tuple(get("SWITCH_KINDS"))
             self.TIME_SWITCHES = tuple(int(k) for k in get("TIME_SWITCHES"))
         except (KeyError, AttributeError):
@@ -400,7 +409,7 @@ class Result:
     """
 
     def __init__(self, t, states, outputs, variables, events, complete, message, failure, stats,
-                 parameters):
+                 parameters, jumps=()):
         self.t = t
         self.states = states
         self.outputs = outputs
@@ -411,6 +420,7 @@ class Result:
         self.failure = failure
         self.stats = stats
         self.parameters = parameters
+        self.jumps = list(jumps)        # (t, states before, states after) where a when clause fired
 
     def __repr__(self):
         end = f"{self.t[-1]:.6g}" if self.t.size else "-"
@@ -456,7 +466,8 @@ _CREEP_STEPS = 200      # ... and this many of them in a row mean the run is stu
 _STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction of the run ...
 _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
 _UNFROZEN_STEPS = 20000
-_MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippov combination)  # steps in one short unfrozen interval: the solver is fighting a discontinuity
+_MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippov combination)
+_EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant  # steps in one short unfrozen interval: the solver is fighting a discontinuity
 
 
 def _creeping(solver, count: int) -> int:
@@ -660,6 +671,7 @@ class _Run:
         self.last_relevant = np.ones(self.switch_count, dtype=bool)
         self.sliding_now = []          # the switches of the last sliding segment
         self.vertex_override = {}      # coulomb switches held between their sliding forces
+        self.jumps = []                # (t, state before, state after) of every when clause that fired
         self._dense = None
 
     # -- evaluation helpers
@@ -972,6 +984,8 @@ class _Run:
                             self.note_event(breaks[break_index][0], breaks[break_index][1])
                         break
                     modes, chattering = self.restart_modes(t, y, old_modes)
+                    if model.WHEN_LABELS:
+                        y, modes, chattering = self.fire_when_clauses(t, y, old_modes, modes, chattering)
                     candidates = self.sliding_candidates(t, y, modes, chattering)
                     chattering = sorted(set(chattering) | set(candidates))
                     relevant_now = self.relevant(t, y, modes) | self.last_relevant
@@ -1005,6 +1019,38 @@ class _Run:
                        "law": None, "cause": "interrupted by the user", "hint": "", "kind": "interrupted"}
         self.stats["wall_time"] = _time_module.perf_counter() - started
         return self.result(complete, failure)
+
+    def fire_when_clauses(self, t, y, before_modes, modes, chattering):
+        """Run the ``when`` clauses whose condition became true at this restart (false with the modes
+        before it, true with those just after), in the order written, every right-hand side with the
+        values just before; then evaluate the conditions again, up to ``_EVENT_ROUNDS`` times."""
+        model = self.model
+        before = model.when_conditions(t, y, self.p, before_modes)
+        after = model.when_conditions(t, y, self.p, modes)
+        for _ in range(_EVENT_ROUNDS):
+            firing = [k for k in range(len(after)) if after[k] and not before[k]]
+            if not firing:
+                return y, modes, chattering
+            new = np.array(y, dtype=float)
+            for k in firing:
+                values = model.WHEN_ACTIONS[k](t, y, self.p, modes)
+                for index, value in zip(model.WHEN_TARGETS[k], values):
+                    new[index] = float(value)
+                self.note_event(t, model.WHEN_LABELS[k])
+                self.stats["when_fired"] = self.stats.get("when_fired", 0) + 1
+            if not np.all(np.isfinite(new)):
+                raise _Stop(self.diagnose(t, new, modes, f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
+            self.jumps.append((float(t), np.array(y, dtype=float), new.copy()))
+            y = new
+            modes, chattering = self.restart_modes(t, y, modes)
+            before, after = after, model.when_conditions(t, y, self.p, modes)
+        labels = "; ".join(model.WHEN_LABELS[k] for k in range(len(after)) if after[k] and not before[k])
+        raise _Stop({"message": f"when clauses kept firing at t={t:.6g}: after {_EVENT_ROUNDS} rounds at the same "
+                                f"instant, {labels} became true again",
+                     "time": float(t), "variable": None, "law": None, "kind": "events",
+                     "cause": "the statements of a when clause make another (or its own) condition true again",
+                     "hint": "make the conditions exclusive (a hysteresis band), or the statements move the state "
+                             "out of the condition"})
 
     def hold_at_stall(self, stalled, t_stop):
         """After the unfrozen law stalled at (t, y): slide on every switch close to its surface
@@ -1169,7 +1215,8 @@ class _Run:
                 self.model.rhs(t, y, self.p, reader)
         except Exception:       # a law that needs a real array of modes: keep every switch
             return relevant
-        needed, stack_ = set(), list(reader.read)
+        # a when clause's condition is always watched
+        needed, stack_ = set(), list(reader.read) + list(self.model.WHEN_SWITCHES)
         while stack_:
             k = stack_.pop()
             if k not in needed:
@@ -1710,6 +1757,8 @@ class _Run:
             failure=failure,
             stats=dict(self.stats),
             parameters={name: float(v) for name, v in zip(model.parameter_names, self.p)},
+            jumps=[(time, dict(zip(model.STATE_NAMES, before)), dict(zip(model.STATE_NAMES, after)))
+                   for time, before, after in self.jumps],
         )
 
 

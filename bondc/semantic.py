@@ -46,7 +46,7 @@ from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import (
     JUNCTION_KINDS, KINDS, PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
-    OutputDef, Parameter, Signal, StateVar,
+    OutputDef, Parameter, Signal, StateVar, WhenDef,
 )
 from bondc.parse import parse_source
 from bondc.source import Source, Span
@@ -240,6 +240,8 @@ def _declare(m: _Model) -> None:
             _add_decl(m, _Decl("output", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.StateDecl):
             _add_decl(m, _Decl("state", statement.name, statement.name_span, statement))
+        elif isinstance(statement, ast.Discrete):
+            _add_decl(m, _Decl("discrete", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.FnDef):
             _add_decl(m, _Decl("function", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Element):
@@ -659,11 +661,11 @@ def check_model_states(m: _Model) -> None:
 
 # ================================================================ expressions
 
-GENERAL = frozenset({"parameter", "input", "output", "state", "graph", "time", "csv"})
+GENERAL = frozenset({"parameter", "input", "output", "state", "discrete", "graph", "time", "csv"})
 SIGNAL = frozenset({"parameter", "input", "time", "csv"})
 CONSTANT = frozenset({"parameter"})
 
-_CATEGORY_PHRASE = {"state": "model state", "time": "time"}
+_CATEGORY_PHRASE = {"state": "model state", "time": "time", "discrete": "discrete variable"}
 
 
 @dataclass(frozen=True)
@@ -1135,6 +1137,64 @@ def check_expressions(m: _Model) -> None:
         if laws.initial is not None:
             _check_expr(m, laws.initial.value, _scope(m, "an initial value", CONSTANT,
                                                       _CONSTANT_RULE.format("an initial value")))
+    for discrete in m.statements(ast.Discrete):
+        _check_expr(m, discrete.value, _scope(m, f"the initial value of discrete variable '{discrete.name}'",
+                                              CONSTANT, _CONSTANT_RULE.format("an initial value")))
+    for when in m.statements(ast.When):
+        _check_when(m, when)
+
+
+_WHEN_RULE = ("a when clause's statements are NAME = EXPR, for a discrete variable, and reinit(STATE, EXPR), "
+              "for a state (X.q, X.p, a custom or a model state)")
+
+
+def _check_when(m: _Model, when: ast.When) -> None:
+    """The condition and the statements of a ``when`` clause: targets are discrete variables
+    (``NAME = ...``) or states (``reinit(STATE, ...)``), E301/E306/E316 otherwise."""
+    scope = _scope(m, "a when clause", GENERAL, _GENERAL_RULE)
+    _check_expr(m, when.condition, scope)
+    for action in when.actions:
+        if isinstance(action, ast.WhenAssign):
+            decl = m.decls.get(action.name)
+            if decl is None:
+                m.report(_error("E301", f"undefined name '{action.name}'", action.name_span,
+                                hint=_did_you_mean(action.name, m.names("discrete")) or _WHEN_RULE))
+            elif decl.category != "discrete":
+                m.report(_error("E316", f"a when clause cannot assign {_a(decl.category)} ('{action.name}')",
+                                action.name_span, hint=_WHEN_RULE))
+            else:
+                m.used.add(action.name)
+            _check_expr(m, action.value, scope)
+            continue
+        if action.func != "reinit":
+            m.report(_error("E301", f"unknown statement '{action.func}(...)' in a when clause", action.func_span,
+                            hint=_WHEN_RULE))
+            continue
+        if len(action.args) != 2:
+            m.report(_error("E306", f"reinit() takes 2 arguments, {len(action.args)} given", action.span,
+                            hint="write reinit(STATE, new value)"))
+            continue
+        target, value = action.args
+        if _check_expr(m, target, scope) and _reinit_target(m, target) is None:
+            m.report(_error("E316", "reinit() sets a state: X.q, X.p, a custom state X.NAME or a model state",
+                            target.span, hint=_WHEN_RULE))
+        _check_expr(m, value, scope)
+
+
+def _reinit_target(m: _Model, target) -> str | None:
+    """The qualified state ``target`` names (``ball.p``, ``x``), or None."""
+    if isinstance(target, ast.Name):
+        decl = m.decls.get(target.name)
+        return target.name if decl is not None and decl.category == "state" else None
+    if isinstance(target, ast.Ref) and len(target.parts) == 2:
+        head, name = target.parts
+        kind = m.known_kind(head)
+        laws = m.element_laws.get(head)
+        if kind is None or laws is None or not KINDS[kind].storage:
+            return None
+        states = set(laws.state_names) | {KINDS[kind].state}
+        return f"{head}.{name}" if name in states else None
+    return None
 
 
 def _own_variable_rules(kind_name: str, target: str, name: str,
@@ -1311,6 +1371,8 @@ def check_units(m: _Model) -> None:
         _resolve_unit(m, output.unit)
     for state in m.statements(ast.StateDecl):
         _require_coherent(m, state.unit, f"state '{state.name}'", "states are integrated in SI")
+    for discrete in m.statements(ast.Discrete):
+        _require_coherent(m, discrete.unit, f"discrete variable '{discrete.name}'", "it is computed in SI")
     for element in m.elements:
         for law in element.laws:
             if isinstance(law, ast.LawState):
@@ -1494,6 +1556,11 @@ def _all_expressions(m: _Model) -> list[ast.Expr]:
                 exprs.append(law.value)
     for state in m.statements(ast.StateDecl):
         exprs += [law.value for law in state.laws if isinstance(law, (ast.LawAssign, ast.LawCall))]
+    exprs += [discrete.value for discrete in m.statements(ast.Discrete)]
+    for when in m.statements(ast.When):
+        exprs.append(when.condition)
+        for action in when.actions:
+            exprs += [action.value] if isinstance(action, ast.WhenAssign) else list(action.args)
     for experiment in m.experiments:
         exprs += [item.value for item in experiment.body]
     exprs += [f.body for f in m.functions.values()]
@@ -1897,6 +1964,18 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
         model_states.append(StateVar(state.name, state.name, None, state.unit.text if state.unit else None,
                                      laws.initial.value if laws.initial else None, laws.rate.value,
                                      state.description, state.span))
+    discrete = []
+    for variable in m.statements(ast.Discrete):
+        zero = ast.Num(0.0, "0", variable.span)
+        model_states.append(StateVar(variable.name, variable.name, None,
+                                     variable.unit.text if variable.unit else None, variable.value, zero,
+                                     variable.description, variable.span))
+        discrete.append(variable.name)
+    whens = []
+    for when in m.statements(ast.When):
+        actions = tuple(("assign", ast.Name(a.name, a.name_span), a.value) if isinstance(a, ast.WhenAssign)
+                        else ("reinit", a.args[0], a.args[1]) for a in when.actions)
+        whens.append(WhenDef(when.condition, actions, _when_text(m, when), when.span))
     functions = {name: Function(name, f.params, f.body, f.description, f.span) for name, f in m.functions.items()}
     outputs = {}
     for output in m.outputs:
@@ -1906,7 +1985,15 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
                                          resolved.factor if resolved is not None else 1.0)
     return BondGraph(m.model.name, m.model.description, m.file.path, parameters, functions, inputs, outputs,
                      elements, junctions, tuple(bonds), tuple(model_states), experiments,
-                     sources=dict(m.sources), span=m.model.span)
+                     sources=dict(m.sources), span=m.model.span, discrete=tuple(discrete), whens=tuple(whens))
+
+
+def _when_text(m: _Model, when: ast.When) -> str:
+    """``when CONDITION`` as written (one line), for event lists."""
+    source = m.sources.get(when.span.file) if when.span is not None else None
+    text = source.text[when.span.start:when.span.end] if source is not None else "when ..."
+    head = " ".join(text.split(" then")[0].split())
+    return head if len(head) <= 120 else head[:117] + "..."
 
 
 def _element_states(element: ast.Element, laws: _ElementLaws) -> tuple[StateVar, ...]:

@@ -88,6 +88,7 @@ class SimResult:
     diagnostics: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
     settings: dict = field(default_factory=dict)
+    jumps: list = field(default_factory=list)    # (t, states before, states after) of when clauses
 
     @property
     def t_reached(self) -> float:
@@ -237,7 +238,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
         variables=dict(raw.variables), complete=raw.complete, message=raw.message, events=list(raw.events),
         stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
         model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
-        settings={k: v for k, v in settings.items() if v is not None},
+        settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
     )
     if raw.failure is not None:
         result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw))

@@ -122,6 +122,9 @@ class StateSpace:
     symbols: Mapping[str, sympy.Symbol] = field(default_factory=dict)
     bond_symbols: Mapping[int, tuple[sympy.Symbol, sympy.Symbol]] = field(default_factory=dict)
     diagnostics: tuple = ()
+    # when clauses: (label, condition, ((state name, new value), ...)); discrete variables are
+    # states whose derivative is 0, set only here
+    events: tuple = ()
 
     # -- lookups
 

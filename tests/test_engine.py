@@ -327,3 +327,76 @@ def test_twisting_switches_at_the_analytic_instants_then_rests_at_the_origin():
     after = result.t > rest + 5e-3
     np.testing.assert_allclose(result.states["spring.q"][after], 0.0, atol=1e-6)
     np.testing.assert_allclose(result.states["mass.p"][after], 0.0, atol=1e-6)
+
+
+# ------------------------------------------------------- discrete variables, when
+
+def test_thermostat_switches_at_the_exponential_crossing_times():
+    # tau = Cr/Gw = 4000 s; heating tends to T_out + Ph/Gw = 313.15 K, cooling to T_out = 283.15 K.
+    result = run(ENGINE / "thermostat.bg")
+    assert result.complete, result.message
+    tau, hot, cold, on, off = 4000.0, 313.15, 283.15, 292.15, 294.15
+    heat = tau * np.log((hot - on) / (hot - off))
+    cool = tau * np.log((off - cold) / (on - cold))
+    first_off = tau * np.log((hot - 288.15) / (hot - off))
+    expected, phase = [first_off], 0
+    while expected[-1] + (cool, heat)[phase] < 20000:
+        expected.append(expected[-1] + (cool, heat)[phase])
+        phase = 1 - phase
+    fired = [(time, label) for time, label in result.events if label.startswith("when ")]
+    assert [label for _, label in fired[:3]] == ["when T_room > T_off", "when T_room < T_on", "when T_room > T_off"]
+    assert len(fired) == len(expected) == 32
+    # the temperature is integrated at rtol 1e-9: the switching times drift by parts in 1e7
+    np.testing.assert_allclose([time for time, _ in fired], expected, rtol=1e-6)
+    # between events the heater state is constant and the temperature stays inside the band
+    settled = result.t > first_off
+    assert np.all((result.outputs["T"][settled] > on - 1e-6) & (result.outputs["T"][settled] < off + 1e-6))
+    assert set(np.unique(result.outputs["P"])) == {0.0, 1500.0}
+
+
+def test_bouncing_ball_impacts_and_apex_heights_follow_the_restitution():
+    result = run(ENGINE / "bouncing_ball.bg")
+    assert result.complete, result.message
+    g, e = 9.81, 0.8
+    impacts, t, v = [], np.sqrt(2 / g), np.sqrt(2 * g)
+    while t < 3.0:
+        impacts.append(t)
+        v *= e
+        t += 2 * v / g
+    fired = [time for time, label in result.events if label.startswith("when ")]
+    np.testing.assert_allclose(fired, impacts, rtol=1e-8)
+    height, time = result.outputs["height"], result.t
+    for n in range(1, len(impacts)):
+        bounce = (time > impacts[n - 1]) & (time < impacts[n])
+        apex = height[bounce].max()
+        assert apex == pytest.approx(e ** (2 * n), rel=1e-3)        # recorded points, near the apex
+    assert height.min() > -1e-9
+
+
+def test_when_clause_statements_are_checked(tmp_path):
+    from bondc.errors import BondcError
+
+    model = tmp_path / "bad.bg"
+    model.write_text("model BadWhen\n  param k = 2\n  discrete d = 0\n  state x : der(x) = 1, x(0) = 0\n"
+                     "  when x > 1 then k = 3, reinit(k, 1) end\n  output y = d\nend\n")
+    with pytest.raises(BondcError) as caught:
+        run(model)
+    found = [(d.code, d.span.line, d.span.column) for d in caught.value.diagnostics]
+    assert found == [("E316", 5, 19), ("E316", 5, 33)]
+
+
+def test_the_energy_account_counts_what_the_impacts_take():
+    # each impact keeps e^2 of the kinetic energy: the when clauses remove (1 - e^2)*M*v_n^2/2,
+    # with impact speeds v_n = e^n*sqrt(2*g*h0); with that the balance closes
+    from bondc.analysis.energy import energy_account
+
+    ss, experiment = _derive("bouncing_ball")
+    result = simulate(ss, experiment)
+    account = energy_account(ss, result)
+    balance = account.windows[0].balance
+    M, g, e = 0.1, 9.81, 0.8
+    speeds = [e**n * np.sqrt(2 * g) for n in range(len(result.jumps))]
+    assert len(result.jumps) == 6                  # impacts before t = 3 s
+    assert balance.event_change == pytest.approx(-sum((1 - e**2) * M * v**2 / 2 for v in speeds), rel=1e-7)
+    assert abs(balance.relative_residual) < 1e-9
+    assert not [d for d in account.diagnostics if d.code == "W930"]

@@ -137,6 +137,7 @@ class ElementEnergy:
     net_work_in: float | None = None
     port_work: tuple[float, float] | None = None
     energy_function: str | None = None          # "analytic", "numeric" or None
+    event_change: float | None = None           # stored energy changed by when clauses (reinit) in the window
 
     @property
     def storage_defect(self) -> float | None:
@@ -157,6 +158,7 @@ class Balance:
     net_work_in: float
     converter_work: float                       # sum over two-ports of the work in at both ports (~0)
     throughput: float
+    event_change: float = 0.0                   # stored energy changed at when clauses (an impact's loss < 0)
 
     @property
     def sources_net(self) -> float:
@@ -164,7 +166,8 @@ class Balance:
 
     @property
     def residual(self) -> float:
-        return self.sources_net - (self.dissipated + self.stored_change + self.net_work_in)
+        # what the ports delivered plus what the events changed is what is stored or dissipated
+        return self.sources_net + self.event_change - (self.dissipated + self.stored_change + self.net_work_in)
 
     @property
     def relative_residual(self) -> float | None:
@@ -175,7 +178,7 @@ class Balance:
             "supplied": self.supplied, "returned": self.returned, "sources_net": self.sources_net,
             "dissipated": self.dissipated, "stored_change": self.stored_change,
             "net_work_in": self.net_work_in, "converter_work": self.converter_work,
-            "residual": self.residual, "throughput": self.throughput,
+            "event_change": self.event_change, "residual": self.residual, "throughput": self.throughput,
             "relative_residual": self.relative_residual,
         }
 
@@ -281,8 +284,9 @@ class EnergyAccount:
             out += _table(window)
             b = window.balance
             relative = "-" if b.relative_residual is None else f"{b.relative_residual:.2e}"
+            events = f" - changed at events {_j(b.event_change)} J" if b.event_change else ""
             out.append(f"balance: sources net {_j(b.sources_net)} J = dissipated {_j(b.dissipated)} J"
-                       f" + stored {_j(b.stored_change)} J + net work in {_j(b.net_work_in)} J"
+                       f" + stored {_j(b.stored_change)} J + net work in {_j(b.net_work_in)} J{events}"
                        f"; residual {b.residual:.3e} J ({relative} of throughput {_j(b.throughput)} J)")
             if any(e.role == "converter" for e in window.elements):
                 out.append(f"two-ports: work in at both ports {b.converter_work:.3e} J (ideally 0)")
@@ -866,9 +870,13 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
                 energy = energies[element.name]
                 h0, h1, change = energy.change(value_at(energy.state_name, start, False),
                                                value_at(energy.state_name, end, True))
+                jumps = [energy.change(before[energy.state_name], after[energy.state_name])[2]
+                         for time, before, after in getattr(result, "jumps", ())
+                         if start < time <= end and energy.state_name in before]
                 if math.isfinite(change):
                     entries.append(ElementEnergy(**common, stored_start=h0, stored_end=h1, stored_change=change,
-                                                 energy_function=energy.kind))
+                                                 energy_function=energy.kind,
+                                                 event_change=float(sum(jumps)) if jumps else None))
                 else:       # its law left its domain on the way: count the work in instead
                     entries.append(ElementEnergy(**common, net_work_in=work_in))
             else:
@@ -884,7 +892,8 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
             supplied=total("supplied"), returned=total("returned"), dissipated=total("dissipated"),
             stored_change=total("stored_change"), net_work_in=total("net_work_in"),
             converter_work=float(sum(e.work_in for e in converters)),
-            throughput=float(sum(e.gross for e in entries if e.role != "converter")))
+            throughput=float(sum(e.gross for e in entries if e.role != "converter")),
+            event_change=total("event_change"))
         result_windows.append(Window(index, float(start), float(end), partial, entries, balance))
         for entry in converters:
             if abs(entry.work_in) > 1e-9 * max(entry.gross, 1e-300):

@@ -66,7 +66,8 @@ ARGUMENTS = ("t", "x", "p", "m")
 MODULE_NAMES = (
     "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "BOND_VARIABLES",
     "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "SWITCH_VERTICES",
-    "SWITCH_KINDS", "TIME_SWITCHES", "DEFAULTS",
+    "SWITCH_KINDS", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
+    "_when_conditions", "DEFAULTS",
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
     "_time_breaks", "_MODEL",
@@ -181,6 +182,7 @@ class _Plan:
     switches: list
     time_breaks: list
     derived: list = field(default_factory=list)    # [(name, expr of other parameters)] in declaration order
+    events: list = field(default_factory=list)     # [(label, frozen condition, [(state index, frozen value)])]
     jacobian_statements: list = field(default_factory=list)
     jacobian_entries: dict = field(default_factory=dict)   # (row, column) -> expr
     blocks: int = 0
@@ -277,8 +279,14 @@ def _plan(ss) -> _Plan:
     add_blocks(len(ss.assignments))
     derivatives = [freezer.freeze(ss.derivatives[s.name], f"der({s.name})") for s in states]
     outputs = [(name, freezer.freeze(expr, f"output {name}")) for name, expr in ss.outputs.items()]
+    state_index = {s.name: i for i, s in enumerate(states)}
+    events = []
+    for label, condition, actions in getattr(ss, "events", ()):
+        frozen = freezer.freeze(condition, label)
+        events.append((label, frozen, [(state_index[name], freezer.freeze(value, label)) for name, value in actions]))
     plan = _Plan(ss, states, parameters, statements, variables, derivatives, outputs, freezer.switches,
-                 freezer.time_breaks, blocks=len(ss.algebraic_blocks), derived=_derived_parameters(ss))
+                 freezer.time_breaks, blocks=len(ss.algebraic_blocks), derived=_derived_parameters(ss),
+                 events=events)
     _forward_jacobian(plan, state_symbols)
     return plan
 
@@ -560,8 +568,27 @@ class _Emitter:
             statements, [symbol for _, symbol, _ in plan.variables],
             lambda texts: ["return (" + "".join(text + ", " for text in texts).rstrip() + ")"]))
         parts.append(self.time_breaks())
+        parts.append(self.when_functions())
         parts.append(_WRAPPERS)
         return "\n\n\n".join(parts) + "\n"
+
+    def when_functions(self) -> str:
+        """``_when_conditions`` (each clause's condition with the modes m) and one function per
+        clause giving the new values of its targets from the values just before the event."""
+        plan = self.plan
+        conditions = [condition for _, condition, _ in plan.events]
+        out = [self.function(
+            "def _when_conditions(t, x, p, m):", "Whether each when clause's condition holds, with the modes m.",
+            plan.statements, conditions,
+            lambda texts: ["return (" + "".join(f"bool({text}), " for text in texts).rstrip() + ")"])]
+        for k, (_, _, actions) in enumerate(plan.events):
+            out.append(self.function(
+                f"def _when_action_{k}(t, x, p, m):", f"The new values of when clause {k + 1}'s targets.",
+                plan.statements, [value for _, value in actions],
+                lambda texts: ["return (" + "".join(text + ", " for text in texts).rstrip() + ")"]))
+        out.append("WHEN_ACTIONS = (" + "".join(f"_when_action_{k}, " for k in range(len(plan.events))).rstrip()
+                   + ")")
+        return "\n\n\n".join(out)
 
     def derive_parameters(self) -> str:
         plan = self.plan
@@ -641,6 +668,12 @@ class _Emitter:
                                                   multiline=len(plan.switches) > 8))
         lines.append("SWITCH_VERTICES = " + _tuple(float(s.vertex) for s in plan.switches))
         lines.append("SWITCH_KINDS = " + _tuple(s.kind for s in plan.switches))
+        modes = {s.mode: s.index for s in plan.switches}
+        when_switches = sorted({modes[symbol] for _, condition, _ in plan.events
+                                for symbol in as_sympy(condition).free_symbols if symbol in modes})
+        lines.append("WHEN_LABELS = " + _tuple(label for label, _, _ in plan.events))
+        lines.append("WHEN_TARGETS = " + _tuple(tuple(index for index, _ in actions) for _, _, actions in plan.events))
+        lines.append("WHEN_SWITCHES = " + _tuple(when_switches))
         lines.append("TIME_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event and s.time_only))
         lines.append(f"VECTORIZED = {plan.blocks == 0}")
         defaults = {}
