@@ -715,6 +715,10 @@ def _format_json(ss: StateSpace, show) -> str:
                               "residuals": [sympy.sstr(show(r)) for r in block.residuals]}
                              for block in ss.algebraic_blocks],
     }
+    if ss.events:
+        data["when"] = [{"condition": label, "condition_sympy": sympy.sstr(condition),
+                         "set": {name: sympy.sstr(value) for name, value in actions}}
+                        for label, condition, actions in ss.events]
     return json.dumps(data, indent=2) + "\n"
 
 
@@ -752,6 +756,10 @@ def _format_text(ss: StateSpace, show) -> str:
             rows.append(f"solve for {', '.join(u.name for u in block.unknowns)}:")
             rows += [f"  0 = {sympy.sstr(show(r))}" for r in block.residuals]
         section("algebraic loops (solved numerically)", rows)
+    if ss.events:
+        section("when clauses (at the instant the condition becomes true)",
+                [f"{label} then " + ", ".join(f"{name} = {sympy.sstr(value)}" for name, value in actions)
+                 for label, _, actions in ss.events])
     return "\n".join(lines) + "\n"
 
 

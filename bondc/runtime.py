@@ -465,9 +465,9 @@ _CREEP = 1e-12          # a step this small relative to t does not advance the s
 _CREEP_STEPS = 200      # ... and this many of them in a row mean the run is stuck
 _STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction of the run ...
 _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
-_UNFROZEN_STEPS = 20000
+_UNFROZEN_STEPS = 3000   # steps in one short unfrozen interval: the solver is fighting a discontinuity
 _MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippov combination)
-_EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant  # steps in one short unfrozen interval: the solver is fighting a discontinuity
+_EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant
 
 
 def _creeping(solver, count: int) -> int:

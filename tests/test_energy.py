@@ -290,6 +290,7 @@ def flagship():
     return ss, experiment, result, energy_account(ss, result)
 
 
+@pytest.mark.slow
 def test_flagship_energy_balance_closes(flagship):
     ss, experiment, result, account = flagship
     assert account.cycle == pytest.approx(4.2)

@@ -25,6 +25,9 @@ from bondc.causality import assign_causality
 from bondc.equations import derive
 from bondc.simulate import run
 
+# the whole file simulates the flagship's experiments: out of `make test-fast`
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "models" / "electro_pneumatic_hybrid.bg"
 OMEGA_CSV = ROOT / "models" / "data" / "omega_measured.csv"

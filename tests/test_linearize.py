@@ -241,3 +241,14 @@ def test_a_comment_row_in_an_input_csv_reads_as_the_simulator_reads_it(tmp_path)
     # a free mass: x' = p/m has no dynamics of its own, and the force enters through B = [1]
     np.testing.assert_allclose(result.A, [[0.0]])
     np.testing.assert_allclose(result.B, [[1.0]])
+
+
+def test_equilibrium_behind_a_relief_valve_that_is_closed_at_the_start():
+    # Q = p/Rl + kr*(p - pr) with the valve open: p = (Q + kr*pr)/(1/Rl + kr); A = -(beta/V)*(1/Rl + kr)
+    path = Path(__file__).parent / "fixtures" / "engine" / "relief_valve.bg"
+    graph, _ = semantic.load(path)
+    result = linearize(derive(assign_causality(graph)), at="equilibrium")
+    Q, Rl, kr, pr, beta, V = 2e-4, 5e10, 1e-9, 50e5, 1.4e9, 1e-3
+    pressure = (Q + kr * pr) / (1 / Rl + kr)
+    assert float(result.x0[0]) * beta / V == pytest.approx(pressure, rel=1e-9)
+    np.testing.assert_allclose(result.A, [[-(beta / V) * (1 / Rl + kr)]], rtol=1e-9)

@@ -76,6 +76,7 @@ def test_every_model_report_builds(name, tmp_path):
     assert "Energy per element" in html and "residual" in html
 
 
+@pytest.mark.slow
 def test_flagship_report():
     html = flagship_report().read_text(encoding="utf-8")
     checker = check_html(html)
