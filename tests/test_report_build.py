@@ -59,6 +59,7 @@ def test_models_folder_is_covered():
     assert len(SMALL_MODELS) >= 5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SMALL_MODELS)
 def test_every_model_report_builds(name, tmp_path):
     target = build_report(MODELS / name, output=tmp_path / "r.html", date=DATE)
