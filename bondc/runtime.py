@@ -302,6 +302,10 @@ class _Model:
         except (KeyError, AttributeError):
             self.SWITCH_KINDS, self.TIME_SWITCHES = ("sign",) * len(self.SWITCHES), ()
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
+        try:
+            self.SWITCH_OWNERS = tuple(get("SWITCH_OWNERS"))
+        except (KeyError, AttributeError):
+            self.SWITCH_OWNERS = ("",) * len(self.SWITCHES)
         self.parameter_names = tuple(self.PARAMETERS)
 
 
@@ -1588,6 +1592,9 @@ class _Run:
                     counts[k] = counts.get(k, 0) + 1
             order = sorted(counts, key=lambda k: (-counts[k], k)) or list(range(self.switch_count))
             labels = [self.model.SWITCHES[k] for k in order]
+            self.chattering_switches = order[:3]
+            if order and not self.stats.get("chattering_law"):
+                self.stats["chattering_law"] = self.model.SWITCH_OWNERS[order[0]]
             self.note_event(t, "chattering: integrating the unfrozen law (" + "; ".join(labels[:3])
                             + ("; ..." if len(labels) > 3 else "") + ")")
         else:
@@ -1614,14 +1621,18 @@ class _Run:
             steps_here = self.stats["steps"] - steps_before
             if creeping >= _CREEP_STEPS or steps_here > _UNFROZEN_STEPS:
                 self.collect(solver)
-                raise _Stalled({"message": f"the simulation stalled at t={solver.t:.6g}: the discontinuous law "
-                                        f"(switches changing mode at every evaluation) lets the solver take "
-                                        f"only rounding-size steps",
-                             "time": float(solver.t), "variable": None, "law": None, "kind": "events",
-                             "cause": "several switches (sign, abs, if) keep changing mode together, e.g. "
-                                      "friction laws that make the motion stick",
-                             "hint": "smooth the laws near their switching surfaces (a small linear band "
-                                     "around zero velocity, for instance)"}, solver.t, solver.y)
+                culprits = getattr(self, "chattering_switches", [])
+                named = "; ".join(self.model.SWITCHES[k] for k in culprits)
+                raise _Stalled({"message": f"the simulation stalled at t={solver.t:.6g}: "
+                                           + (f"{named} keep changing mode at every evaluation and " if named
+                                              else "switches keep changing mode at every evaluation and ")
+                                           + "the solver makes no headway",
+                                "time": float(solver.t), "kind": "events", "law": None,
+                                "variable": self.model.SWITCH_OWNERS[culprits[0]] if culprits else None,
+                                "cause": "several switches (sign, if, coulomb) keep changing mode together "
+                                         "where no sliding mode holds them",
+                                "hint": "smooth the laws near their switching surfaces (a small linear band "
+                                        "around zero velocity, for instance)"}, solver.t, solver.y)
             if solver.status == "failed":
                 self.collect(solver)
                 if method is None:      # forget this attempt's points and retry explicitly

@@ -260,10 +260,13 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
         switches = first_label.partition("(")[2].rstrip(")")
         more = f" (and {len(chattering) - 1} more episode{'s' if len(chattering) > 2 else ''})" \
             if len(chattering) > 1 else ""
+        from bondc.source import NO_SPAN
+
         result.warnings.append(Diagnostic(
             "warning", "W820",
             f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
             "be located; integrated with the unfrozen law there",
+            _span_of(graph, raw.stats.get("chattering_law")) or NO_SPAN,
             hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
                  "switching instants there are not located, so results there are only as good as the solver's "
                  "steps (lower rtol for a tighter result)"))

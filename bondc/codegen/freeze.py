@@ -67,6 +67,7 @@ class Switch:
     vertex: float = 1.0             # mode value of each side while sliding (2: coulomb's static limit)
     kind: str = "sign"              # "sign": m = sign(g); "floor": m = floor(g), an integer held between events
     time_only: bool = False         # g is a function of time alone (no state, no mode): its zeros can be found ahead
+    owner: str = ""                 # the variable whose law has it (for diagnostics: its line)
     breaks: list = field(default_factory=list)   # [(time expr, label)] when known in advance
 
 
@@ -148,7 +149,7 @@ class Freezer:
             return -self._by_g[-g].mode
         index = len(self.switches)
         mode = sympy.Symbol(f"_m{index}", real=True)
-        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label)
+        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label, owner=self._owner)
         root = self._linear_time_root(g)
         if not (g.free_symbols - self.parameters):
             switch.event = False            # of parameters only: its mode never changes
@@ -237,7 +238,8 @@ class Freezer:
         index = len(self.switches)
         mode = sympy.Symbol(f"_m{index}", real=True)
         label = f"floor({_short(expr.args[0])})"
-        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label, kind="floor")
+        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label, kind="floor",
+                        owner=self._owner)
         if not (g.free_symbols - self.parameters):
             switch.event = False
         if self.is_time_only(g):
