@@ -303,6 +303,10 @@ class _Model:
             self.SWITCH_KINDS, self.TIME_SWITCHES = ("sign",) * len(self.SWITCHES), ()
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
         try:
+            self.JACOBIAN_PATTERN = tuple(get("JACOBIAN_PATTERN"))
+        except (KeyError, AttributeError):
+            self.JACOBIAN_PATTERN = None
+        try:
             self.SWITCH_OWNERS = tuple(get("SWITCH_OWNERS"))
         except (KeyError, AttributeError):
             self.SWITCH_OWNERS = ("",) * len(self.SWITCHES)
@@ -516,8 +520,11 @@ class CvodeSolver:
 
     variant = "BDF"
 
+    #: From this many states on, a model with a known Jacobian pattern uses the sparse linear solver.
+    SPARSE_FROM = 40
+
     def __init__(self, fun, t0, y0, t_bound, *, rtol=1e-6, atol=1e-9, max_step=np.inf, first_step=None,
-                 jac=None, vectorized=False):
+                 jac=None, vectorized=False, pattern=None):
         # SUNDIALS warns on stderr when a step is at rounding size; the run's own guards report that
         os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", os.devnull)
         from sksundae.cvode import CVODE as SundialsCvode
@@ -534,9 +541,24 @@ class CvodeSolver:
         options = {"method": method, "rtol": float(rtol), "atol": float(atol),
                    "max_step": 0.0 if not np.isfinite(max_step) else float(max_step),
                    "first_step": float(first_step or 0.0), "max_num_steps": 100000}
+        self.pattern = None
         if jac is not None and method == "BDF":
             options["jacfn"] = self._jacobian
-        self._cvode = SundialsCvode(self._rhs, **options)
+            if pattern is not None and self.n >= self.SPARSE_FROM:
+                # SuperLU on the structural non-zeros (with the diagonal, which Newton's matrix has)
+                entries = sorted(set(map(tuple, pattern)) | {(i, i) for i in range(self.n)},
+                                 key=lambda key: (key[1], key[0]))
+                self.pattern = (np.array([i for i, _ in entries]), np.array([j for _, j in entries]))
+                sparsity = np.zeros((self.n, self.n), dtype=int)
+                sparsity[self.pattern] = 1
+                options.update(linsolver="sparse", sparsity=sparsity)
+        self.linear_solver = options.get("linsolver", "dense")
+        import warnings
+
+        with warnings.catch_warnings():
+            # with a sparsity pattern and our own Jacobian, scikit-sundae says it will not approximate one
+            warnings.filterwarnings("ignore", message="Custom sparse Jacobian approximation")
+            self._cvode = SundialsCvode(self._rhs, **options)
         self._cvode.init_step(self.t, self.y)
 
     def _rhs(self, t, y, yp):
@@ -551,7 +573,10 @@ class CvodeSolver:
             if not self.jacobian_fallbacks:
                 self.first_fallback = float(t)
             self.jacobian_fallbacks += 1
-        JJ[:, :] = matrix
+        if self.pattern is None:
+            JJ[:, :] = matrix
+        else:
+            JJ[:] = matrix[self.pattern]        # compressed sparse columns, in the pattern's order
 
     def difference_jacobian(self, t, y, f0):
         """Forward differences of ``fun``; a column that is not finite is taken as zero."""
@@ -1105,6 +1130,8 @@ class _Run:
         options = dict(self.options)
         if self.implicit:
             options["jac"] = jac
+        if issubclass(self.method, CvodeSolver) and self.model.JACOBIAN_PATTERN is not None:
+            options["pattern"] = self.model.JACOBIAN_PATTERN
         if "first_step" in options and options["first_step"] > t_stop - t:
             del options["first_step"]
         return self.method(fun, t, y, t_stop, **options)
@@ -1317,6 +1344,8 @@ class _Run:
     def collect(self, solver):
         self.stats["njev"] += int(getattr(solver, "njev", 0) or 0)
         self.stats["nlu"] += int(getattr(solver, "nlu", 0) or 0)
+        if getattr(solver, "linear_solver", None):
+            self.stats["linear_solver"] = solver.linear_solver
         fallbacks = int(getattr(solver, "jacobian_fallbacks", 0) or 0)
         if fallbacks:
             if not self.stats.get("jacobian_fallbacks"):

@@ -66,7 +66,7 @@ ARGUMENTS = ("t", "x", "p", "m")
 MODULE_NAMES = (
     "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "BOND_VARIABLES",
     "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "SWITCH_VERTICES",
-    "SWITCH_KINDS", "SWITCH_OWNERS", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
+    "SWITCH_KINDS", "SWITCH_OWNERS", "JACOBIAN_PATTERN", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
     "_when_conditions", "DEFAULTS",
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
@@ -668,6 +668,9 @@ class _Emitter:
                                                   multiline=len(plan.switches) > 8))
         lines.append("SWITCH_VERTICES = " + _tuple(float(s.vertex) for s in plan.switches))
         lines.append("SWITCH_KINDS = " + _tuple(s.kind for s in plan.switches))
+        # the Jacobian's structural non-zeros, column by column (the order of a CSC matrix)
+        pattern = sorted(plan.jacobian_entries, key=lambda key: (key[1], key[0]))
+        lines.append("JACOBIAN_PATTERN = (" + "".join(f"({i}, {j}), " for i, j in pattern).rstrip() + ")")
         lines.append("SWITCH_OWNERS = " + _tuple((s.owner for s in plan.switches), multiline=len(plan.switches) > 8))
         modes = {s.mode: s.index for s in plan.switches}
         when_switches = sorted({modes[symbol] for _, condition, _ in plan.events
