@@ -701,6 +701,7 @@ class _Run:
         self.sliding_now = []          # the switches of the last sliding segment
         self.vertex_override = {}      # coulomb switches held between their sliding forces
         self.jumps = []                # (t, state before, state after) of every when clause that fired
+        self.extended = None           # modes of the last right-hand side taken beyond a switch
         self._dense = None
 
     # -- evaluation helpers
@@ -708,9 +709,21 @@ class _Run:
     def rhs(self, t, x, modes):
         self.stats["nfev"] += 1
         value = np.asarray(self.model.rhs(t, x, self.p, modes), dtype=float)
-        if not np.isfinite(np.sum(value)) and (self.bad is None or np.isfinite(np.sum(x))):
-            # the latest non-finite evaluation at a finite state: where a law left its domain
-            self.bad = (t, np.array(x, dtype=float), np.array(modes))
+        if not np.isfinite(np.sum(value)) and np.isfinite(np.sum(x)):
+            # A trial point beyond a switch, where the frozen branch is outside its domain
+            # (``if e > 0 then sqrt(e) else 0`` at e < 0): take the branches that hold there. The
+            # step that reaches it crosses the switch, which is then located as an event.
+            here = self.modes_at(t, x, modes)
+            if not np.array_equal(here, modes):
+                with np.errstate(all="ignore"):
+                    other = np.asarray(self.model.rhs(t, x, self.p, here), dtype=float)
+                if np.isfinite(np.sum(other)):
+                    self.stats["branch_extensions"] = self.stats.get("branch_extensions", 0) + 1
+                    self.extended = here
+                    return other
+            if self.bad is None or np.isfinite(np.sum(x)):
+                # the latest non-finite evaluation at a finite state: where a law left its domain
+                self.bad = (t, np.array(x, dtype=float), np.array(modes))
         return value
 
     def jac(self, t, x, modes):
@@ -1170,6 +1183,7 @@ class _Run:
                                                           f"{_CREEP:g} relative: the solution is not advancing"))
             t_new, y_new = solver.t, solver.y
             derivative = getattr(solver, "f", None)
+            self.extended = None
             if derivative is None or self.method.__name__ == "LSODA":
                 with np.errstate(all="ignore"):
                     derivative = self.rhs(t_new, y_new, modes)
@@ -1179,7 +1193,12 @@ class _Run:
             self._dense = None
             if index.size:
                 values_new = self.switches_at(t_new, y_new, modes, index)
-                hit = self.crossing(solver, modes, index, signs, values_old, values_new, deadband)
+                band = deadband
+                if self.extended is not None:
+                    # the step ended where the frozen branch is not defined: the switches whose
+                    # mode differs there have crossed, however shallow the crossing
+                    band = np.where(self.extended[index] != modes[index], 0.0, deadband)
+                hit = self.crossing(solver, modes, index, signs, values_old, values_new, band)
                 if hit is not None:
                     t_event, k = hit
                     if self._dense is None:

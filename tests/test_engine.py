@@ -463,3 +463,16 @@ def test_the_jacobian_pattern_holds_every_non_zero_of_the_jacobian():
         state = rng.uniform(-2, 2, n)
         jacobian = namespace["jacobian"](rng.uniform(0, 8), state)
         assert {(int(i), int(j)) for i, j in zip(*np.nonzero(jacobian))} <= pattern
+
+
+def test_a_branch_is_never_evaluated_outside_its_domain_beyond_its_switch():
+    # dq/dt = -2*sqrt(q): q = (1 - t)^2 until the tank is empty at t = 1 s, then the else branch
+    result = run(ENGINE / "branch_domain.bg")
+    assert result.complete, result.message
+    t, level = result.t, result.outputs["level"]
+    assert np.all(np.isfinite(level))
+    np.testing.assert_allclose(level, np.where(t < 1, (1 - t) ** 2, 0.0), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(level[t > 1.001], 0.0, atol=1e-12)
+    # the tank reaches its switch at t = 1 s (and is held on it: both branches leave it at rest)
+    switched = [time for time, label in result.events if "if b2.e > 0" in label]
+    assert switched and switched[0] == pytest.approx(1.0, abs=1e-3)
