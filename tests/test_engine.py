@@ -87,6 +87,20 @@ def test_three_coupled_clutches_stick_together_then_the_first_breaks_away():
     assert ends and ends[0] == pytest.approx(4.0, abs=1e-7)
 
 
+def test_coupled_clutches_energy_work_of_the_drive_and_slip_losses():
+    # drive work: int_0^4 t*t^2/8 dt + int_4^8 t*(2 + t^2/2 - 2t) dt = 8 + 229 1/3; clutch 1 slipping
+    # at 2 N*m dissipates 2*int_4^8 (w1 - w2) dt = 42 2/3; kinetic energy at 8 s: (18^2 + 3*(14/3)^2)/2
+    from bondc.analysis.energy import energy_account
+
+    ss, experiment = _derive("coupled_clutches")
+    result = simulate(ss, experiment)
+    window = energy_account(ss, result).windows[0]
+    assert window.balance.sources_net == pytest.approx(8 + 688 / 3, rel=1e-6)
+    assert window.element("clutch1").dissipated == pytest.approx(128 / 3, rel=1e-6)
+    assert window.balance.stored_change == pytest.approx((18**2 + 3 * (14 / 3) ** 2) / 2, rel=1e-6)
+    assert abs(window.balance.relative_residual) < 1e-8
+
+
 def test_breakaway_happens_at_the_static_limit_then_slides_at_the_sliding_force():
     # F = 4t against coulomb(v, 8 N, 12 N): held (friction = F) until F = 12 N at t = 3 s; then
     # M v' = 4t - 8, v = (2 (t^2 - 9) - 8 (t - 3)) / 2.

@@ -54,7 +54,8 @@ refined interpolant. Positive and negative parts of a power come from the
 degree-4 interpolant of the five samples where they change sign, so
 ``supplied - returned`` is the net integral exactly. Steps of a Filippov
 sliding mode (the law there is a convex combination only the runtime
-computes) use the result's recorded values, linearly (the trapezoid rule).
+computes) use the result's recorded values, through a cubic spline over the
+points of each sliding span (the motion is smooth there).
 ``EnergyAccount.quadrature`` counts the steps of each kind.
 
 >>> from pathlib import Path
@@ -105,8 +106,8 @@ ROLES = {"Se": "source", "MSe": "source", "Sf": "source", "MSf": "source", "R": 
          "MGY": "converter"}
 
 METHOD = ("5-point Gauss-Lobatto quadrature per solver step, states from the cubic Hermite interpolant refined "
-          "by deferred correction (rates with the step's modes frozen); sliding-mode steps: trapezoid on the "
-          "recorded values")
+          "by deferred correction (rates with the step's modes frozen); sliding-mode steps: a cubic spline "
+          "through the recorded values of each sliding span")
 
 
 # ------------------------------------------------------------------ values
@@ -384,8 +385,13 @@ def experiment_cycle(ss, result) -> float | None:
 # ------------------------------------------------------------ trajectory
 
 
-def _sign(values):
-    modes = np.sign(np.asarray(values, dtype=float))
+def _sign(values, floors=None):
+    """Modes from switching-function values (switches by rows): signs, and integer parts for the
+    ``floor`` switches (``floors``, a mask over the rows), as :func:`bondc.runtime.modes_at` takes them."""
+    values = np.asarray(values, dtype=float)
+    modes = np.sign(values)
+    if floors is not None and np.any(floors):
+        modes[floors] = np.floor(values[floors])
     modes[np.isnan(modes)] = 0.0
     return modes
 
@@ -400,6 +406,8 @@ class _Model:
         self.vectorized = bool(namespace.get("VECTORIZED", False))
         self._rhs, self._variables = namespace["_rhs"], namespace["_variables"]
         self._switches = namespace["_switches"]
+        kinds = tuple(namespace.get("SWITCH_KINDS", ())) or ("sign",) * self.switch_count
+        self.floors = np.array([kind == "floor" for kind in kinds], dtype=bool)
         names = tuple(namespace["PARAMETERS"])
         self.p = np.array([float(parameters.get(name, namespace["PARAMETERS"][name])) for name in names])
 
@@ -440,7 +448,7 @@ class _Model:
         if self.switch_count == 0:
             return rows
         for _ in range(self.switch_count + 1):
-            new = _sign(self.by_modes(self._switches, t, x, rows, self.switch_count)).T
+            new = _sign(self.by_modes(self._switches, t, x, rows, self.switch_count), self.floors).T
             if np.array_equal(new, rows):
                 break
             rows = new
@@ -608,12 +616,23 @@ class _Trajectory:
         values = self.model.variables(times.ravel(), states.reshape(n, steps * 5), flat_modes)
         values = values.reshape(len(self.model.variable_names), steps, 5)
         if np.any(self.sliding):
-            # the Filippov combination is the runtime's: interpolate its recorded values
-            rows = np.flatnonzero(self.sliding)
+            # the Filippov combination is the runtime's: interpolate its recorded values, by a cubic
+            # spline through the points of each sliding span (the motion is smooth there)
+            from scipy.interpolate import CubicSpline
+
             recorded_t = np.asarray(self.result.t, dtype=float)
-            for i, name in enumerate(self.model.variable_names):
-                recorded = np.asarray(self.result.variables[name], dtype=float)
-                values[i, rows, :] = np.interp(times[rows], recorded_t, recorded)
+            for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
+                mid = 0.5 * (self.ta + self.tb)
+                rows = np.flatnonzero(self.sliding & (mid > start) & (mid < end))
+                points = np.flatnonzero((recorded_t >= start) & (recorded_t <= end))
+                if rows.size == 0:
+                    continue
+                for i, name in enumerate(self.model.variable_names):
+                    recorded = np.asarray(self.result.variables[name], dtype=float)
+                    if points.size >= 4 and np.all(np.isfinite(recorded[points])):
+                        values[i, rows, :] = CubicSpline(recorded_t[points], recorded[points])(times[rows])
+                    else:
+                        values[i, rows, :] = np.interp(times[rows], recorded_t, recorded)
         return times, {name: values[i] for i, name in enumerate(self.model.variable_names)}
 
     def states_at_bounds(self) -> dict:
