@@ -1469,7 +1469,7 @@ class _Run:
                 worst = int(unheld[np.argmax(np.abs(residual[unheld]) / scale[unheld])])
                 if self.relax_static_limit(sliding[worst]):
                     continue
-                modes[sliding[worst]] = self.leaving_side(t, y, modes, sliding[worst], residual[worst] > 0)
+                modes[sliding[worst]] = 1.0 if residual[worst] > 0 else -1.0
                 del sliding[worst]
                 continue
             violation = np.maximum(alpha - 1.0, -alpha)
@@ -1479,7 +1479,7 @@ class _Run:
             # the force needed to hold it exceeds its limit: it leaves towards that side
             if self.relax_static_limit(sliding[worst]):
                 continue
-            modes[sliding[worst]] = self.leaving_side(t, y, modes, sliding[worst], alpha[worst] > 1.0)
+            modes[sliding[worst]] = 1.0 if alpha[worst] > 1.0 else -1.0
             del sliding[worst]
         return [], modes, None
 
@@ -1491,11 +1491,6 @@ class _Run:
             self.vertex_override[k] = 1.0
             return True
         return False
-
-    @staticmethod
-    def leaving_side(t, y, modes, k, upwards):
-        """The mode of switch ``k`` as it leaves its surface, ``g`` growing (``upwards``) or falling."""
-        return 1.0 if upwards else -1.0
 
     def consistent_sliding_set(self, t, y, modes, candidates):
         """:meth:`sliding_set`, with the modes of the other switches chosen just after (t, y) along the

@@ -31,7 +31,6 @@ Piecewise((k*spring.q, Abs(spring.q) < 1), (k*spring.q**3, True))
 
 from __future__ import annotations
 
-import csv as _csv
 import math
 import functools
 from pathlib import Path

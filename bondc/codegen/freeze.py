@@ -50,7 +50,7 @@ import numpy as np
 import sympy
 from sympy.core.relational import Relational
 
-from bondc.symbolic import Csv, Pwm, Table, as_sympy
+from bondc.symbolic import Csv, Table, as_sympy
 
 _LABEL_LIMIT = 120
 
