@@ -14,7 +14,6 @@ existing file keeps its permission bits.
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import stat
@@ -113,10 +112,3 @@ def read_source(path, name: str | None = None):
     except OSError as error:
         reason = error.strerror or str(error)
     raise UsageError(Diagnostic("error", "E002", f"cannot read '{name}': {reason}", hint=hint))
-
-
-def csv_data_rows(handle):
-    """The rows of an open csv file as every stage reads them (``bondc.runtime.load_csv`` too):
-    blank lines and lines starting with ``#`` skipped; the first row is the header."""
-    return [row for row in csv.reader(handle)
-            if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]

@@ -95,14 +95,30 @@ computed before it, ``complete`` is False and ``failure`` names the time, the
 variable that first became nan or inf (in causal order) and its law.
 """
 
+import csv as _csv
+import importlib
 import math
 import os
 import sys  # noqa: F401  (the generated module's main writes to sys.stdout)
 import time as _time_module
 
 import numpy as np
-from scipy import integrate as _integrate
-from scipy import optimize as _optimize
+
+
+class _LazyModule:
+    """A module imported on first use: reading a model's data (``bondc check``) needs no scipy."""
+
+    def __init__(self, name):
+        self._name, self._module = name, None
+
+    def __getattr__(self, attribute):
+        if self._module is None:
+            self._module = importlib.import_module(self._name)
+        return getattr(self._module, attribute)
+
+
+_integrate = _LazyModule("scipy.integrate")
+_optimize = _LazyModule("scipy.optimize")
 
 RUNTIME_VERSION = 1
 
@@ -163,36 +179,49 @@ class CsvError(ValueError):
     """A measured-signal file that cannot be read."""
 
 
+def csv_rows(handle):
+    """The rows of an open csv file as every stage of bondc reads them: blank lines and lines
+    starting with ``#`` are skipped; the first remaining row is the header."""
+    return [row for row in _csv.reader(handle)
+            if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
+
+
+def csv_header(path):
+    """The column names of a csv file (``[]`` when it has no header line)."""
+    with open(path, newline="", encoding="utf-8") as handle:
+        rows = csv_rows(handle)
+    return [cell.strip() for cell in rows[0]] if rows else []
+
+
 def load_csv(path, column):
     """Time and value arrays of ``column`` in a csv file (loaded once per path and column).
 
-    The time is the column named ``t`` or ``time`` (any case), else the first
-    column; lines starting with ``#`` and blank lines are skipped; the first
-    remaining line is the header. Times must not decrease.
+    The one reader of measured signals: ``bondc check``, the equations stage
+    (``linearize``) and the simulation all read files through it. The time is
+    the column named ``t`` or ``time`` (any case), else the first column;
+    rows as :func:`csv_rows` gives them. Times must not decrease.
     """
     path = os.path.abspath(path)
     key = (path, column)
     if key in _CSV_CACHE:
         return _CSV_CACHE[key]
-    with open(path, encoding="utf-8") as handle:
-        lines = [line.strip() for line in handle]
-    lines = [line for line in lines if line and not line.startswith("#")]
-    if not lines:
+    with open(path, newline="", encoding="utf-8") as handle:
+        rows = csv_rows(handle)
+    if not rows:
         raise CsvError(f"{path}: empty csv file")
-    header = [cell.strip().strip('"').strip() for cell in lines[0].split(",")]
+    header = [cell.strip() for cell in rows[0]]
     lowered = [name.lower() for name in header]
     time_index = lowered.index("t") if "t" in lowered else (lowered.index("time") if "time" in lowered else 0)
     if column not in header:
         raise CsvError(f"{path}: no column {column!r} (columns: {', '.join(header)})")
     value_index = header.index(column)
     times, values = [], []
-    for number, line in enumerate(lines[1:], start=2):
-        cells = line.split(",")
+    for number, row in enumerate(rows[1:], start=2):
         try:
-            times.append(float(cells[time_index]))
-            values.append(float(cells[value_index]))
+            times.append(float(row[time_index]))
+            values.append(float(row[value_index]))
         except (ValueError, IndexError):
-            raise CsvError(f"{path}: row {number} is not numeric: {line!r}") from None
+            raise CsvError(f"{path}: row {number} is not numeric: {','.join(row)!r}") from None
     times, values = np.array(times), np.array(values)
     if times.size == 0:
         raise CsvError(f"{path}: no data rows")

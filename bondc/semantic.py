@@ -41,7 +41,8 @@ from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
 from bondc import ast, units
-from bondc.io import csv_data_rows, read_source
+from bondc.io import read_source
+from bondc.runtime import csv_header
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import (
@@ -1008,9 +1009,7 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     key = str(path)
     if key not in m.csv_headers:
         try:
-            with open(path, newline="", encoding="utf-8") as handle:
-                rows = csv_data_rows(handle)
-                m.csv_headers[key] = [cell.strip() for cell in rows[0]] if rows else []
+            m.csv_headers[key] = csv_header(path)      # the simulator's own reader
         except (OSError, UnicodeDecodeError, csv.Error):
             m.csv_headers[key] = None
     header = m.csv_headers[key]

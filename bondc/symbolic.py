@@ -32,7 +32,6 @@ Piecewise((k*spring.q, Abs(spring.q) < 1), (k*spring.q**3, True))
 from __future__ import annotations
 
 import math
-import functools
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -41,7 +40,6 @@ import sympy
 from sympy.core.symbol import Str as _SymStr
 
 from bondc import ast
-from bondc.io import csv_data_rows
 from bondc.errors import Diagnostic, EquationError
 
 # ------------------------------------------------------------ signal functions
@@ -252,19 +250,12 @@ def step_value(x, x0):
     return 1.0 if x >= x0 else 0.0
 
 
-@functools.lru_cache(maxsize=32)
 def read_csv_column(path: str, column: str) -> tuple[np.ndarray, np.ndarray]:
-    """Time and value columns of a csv file: time is the ``t``/``time`` column, else the first.
+    """Time and value columns of a csv file, read by the one reader of every stage
+    (:func:`bondc.runtime.load_csv`)."""
+    from bondc.runtime import load_csv
 
-    Rows as :func:`csv_data_rows` gives them.
-    """
-    with open(path, newline="", encoding="utf-8") as handle:
-        rows = csv_data_rows(handle)
-    header = [cell.strip() for cell in rows[0]]
-    time_index = next((i for i, name in enumerate(header) if name.lower() in ("t", "time")), 0)
-    value_index = header.index(column)
-    data = np.array([[float(row[time_index]), float(row[value_index])] for row in rows[1:] if row])
-    return data[:, 0], data[:, 1]
+    return load_csv(str(path), str(column))
 
 
 def csv_value(x, path, column):

@@ -252,3 +252,24 @@ def test_equilibrium_behind_a_relief_valve_that_is_closed_at_the_start():
     pressure = (Q + kr * pr) / (1 / Rl + kr)
     assert float(result.x0[0]) * beta / V == pytest.approx(pressure, rel=1e-9)
     np.testing.assert_allclose(result.A, [[-(beta / V) * (1 / Rl + kr)]], rtol=1e-9)
+
+
+def test_check_equations_and_simulation_read_a_csv_file_alike(tmp_path):
+    # quoted header cells, a comment row and a blank line: one reader for every stage
+    from bondc.runtime import load_csv
+    from bondc.simulate import run
+    from bondc.symbolic import read_csv_column
+
+    (tmp_path / "data").mkdir()
+    (tmp_path / "data" / "push.csv").write_text('# force profile\n"time","force"\n0,0\n\n0.5,10\n# end\n2,10\n')
+    sim = Path(__file__).parent / "fixtures" / "sim"
+    (tmp_path / "model.bg").write_text((sim / "csv_force.bg").read_text())
+    graph, _ = semantic.load(tmp_path / "model.bg")            # check: finds the column
+    path = str(tmp_path / "data" / "push.csv")
+    times, values = read_csv_column(path, "force")
+    np.testing.assert_array_equal(times, [0.0, 0.5, 2.0])
+    np.testing.assert_array_equal(values, [0.0, 10.0, 10.0])
+    assert load_csv(path, "force")[0] is times                # the same reader (and its cache)
+    result = run(tmp_path / "model.bg", t_end=2.0)
+    # m v' = F(t), F rising linearly to 10 N at 0.5 s: v(2) = (0.5*10/2 + 1.5*10)/2 kg
+    assert result.outputs["v"][-1] == pytest.approx((2.5 + 15.0) / 2.0, rel=1e-6)

@@ -77,7 +77,7 @@ _LAW_LIMIT = 200
 
 
 #: Modules the runtime imports under its own names (the generated module imports them itself).
-_RUNTIME_MODULES = frozenset({"math", "os", "sys", "np", "_integrate", "_optimize", "_time_module"})
+_RUNTIME_MODULES = frozenset({"math", "os", "sys", "np", "_csv", "importlib", "_integrate", "_optimize", "_time_module"})
 
 
 def runtime_source() -> str:
