@@ -273,3 +273,15 @@ def test_check_equations_and_simulation_read_a_csv_file_alike(tmp_path):
     result = run(tmp_path / "model.bg", t_end=2.0)
     # m v' = F(t), F rising linearly to 10 N at 0.5 s: v(2) = (0.5*10/2 + 1.5*10)/2 kg
     assert result.outputs["v"][-1] == pytest.approx((2.5 + 15.0) / 2.0, rel=1e-6)
+
+
+def test_equilibrium_beyond_a_backlash_gap_where_the_jacobian_column_is_zero_at_the_start():
+    # q = gap + F/k; then a mass on a spring and damper: wn = sqrt(k/m) = 10 rad/s, zeta = b/(2*sqrt(k*m))
+    path = Path(__file__).parent / "fixtures" / "engine" / "backlash.bg"
+    graph, _ = semantic.load(path)
+    ss = derive(assign_causality(graph))
+    result = linearize(ss, at="equilibrium")
+    q = result.x0[list(ss.state_names).index("spring.q")]
+    assert q == pytest.approx(0.01 + 3 / 100, rel=1e-9)
+    assert result.held == ()
+    assert_same_spectrum(result.eigenvalues, np.roots([1.0, 5.0, 100.0]))

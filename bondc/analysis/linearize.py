@@ -18,7 +18,12 @@ Operating point (``at``):
   undetermined along them; they are *held* at their initial value (listed in
   ``held``) and the other states are solved for, with every state equation
   (theirs included, e.g. ``mass.f = 0``) as a residual. They stay in A, B, C,
-  D and contribute zero eigenvalues. If the residual cannot be driven to zero
+  D and contribute zero eigenvalues. Where Newton's method cannot leave a
+  region in which a law is flat (a relief valve closed at the start, a spring
+  inside its backlash gap, whose Jacobian column is zero only there), the
+  states the derivatives depend on near the start are followed along the
+  state equations, with the inputs held (scipy's LSODA), to where they settle,
+  and solved again from there. If the residual cannot be driven to zero
   (a constant force on a free mass) :class:`~bondc.errors.AnalysisError`
   ``E940`` is raised.
 
@@ -272,25 +277,31 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
         time=float(time), at=at, x0=np.asarray(x, dtype=float), u0=u0, held=held, notes=tuple(notes))
 
 
+def _settle(rates, start):
+    """Integrate ``dz/dtau = rates(z)`` (scipy's LSODA) until the rates vanish; the state there, or
+    None when it does not settle (or runs away) within 1e6 of the slowest time scale tried."""
+    from scipy.integrate import solve_ivp
+
+    z = np.array(start, dtype=float)
+    horizon = 1.0
+    for _ in range(7):
+        with np.errstate(all="ignore"):
+            solution = solve_ivp(lambda tau, y: rates(y), (0.0, horizon), z, method="LSODA", rtol=1e-10,
+                                 atol=1e-14 * (1.0 + np.abs(z)))
+        if not solution.success or not np.all(np.isfinite(solution.y[:, -1])):
+            return None
+        end = solution.y[:, -1]
+        if np.max(np.abs(end - z)) <= 1e-12 * (1.0 + np.max(np.abs(end))):
+            return end
+        z, horizon = end, 10.0 * horizon
+    return z
+
+
 def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
     from scipy.optimize import least_squares
 
     n = len(x0)
-    A0 = jacobian(point(x0))[0][:, :n]
-    free = [i for i in range(n) if np.any(A0[:, i] != 0)]
-    held = tuple(ss.state_names[i] for i in range(n) if i not in free)
-
-    def full(z):
-        x = np.array(x0, dtype=float)
-        x[free] = z
-        return x
-
-    def residual(z):
-        return numeric.derivatives(time, full(z), inputs)
-
-    def jac(z):
-        return jacobian(point(full(z)))[0][:, :n][:, free]
-
+    x_start = np.asarray(x0, dtype=float)
     u = np.array(list(inputs.values()), dtype=float)
 
     def unbalanced(x):
@@ -301,16 +312,63 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
         scale = np.abs(rows[:, :n]) @ np.abs(x) + np.abs(rows[:, n:]) @ np.abs(u)
         return np.abs(rates) > 1e-8 * scale + 1e-12, rates
 
-    start = np.asarray(x0, dtype=float)[free]
-    bad, rates = unbalanced(full(start))
+    def attempt(free, settle):
+        """Solve for the states ``free`` (the others held); (x, runaway, bad, rates)."""
+        def full(z):
+            x = np.array(x_start)
+            x[free] = z
+            return x
+
+        def residual(z):
+            return numeric.derivatives(time, full(z), inputs)
+
+        def jac(z):
+            return jacobian(point(full(z)))[0][:, :n][:, free]
+
+        def solve(initial):
+            z = least_squares(residual, initial, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
+                              max_nfev=2000).x if free else initial
+            return z, not np.all(np.isfinite(z)) or (
+                bool(free) and np.max(np.abs(z - initial)) > 1e9 * (1.0 + float(np.max(np.abs(initial)))))
+
+        start = x_start[free]
+        if settle:
+            # Newton's method cannot leave a region where the law is flat (a closed relief valve, a
+            # backlash gap): follow the motion the state equations give, with the inputs held, to
+            # where it settles, and solve from there
+            start = _settle(lambda z: residual(z)[free], start)
+            if start is None:
+                return None
+        z, runaway = solve(start)
+        bad, rates = unbalanced(full(z)) if not runaway else (None, None)
+        return full(z), runaway, bad, rates
+
+    def columns_at(x):
+        return np.any(jacobian(point(x))[0][:, :n] != 0, axis=0)
+
+    # States on which no derivative depends at the start (pure integrators) are held.
+    columns = columns_at(x_start)
+    free = [i for i in range(n) if columns[i]]
+    held = tuple(ss.state_names[i] for i in range(n) if i not in free)
+    bad, rates = unbalanced(x_start)
     if not bad.any():
-        return full(start), held          # already at rest: do not wander along flat directions
-    z = least_squares(residual, start, jac=jac, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15,
-                      max_nfev=2000).x if free else start
-    runaway = not np.all(np.isfinite(z)) or (
-        free and np.max(np.abs(z - start)) > 1e9 * (1.0 + float(np.max(np.abs(start)))))
-    if not runaway:
-        bad, rates = unbalanced(full(z))
+        return x_start, held          # already at rest: do not wander along flat directions
+    x, runaway, bad, rates = attempt(free, settle=False)
+    if runaway or bad.any():
+        # A column that is zero only at the start (a spring inside its backlash gap): sample around
+        # the start for the states the derivatives do depend on, and follow the motion to rest.
+        rng = np.random.default_rng(0)
+        spread = np.maximum(np.abs(x_start), 1.0)
+        wider = columns.copy()
+        for _ in range(8):
+            with np.errstate(all="ignore"):
+                sample = jacobian(point(x_start + spread * rng.uniform(-1.0, 1.0, n)))[0][:, :n]
+            wider |= np.any(np.nan_to_num(sample) != 0, axis=0)
+        retry = attempt([i for i in range(n) if wider[i]], settle=True) if wider.any() else None
+        if retry is not None and not retry[1] and not retry[2].any():
+            x, runaway, bad, rates = retry
+            at_rest = columns_at(x)
+            held = tuple(ss.state_names[i] for i in range(n) if not at_rest[i] and not wider[i])
     if runaway or bad.any():
         detail = ": the solver ran away" if runaway else ", ".join(
             f"der({ss.state_names[i]}) stays {rates[i]:.3g}" for i in np.flatnonzero(bad))
@@ -320,4 +378,4 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
             + (detail if runaway else f" ({detail})"),
             hint="the system may have no equilibrium (e.g. a constant force on a free mass); "
                  "linearise at the initial point instead"))
-    return full(z), held
+    return x, held
