@@ -351,3 +351,14 @@ def test_docstring_examples():
 
     result = doctest.testmod(render)
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_plot_labels_from_data_are_text_never_mathtext():
+    # a measured column named "$\foo$" made matplotlib's mathtext parser raise; it is drawn as written
+    from bondc.report.render import plot_svg
+
+    t = np.linspace(0.0, 1.0, 11)
+    svg = str(plot_svg(t, {"$\\foo$": t, "x_1^2 $": 2 * t}, "title $a$", "$\\bar{y}$ [m]"))
+    root = ET.fromstring(svg)
+    texts = "".join(root.itertext())
+    assert "$\\foo$" in texts and "x_1^2 $" in texts and "$\\bar{y}$ [m]" in texts

@@ -305,3 +305,15 @@ def test_docstring_examples():
 
     result = doctest.testmod(validate)
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_junit_with_control_characters_in_names_is_still_xml():
+    # a measured column named "v\x01bad" (from --compare "v=v\x01bad") and a suite name with \x0b
+    t, sim = simulated()
+    measured = {"t": t, "x\x01good": sim["x"] * 1.001}
+    results = compare(t, sim, measured, [parse_compare_spec("x=x\x01good")])
+    text = junit_xml(results, "rig\x0b2")
+    root = ET.fromstring(text.split("\n", 1)[1])             # parses: no character XML cannot hold
+    [suite] = root.findall("testsuite")
+    assert suite.get("name") == "rig\\x0b2"
+    assert [case.get("name") for case in suite.findall("testcase")] == ["x=x\\x01good"]

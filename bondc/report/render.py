@@ -455,7 +455,9 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
         arrays = {label: values[kept] for label, values in arrays.items()}
     styles = styles or {}
 
-    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": key, "axes.spines.top": False,
+    # text.parse_math off: labels come from model and data files; a header "$\\foo$" is not mathtext
+    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": key, "text.parse_math": False,
+                                "axes.spines.top": False,
                                 "axes.spines.right": False, "axes.grid": True, "grid.color": "#dddddd",
                                 "grid.linewidth": 0.6, "font.size": 9, "axes.titlesize": 10,
                                 "legend.frameon": False, "lines.linewidth": 1.4}):

@@ -396,8 +396,25 @@ def compare(sim_t: Sequence[float], sim_values: Mapping[str, Sequence[float]],
 
 # ---------------------------------------------------------------- JUnit
 
+_NOT_XML = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def _xml_safe(element: ET.Element) -> ET.Element:
+    """Characters XML 1.0 cannot hold (control characters from a column name, say), in every
+    attribute and text of ``element``'s tree, written as visible escapes (``\\x01``)."""
+    clean = lambda text: _NOT_XML.sub(lambda match: f"\\x{ord(match.group()):02x}", text)
+    for node in element.iter():
+        node.attrib.update({key: clean(value) for key, value in node.attrib.items()})
+        if node.text:
+            node.text = clean(node.text)
+    return element
+
+
 def junit_xml(results: Sequence[SignalResult], suite_name: str) -> str:
-    """A JUnit XML report: one ``<testcase>`` per signal, ``<failure>`` with the numbers when it fails."""
+    """A JUnit XML report: one ``<testcase>`` per signal, ``<failure>`` with the numbers when it fails.
+
+    Every name and message is XML-safe (:func:`_xml_safe`), so any CI can parse it.
+    """
     failures = sum(1 for r in results if not r.passed)
     suites = ET.Element("testsuites", {"name": suite_name, "tests": str(len(results)),
                                        "failures": str(failures), "errors": "0"})
@@ -417,7 +434,7 @@ def junit_xml(results: Sequence[SignalResult], suite_name: str) -> str:
             failure.text = result.summary()
         output = ET.SubElement(case, "system-out")
         output.text = result.summary()
-    ET.indent(suites)
+    ET.indent(_xml_safe(suites))
     return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(suites, encoding="unicode") + "\n"
 
 
