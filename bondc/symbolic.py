@@ -301,6 +301,25 @@ _COMPARISONS = {
 }
 
 
+def _require_finite(value, node) -> None:
+    """A constant that is not a finite double (``10^309``, ``1/0``, ``0/0``) is an error at ``node``."""
+    try:
+        number = float(value)
+    except (OverflowError, TypeError):
+        number = math.inf
+    if not math.isfinite(number):
+        what = "is not a number" if value is sympy.nan else "is not a finite number"
+        raise _fail(node, f"this constant {what} ({_short_number(value)})",
+                    hint="a division by zero, or a value beyond a double's range (about 1.8e308)")
+
+
+def _short_number(value) -> str:
+    if value is sympy.zoo:
+        return "a division by zero"
+    text = str(value)
+    return text if len(text) <= 40 else f"{text[:20]}...({len(text)} digits)"
+
+
 def _fail(node, message: str, hint: str | None = None) -> EquationError:
     return EquationError(Diagnostic("error", "E701", message, getattr(node, "span", None) or _no_span(), hint=hint))
 
@@ -353,7 +372,10 @@ class Translator:
         method = getattr(self, "_" + type(node).__name__, None)
         if method is None:
             raise _fail(node, f"unsupported expression {type(node).__name__}")
-        return method(node)
+        result = method(node)
+        if isinstance(result, sympy.Number) or result is sympy.zoo:
+            _require_finite(result, node)
+        return result
 
     # -- leaves
 

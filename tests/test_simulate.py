@@ -326,3 +326,33 @@ def test_progress_bar_is_quiet_off_a_terminal_and_drawn_on_one():
     bar(1.0)
     bar.close()
     assert "50.0%" in terminal.getvalue()
+
+
+@pytest.mark.parametrize("value, what", [("10^309", "is not a finite number"), ("1/(1-1)", "a division by zero")])
+def test_a_constant_that_is_not_a_finite_number_is_a_diagnostic_at_its_position(tmp_path, value, what):
+    model = tmp_path / "constant.bg"
+    model.write_text(f"model Constant\n  input u = {value}\n  Se s : e = u\n  I mass : f = p/2\n  s -> mass\n"
+                     "  experiment run\n    t_end = 1 [s]\n  end\nend\n")
+    from bondc.errors import BondcError
+
+    with pytest.raises(BondcError) as caught:
+        run(model)
+    diagnostic = caught.value.diagnostics[0]
+    assert diagnostic.code == "E701" and what in diagnostic.message
+    assert (diagnostic.span.line, diagnostic.span.column) == (2, 13)
+
+
+def test_an_infinite_power_stops_the_energy_account_with_a_diagnostic(tmp_path):
+    from bondc.analysis.energy import energy_account
+    from bondc.errors import AnalysisError
+    from bondc.pipeline import derive_file
+
+    model = tmp_path / "tiny.bg"
+    model.write_text("model Tiny\n  param m = 1e-320 [kg]\n  Se push : e = 1\n  I mass : f = p/m\n  push -> mass\n"
+                     "  experiment run\n    t_end = 1 [s]\n  end\nend\n")
+    derived = derive_file(model)
+    result = simulate(derived.state_space, derived.experiment)
+    assert any(w.code == "W821" for w in result.warnings)          # the velocity p/m is infinite
+    with pytest.raises(AnalysisError) as caught:
+        energy_account(derived.state_space, result)
+    assert caught.value.diagnostics[0].code == "E934"

@@ -870,6 +870,14 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     for element in graph.elements.values():
         role = ROLES[element.kind]
         ports = [power_into(element, i) for i in range(len(element.bonds))]
+        for power in ports:
+            bad = ~np.isfinite(power)
+            if np.any(bad):
+                first = float(np.min(times[bad]))
+                raise _error("E934", f"the power into '{element.name}' is not finite from t={first:.6g} s: "
+                                     "no energy account for this run",
+                             hint="a law gives inf or nan there (W821 names the variable): a division by a "
+                                  "parameter that is zero or tiny, or a state out of its range")
         integrals = [_integrals(times, p) for p in ports]
         entries = []
         for mask, (start, end, _) in zip(masks, windows):

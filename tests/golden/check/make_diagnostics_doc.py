@@ -347,6 +347,11 @@ d("E933", "no such output",
   "Python API (`bondc.analysis.stats.power_statistics(result, names)`): a name is not an output of the "
   "simulation result.",
   "Use one of the outputs the hint lists.")
+d("E934", "power not finite",
+  "A power in the energy account is `inf` or `nan` from some time on (a bond variable that is not finite, "
+  "W821): there is no meaningful account, so `bondc simulate` prints this instead of the tables. The "
+  "example's mass of 1e-320 kg makes its velocity `p/m` infinite at once.",
+  "Fix the law W821 names: a division by a parameter that is zero or tiny, or a state outside its range.")
 d("W930", "energy balance does not close",
   "After a run, bondc accounts the energy of every element per cycle; for a cycle, the sources' net energy "
   "differs from dissipated + stored + net work in by more than 1e-6 of the energy throughput. The residual is "
@@ -612,6 +617,17 @@ live("E931", Api(_with(_ENERGY, _SPIN_API.replace("simulate(ss, graph.experiment
 live("E932", Api(_with(_ENERGY, _SPIN_API) + "energy_account(ss, result, cycle=0)", {"spin.bg": SPIN}))
 live("E933", Api(_with("from bondc.analysis.stats import power_statistics\n", _SPIN_API)
                  + "power_statistics(result, [\"power\"])", {"spin.bg": SPIN}))
+_TINY = """model Tiny
+  param m = 1e-320 [kg]
+  Se push : e = 1
+  I  mass : f = p/m
+  push -> mass
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+live("E934", Cli("bondc simulate tiny.bg", {"tiny.bg": _TINY}, lines="[E934]"))
 live("W930", Cli("bondc simulate bounce.bg", {"bounce.bg": LOOSE}, stream="stdout", lines="[W930]",
                  note="Of the energy account `bondc simulate` prints, only its last line is shown here."))
 
