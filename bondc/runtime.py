@@ -186,9 +186,26 @@ def csv_rows(handle):
             if row and any(cell.strip() for cell in row) and not row[0].lstrip().startswith("#")]
 
 
+#: The largest data file read (a measured signal is a few MB; /dev/zero is endless).
+MAX_DATA_BYTES = 256 * 2**20
+
+
+def open_data(path, encoding="utf-8"):
+    """Open a data file for reading: only a regular file of at most MAX_DATA_BYTES (a device, a
+    named pipe or a directory would block or never end), else CsvError saying which."""
+    import stat
+
+    info = os.stat(path)
+    if not stat.S_ISREG(info.st_mode):
+        raise CsvError(f"{path}: not a regular file (a device, a pipe or a directory cannot be a data file)")
+    if info.st_size > MAX_DATA_BYTES:
+        raise CsvError(f"{path}: {info.st_size} bytes, more than the {MAX_DATA_BYTES} a data file may have")
+    return open(path, newline="", encoding=encoding)
+
+
 def csv_header(path):
     """The column names of a csv file (``[]`` when it has no header line)."""
-    with open(path, newline="", encoding="utf-8") as handle:
+    with open_data(path) as handle:
         rows = csv_rows(handle)
     return [cell.strip() for cell in rows[0]] if rows else []
 
@@ -205,7 +222,7 @@ def load_csv(path, column):
     key = (path, column)
     if key in _CSV_CACHE:
         return _CSV_CACHE[key]
-    with open(path, newline="", encoding="utf-8") as handle:
+    with open_data(path) as handle:
         rows = csv_rows(handle)
     if not rows:
         raise CsvError(f"{path}: empty csv file")

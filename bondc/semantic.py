@@ -42,7 +42,7 @@ from typing import Iterable, Mapping, Sequence
 
 from bondc import ast, units
 from bondc.io import read_source
-from bondc.runtime import csv_header
+from bondc.runtime import CsvError, csv_header
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import (
@@ -176,7 +176,7 @@ class _Model:
     units: dict[int, units.SIUnit | None] = field(default_factory=dict)
     expr_ok: dict[int, bool] = field(default_factory=dict)
     used: set[str] = field(default_factory=set)
-    csv_headers: dict[str, list[str] | None] = field(default_factory=dict)
+    csv_headers: dict[str, list[str] | str | None] = field(default_factory=dict)   # str: why unreadable
     misspelt: set[str] = field(default_factory=set)   # nodes a misspelt bond endpoint probably meant
 
     def report(self, diagnostic: Diagnostic) -> None:
@@ -1010,10 +1010,15 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     if key not in m.csv_headers:
         try:
             m.csv_headers[key] = csv_header(path)      # the simulator's own reader
+        except CsvError as problem:
+            m.csv_headers[key] = str(problem).rpartition(": ")[2]
         except (OSError, UnicodeDecodeError, csv.Error):
             m.csv_headers[key] = None
     header = m.csv_headers[key]
-    if header is None:
+    if isinstance(header, str):
+        report(_error("E310", f"cannot read CSV file '{path_arg.value}': {header}", path_arg.span,
+                      hint="a data file is a regular text file with a header line"))
+    elif header is None:
         report(_error("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span,
                       hint=f"the path is relative to the model file: looked for '{shown}'"))
     elif not header or not any(header):

@@ -136,8 +136,14 @@ def read_csv_table(path: str | Path) -> Table:
     header or no data rows.
     """
     path = Path(path)
+    from bondc.runtime import CsvError, open_data
+
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        with open_data(path, encoding="utf-8-sig") as handle:
+            text = handle.read()
+    except CsvError as error:
+        raise DataError(Diagnostic("error", "E905", f"cannot read '{path}': "
+                                                    f"{str(error).rpartition(': ')[2]}")) from None
     except (OSError, UnicodeDecodeError) as error:
         reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
         raise DataError(Diagnostic("error", "E905", f"cannot read '{path}': {reason}")) from None

@@ -26,6 +26,8 @@ E957   a CSV row has the wrong number of cells, or the header repeats a name
 
 >>> spec = parse_compare_spec("x=x_meas:rmse=0.1")
 >>> import numpy as np
+
+from bondc.runtime import CsvError, open_data
 >>> t = np.linspace(0, 1, 11)
 >>> [r] = compare(t, {"x": t}, {"t": t, "x_meas": t + 0.01}, [spec])
 >>> r.passed, round(r.rmse, 6)
@@ -47,6 +49,7 @@ import numpy as np
 
 from bondc.errors import DataError, Diagnostic
 from bondc.io import atomic_write_text
+from bondc.runtime import CsvError, open_data
 from bondc.source import NO_SPAN, Span
 
 __all__ = [
@@ -106,9 +109,12 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
     path = Path(path)
     name = str(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
+        with open_data(path, encoding="utf-8-sig") as handle:
+            text = handle.read()
     except FileNotFoundError:
         raise _error("E950", f"measured data file '{name}' does not exist") from None
+    except CsvError as exc:
+        raise _error("E950", f"cannot read measured data file '{name}': {str(exc).rpartition(': ')[2]}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise _error("E950", f"cannot read measured data file '{name}': {exc}") from None
 
