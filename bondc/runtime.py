@@ -313,49 +313,30 @@ class _Model:
         get = source.__getitem__ if isinstance(source, dict) else (lambda name: getattr(source, name))
         for name in _MODEL_NAMES:
             setattr(self, name.lstrip("_"), get(name))
-        try:
-            self.derive_parameters = get("_derive_parameters")
-        except (KeyError, AttributeError):
-            self.derive_parameters = None
-        try:
-            self.DEFAULTS = dict(get("DEFAULTS"))
-        except (KeyError, AttributeError):
-            self.DEFAULTS = {}
-        try:
-            self.VECTORIZED = bool(get("VECTORIZED"))
-        except (KeyError, AttributeError):
-            self.VECTORIZED = True
-        try:
-            self.SWITCH_DEPENDS = tuple(tuple(d) for d in get("SWITCH_DEPENDS"))
-        except (KeyError, AttributeError):
-            self.SWITCH_DEPENDS = None
-        try:
-            self.SWITCH_VERTICES = tuple(float(v) for v in get("SWITCH_VERTICES"))
-        except (KeyError, AttributeError):
-            self.SWITCH_VERTICES = (1.0,) * len(self.SWITCHES)
-        try:
-            self.WHEN_LABELS = tuple(get("WHEN_LABELS"))
-            self.WHEN_TARGETS = tuple(tuple(t) for t in get("WHEN_TARGETS"))
-            self.WHEN_SWITCHES = tuple(get("WHEN_SWITCHES"))
-            self.WHEN_ACTIONS = tuple(get("WHEN_ACTIONS"))
-            self.when_conditions = get("_when_conditions")
-        except (KeyError, AttributeError):
-            self.WHEN_LABELS = self.WHEN_TARGETS = self.WHEN_SWITCHES = self.WHEN_ACTIONS = ()
-            self.when_conditions = None
-        try:
-            self.SWITCH_KINDS = tuple(get("SWITCH_KINDS"))
-            self.TIME_SWITCHES = tuple(int(k) for k in get("TIME_SWITCHES"))
-        except (KeyError, AttributeError):
-            self.SWITCH_KINDS, self.TIME_SWITCHES = ("sign",) * len(self.SWITCHES), ()
+        count = len(self.SWITCHES)
+
+        def optional(name, convert, default):
+            """A name modules from older bondc versions (or hand-made models) may lack."""
+            try:
+                return convert(get(name))
+            except (KeyError, AttributeError):
+                return default
+
+        self.derive_parameters = optional("_derive_parameters", lambda f: f, None)
+        self.DEFAULTS = optional("DEFAULTS", dict, {})
+        self.VECTORIZED = optional("VECTORIZED", bool, True)
+        self.SWITCH_DEPENDS = optional("SWITCH_DEPENDS", lambda d: tuple(map(tuple, d)), None)
+        self.SWITCH_VERTICES = optional("SWITCH_VERTICES", lambda v: tuple(map(float, v)), (1.0,) * count)
+        self.SWITCH_KINDS = optional("SWITCH_KINDS", tuple, ("sign",) * count)
+        self.SWITCH_OWNERS = optional("SWITCH_OWNERS", tuple, ("",) * count)
+        self.TIME_SWITCHES = optional("TIME_SWITCHES", lambda k: tuple(map(int, k)), ())
+        self.JACOBIAN_PATTERN = optional("JACOBIAN_PATTERN", tuple, None)
+        self.WHEN_LABELS = optional("WHEN_LABELS", tuple, ())
+        self.WHEN_TARGETS = optional("WHEN_TARGETS", lambda w: tuple(map(tuple, w)), ())
+        self.WHEN_SWITCHES = optional("WHEN_SWITCHES", tuple, ())
+        self.WHEN_ACTIONS = optional("WHEN_ACTIONS", tuple, ())
+        self.when_conditions = optional("_when_conditions", lambda f: f, None)
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
-        try:
-            self.JACOBIAN_PATTERN = tuple(get("JACOBIAN_PATTERN"))
-        except (KeyError, AttributeError):
-            self.JACOBIAN_PATTERN = None
-        try:
-            self.SWITCH_OWNERS = tuple(get("SWITCH_OWNERS"))
-        except (KeyError, AttributeError):
-            self.SWITCH_OWNERS = ("",) * len(self.SWITCHES)
         self.parameter_names = tuple(self.PARAMETERS)
 
 
@@ -384,7 +365,7 @@ def param_array(parameters, p=None, derive=None):
     return array
 
 
-def _sign(values, floors=None):
+def mode_values(values, floors=None):
     """Modes from switching-function values: their signs, and for ``floor`` switches their floors
     (``floors`` a boolean mask over the first axis); nan gives 0."""
     values = np.asarray(values, dtype=float)
@@ -406,7 +387,7 @@ def modes_at(model, t, x, p, guess=None):
         return np.zeros(0)
     modes = np.ones(count) if guess is None else np.array(guess, dtype=float)
     for _ in range(count + 1):
-        new = _sign(model.switches(t, x, p, modes), getattr(model, "floor_switches", None))
+        new = mode_values(model.switches(t, x, p, modes), getattr(model, "floor_switches", None))
         if np.array_equal(new, modes):
             break
         modes = new
@@ -570,7 +551,7 @@ class CvodeSolver:
     SPARSE_FROM = 40
 
     def __init__(self, fun, t0, y0, t_bound, *, rtol=1e-6, atol=1e-9, max_step=np.inf, first_step=None,
-                 jac=None, vectorized=False, pattern=None):
+                 jac=None, pattern=None):
         # SUNDIALS warns on stderr when a step is at rounding size; the run's own guards report that
         os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", os.devnull)
         from sksundae.cvode import CVODE as SundialsCvode
@@ -1170,14 +1151,11 @@ class _Run:
                 if k not in candidates and (vertices[k] != 1.0 or k in self.sliding_now)]
         if keep:
             relevant = self.relevant(t, y, modes)
-            for k in list(keep):
-                probe = np.array(modes, dtype=float)
-                if not relevant[k]:
-                    continue
-                index = np.array([k])
-                value = abs(self.switches_at(t, y, probe, index)[0])
-                if value <= max(self.deadbands(t, y, probe, index)[0], 1e-300) or value == 0.0:
-                    candidates.add(k)
+            index = np.array([k for k in keep if relevant[k]], dtype=int)
+            if index.size:
+                # on the surface: |g| within its deadband (the integration noise of the state)
+                on_surface = np.abs(self.switches_at(t, y, modes, index)) <= self.deadbands(t, y, modes, index)
+                candidates.update(int(k) for k in index[on_surface])
         return sorted(candidates)
 
     def too_many_events(self, t):
@@ -1771,7 +1749,7 @@ class _Run:
             unique, inverse = np.unique(rows, axis=0, return_inverse=True)
             for r, row in enumerate(unique):
                 columns = np.flatnonzero(inverse.ravel() == r)
-                new = _sign(self.switch_columns(t[columns], x[:, columns], row)[free],
+                new = mode_values(self.switch_columns(t[columns], x[:, columns], row)[free],
                             self.model.floor_switches[free]).T
                 if not np.array_equal(new, rows[np.ix_(columns, free)]):
                     rows[np.ix_(columns, free)] = new

@@ -84,6 +84,7 @@ import numpy as np
 import sympy
 
 from bondc.errors import AnalysisError, Diagnostic
+from bondc.runtime import mode_values
 from bondc.symbolic import as_sympy
 
 # Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
@@ -385,17 +386,6 @@ def experiment_cycle(ss, result) -> float | None:
 # ------------------------------------------------------------ trajectory
 
 
-def _sign(values, floors=None):
-    """Modes from switching-function values (switches by rows): signs, and integer parts for the
-    ``floor`` switches (``floors``, a mask over the rows), as :func:`bondc.runtime.modes_at` takes them."""
-    values = np.asarray(values, dtype=float)
-    modes = np.sign(values)
-    if floors is not None and np.any(floors):
-        modes[floors] = np.floor(values[floors])
-    modes[np.isnan(modes)] = 0.0
-    return modes
-
-
 class _Model:
     """The generated module's functions (see :mod:`bondc.runtime`), evaluated over columns."""
 
@@ -448,7 +438,7 @@ class _Model:
         if self.switch_count == 0:
             return rows
         for _ in range(self.switch_count + 1):
-            new = _sign(self.by_modes(self._switches, t, x, rows, self.switch_count), self.floors).T
+            new = mode_values(self.by_modes(self._switches, t, x, rows, self.switch_count), self.floors).T
             if np.array_equal(new, rows):
                 break
             rows = new
@@ -621,8 +611,8 @@ class _Trajectory:
             from scipy.interpolate import CubicSpline
 
             recorded_t = np.asarray(self.result.t, dtype=float)
+            mid = 0.5 * (self.ta + self.tb)
             for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
-                mid = 0.5 * (self.ta + self.tb)
                 rows = np.flatnonzero(self.sliding & (mid > start) & (mid < end))
                 points = np.flatnonzero((recorded_t >= start) & (recorded_t <= end))
                 if rows.size == 0:

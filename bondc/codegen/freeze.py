@@ -137,20 +137,27 @@ class Freezer:
         """The mode expression (``m`` or ``-m``) of switching function ``g``, registering it if new.
 
         ``shared=False`` gives a switch of its own even when another has the same ``g``
-        (a ``coulomb`` friction, whose sliding sides are its static limits).
+        (a ``coulomb`` friction, whose sliding sides are its static limits). ``kind="floor"``
+        makes an integer mode ``m = floor(g)``, shared only with other floors of ``g``.
         """
         g = as_sympy(g)
+        floor = kind == "floor"
         if g.is_number:
             value = float(g)
+            if floor:
+                return sympy.Integer(int(np.floor(value)))
             return sympy.Integer(0 if value == 0 else (1 if value > 0 else -1))
-        if shared and g in self._by_g:
-            return self._by_g[g].mode
-        if shared and -g in self._by_g:
+        key = ("floor", g) if floor else g
+        if shared and key in self._by_g:
+            return self._by_g[key].mode
+        if shared and not floor and -g in self._by_g:
             return -self._by_g[-g].mode
         index = len(self.switches)
         mode = sympy.Symbol(f"_m{index}", real=True)
-        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label, owner=self._owner)
-        root = self._linear_time_root(g)
+        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label,
+                        kind="floor" if floor else "sign", owner=self._owner)
+        # a floor of a linear function of time jumps at every integer: found ahead, not one root
+        root = None if floor else self._linear_time_root(g)
         if not (g.free_symbols - self.parameters):
             switch.event = False            # of parameters only: its mode never changes
         elif root is not None:
@@ -162,7 +169,7 @@ class Freezer:
             switch.time_only = not (g.free_symbols & set(self.mode_symbols))
         self.switches.append(switch)
         if shared:
-            self._by_g[g] = switch
+            self._by_g[key] = switch
         return mode
 
     @property
@@ -229,25 +236,7 @@ class Freezer:
 
     def _freeze_floor(self, expr):
         """``floor(a)``: an integer mode ``m = floor(g)``, held until ``g`` leaves ``[m, m + 1)``."""
-        g = as_sympy(self._freeze(expr.args[0]))
-        if g.is_number:
-            return sympy.Integer(int(np.floor(float(g))))
-        key = ("floor", g)
-        if key in self._by_g:
-            return self._by_g[key].mode
-        index = len(self.switches)
-        mode = sympy.Symbol(f"_m{index}", real=True)
-        label = f"floor({_short(expr.args[0])})"
-        switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label, kind="floor",
-                        owner=self._owner)
-        if not (g.free_symbols - self.parameters):
-            switch.event = False
-        if self.is_time_only(g):
-            self._time_modes.add(mode)
-            switch.time_only = not (g.free_symbols & set(self.mode_symbols))
-        self.switches.append(switch)
-        self._by_g[key] = switch
-        return mode
+        return self.switch(self._freeze(expr.args[0]), f"floor({_short(expr.args[0])})", "floor")
 
     def _freeze_ceiling(self, expr):
         return -self._freeze_floor(sympy.floor(-expr.args[0]))
