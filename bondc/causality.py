@@ -610,6 +610,7 @@ def strongly_connected(nodes: list, edges: Mapping[object, Iterable]) -> list[li
     on_stack: set = set()
     stack: list = []
     components: list[list] = []
+    order = {n: i for i, n in enumerate(nodes)}
     counter = 0
     for root in nodes:
         if root in index:
@@ -647,7 +648,6 @@ def strongly_connected(nodes: list, edges: Mapping[object, Iterable]) -> list[li
                     component.append(member)
                     if member == node:
                         break
-                order = {n: i for i, n in enumerate(nodes)}
                 component.sort(key=lambda n: order.get(n, len(order)))
                 components.append(component)
     return components
@@ -670,12 +670,13 @@ def _find_loops(graph: BondGraph, relations) -> tuple[AlgebraicLoop, ...]:
     edges = {output: [k for k in inputs if k in computed_by] for _, output, inputs in relations}
     nodes = [output for _, output, _ in relations]
     loops = []
+    positions = {n: i for i, n in enumerate((*graph.elements, *graph.junctions, *graph.outputs))}
     for component in strongly_connected(nodes, edges):
         cyclic = len(component) > 1 or component[0] in edges.get(component[0], ())
         if not cyclic:
             continue
         members = {computed_by[k] for k in component}
-        ordered = [n for n in list(graph.elements) + list(graph.junctions) + list(graph.outputs) if n in members]
+        ordered = sorted(members, key=positions.__getitem__)
         loops.append(AlgebraicLoop(
             resistors=tuple(n for n in ordered if n in graph.elements and ROLES.get(graph.elements[n].kind) == "resistor"),
             junctions=tuple(n for n in ordered if n in graph.junctions),
@@ -719,6 +720,7 @@ def _dependencies(graph: BondGraph, relations, storage: Mapping[str, str]) -> di
     computed = {output: (node, inputs) for node, output, inputs in relations}
     owners = {f"s:{s.qualified}": s.owner for s in graph.states if s.owner}
     result: dict[str, tuple[str, ...]] = {}
+    positions = {n: i for i, n in enumerate(graph.elements)}
     for name, causality in storage.items():
         if causality != DERIVATIVE:
             continue
@@ -739,8 +741,7 @@ def _dependencies(graph: BondGraph, relations, storage: Mapping[str, str]) -> di
                 if item not in seen:
                     seen.add(item)
                     queue.append(item)
-        order = list(graph.elements)
-        result[name] = tuple(sorted(dict.fromkeys(found), key=order.index))
+        result[name] = tuple(sorted(dict.fromkeys(found), key=positions.__getitem__))
     return result
 
 

@@ -52,7 +52,8 @@ def _derive(args):
     from bondc.pipeline import derive_file
 
     derived = derive_file(Path(args.file), model=getattr(args, "model", None),
-                          experiment=getattr(args, "experiment", None), sets=getattr(args, "set", None) or ())
+                          experiment=getattr(args, "experiment", None), sets=getattr(args, "set", None) or (),
+                          cache=False if getattr(args, "no_cache", False) else None)
     _print_diagnostics(derived.notes, derived.graph.sources)
     return derived.graph, derived.causal, derived.state_space, derived.experiment
 
@@ -264,6 +265,8 @@ def _cmd_fit_friction(args) -> int:
 def _add_model_args(parser, *, sets=True) -> None:
     parser.add_argument("file", help="the .bg model file")
     parser.add_argument("--model", help="the model to use when the file holds several")
+    parser.add_argument("--no-cache", action="store_true",
+                        help="derive and compile again instead of reusing the compile cache")
     if sets:
         parser.add_argument("--set", action="append", metavar="NAME=VALUE",
                             help='override a parameter, e.g. --set M=40 or --set "M=40 [kg]" (repeatable)')

@@ -55,6 +55,7 @@ from bondc.statespace import AlgebraicBlock, StateInfo, StateSpace
 from bondc.symbolic import (Csv, Step, Table, Translator, discontinuities, strip_impulses, as_sympy)
 
 _OPAQUE = (sympy.Piecewise, sympy.Abs, sympy.sign, sympy.Min, sympy.Max, sympy.Heaviside, Table, Step, Csv)
+_ENERGY_VARIABLE = sympy.Dummy("s", real=True)      # the integration variable of stored-energy functions
 
 
 def _real(name: str) -> sympy.Symbol:
@@ -615,6 +616,7 @@ class _Deriver:
 
     def _energy(self) -> dict:
         energy = {}
+        integrals: dict = {}
         parameters = set(self.parameters.values())
         for element in self.graph.storage_elements:
             energy[element.name] = None
@@ -631,8 +633,12 @@ class _Deriver:
                 continue
             if not expr.free_symbols <= parameters | {state} or not expr.is_polynomial(state):
                 continue
-            dummy = sympy.Dummy("s", real=True)
-            energy[element.name] = sympy.integrate(expr.xreplace({state: dummy}), (dummy, 0, state))
+            # the integral of a polynomial term by term, once per distinct law (a chain of N equal
+            # springs integrates once): sympy.integrate per element is most of a large model's time
+            key = expr.xreplace({state: _ENERGY_VARIABLE})
+            if key not in integrals:
+                integrals[key] = sympy.Poly(key, _ENERGY_VARIABLE).integrate().as_expr()
+            energy[element.name] = integrals[key].xreplace({_ENERGY_VARIABLE: state})
         return energy
 
 

@@ -57,9 +57,22 @@ class Derived:
 
 
 def derive_file(path, *, model: str | None = None, experiment: str | None = None,
-                sets: Sequence = ()) -> Derived:
+                sets: Sequence = (), cache: bool | None = None) -> Derived:
     """Load ``path`` with ``experiment``'s overrides (default: the first experiment) and ``sets``,
-    assign causality and derive the state equations. Raises the stages' errors."""
+    assign causality and derive the state equations. Raises the stages' errors.
+
+    ``cache`` (default: on unless ``BONDC_CACHE=0``): reuse the result of an earlier run on the
+    same files with the same model, experiment and ``--set`` values (see :mod:`bondc.cache`).
+    """
+    from bondc import cache as compile_cache
+
+    use_cache = compile_cache.enabled() if cache is None else cache
+    entry = compile_cache.Entry.for_model(path, model, experiment, sets) if use_cache else None
+    if entry is not None:
+        derived = entry.load()
+        if derived is not None:
+            return derived
+
     from bondc import semantic
     from bondc.causality import assign_causality
     from bondc.equations import derive
@@ -69,5 +82,8 @@ def derive_file(path, *, model: str | None = None, experiment: str | None = None
                                     experiment=experiment if experiment is not None else semantic.FIRST,
                                     sets=parsed)
     causal = assign_causality(graph)
-    return Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment),
-                   tuple(parsed))
+    derived = Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment),
+                      tuple(parsed))
+    if entry is not None:
+        entry.store(derived)
+    return derived

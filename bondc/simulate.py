@@ -138,12 +138,19 @@ def compile_model(ss) -> dict:
     cached = _COMPILED.get(key)
     if cached is not None and cached[0]() is ss:
         return cached[1]
-    from bondc.codegen import emit
+    from bondc.cache import entry_of
 
     graph = getattr(ss, "graph", None)
     graph_file = getattr(graph, "file", None)
     module_dir = Path(graph_file).resolve().parent if graph_file else Path.cwd()
-    source = emit(ss, None, module_dir=module_dir)
+    entry = entry_of(ss)        # loaded from (or stored in) the compile cache: its module is there too
+    source = entry.read_module() if entry is not None else None
+    if source is None:
+        from bondc.codegen import emit
+
+        source = emit(ss, None, module_dir=module_dir)
+        if entry is not None:
+            entry.write_module(source)
     name = getattr(graph, "name", "model")
     namespace = {"__name__": f"bondc_generated_{name}", "__file__": str(module_dir / f"__bondc_{name}__.py")}
     # the text is bondc's own output (printed from sympy), never user text

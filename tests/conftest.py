@@ -1,6 +1,13 @@
 """Shared pytest options: ``pytest --update-golden`` rewrites golden files instead of comparing."""
 
+import os
+import tempfile
+
 import pytest
+
+# The compile cache and the compiled C libraries of this test run live in a folder of their own,
+# never in the user's cache (tests that need an empty cache make their own).
+os.environ["BONDC_CACHE_DIR"] = tempfile.mkdtemp(prefix="bondc-test-cache-")
 
 
 def pytest_addoption(parser):

@@ -418,12 +418,17 @@ def test_the_energy_account_counts_what_the_impacts_take():
 
 # ------------------------------------------------------ sparse linear algebra
 
-def _chain_text(n, m=1.0, k=400.0, b=2.0, b0=0.5, force=10.0):
+def _chain_text(n, m=1.0, k=400.0, b=2.0, b0=0.5, force=10.0, interleaved=False):
+    """The chain; ``interleaved`` declares each section's spring right after its mass, so that
+    the states (in declaration order) give a banded Jacobian, else every mass first (a wide one)."""
     lines = [f"model Chain{n}", f"  Se push : e = {force}*step(t, 0.01)"]
-    for i in range(1, n + 1):
-        lines += [f"  I mass{i} : f = p/{m}", f"  R ground{i} : e = {b0}*f", f"  1 v{i}"]
-    for i in range(1, n):
-        lines += [f"  C spring{i} : e = {k}*q", f"  R damper{i} : e = {b}*f", f"  0 link{i}", f"  1 rel{i}"]
+    masses = [[f"  I mass{i} : f = p/{m}", f"  R ground{i} : e = {b0}*f", f"  1 v{i}"] for i in range(1, n + 1)]
+    springs = [[f"  C spring{i} : e = {k}*q", f"  R damper{i} : e = {b}*f", f"  0 link{i}", f"  1 rel{i}"]
+               for i in range(1, n)] + [[]]
+    if interleaved:
+        lines += [line for mass, spring in zip(masses, springs) for line in mass + spring]
+    else:
+        lines += [line for mass in masses for line in mass] + [line for spring in springs for line in spring]
     lines += ["  push -> v1"]
     for i in range(1, n + 1):
         lines += [f"  v{i} -> mass{i}", f"  v{i} -> ground{i}"]
@@ -434,15 +439,25 @@ def _chain_text(n, m=1.0, k=400.0, b=2.0, b0=0.5, force=10.0):
     return "\n".join(lines) + "\n"
 
 
-def test_a_large_model_uses_the_sparse_solver_and_matches_the_hand_written_chain(tmp_path):
+@pytest.mark.parametrize("solver, interleaved", [("dense", False), ("band", True), ("sparse", False)])
+def test_every_linear_solver_matches_the_hand_written_chain(tmp_path, monkeypatch, solver, interleaved):
+    """Dense LU, banded LU (the interleaved chain's Jacobian has a band of 2 + 2) and SuperLU on
+    the pattern (the other order's is wide). The size thresholds are performance settings: the
+    sparse solver is tried here on the 49 states by lowering its threshold."""
+    from bondc.simulate import compile_model
+
     n, m, k, b, b0, force = 25, 1.0, 400.0, 2.0, 0.5, 10.0
     path = tmp_path / "chain.bg"
-    path.write_text(_chain_text(n, m, k, b, b0, force))
-    result = run(path)
+    path.write_text(_chain_text(n, m, k, b, b0, force, interleaved))
+    derived = derive_file(path, cache=False)
+    cvode = compile_model(derived.state_space)["CvodeSolver"]     # the module's copy of the runtime's
+    if solver == "sparse":
+        monkeypatch.setattr(cvode, "SPARSE_FROM", 40)
+    result = simulate(derived.state_space, derived.experiment)
     assert result.complete, result.message
     names = list(result.states)
-    assert len(names) == 2 * n - 1 >= 40          # CVODE's sparse (SuperLU) solver from 40 states on
-    assert result.stats["linear_solver"] == "sparse"
+    assert len(names) == 2 * n - 1 >= cvode.STRUCTURED_FROM
+    assert result.stats["linear_solver"] == solver
 
     def chain(t, y):
         p, q = y[:n], y[n:]

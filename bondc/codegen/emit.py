@@ -57,7 +57,8 @@ import sympy
 
 from bondc import __version__
 from bondc.codegen.freeze import Freezer
-from bondc.codegen.printer import BondcPrinter, relative_data_path
+from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
+from bondc.codegen.printer import BondcPrinter, UnsupportedExpression, relative_data_path
 from bondc.symbolic import Csv, Table, as_sympy
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
@@ -152,9 +153,27 @@ def _hide_piecewise(expr, pieces: dict):
 
 
 def _safe_diff(expr, symbol):
-    """``d expr / d symbol`` with bondc's opaque signals (free of ``symbol``) held as constants."""
+    """``d expr / d symbol`` with bondc's opaque signals (free of ``symbol``) held as constants.
+
+    Sums and products are taken apart here (the sum rule, and a product with one factor that
+    depends on ``symbol``) before sympy's ``diff`` sees the rest: a large model's Jacobian is
+    tens of thousands of such small derivatives, and this is most of them.
+    """
+    if expr == symbol:
+        return sympy.Integer(1)
     if symbol not in expr.free_symbols:
         return sympy.Integer(0)
+    if expr.is_Add:
+        return sympy.Add(*[_safe_diff(arg, symbol) for arg in expr.args])
+    if expr.is_Mul:
+        depending = [arg for arg in expr.args if symbol in arg.free_symbols]
+        if len(depending) == 1:
+            rest = sympy.Mul(*[arg for arg in expr.args if arg is not depending[0]])
+            return rest * _safe_diff(depending[0], symbol)
+    return _sympy_diff(expr, symbol)
+
+
+def _sympy_diff(expr, symbol):
     opaque = sorted(expr.atoms(Table, Csv), key=sympy.default_sort_key)
     if not opaque:
         return sympy.diff(expr, symbol)
@@ -163,6 +182,18 @@ def _safe_diff(expr, symbol):
         raise ValueError(f"cannot differentiate a signal of {symbol}")
     derivative = sympy.diff(expr.xreplace(held), symbol)
     return derivative.xreplace({v: k for k, v in held.items()})
+
+
+def _cse(exprs: list):
+    """Common subexpressions of ``exprs``: sympy's tree cse, without its ``opt_cse`` pre-pass.
+
+    The pre-pass (common subsets of sums' and products' arguments, negations) costs more than
+    the rest of code generation on a large model and grows faster than linearly; equal
+    subtrees are still shared.
+    """
+    from sympy.simplify.cse_main import tree_cse
+
+    return tree_cse(exprs, sympy.numbered_symbols("_c", real=True), {}, "canonical", ())
 
 
 # --------------------------------------------------------------------- plan
@@ -423,8 +454,7 @@ class _Emitter:
         # modes are the only ones read): every Piecewise is hidden behind a placeholder first
         pieces: dict = {}
         exprs = [_hide_piecewise(expr, pieces) for expr in exprs]
-        replacements, reduced = sympy.cse(exprs, symbols=sympy.numbered_symbols("_c", real=True),
-                                          order="canonical", list=True) if exprs else ([], [])
+        replacements, reduced = _cse(exprs) if exprs else ([], [])
         placeholders = {symbol: piecewise for piecewise, symbol in pieces.items()}
         uses: dict = {}
         for expr in [e for _, e in replacements] + list(reduced):
@@ -452,7 +482,7 @@ class _Emitter:
                     continue
                 emit_replacements(substitutes[symbol])
                 emitted.add(symbol)
-                lines.append(f"{self.names[symbol]} = {printer.doprint(substitutes[symbol])}")
+                lines.append(self.assign_line(self.names[symbol], printer.doprint(substitutes[symbol])))
 
         position = 0
         for statement in kept:
@@ -475,9 +505,13 @@ class _Emitter:
             used |= statement.uses
         return lines, final_texts, used
 
+    @staticmethod
+    def assign_line(name: str, text: str) -> str:
+        return f"{name} = {text}"
+
     def statement_lines(self, statement, exprs, printer):
         if statement.kind == "assign":
-            return [f"{self.names[statement.defines[0]]} = {printer.doprint(exprs[0])}"]
+            return [self.assign_line(self.names[statement.defines[0]], printer.doprint(exprs[0]))]
         if statement.kind == "block":
             number = statement.data["number"]
             unknowns = ", ".join(self.names[u] for u in statement.defines) + ","
@@ -680,6 +714,9 @@ class _Emitter:
         lines.append("WHEN_SWITCHES = " + _tuple(when_switches))
         lines.append("TIME_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event and s.time_only))
         lines.append(f"VECTORIZED = {plan.blocks == 0}")
+        native, reason = _NativeEmitter(self).native_source()
+        lines.append(f"NATIVE_SOURCE = {_text_literal(native)}")
+        lines.append(f"NATIVE_UNAVAILABLE = {reason!r}")
         defaults = {}
         if experiment is not None:
             for key, attribute in (("t_end", "t_end"), ("method", "solver"), ("rtol", "rtol"), ("atol", "atol"),
@@ -723,6 +760,83 @@ class _Emitter:
             body += f" + {text}"
         lines.append(f"{_INDENT}return {body}")
         return "\n".join(lines)
+
+
+class _NativeEmitter(_Emitter):
+    """The right-hand side, Jacobian and switching functions as C (``NATIVE_SOURCE``).
+
+    Same plan, same statements and common subexpressions as the numpy functions, printed by
+    :class:`~bondc.codegen.cprinter.NativePrinter` into three C functions of one signature::
+
+        void bondc_rhs(double t, const double *x, const double *p, const double *m, double *out)
+
+    ``bondc_jac`` writes the Jacobian's entries in JACOBIAN_PATTERN order. Every name is a C
+    identifier made from the numpy module's (already sanitised) names; no model text is copied.
+    """
+
+    def __init__(self, emitter: _Emitter):
+        self.__dict__.update(emitter.__dict__)
+        ss = self.plan.ss
+        names = {}
+        for index, (symbol, name) in enumerate(emitter.names.items()):
+            if symbol in self.modes or symbol == ss.time:
+                names[symbol] = name        # m[k], t
+            else:
+                names[symbol] = c_name(name, index)
+        self.names = names
+
+    def printer(self, extra_frozen=()):
+        return NativePrinter(self.names)
+
+    @staticmethod
+    def assign_line(name: str, text: str) -> str:
+        return f"const double {name} = {text};"
+
+    def statement_lines(self, statement, exprs, printer):
+        if statement.kind != "assign":
+            raise UnsupportedExpression("an algebraic loop is solved by the numpy module")
+        return [self.assign_line(self.names[statement.defines[0]], printer.doprint(exprs[0]))]
+
+    def unpack(self, used, with_modes=True):
+        lines = []
+        for symbol, i in sorted(self.parameter_index.items(), key=lambda item: item[1]):
+            if symbol in used:
+                lines.append(f"const double {self.names[symbol]} = p[{i}];")
+        for symbol, i in sorted(self.state_index.items(), key=lambda item: item[1]):
+            if symbol in used:
+                lines.append(f"const double {self.names[symbol]} = x[{i}];")
+        return lines
+
+    def c_function(self, name, statements, finals) -> str:
+        lines, texts, used = self.body(statements, finals)
+        out = [f"void {name}(double t, const double *x, const double *p, const double *m, double *out)", "{",
+               f"{_INDENT}(void)t; (void)x; (void)p; (void)m;"]
+        out += [_INDENT + line for line in self.unpack(used) + lines]
+        out += [f"{_INDENT}out[{k}] = {text};" for k, text in enumerate(texts)]
+        return "\n".join(out + ["}"])
+
+    def native_source(self) -> tuple:
+        """(C source, "") or ("", why the model has no native code)."""
+        plan = self.plan
+        if plan.blocks:
+            return "", "an algebraic loop is solved by the numpy module"
+        pattern = sorted(plan.jacobian_entries, key=lambda key: (key[1], key[0]))
+        try:
+            parts = [PRELUDE,
+                     self.c_function("bondc_rhs", plan.statements, plan.derivatives),
+                     self.c_function("bondc_jac", plan.jacobian_statements,
+                                     [plan.jacobian_entries[key] for key in pattern]),
+                     self.c_function("bondc_switches", plan.statements, [s.g for s in plan.switches])]
+        except UnsupportedExpression as error:
+            return "", str(error)
+        return "\n\n".join(parts) + "\n", ""
+
+
+def _text_literal(text: str) -> str:
+    """A Python literal of ``text``, one line of source per line of text."""
+    if not text:
+        return "''"
+    return "(\n" + "".join(f"    {line!r}\n" for line in text.splitlines(keepends=True)) + ")"
 
 
 def _tuple(values, multiline=False) -> str:

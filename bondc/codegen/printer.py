@@ -42,7 +42,9 @@ class BondcPrinter(NumPyPrinter):
     """numpy printer with bondc's names, exact floats, signals and frozen conditionals."""
 
     printmethod = "_bondccode"
-    _default_settings = {**NumPyPrinter._default_settings, "allow_unknown_functions": False}
+    # order "none": sums print in sympy's own (canonical, deterministic) argument order; sorting
+    # every sum's terms for display costs more than the rest of the printing of a large model
+    _default_settings = {**NumPyPrinter._default_settings, "allow_unknown_functions": False, "order": "none"}
 
     def __init__(self, names: Mapping[sympy.Symbol, str], *, mode_symbols=frozenset(),
                  data_paths: Mapping[str, str] | None = None, settings=None):
@@ -51,6 +53,13 @@ class BondcPrinter(NumPyPrinter):
         self.names = dict(names)
         self.mode_symbols = frozenset(mode_symbols)
         self.data_paths = dict(data_paths or {})
+
+    def _as_ordered_terms(self, expr, order=None):
+        # sympy's argument order, with the terms that print with a minus sign last: "t - 0.1"
+        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
+
+    def _handle_UnevaluatedExpr(self, expr):
+        return expr         # bondc never builds UnevaluatedExpr: skip the search for one in every expression
 
     # -- names and numbers
 

@@ -1,0 +1,222 @@
+"""bondc benchmarks: ``python -m benchmarks [--quick] [--json out.json]``.
+
+Three tables (see benchmarks/README.md for the targets and the last recorded run):
+
+1. **Compile scaling**: the N-section mass-spring-damper chain (benchmarks/chain.py)
+   from source to a loaded compiled module, each N in a fresh process: seconds
+   per stage, peak memory, and the exponent of time against N fitted over the
+   largest sizes.
+2. **Simulation against hand-written scipy code** of the same physics
+   (benchmarks/hand/), run in this process with the same tolerances: the ratio
+   bondc / hand of the best of several runs (model compilation excluded), the
+   right-hand side and Jacobian counts, and the largest difference of the
+   trajectories (relative to each state's range).
+3. **Startup**: whole-process wall time of ``bondc --help``, ``bondc check``,
+   a cold ``bondc simulate`` (empty cache) and a cached one, on the flagship.
+
+Times are seconds on this machine now; the ratios in table 2 are what carries
+over between machines. ``--quick`` (under 2 minutes) stops the scaling at
+N = 1000 and simulates the 100-section chain only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+FLAGSHIP = ROOT / "models" / "electro_pneumatic_hybrid.bg"
+
+
+def best_of(repeat: int, function):
+    """(fastest wall time of ``repeat`` calls, the last call's value)."""
+    best, value = math.inf, None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        value = function()
+        best = min(best, time.perf_counter() - start)
+    return best, value
+
+
+def fitted_exponent(rows: list) -> float | None:
+    """Slope of log(total time) against log(N), least squares over the given rows."""
+    if len(rows) < 2:
+        return None
+    x = np.log([row["n"] for row in rows])
+    y = np.log([row["total"] for row in rows])
+    return float(np.polyfit(x, y, 1)[0])
+
+
+# ------------------------------------------------------------------ 1. compile scaling
+
+def compile_scaling(sizes) -> dict:
+    rows = []
+    for n in sizes:
+        done = subprocess.run([sys.executable, "-m", "benchmarks.compile_one", str(n)], cwd=ROOT,
+                              capture_output=True, text=True, timeout=3600)
+        if done.returncode != 0:
+            rows.append({"n": n, "error": (done.stderr.strip().splitlines() or ["failed"])[-1]})
+            continue
+        rows.append(json.loads(done.stdout))
+        row = rows[-1]
+        print(f"  N = {n:>6}: {row['total']:7.2f} s  " + "  ".join(
+            f"{stage} {seconds:.2f}" for stage, seconds in row["stages"].items())
+              + f"  peak {row['peak_mb']:.0f} MB", file=sys.stderr, flush=True)
+    good = [row for row in rows if "error" not in row]
+    large = [row for row in good if row["n"] >= 1000]
+    return {"rows": rows, "exponent": fitted_exponent(large if len(large) >= 2 else good[-2:])}
+
+
+# ------------------------------------------------------------------ 2. simulation
+
+def _bondc_run(path: Path, repeat: int):
+    """Best time of bondc simulating ``path``'s first experiment in this process, compiled once."""
+    from bondc.pipeline import derive_file
+    from bondc.simulate import compile_model
+
+    derived = derive_file(path, cache=False)
+    namespace = compile_model(derived.state_space)
+    experiment = derived.experiment
+    settings = {"t_end": experiment.t_end, "method": experiment.solver, "rtol": experiment.rtol,
+                "atol": experiment.atol, "max_step": experiment.max_step}
+
+    def run(native=None):
+        return namespace["simulate_model"](namespace["_MODEL"], native=native, **settings)
+
+    run()       # builds (or loads) the C library outside the timing
+    seconds, result = best_of(repeat, run)
+    numpy_seconds, _ = best_of(1, lambda: run(False))
+    return seconds, numpy_seconds, result, settings
+
+
+def _difference(hand_t, hand_y, result, names) -> float:
+    """Largest |bondc - hand| over the states, each relative to the state's range."""
+    worst = 0.0
+    for row, name in enumerate(names):
+        values = np.interp(hand_t, result.t, result.states[name])
+        scale = max(float(np.ptp(hand_y[row])), 1e-300)
+        worst = max(worst, float(np.max(np.abs(values - hand_y[row]))) / scale)
+    return worst
+
+
+def simulate_flagship(repeat: int) -> dict:
+    from benchmarks.hand import flagship as hand
+
+    ours, numpy_time, result, settings = _bondc_run(FLAGSHIP, repeat)
+    hand_time, reference = best_of(repeat, lambda: hand.simulate(settings["rtol"], settings["atol"],
+                                                                  settings["max_step"], "LSODA"))
+    names = list(result.states)
+    return {"benchmark": "flagship cycle (4.2 s)", "hand": "LSODA, events for the friction jump",
+            "hand_s": hand_time, "bondc_s": ours, "bondc_numpy_s": numpy_time, "ratio": ours / hand_time,
+            "hand_nfev": reference.nfev, "hand_njev": reference.njev,
+            "bondc_nfev": result.stats["nfev"], "bondc_njev": result.stats["njev"],
+            "code": result.stats.get("code"), "difference": _difference(reference.t, reference.y, result, names)}
+
+
+def simulate_chain(n: int, repeat: int) -> dict:
+    from benchmarks.chain import chain_source
+    from benchmarks.hand import chain as hand
+
+    folder = Path(tempfile.mkdtemp(prefix="bondc-bench-"))
+    path = folder / f"chain{n}.bg"
+    path.write_text(chain_source(n), encoding="utf-8")
+    ours, numpy_time, result, settings = _bondc_run(path, repeat)
+    hand_time, reference = best_of(repeat, lambda: hand.simulate(n, settings["t_end"], settings["rtol"],
+                                                                  settings["atol"], "LSODA"))
+    names = [name for i in range(1, n + 1) for name in (f"m{i}.p", f"k{i}.q")]
+    return {"benchmark": f"chain N = {n} (10 s)", "hand": "LSODA, banded Jacobian, sparse matrix RHS",
+            "hand_s": hand_time, "bondc_s": ours, "bondc_numpy_s": numpy_time, "ratio": ours / hand_time,
+            "hand_nfev": reference.nfev, "hand_njev": reference.njev,
+            "bondc_nfev": result.stats["nfev"], "bondc_njev": result.stats["njev"],
+            "code": result.stats.get("code"), "difference": _difference(reference.t, reference.y, result, names)}
+
+
+# ------------------------------------------------------------------ 3. startup
+
+def startup(repeat: int) -> dict:
+    bondc = [sys.executable, "-m", "bondc"]
+    cache = tempfile.mkdtemp(prefix="bondc-bench-cache-")
+    environment = {**os.environ, "BONDC_CACHE_DIR": cache}
+    out = str(Path(cache) / "out.csv")
+
+    def timed(arguments):
+        def run():
+            done = subprocess.run(bondc + arguments, env=environment, capture_output=True, text=True, cwd=ROOT)
+            if done.returncode != 0:
+                raise RuntimeError(f"bondc {' '.join(arguments)} failed: {done.stderr.strip()[-300:]}")
+        return best_of(repeat, run)[0]
+
+    rows = {"bondc --help": timed(["--help"]),
+            "bondc check flagship": timed(["check", str(FLAGSHIP)])}
+    rows["bondc simulate flagship, cold (no cache, C build)"] = best_of(1, lambda: subprocess.run(
+        bondc + ["simulate", str(FLAGSHIP), "-o", out, "--no-cache"],
+        env={**environment, "BONDC_CACHE_DIR": tempfile.mkdtemp(prefix="bondc-cold-")},
+        capture_output=True, check=True))[0]
+    timed(["simulate", str(FLAGSHIP), "-o", out])       # fills the cache
+    rows["bondc simulate flagship, cached"] = timed(["simulate", str(FLAGSHIP), "-o", out])
+    return rows
+
+
+# ------------------------------------------------------------------ main
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="smaller sizes, fewer repeats (under 2 minutes)")
+    parser.add_argument("--json", metavar="OUT.json", help="also write every figure as JSON")
+    args = parser.parse_args(argv)
+    sys.path.insert(0, str(ROOT))
+    os.environ.setdefault("BONDC_CACHE_DIR", tempfile.mkdtemp(prefix="bondc-bench-cache-"))
+    repeat = 2 if args.quick else 3
+    sizes = (10, 100, 1000) if args.quick else (10, 100, 1000, 3000, 10000)
+
+    print("compile scaling (N-section chain: parse .. loaded C library)", file=sys.stderr, flush=True)
+    scaling = compile_scaling(sizes)
+    print("simulation against hand-written scipy code", file=sys.stderr, flush=True)
+    simulations = [simulate_flagship(repeat), simulate_chain(100, repeat)]
+    if not args.quick:
+        simulations.append(simulate_chain(1000, 1))
+    print("startup", file=sys.stderr, flush=True)
+    starts = startup(repeat)
+
+    print("\n## Compile scaling\n")
+    stages = list(next(row for row in scaling["rows"] if "error" not in row)["stages"])
+    print("| N | states | " + " | ".join(stages) + " | total s | peak MB |")
+    print("|" + " --- |" * (len(stages) + 4))
+    for row in scaling["rows"]:
+        if "error" in row:
+            print(f"| {row['n']} | failed: {row['error']} |")
+            continue
+        print(f"| {row['n']} | {row['states']} | " + " | ".join(f"{row['stages'][s]:.2f}" for s in stages)
+              + f" | {row['total']:.2f} | {row['peak_mb']:.0f} |")
+    exponent = scaling["exponent"]
+    print(f"\nfitted exponent (time ~ N^k, largest sizes): k = {exponent:.2f}" if exponent else "")
+    print("\n## Simulation (bondc / hand-written scipy, same tolerances, best of runs)\n")
+    print("| benchmark | hand s | bondc s | ratio | bondc numpy-code s | nfev hand / bondc | njev hand / bondc "
+          "| max difference |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for row in simulations:
+        print(f"| {row['benchmark']} | {row['hand_s']:.3f} | {row['bondc_s']:.3f} | {row['ratio']:.2f} | "
+              f"{row['bondc_numpy_s']:.3f} | {row['hand_nfev']} / {row['bondc_nfev']} | "
+              f"{row['hand_njev']} / {row['bondc_njev']} | {row['difference']:.1e} |")
+    print("\n## Startup (whole process, best of runs)\n")
+    print("| command | s |")
+    print("| --- | --- |")
+    for name, seconds in starts.items():
+        print(f"| {name} | {seconds:.2f} |")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"scaling": scaling, "simulation": simulations, "startup": starts},
+                                              indent=2), encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,197 @@
+"""Compiled model code (C through cffi): the same numbers as the numpy module, and a clean
+fallback to numpy where there is no C compiler.
+
+The independent expectation is the numpy module itself (tested against analytic
+solutions elsewhere): every law printed to C must give the value the numpy printer
+gives, at negative, zero and positive arguments, and whole simulations must agree
+to the solver tolerance.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+from bondc import runtime
+from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
+from bondc.codegen.printer import BondcPrinter, UnsupportedExpression
+from bondc.pipeline import derive_file
+from bondc.simulate import compile_model
+from bondc.symbolic import Step, Table
+
+ROOT = Path(__file__).resolve().parent.parent
+HAVE_CC = bool(shutil.which("cc") or shutil.which("gcc") or shutil.which("clang"))
+needs_cc = pytest.mark.skipif(not HAVE_CC, reason="no C compiler on this machine")
+
+x, y = sympy.symbols("x y", real=True)
+LAWS = {
+    "orifice": sympy.sign(x) * sympy.sqrt(sympy.Abs(x)),
+    "power": sympy.Abs(x) ** sympy.Rational(7, 5) * sympy.sign(x),
+    "saturation": sympy.Min(sympy.Max(x, -1), 1) + sympy.Max(y, x, 0),
+    "rational": (x ** 3 - 2 * x) / (1 + x ** 2) + sympy.Rational(1, 3) * y,
+    "transcendental": sympy.exp(-x) * sympy.sin(3 * x) + sympy.atan2(y, x) + sympy.tanh(x) - sympy.log(1 + x ** 2),
+    "piecewise": sympy.Piecewise((x ** 2, x > 0), (-y, x < -1), (0.5 * x, True)),
+    "heaviside": sympy.Heaviside(x, 0.25) * y,
+    "table": Table(x, sympy.Tuple(-1.0, 0.0, 2.0), sympy.Tuple(3.0, -1.0, 5.0)),
+    "step": Step(x, 0) * y + sympy.floor(x) - sympy.ceiling(y),
+    "pole": 1 / x,
+}
+POINTS = [(-2.5, 0.7), (-1.0, -1.0), (-1e-9, 2.0), (0.0, 0.0), (0.0, -3.0), (1e-9, 1.0), (0.3, -0.2), (4.0, 2.0)]
+
+
+def _native_functions(laws):
+    names = {x: "v_x", y: "v_y"}
+    printer = NativePrinter(names)
+    lines = [PRELUDE, "void bondc_rhs(double t, const double *x, const double *p, const double *m, double *out)",
+             "{", "    const double v_x = x[0];", "    const double v_y = x[1];"]
+    lines += [f"    out[{k}] = {printer.doprint(law)};" for k, law in enumerate(laws)]
+    lines += ["}", "void bondc_jac(double t, const double *x, const double *p, const double *m, double *out) {}",
+              "void bondc_switches(double t, const double *x, const double *p, const double *m, double *out) {}"]
+    ffi, lib = runtime.load_native("\n".join(lines) + "\n")
+    assert ffi is not None, lib
+
+    def evaluate(a, b):
+        out = np.empty(len(laws))
+        xs = np.array([a, b])
+        lib.bondc_rhs(0.0, ffi.from_buffer("double[]", xs), ffi.NULL, ffi.NULL, ffi.from_buffer("double[]", out))
+        return out
+
+    return evaluate
+
+
+def _numpy_value(law, a, b):
+    from bondc import runtime as namespace
+
+    text = BondcPrinter({x: "x", y: "y"}).doprint(law)
+    scope = {name: getattr(namespace, name) for name in ("table", "step")}
+    with np.errstate(all="ignore"):
+        return float(eval(text, {"np": np, "math": math, **scope}, {"x": np.float64(a), "y": np.float64(b)}))  # noqa: S307  (test: printer output)
+
+
+@needs_cc
+@pytest.mark.parametrize("name", sorted(LAWS))
+def test_every_law_prints_to_c_with_the_numpy_value_at_negative_zero_and_positive_arguments(name):
+    evaluate = _native_functions([LAWS[name]])
+    for a, b in POINTS:
+        expected = _numpy_value(LAWS[name], a, b)
+        got = evaluate(a, b)[0]
+        if math.isnan(expected):
+            assert math.isnan(got), (a, b)
+        else:
+            assert got == pytest.approx(expected, rel=1e-14, abs=1e-300), (a, b)
+
+
+def test_c_names_are_identifiers_that_cannot_collide():
+    assert c_name("mass_p", 3) == "v_mass_p"
+    assert c_name("double", 4) == "v_double"          # a C keyword gets the prefix too
+    assert c_name("Δp", 5) == "w5"                    # not ASCII: by position
+    assert c_name('x"; system("rm', 6) == "w6"        # never text that is not an identifier
+
+
+def test_a_measured_signal_has_no_native_form():
+    from bondc.symbolic import Csv, _SymStr
+
+    with pytest.raises(UnsupportedExpression):
+        NativePrinter({x: "v_x"}).doprint(Csv(x, _SymStr("/data/force.csv"), _SymStr("F")))
+
+
+# ------------------------------------------------------------------ whole models
+
+MODELS = sorted([*ROOT.glob("models/*.bg"), *(ROOT / "tests" / "fixtures" / "engine").glob("*.bg"),
+                 *(ROOT / "tests" / "fixtures" / "sim").glob("*.bg"),
+                 *(ROOT / "tests" / "fixtures" / "textbook").glob("*.bg")])
+QUICK = {"mass_spring_damper.bg", "orifice_reversing.bg", "two_stuck_masses.bg", "diode_bridge.bg"}
+
+
+def _runs(path):
+    derived = derive_file(path, cache=False)
+    namespace = compile_model(derived.state_space)
+    experiment = derived.experiment
+    settings = {}
+    if experiment is not None:
+        settings = {"t_end": experiment.t_end, "method": experiment.solver, "rtol": experiment.rtol,
+                    "atol": experiment.atol, "max_step": experiment.max_step}
+    if settings.get("t_end") is None:
+        settings["t_end"] = 1.0
+    runs = {}
+    for native in (False, None):
+        with np.errstate(all="ignore"):
+            runs[native] = namespace["simulate_model"](namespace["_MODEL"], native=native, **settings)
+    return namespace, runs, settings
+
+
+def _model_cases():
+    return [pytest.param(path, id=path.name,
+                         marks=() if path.name in QUICK else (pytest.mark.slow,)) for path in MODELS]
+
+
+@needs_cc
+@pytest.mark.parametrize("path", _model_cases())
+def test_compiled_and_numpy_code_give_the_same_run(path):
+    namespace, runs, settings = _runs(path)
+    numpy_run, native_run = runs[False], runs[None]
+    assert numpy_run.stats["code"] == "numpy"
+    if namespace["NATIVE_UNAVAILABLE"]:
+        # only models whose laws C cannot print (an algebraic loop solved numerically, a csv signal)
+        assert native_run.stats["code"] == "numpy"
+        assert native_run.stats["code_note"] == namespace["NATIVE_UNAVAILABLE"]
+    else:
+        assert native_run.stats["code"] == "native", native_run.stats.get("code_note")
+    assert native_run.complete == numpy_run.complete
+    assert native_run.t[-1] == pytest.approx(numpy_run.t[-1], rel=1e-9, abs=1e-12)
+    rtol = max(float(settings.get("rtol") or 1e-6), 1e-9)
+    for name, values in numpy_run.states.items():
+        other = np.interp(numpy_run.t, native_run.t, native_run.states[name])
+        scale = max(float(np.max(np.abs(values))), 1e-12)
+        difference = float(np.max(np.abs(other - values))) / scale
+        assert difference <= 100 * rtol, (name, difference)
+
+
+@needs_cc
+def test_without_a_compiler_the_numpy_code_runs_and_says_why(tmp_path, monkeypatch):
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    runtime._NATIVE_LIBRARIES.clear()
+    path = ROOT / "models" / "mass_spring_damper.bg"
+    derived = derive_file(path, cache=False)
+    namespace = compile_model(derived.state_space)
+    run = namespace["simulate_model"](namespace["_MODEL"], t_end=0.5)
+    assert run.complete
+    assert run.stats["code"] == "numpy"
+    assert "C compiler" in run.stats["code_note"]
+    monkeypatch.delenv("CC")
+    again = namespace["simulate_model"](namespace["_MODEL"], t_end=0.5)
+    assert again.stats["code"] == "native"
+    np.testing.assert_allclose(again.states["spring.q"], np.interp(again.t, run.t, run.states["spring.q"]),
+                               rtol=1e-6, atol=1e-9)
+
+
+@needs_cc
+def test_the_library_is_built_once_per_text_and_reused_from_the_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    runtime._NATIVE_LIBRARIES.clear()
+    source = PRELUDE + "".join(
+        f"void {name}(double t, const double *x, const double *p, const double *m, double *out) {{ out[0] = 2*t; }}\n"
+        for name in ("bondc_rhs", "bondc_jac", "bondc_switches"))
+    ffi, lib = runtime.load_native(source)
+    built = sorted((tmp_path / "native").glob("*.so"))
+    assert len(built) == 1
+    runtime._NATIVE_LIBRARIES.clear()       # a new process: found on disk, not rebuilt
+    stamp = built[0].stat().st_mtime_ns
+    ffi, lib = runtime.load_native(source)
+    assert built[0].stat().st_mtime_ns == stamp
+    out = np.zeros(1)
+    lib.bondc_rhs(1.5, ffi.NULL, ffi.NULL, ffi.NULL, ffi.from_buffer("double[]", out))
+    assert out[0] == 3.0
+    assert not [p for p in (tmp_path / "native").iterdir() if p.name.startswith("build-")]
+
+
+def test_native_code_can_be_turned_off(monkeypatch):
+    monkeypatch.setenv("BONDC_NATIVE", "0")
+    ffi, why = runtime.load_native("int x;")
+    assert ffi is None and "BONDC_NATIVE=0" in why
