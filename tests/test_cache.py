@@ -1,0 +1,174 @@
+"""The compile cache: a second run of an unchanged model skips every compile stage; any change
+to the model, its imports, the options or bondc itself is a miss; a broken cache is never an error."""
+
+from __future__ import annotations
+
+import os
+import stat
+import sys
+
+import numpy as np
+import pytest
+
+from bondc import cache, semantic
+from bondc.pipeline import derive_file
+from bondc.simulate import compile_model, simulate
+
+MODEL = """fn square(x) = x*x
+model Drive "mass, spring and damper"
+  param m = 2 [kg]
+  param k = 800 [N/m]
+  param b = {b} [N*s/m]
+  Se force : e = 10*step(t, 0.1)
+  I mass : f = p/m
+  C spring : e = k*q
+  R damper : e = b*f
+  1 j
+  force -> j
+  j -> mass
+  j -> spring
+  j -> damper
+  output x [m] = spring.q
+  experiment step
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+@pytest.fixture
+def isolated(tmp_path, monkeypatch):
+    """An empty cache folder of this test's own, and a counter of semantic loads."""
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(folder))
+    monkeypatch.delenv("BONDC_CACHE", raising=False)
+    loads = []
+    real = semantic.load
+
+    def counting(*args, **kwargs):
+        loads.append(args[0])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(semantic, "load", counting)
+    return folder, loads
+
+
+def _write(path, b=12):
+    path.write_text(MODEL.format(b=b), encoding="utf-8")
+    return path
+
+
+def test_a_second_run_of_an_unchanged_model_skips_every_stage(tmp_path, isolated, monkeypatch):
+    folder, loads = isolated
+    path = _write(tmp_path / "drive.bg")
+    first = derive_file(path)
+    result = simulate(first.state_space, first.experiment)
+    assert len(loads) == 1
+    assert (folder / "models").is_dir()
+    assert not [p for p in tmp_path.iterdir() if p.name not in ("drive.bg", "cache")]   # nothing beside the model
+
+    def no_codegen(*args, **kwargs):
+        raise AssertionError("the generated module should come from the cache")
+
+    monkeypatch.setattr("bondc.codegen.emit", no_codegen)
+    second = derive_file(path)
+    assert len(loads) == 1                           # not parsed or checked again
+    assert second.state_space is not first.state_space
+    assert [s.name for s in second.state_space.states] == [s.name for s in first.state_space.states]
+    again = simulate(second.state_space, second.experiment)
+    np.testing.assert_array_equal(again.t, result.t)
+    np.testing.assert_array_equal(again.states["spring.q"], result.states["spring.q"])
+
+
+def test_an_edit_options_or_no_cache_are_misses(tmp_path, isolated):
+    _, loads = isolated
+    path = _write(tmp_path / "drive.bg")
+    derive_file(path)
+    derive_file(path, sets=["k=400"])                  # other overrides: another entry
+    assert len(loads) == 2
+    assert derive_file(path, sets=["k=400"]).graph.parameters["k"].value == 400.0
+    assert len(loads) == 2
+    _write(path, b=30)                                 # the file changed
+    assert derive_file(path).graph.parameters["b"].value == 30.0
+    assert len(loads) == 3
+    derive_file(path, cache=False)
+    assert len(loads) == 4
+
+
+def test_a_changed_import_is_a_miss(tmp_path, isolated):
+    _, loads = isolated
+    library = tmp_path / "lib.bg"
+    library.write_text("fn gain(x) = 2*x\n", encoding="utf-8")
+    path = tmp_path / "main.bg"
+    path.write_text('import "lib.bg"\n' + MODEL.replace("e = 10*step(t, 0.1)", "e = gain(5)*step(t, 0.1)")
+                    .format(b=12), encoding="utf-8")
+    derive_file(path)
+    derive_file(path)
+    assert len(loads) == 1
+    library.write_text("fn gain(x) = 3*x\n", encoding="utf-8")
+    changed = derive_file(path)
+    assert len(loads) == 2
+    result = simulate(changed.state_space, changed.experiment)
+    # the force is now 15 N, not 10: the first peak of the step response (zeta = 0.15, overshoot
+    # exp(-pi*zeta/sqrt(1 - zeta^2)) = 62 %) is 1.62*15/800 = 30 mm, not 20 mm
+    overshoot = np.exp(-np.pi * 0.15 / np.sqrt(1 - 0.15 ** 2))
+    assert result.states["spring.q"].max() == pytest.approx((1 + overshoot) * 15 / 800, rel=0.01)
+
+
+def test_the_environment_turns_the_cache_off(tmp_path, isolated, monkeypatch):
+    _, loads = isolated
+    monkeypatch.setenv("BONDC_CACHE", "0")
+    path = _write(tmp_path / "drive.bg")
+    derive_file(path)
+    derive_file(path)
+    assert len(loads) == 2
+
+
+def test_a_corrupt_entry_is_a_miss_not_an_error(tmp_path, isolated):
+    folder, loads = isolated
+    path = _write(tmp_path / "drive.bg")
+    derive_file(path)
+    for pickled in folder.glob("models/*/derived.pickle"):
+        pickled.write_bytes(b"not a pickle")
+    derived = derive_file(path)
+    assert len(loads) == 2 and derived.graph.name == "Drive"
+    assert derive_file(path) is not None and len(loads) == 2     # rewritten by the second run
+
+
+@pytest.mark.skipif(sys.platform == "win32" or os.geteuid() == 0, reason="needs a folder the user cannot write")
+def test_an_unwritable_cache_folder_only_means_no_cache(tmp_path, isolated, monkeypatch):
+    _, loads = isolated
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(stat.S_IRUSR | stat.S_IXUSR)
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(locked / "cache"))
+    try:
+        path = _write(tmp_path / "drive.bg")
+        derived = derive_file(path)
+        assert simulate(derived.state_space, derived.experiment).complete
+        derive_file(path)
+        assert len(loads) == 2
+    finally:
+        locked.chmod(stat.S_IRWXU)
+
+
+def test_the_key_covers_bondc_itself(tmp_path, isolated, monkeypatch):
+    _, loads = isolated
+    path = _write(tmp_path / "drive.bg")
+    derive_file(path)
+    monkeypatch.setattr(cache, "_CODE_HASH", ["another bondc"])
+    derive_file(path)
+    assert len(loads) == 2
+
+
+def test_the_cli_option(tmp_path, isolated, capsys):
+    from bondc.cli import main
+
+    _, loads = isolated
+    path = _write(tmp_path / "drive.bg")
+    assert main(["equations", str(path)]) == 0
+    assert main(["equations", str(path)]) == 0
+    assert len(loads) == 1
+    assert main(["equations", str(path), "--no-cache"]) == 0
+    assert len(loads) == 2
+    assert "der(mass.p)" in capsys.readouterr().out
