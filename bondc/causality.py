@@ -244,12 +244,20 @@ class _Assignment:
         self.graph = graph
         self.setter: dict[int, str] = {}
         self.origin: dict[int, str] = {}
+        self.journal: list[int] = []      # bonds in the order they were set (to undo a failed trial)
 
     def copy(self) -> "_Assignment":
         other = _Assignment(self.graph)
         other.setter = dict(self.setter)
         other.origin = dict(self.origin)
         return other
+
+    def undo(self, mark: int) -> None:
+        """Forget every bond set after ``len(journal) == mark`` (a trial that conflicted)."""
+        while len(self.journal) > mark:
+            bond = self.journal.pop()
+            del self.setter[bond]
+            del self.origin[bond]
 
     def decide(self, bond: int, setter: str, origin: str) -> _Conflict | None:
         queue: list[str] = []
@@ -264,6 +272,7 @@ class _Assignment:
             return _Conflict(None, (bond,), "bond", setter)
         self.setter[bond] = setter
         self.origin[bond] = origin
+        self.journal.append(bond)
         b = self.graph.bond(bond)
         queue.extend((b.tail, b.head))
         return None
@@ -387,13 +396,15 @@ class _Procedure:
     def _decide(self, bond: int, options, subject: ElementNode | None) -> None:
         first_conflict = None
         for setter, origin in options:
-            trial = self.state.copy()
-            conflict = trial.decide(bond, setter, origin)
+            # try the option in place; undo it on a conflict (a copy of the whole assignment per
+            # decision made causality quadratic in the number of bonds)
+            mark = len(self.state.journal)
+            conflict = self.state.decide(bond, setter, origin)
             if conflict is None:
-                self.state = trial
                 return
             if first_conflict is None:
-                first_conflict = (conflict, trial, origin)
+                first_conflict = (conflict, self.state.copy(), origin)
+            self.state.undo(mark)
         conflict, trial, origin = first_conflict
         self.errors.append(_conflict_diagnostic(self.graph, conflict, trial, origin, subject))
 

@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import sympy
+from sympy.printing.str import StrPrinter
 
 from bondc import __version__
 from bondc.codegen.freeze import Freezer
@@ -193,7 +194,7 @@ def _cse(exprs: list):
     """
     from sympy.simplify.cse_main import tree_cse
 
-    return tree_cse(exprs, sympy.numbered_symbols("_c", real=True), {}, "canonical", ())
+    return tree_cse(exprs, sympy.numbered_symbols("_c", real=True), {}, "none", ())
 
 
 # --------------------------------------------------------------------- plan
@@ -275,8 +276,21 @@ def _switch_depends(plan: _Plan) -> list:
     return [sorted(modes_of([s.g]) - {s.index}) for s in plan.switches]
 
 
+class _LawPrinter(StrPrinter):
+    """sympy's str printer, with sums in sympy's argument order and negative terms last
+    ("q - 1"): sorting the terms of every sum for display is most of a large model's printing."""
+
+    _default_settings = {**StrPrinter._default_settings, "order": "none"}
+
+    def _as_ordered_terms(self, expr, order=None):
+        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
+
+
+_LAW_PRINTER = _LawPrinter()
+
+
 def _law_text(expr) -> str:
-    text = sympy.sstr(expr)
+    text = _LAW_PRINTER.doprint(expr)
     return text if len(text) <= _LAW_LIMIT else text[: _LAW_LIMIT - 3] + "..."
 
 
@@ -432,6 +446,7 @@ class _Emitter:
                 path = item.csv.path
                 data_paths[path] = relative_data_path(path, module_dir) if module_dir else Path(path).name
         self.data_paths = data_paths
+        self.reduced: dict = {}        # body() memo, shared with the C emitter (a shallow copy of this one)
 
     def printer(self, extra_frozen=()):
         return BondcPrinter(self.names, mode_symbols=self.modes | set(extra_frozen), data_paths=self.data_paths)
@@ -440,6 +455,14 @@ class _Emitter:
 
     def body(self, statements, finals):
         """Lines computing ``finals`` from (t, x, p, m) and the printed finals."""
+        key = (id(statements), tuple(finals))
+        if key not in self.reduced:     # the same body printed as numpy and as C: reduce it once
+            self.reduced[key] = self.reduce(statements, finals)
+        kept, replacements, reduced, frozen = self.reduced[key]
+        return self.print_body(kept, replacements, reduced, frozen)
+
+    def reduce(self, statements, finals):
+        """The statements ``finals`` need, and their common subexpressions (sympy, not printed)."""
         needed = set().union(*(as_sympy(f).free_symbols for f in finals)) if finals else set()
         kept = []
         for statement in reversed(statements):
@@ -456,21 +479,25 @@ class _Emitter:
         exprs = [_hide_piecewise(expr, pieces) for expr in exprs]
         replacements, reduced = _cse(exprs) if exprs else ([], [])
         placeholders = {symbol: piecewise for piecewise, symbol in pieces.items()}
+        placeholder_set = set(placeholders)
         uses: dict = {}
         for expr in [e for _, e in replacements] + list(reduced):
-            for symbol in expr.free_symbols & set(placeholders):
+            for symbol in expr.free_symbols & placeholder_set:
                 uses[symbol] = uses.get(symbol, 0) + 1
         once = {symbol: placeholders[symbol] for symbol, count in uses.items() if count == 1}
         replacements = [(symbol, expr.xreplace(once)) for symbol, expr in replacements]
         reduced = [expr.xreplace(once) for expr in reduced]
         shared = [(symbol, placeholders[symbol]) for symbol in sorted(set(uses) - set(once), key=lambda s: s.name)]
         replacements = replacements + shared
-        substitutes = dict(replacements)
-        order = {symbol: i for i, (symbol, _) in enumerate(replacements)}
         frozen = set()
         for symbol, expr in replacements:       # cse temps that are conditions on modes only
             if expr.free_symbols <= (self.modes | frozen):
                 frozen.add(symbol)
+        return kept, replacements, reduced, frozen
+
+    def print_body(self, kept, replacements, reduced, frozen):
+        substitutes = dict(replacements)
+        order = {symbol: i for i, (symbol, _) in enumerate(replacements)}
         for symbol, _ in replacements:
             self.names.setdefault(symbol, symbol.name)
         printer = self.printer(frozen)
@@ -579,7 +606,7 @@ class _Emitter:
             statements, plan.derivatives,
             lambda texts: ["return np.array([" + ", ".join(texts) + "], dtype=float)"]))
         entries = plan.jacobian_entries
-        keys = sorted(entries)
+        keys = sorted(entries, key=lambda key: (key[1], key[0]))     # JACOBIAN_PATTERN's order, as in C
 
         def jac_tail(texts):
             lines = [f"J = np.zeros(({n}, {n}))"]
