@@ -675,10 +675,6 @@ def _display(ss: StateSpace):
     return lambda expr: as_sympy(expr).xreplace(mapping)
 
 
-def _initial_value(ss: StateSpace, state: StateInfo) -> float:
-    return ss.initial_values()[state.name]
-
-
 def _latex_name(name: str) -> str:
     def mathrm(text):
         return r"\mathrm{%s}" % text.replace("_", r"\_")
@@ -707,10 +703,11 @@ def format_equations(ss: StateSpace, fmt: str = "text") -> str:
 
 
 def _format_json(ss: StateSpace, show) -> str:
+    values = ss.initial_values()       # once: it evaluates every state's initial value
     graph = ss.graph
     data = {
         "model": graph.name,
-        "states": [{"name": s.name, "unit": s.unit_text, "initial": _initial_value(ss, s)} for s in ss.states],
+        "states": [{"name": s.name, "unit": s.unit_text, "initial": values[s.name]} for s in ss.states],
         "inputs": [{"name": name, "unit": graph.inputs[name].unit_text, "expr": sympy.sstr(expr)}
                    for name, (_, expr) in ss.inputs.items()],
         "parameters": {name: value for name, (_, value) in ss.parameters.items()},
@@ -729,6 +726,7 @@ def _format_json(ss: StateSpace, show) -> str:
 
 
 def _format_text(ss: StateSpace, show) -> str:
+    values = ss.initial_values()       # once: it evaluates every state's initial value
     graph = ss.graph
     head = f"model {graph.name}" + (f' "{graph.description}"' if graph.description else "")
     lines = [head]
@@ -744,7 +742,7 @@ def _format_text(ss: StateSpace, show) -> str:
     rows = []
     for s, unit in zip(ss.states, units):
         initial = as_sympy(s.initial)
-        value = repr(_initial_value(ss, s))
+        value = repr(values[s.name])
         shown = value if initial.is_number else f"{sympy.sstr(initial)} = {value}"
         cells = [s.name.ljust(width)] + ([unit.ljust(unit_width)] if unit_width else []) + [f"initial {shown}"]
         rows.append("  ".join(cells))
@@ -770,13 +768,14 @@ def _format_text(ss: StateSpace, show) -> str:
 
 
 def _format_latex(ss: StateSpace, show) -> str:
+    values = ss.initial_values()       # once: it evaluates every state's initial value
     names = {symbol: _latex_name(name) for name, symbol in ss.symbols.items()}
 
     def tex(expr):
         return sympy.latex(show(expr), symbol_names=names)
 
     lines = [f"% bondc equations of model {ss.graph.name}", "% states (initial values, SI):"]
-    lines += [f"%   {s.name} = {_initial_value(ss, s)!r}" for s in ss.states]
+    lines += [f"%   {s.name} = {values[s.name]!r}" for s in ss.states]
     lines += ["% parameters (SI):"] + [f"%   {name} = {value!r}" for name, (_, value) in ss.parameters.items()]
     rows = []
     for name, (symbol, expr) in ss.inputs.items():

@@ -218,7 +218,8 @@ class NumericModel:
         for block in ss.algebraic_blocks:
             for unknown in block.unknowns:
                 ident(unknown)
-        printer = NumPyPrinter({"allow_unknown_functions": True, "fully_qualified_modules": True})
+        # sums in sympy's own argument order: this code is only run, and sorting every sum is slow
+        printer = NumPyPrinter({"allow_unknown_functions": True, "fully_qualified_modules": True, "order": "none"})
 
         def code(expr):
             expr = as_sympy(as_sympy(expr).xreplace(numbers))

@@ -603,3 +603,38 @@ def strip_impulses(expr):
     if expr.has(sympy.DiracDelta):
         expr = expr.replace(sympy.DiracDelta, lambda *args: sympy.Integer(0))
     return expr
+
+
+# ------------------------------------------------------------------ derivatives
+
+def partial_derivative(expr, symbol, leaf=None):
+    """``d expr / d symbol`` with bondc's opaque signals (free of ``symbol``) held as constants.
+
+    Sums and products are taken apart here (the sum rule, and a product with one factor that
+    depends on ``symbol``) before sympy's ``diff`` sees the rest: a large model's Jacobian is
+    tens of thousands of such small derivatives, and this is most of them. ``leaf``
+    differentiates what is left (default: sympy's ``diff`` with tables and csv signals held).
+    """
+    if expr == symbol:
+        return sympy.Integer(1)
+    if symbol not in expr.free_symbols:
+        return sympy.Integer(0)
+    if expr.is_Add:
+        return sympy.Add(*[partial_derivative(arg, symbol, leaf) for arg in expr.args])
+    if expr.is_Mul:
+        depending = [arg for arg in expr.args if symbol in arg.free_symbols]
+        if len(depending) == 1:
+            rest = sympy.Mul(*[arg for arg in expr.args if arg is not depending[0]])
+            return rest * partial_derivative(depending[0], symbol, leaf)
+    return (leaf or _held_diff)(expr, symbol)
+
+
+def _held_diff(expr, symbol):
+    opaque = sorted(expr.atoms(Table, Csv), key=sympy.default_sort_key)
+    if not opaque:
+        return sympy.diff(expr, symbol)
+    held = {f: sympy.Symbol(f"_held{i}", real=True) for i, f in enumerate(opaque)}
+    if any(symbol in f.free_symbols for f in opaque):
+        raise ValueError(f"cannot differentiate a signal of {symbol}")
+    derivative = sympy.diff(expr.xreplace(held), symbol)
+    return derivative.xreplace({v: k for k, v in held.items()})

@@ -12,7 +12,7 @@ import pytest
 
 from bondc import cache, semantic
 from bondc.pipeline import derive_file
-from bondc.simulate import compile_model, simulate
+from bondc.simulate import simulate
 
 MODEL = """fn square(x) = x*x
 model Drive "mass, spring and damper"

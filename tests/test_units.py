@@ -268,3 +268,21 @@ def test_valid_names_need_no_suggestion():
     assert ok(unit("Nm", ("Nm", 1))).dims == dims(kg=1, m=2, s=-2)
     assert lookup("unknown") is None
     assert lookup("kg").text == "kg"
+
+
+@pytest.mark.parametrize("text", ["N*m*rad/s", "kW", "J/kg/K", "kg*m^2", "m/s^2", "N*s/m", "Pa", "m^-1",
+                                  "a/b*c", "rpm", "N * m / rad", "bar^+2"])
+def test_the_statistics_unit_reader_reads_simple_units_as_the_parser_does(text):
+    from bondc.analysis.stats import _simple_unit
+    from bondc.parse import parse_set_value
+
+    expected = parse_set_value(f"_u = 1 [{text}]").unit
+    got = _simple_unit(text)
+    assert [(f.name, f.exponent) for f in got.factors] == [(f.name, f.exponent) for f in expected.factors]
+
+
+@pytest.mark.parametrize("text", ["1/s", "(N*m)/s", "m^(1/2)", "N*m/", "*N", "m^0.5"])
+def test_anything_else_goes_to_the_parser(text):
+    from bondc.analysis.stats import _simple_unit
+
+    assert _simple_unit(text) is None

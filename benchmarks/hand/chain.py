@@ -52,10 +52,6 @@ so the Jacobian is the constant matrix [[-(b/m) D^T D, -k D^T], [(1/m) D, 0]]
 every N); ``Problem.rhs_explicit`` is the junction-by-junction form above
 (``simulate(..., explicit=True)``); the two agree to rounding.
 
-Note: ``benchmarks/chain.py`` as written names an output ``v1``, which clashes
-with junction ``v1`` (bondc refuses the model: E302 'v1' is defined twice);
-:func:`bondc_model` renames that output to ``vel1`` for the comparison runs.
-
 ``python -m benchmarks.hand.chain [N ...]`` compares this against
 ``bondc simulate`` (run through its command line, files in /tmp) for N = 10
 and 100 with Radau and LSODA at rtol 1e-8 and prints the differences and the
@@ -231,13 +227,8 @@ def simulate(n: int, t_end: float = 10.0, rtol: float = 1e-6, atol: float = 1e-9
 # ---------------------------------------------------------------- comparison against bondc
 
 def bondc_model(n: int, t_end: float, rtol: float, atol: float, method: str) -> str:
-    """The chain's .bg text with the experiment set to ``method``/``rtol``/``atol``.
-
-    benchmarks/chain.py names an output ``v1``, which is also the name of
-    junction v1 (bondc: E302 'v1' is defined twice); it is renamed here.
-    """
+    """The chain's .bg text with the experiment set to ``method``/``rtol``/``atol``."""
     text = chain_source(n, t_end)
-    text = re.sub(r"^(\s*output\s+)v1(\s)", r"\1vel1\2", text, flags=re.M)
     text = re.sub(r"^(\s*)rtol\s*=.*$", rf"\g<1>rtol = {rtol:g}", text, flags=re.M)
     text = re.sub(r"^(\s*)atol\s*=.*$", rf"\g<1>atol = {atol:g}", text, flags=re.M)
     text = re.sub(r"^(\s*experiment\s+\w+.*)$", rf'\1\n    solver = "{method}"', text, count=1, flags=re.M)

@@ -58,7 +58,7 @@ import sympy
 
 from bondc.errors import AnalysisError, Diagnostic
 from bondc.statespace import StateSpace
-from bondc.symbolic import strip_impulses, as_sympy
+from bondc.symbolic import as_sympy, partial_derivative, strip_impulses
 
 AT = ("initial", "equilibrium")
 
@@ -125,6 +125,13 @@ class Linearization:
             if not rows or not cols:
                 lines.append("  (empty)")
                 continue
+            if len(cols) > _TABLE_COLUMNS:
+                # a large model: its non-zero entries, row by row (a dense table would be N^2 cells)
+                matrix = np.asarray(m)
+                entries = list(zip(*np.nonzero(matrix)))
+                lines.append(f"  {len(entries)} non-zero entries (row, column, value)")
+                lines += [f"  {rows[i]}  {cols[j]}  {matrix[i, j]:.6g}" for i, j in entries]
+                continue
             width = max(12, *(len(c) for c in cols))
             rwidth = max(len(r) for r in rows)
             lines.append(" " * (rwidth + 2) + "".join(c.rjust(width + 2) for c in cols))
@@ -138,6 +145,10 @@ class Linearization:
             lines.append(f"  {text.ljust(22)} {wn:.6g} rad/s".ljust(45) + f"  {zeta_text}")
         lines += [f"note: {note}" for note in self.notes]
         return "\n".join(lines) + "\n"
+
+
+#: Matrices with more columns than this print as their non-zero entries.
+_TABLE_COLUMNS = 12
 
 
 # ----------------------------------------------------------------- jacobians
@@ -159,10 +170,19 @@ class _Jacobian:
         self.output_partials = [self._partials(expr) for expr in ss.outputs.values()]
 
     def _partials(self, expr):
+        """``(symbol, partial, value)`` per variable ``expr`` depends on; ``value`` is the partial's
+        number when it depends on parameters only (most of a large model's), else None."""
         expr = as_sympy(expr)
         symbols = sorted((s for s in expr.free_symbols if s not in self.parameter_values and s != self.ss.time),
                          key=lambda s: s.name)
-        return tuple((s, strip_impulses(sympy.diff(expr, s))) for s in symbols)
+        out = []
+        for s in symbols:
+            partial = strip_impulses(partial_derivative(expr, s, sympy.diff))
+            constant = None
+            if not (partial.free_symbols - set(self.parameter_values)):
+                constant = self._value(partial, {})
+            out.append((s, partial, constant))
+        return tuple(out)
 
     def _value(self, expr, values) -> float:
         number = as_sympy(expr).xreplace(values).xreplace(self.parameter_values)
@@ -174,23 +194,31 @@ class _Jacobian:
                                                             f"at the operating point ({number})")) from error
 
     def __call__(self, values: Mapping) -> tuple[np.ndarray, np.ndarray]:
-        """[A B] and [C D] at a point given by ``values`` (symbol -> float, incl. t)."""
+        """[A B] and [C D] at a point given by ``values`` (symbol -> float, incl. t).
+
+        Each variable's gradient is kept sparse ({column: value}): a chain of N sections has
+        gradients of a few entries each, where dense rows would take N^2 memory."""
         ss = self.ss
         n, m = len(self.state_symbols), len(self.input_symbols)
         gradient: dict = {}
         for i, symbol in enumerate(self.state_symbols):
-            gradient[symbol] = np.eye(n + m)[i]
+            gradient[symbol] = {i: 1.0}
         for j, symbol in enumerate(self.input_symbols):
-            gradient[symbol] = np.eye(n + m)[n + j]
-        zero = np.zeros(n + m)
+            gradient[symbol] = {n + j: 1.0}
         numeric = {s: sympy.Float(v) for s, v in values.items()}
 
+        def value(partial, constant):
+            return constant if constant is not None else self._value(partial, numeric)
+
         def chain(partials):
-            total = np.zeros(n + m)
-            for symbol, partial in partials:
-                g = gradient.get(symbol, zero)
-                if g.any():
-                    total += self._value(partial, numeric) * g
+            total: dict = {}
+            for symbol, partial, constant in partials:
+                g = gradient.get(symbol)
+                if not g:
+                    continue
+                factor = value(partial, constant)
+                for column, entry in g.items():
+                    total[column] = total.get(column, 0.0) + factor * entry
             return total
 
         blocks = {}
@@ -204,14 +232,16 @@ class _Jacobian:
                 jac_u = np.zeros((len(unknowns), len(unknowns)))
                 rhs = np.zeros((len(unknowns), n + m))
                 for row, partials in enumerate(self.block_partials[number]):
-                    for symbol, partial in partials:
+                    for symbol, partial, constant in partials:
                         if symbol in unknowns:
-                            jac_u[row, unknowns.index(symbol)] = self._value(partial, numeric)
-                        elif gradient.get(symbol, zero).any():
-                            rhs[row] -= self._value(partial, numeric) * gradient[symbol]
+                            jac_u[row, unknowns.index(symbol)] = value(partial, constant)
+                        elif gradient.get(symbol):
+                            factor = value(partial, constant)
+                            for column, entry in gradient[symbol].items():
+                                rhs[row, column] -= factor * entry
                 solution = np.linalg.solve(jac_u, rhs)
                 for k, unknown in enumerate(unknowns):
-                    gradient[unknown] = solution[k]
+                    gradient[unknown] = {int(c): float(solution[k, c]) for c in np.flatnonzero(solution[k])}
 
         for position, ((symbol, _), partials) in enumerate(zip(ss.assignments, self.partials)):
             solve_blocks(position)
@@ -219,9 +249,15 @@ class _Jacobian:
                 continue
             gradient[symbol] = chain(partials)
         solve_blocks(len(ss.assignments))
-        f_rows = np.array([chain(p) for p in self.derivative_partials]).reshape(n, n + m)
-        g_rows = np.array([chain(p) for p in self.output_partials]).reshape(len(self.output_partials), n + m)
-        return f_rows, g_rows
+
+        def rows(all_partials):
+            matrix = np.zeros((len(all_partials), n + m))
+            for row, partials in enumerate(all_partials):
+                for column, entry in chain(partials).items():
+                    matrix[row, column] = entry
+            return matrix
+
+        return rows(self.derivative_partials), rows(self.output_partials)
 
 
 # --------------------------------------------------------------------- stage

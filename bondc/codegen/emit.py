@@ -60,7 +60,7 @@ from bondc import __version__
 from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import BondcPrinter, UnsupportedExpression, relative_data_path
-from bondc.symbolic import Csv, Table, as_sympy
+from bondc.symbolic import Csv, Table, as_sympy, partial_derivative
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
 ARGUMENTS = ("t", "x", "p", "m")
@@ -151,38 +151,6 @@ def _hide_piecewise(expr, pieces: dict):
     if all(a is b for a, b in zip(args, expr.args)):
         return expr
     return expr.func(*args)
-
-
-def _safe_diff(expr, symbol):
-    """``d expr / d symbol`` with bondc's opaque signals (free of ``symbol``) held as constants.
-
-    Sums and products are taken apart here (the sum rule, and a product with one factor that
-    depends on ``symbol``) before sympy's ``diff`` sees the rest: a large model's Jacobian is
-    tens of thousands of such small derivatives, and this is most of them.
-    """
-    if expr == symbol:
-        return sympy.Integer(1)
-    if symbol not in expr.free_symbols:
-        return sympy.Integer(0)
-    if expr.is_Add:
-        return sympy.Add(*[_safe_diff(arg, symbol) for arg in expr.args])
-    if expr.is_Mul:
-        depending = [arg for arg in expr.args if symbol in arg.free_symbols]
-        if len(depending) == 1:
-            rest = sympy.Mul(*[arg for arg in expr.args if arg is not depending[0]])
-            return rest * _safe_diff(depending[0], symbol)
-    return _sympy_diff(expr, symbol)
-
-
-def _sympy_diff(expr, symbol):
-    opaque = sorted(expr.atoms(Table, Csv), key=sympy.default_sort_key)
-    if not opaque:
-        return sympy.diff(expr, symbol)
-    held = {f: sympy.Symbol(f"_held{i}", real=True) for i, f in enumerate(opaque)}
-    if any(symbol in f.free_symbols for f in opaque):
-        raise ValueError(f"cannot differentiate a signal of {symbol}")
-    derivative = sympy.diff(expr.xreplace(held), symbol)
-    return derivative.xreplace({v: k for k, v in held.items()})
 
 
 def _cse(exprs: list):
@@ -354,7 +322,7 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
             ds = sensitivity(symbol)
             if not ds:
                 continue
-            partial = _safe_diff(expr, symbol)
+            partial = partial_derivative(expr, symbol)
             if partial == 0:
                 continue
             for j, dsj in ds.items():
@@ -382,7 +350,7 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
             number = statement.data["number"]
             unknowns = statement.defines
             residuals = statement.data["residuals"]
-            rz = [[_safe_diff(r, z) for z in unknowns] for r in residuals]
+            rz = [[partial_derivative(r, z) for z in unknowns] for r in residuals]
             rx = {}
             for i, r in enumerate(residuals):
                 for j, value in row_of(r, exclude=unknowns).items():
