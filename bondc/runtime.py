@@ -339,6 +339,7 @@ class _Model:
         self.NATIVE_SOURCE = optional("NATIVE_SOURCE", lambda text: "".join(text), "")
         self.NATIVE_UNAVAILABLE = optional("NATIVE_UNAVAILABLE", str, "")
         self.jac_entries = None
+        self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
         self.parameter_names = tuple(self.PARAMETERS)
 
@@ -667,6 +668,100 @@ class CvodeSolver:
         return interpolate
 
 
+class _NativeDriver:
+    """bondc's C driver of CVODE (``_DRIVER_SOURCE``) for one run: the model's C right-hand side
+    and Jacobian called by SUNDIALS directly, steps gathered in C, Python only between batches."""
+
+    CAPACITY = 2048
+
+    def __init__(self, ffi, lib, handle, n, keep):
+        self.ffi, self.lib, self.handle, self.n = ffi, lib, handle, n
+        self.keep = keep                # arrays the C side points to
+        self.ts = np.empty(self.CAPACITY)
+        self.ys = np.empty((self.CAPACITY, n))
+        self.count = ffi.new("int *")
+        self.modes = np.zeros(0)
+        self.linear_solver = keep["solver"]
+
+    @classmethod
+    def create(cls, model, library, p, adams):
+        """The driver, or None where it does not apply (a sparse linear solver, no driver built)."""
+        ffi, lib = library
+        # SUNDIALS logs a failed right-hand side (the driver's signal to hand over) as an error
+        os.environ.setdefault("SUNLOGGER_ERROR_FILENAME", os.devnull)
+        os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", os.devnull)
+        n = len(model.STATE_NAMES)
+        pattern = tuple(model.JACOBIAN_PATTERN or ())
+        lower = max([0] + [i - j for i, j in pattern])
+        upper = max([0] + [j - i for i, j in pattern])
+        solver = "dense"
+        if n >= CvodeSolver.STRUCTURED_FROM and pattern:
+            if 4 * (lower + upper + 1) <= n:
+                solver = "band"
+            elif n >= CvodeSolver.SPARSE_FROM:
+                return None         # SuperLU: scikit-sundae's solver, stepped from Python
+        keep = {"rows": np.array([i for i, _ in pattern] or [0], dtype=np.intc),
+                "cols": np.array([j for _, j in pattern] or [0], dtype=np.intc),
+                "p": np.array(p, dtype=float), "solver": "band" if solver == "band" else "dense"}
+        buffer = ffi.from_buffer
+        handle = lib.bondc_driver_new(n, len(model.SWITCHES), len(pattern), buffer("int[]", keep["rows"]),
+                                      buffer("int[]", keep["cols"]), int(solver == "band"), int(lower),
+                                      int(upper), int(bool(adams)), buffer("double[]", keep["p"]))
+        if handle == ffi.NULL:
+            return None
+        return cls(ffi, lib, ffi.gc(handle, lib.bondc_driver_free), n, keep)
+
+    def start(self, t, y, modes, t_stop, rtol, atol, max_step, first_step) -> bool:
+        self.modes = np.array(modes, dtype=float)
+        y = np.array(y, dtype=float)
+        buffer = self.ffi.from_buffer
+        flag = self.lib.bondc_driver_start(self.handle, float(t), buffer("double[]", y),
+                                           buffer("double[]", self.modes) if self.modes.size else self.ffi.NULL,
+                                           float(t_stop), float(rtol), float(atol), float(max_step),
+                                           float(first_step), 100000)
+        return flag == 0
+
+    def advance(self, watch, signs, band, g_old):
+        """One batch: (code, times, states) — see ``bondc_driver_advance``."""
+        buffer, null = self.ffi.from_buffer, self.ffi.NULL
+        watched = int(watch.size)
+        code = self.lib.bondc_driver_advance(
+            self.handle, self.CAPACITY, watched, buffer("int[]", watch) if watched else null,
+            buffer("double[]", signs) if watched else null, buffer("double[]", band) if watched else null,
+            buffer("double[]", g_old) if watched else null, buffer("double[]", self.ts),
+            buffer("double[]", self.ys), self.count)
+        count = self.count[0]
+        return code, self.ts[:count], self.ys[:count]
+
+    def interpolate(self, t):
+        out = np.empty(self.n)
+        self.lib.bondc_driver_dky(self.handle, float(t), 0, self.ffi.from_buffer("double[]", out))
+        return out
+
+    def counts(self):
+        out = self.ffi.new("long[3]")
+        self.lib.bondc_driver_counts(self.handle, out)
+        return int(out[0]), int(out[1]), int(out[2])
+
+
+class _DriverStep:
+    """The driver's last step seen as a solver by :meth:`_Run.crossing`: t_old, t, y, dense_output()."""
+
+    def __init__(self, driver, t_old, t, y):
+        self.driver, self.t_old, self.t, self.y = driver, t_old, t, y
+
+    def dense_output(self):
+        t_old, t_new, y_new, driver = self.t_old, self.t, self.y, self.driver
+
+        def interpolate(tt):
+            tt = float(tt)
+            if tt == t_new:
+                return y_new.copy()
+            return driver.interpolate(min(max(tt, t_old), t_new))
+
+        return interpolate
+
+
 class CVODE(CvodeSolver):
     """CVODE with variable-order BDF and Newton iteration: the default, for stiff and non-stiff models."""
 
@@ -748,6 +843,7 @@ class _Run:
         self.jumps = []                # (t, state before, state after) of every when clause that fired
         self.extended = None           # modes of the last right-hand side taken beyond a switch
         self._dense = None
+        self._driver = None            # the native CVODE driver: None (not tried yet), False (none)
 
     # -- evaluation helpers
 
@@ -1191,6 +1287,94 @@ class _Run:
             del options["first_step"]
         return self.method(fun, t, y, t_stop, **options)
 
+    def driver_for(self, index, signs):
+        """The native CVODE driver for a segment watching ``index`` in modes ``signs``, or None.
+
+        It serves CVODE runs that report every step (no ``t_eval``) of models whose C code
+        carries the driver, when every watched switch is a sign switch in mode +-1 (floor
+        switches and sliding segments keep the step-by-step loop)."""
+        if self._driver is False:
+            return None
+        if self._driver is None:
+            self._driver = False
+            library = getattr(self.model, "native_library", None)
+            if (library is None or self.t_eval is not None or not isinstance(self.method, type)
+                    or not issubclass(self.method, CvodeSolver)):
+                return None
+            driver = _NativeDriver.create(self.model, library, self.p, self.method.variant == "Adams")
+            if driver is None:
+                return None
+            self._driver = driver
+        if index.size and (self.model.floor_switches[index].any() or not signs.all()):
+            return None
+        return self._driver
+
+    def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband):
+        """Integrate one segment with the native driver: (t, y, event) as :meth:`segment` returns,
+        or ("handover", t, y) to go on step by step from there."""
+        options = self.options
+        first_step = float(options.get("first_step") or 0.0)
+        if first_step > t_stop - t:
+            first_step = 0.0
+        max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
+        if not driver.start(t, y, modes, t_stop, options["rtol"], options["atol"], max_step, first_step):
+            return "handover", t, np.array(y, dtype=float)
+        g_old = np.array(values_old, dtype=float)
+        watch = index.astype(np.intc)
+        signs = np.asarray(signs, dtype=float)
+        band = np.asarray(deadband, dtype=float)
+        t_prev, y_prev = float(t), np.array(y, dtype=float)
+        creeping = 0
+        self.extended = None
+        try:
+            while True:
+                code, ts, ys = driver.advance(watch, signs, band, g_old)
+                done = len(ts) - (1 if code in (1, 4) else 0)
+                if done > 0:
+                    self.stats["steps"] += done
+                    steps = np.diff(np.concatenate(([t_prev], ts[:done])))
+                    for tiny in steps <= _CREEP * np.maximum(np.abs(ts[:done]), 1.0):
+                        creeping = creeping + 1 if tiny else 0
+                        if creeping >= _CREEP_STEPS:
+                            return "handover", t_prev, y_prev    # the step loop diagnoses it
+                    self.blocks_t.append(ts[:done].copy())
+                    self.blocks_x.append(ys[:done].T.copy())
+                    self.blocks_mode.append(mode)
+                    t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
+                    if self.progress is not None:
+                        self.progress(t_prev)
+                if code == 0:
+                    continue
+                if code == 2:
+                    return t_prev, y_prev, None
+                if code != 1:       # 3, 4 or a CVODE failure: the step loop takes over and explains
+                    return "handover", t_prev, y_prev
+                # a possible crossing in the last step: the step loop's own test and location
+                t_new, y_new = float(ts[-1]), ys[-1].copy()
+                self.stats["steps"] += 1
+                step = _DriverStep(driver, t_prev, t_new, y_new)
+                values_new = self.switches_at(t_new, y_new, modes, index)
+                self._dense = None
+                hit = self.crossing(step, modes, index, signs, g_old, values_new, band)
+                if hit is not None:
+                    t_event, k = hit
+                    dense = self._dense or step.dense_output()
+                    y_event = dense(t_event)
+                    self.record(t_prev, t_event, y_event, dense, mode)
+                    return t_event, y_event, k
+                self.record(t_prev, t_new, y_new, None, mode)
+                g_old[:] = values_new
+                t_prev, y_prev = t_new, y_new
+                if t_new >= t_stop:
+                    return t_new, y_new, None
+        finally:
+            nfev, njev, nlu = driver.counts()
+            self.stats["nfev"] += nfev
+            self.stats["njev"] += njev
+            self.stats["nlu"] += nlu
+            self.stats["linear_solver"] = driver.linear_solver
+            self.stats["driver_segments"] = self.stats.get("driver_segments", 0) + 1
+
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
         self.stats["segments"] += 1
@@ -1200,7 +1384,6 @@ class _Run:
         self.last_relevant = relevant
         fun = lambda tt, yy: self.rhs(tt, yy, modes)
         jac = lambda tt, yy: self.jac(tt, yy, modes)
-        solver = self.new_solver(fun, jac, t, y, t_stop)
         index = np.array([k for k in self.event_switches if relevant[k]], dtype=int)
         signs = modes[index] if index.size else np.zeros(0)
         values_old = self.switches_at(t, y, modes, index)
@@ -1209,6 +1392,16 @@ class _Run:
         drift = np.where(self.model.floor_switches[index], 0.0, np.maximum(0.0, -signs * values_old)) \
             if index.size else np.zeros(0)
         deadband = self.deadbands(t, y, modes, index) + drift
+        driver = self.driver_for(index, signs)
+        if driver is not None:
+            outcome = self.driver_segment(driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband)
+            if outcome[0] != "handover":
+                return outcome
+            # something the driver leaves to this loop (a law not finite at a trial point, a solver
+            # failure to diagnose): go on from its last accepted step, one step at a time
+            _, t, y = outcome
+            values_old = self.switches_at(t, y, modes, index)
+        solver = self.new_solver(fun, jac, t, y, t_stop)
         creeping = 0
         while True:
             message = solver.step()
@@ -1898,13 +2091,272 @@ def cache_dir() -> str:
     return platformdirs.user_cache_dir("bondc", appauthor=False)
 
 
-def load_native(source):
+#: bondc's CVODE driver (C, appended to a model's code where scikit-sundae's SUNDIALS libraries can be
+#: linked): integrates a segment with the model's C functions and watches its switching functions,
+#: returning to Python only at a possible crossing, the segment's end, or anything unusual.
+_DRIVER_SOURCE = r"""/* ---- bondc's CVODE driver: integrates with the model's C functions, no Python per step ---- */
+#include <stdlib.h>
+
+typedef double sunrealtype;
+typedef BONDC_INDEX_TYPE sunindextype;
+typedef struct _generic_N_Vector *N_Vector;
+typedef struct _generic_SUNMatrix *SUNMatrix;
+typedef struct _generic_SUNLinearSolver *SUNLinearSolver;
+typedef struct SUNContext_ *SUNContext;
+typedef int (*CVRhsFn)(sunrealtype, N_Vector, N_Vector, void *);
+typedef int (*CVLsJacFn)(sunrealtype, N_Vector, N_Vector, SUNMatrix, void *, N_Vector, N_Vector, N_Vector);
+
+extern int SUNContext_Create(int comm, SUNContext *ctx);
+extern int SUNContext_Free(SUNContext *ctx);
+extern N_Vector N_VNew_Serial(sunindextype n, SUNContext ctx);
+extern void N_VDestroy(N_Vector v);
+extern sunrealtype *N_VGetArrayPointer(N_Vector v);
+extern SUNMatrix SUNDenseMatrix(sunindextype m, sunindextype n, SUNContext ctx);
+extern SUNMatrix SUNBandMatrix(sunindextype n, sunindextype mu, sunindextype ml, SUNContext ctx);
+extern sunrealtype *SUNDenseMatrix_Column(SUNMatrix a, sunindextype j);
+extern sunrealtype *SUNBandMatrix_Column(SUNMatrix a, sunindextype j);
+extern int SUNMatZero(SUNMatrix a);
+extern void SUNMatDestroy(SUNMatrix a);
+extern SUNLinearSolver SUNLinSol_Dense(N_Vector y, SUNMatrix a, SUNContext ctx);
+extern SUNLinearSolver SUNLinSol_Band(N_Vector y, SUNMatrix a, SUNContext ctx);
+extern int SUNLinSolFree(SUNLinearSolver s);
+extern void *CVodeCreate(int lmm, SUNContext ctx);
+extern int CVodeInit(void *mem, CVRhsFn f, sunrealtype t0, N_Vector y0);
+extern int CVodeReInit(void *mem, sunrealtype t0, N_Vector y0);
+extern int CVodeSStolerances(void *mem, sunrealtype rtol, sunrealtype atol);
+extern int CVodeSetUserData(void *mem, void *data);
+extern int CVodeSetMaxNumSteps(void *mem, long mxsteps);
+extern int CVodeSetInitStep(void *mem, sunrealtype h);
+extern int CVodeSetMaxStep(void *mem, sunrealtype h);
+extern int CVodeSetStopTime(void *mem, sunrealtype t);
+extern int CVodeSetLinearSolver(void *mem, SUNLinearSolver ls, SUNMatrix a);
+extern int CVodeSetJacFn(void *mem, CVLsJacFn jac);
+extern int CVode(void *mem, sunrealtype tout, N_Vector yout, sunrealtype *tret, int itask);
+extern int CVodeGetDky(void *mem, sunrealtype t, int k, N_Vector dky);
+extern int CVodeGetNumRhsEvals(void *mem, long *n);
+extern int CVodeGetNumJacEvals(void *mem, long *n);
+extern int CVodeGetNumLinSolvSetups(void *mem, long *n);
+extern void CVodeFree(void **mem);
+
+typedef struct {
+    void *cvode;
+    SUNContext ctx;
+    N_Vector y, work;
+    SUNMatrix a;
+    SUNLinearSolver ls;
+    int n, switches, entries, banded, lower, upper, started, bad;
+    const int *rows, *cols;
+    double *p, *m, *g, *values;
+    double t_stop;
+} bondc_driver;
+
+static int driver_finite(const double *v, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
+{
+    bondc_driver *d = (bondc_driver *)data;
+    double *out = N_VGetArrayPointer(ydot);
+    bondc_rhs(t, N_VGetArrayPointer(y), d->p, d->m, out);
+    if (!driver_finite(out, d->n)) { d->bad = 1; return -1; }   /* numpy's runtime takes over */
+    return 0;
+}
+
+static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, void *data,
+                      N_Vector t1, N_Vector t2, N_Vector t3)
+{
+    bondc_driver *d = (bondc_driver *)data;
+    (void)fy; (void)t1; (void)t2; (void)t3;
+    bondc_jac(t, N_VGetArrayPointer(y), d->p, d->m, d->values);
+    if (!driver_finite(d->values, d->entries)) { d->bad = 2; return -1; }
+    SUNMatZero(jac);
+    for (int k = 0; k < d->entries; k++) {
+        if (d->banded)
+            SUNBandMatrix_Column(jac, d->cols[k])[d->rows[k] - d->cols[k]] = d->values[k];
+        else
+            SUNDenseMatrix_Column(jac, d->cols[k])[d->rows[k]] = d->values[k];
+    }
+    return 0;
+}
+
+bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows, const int *cols,
+                               int banded, int lower, int upper, int adams, double *p)
+{
+    bondc_driver *d = (bondc_driver *)calloc(1, sizeof(bondc_driver));
+    if (!d) return NULL;
+    d->n = n; d->switches = switches; d->entries = entries; d->rows = rows; d->cols = cols;
+    d->banded = banded; d->lower = lower; d->upper = upper; d->p = p;
+    d->m = (double *)calloc(switches + 1, sizeof(double));
+    d->g = (double *)calloc(switches + 1, sizeof(double));
+    d->values = (double *)calloc(entries + 1, sizeof(double));
+    if (!d->m || !d->g || !d->values || SUNContext_Create(0, &d->ctx) != 0) return NULL;
+    d->y = N_VNew_Serial(n, d->ctx);
+    d->work = N_VNew_Serial(n, d->ctx);
+    d->cvode = CVodeCreate(adams ? 1 : 2, d->ctx);
+    if (!d->y || !d->work || !d->cvode) return NULL;
+    /* Newton iteration (CVODE's default, for Adams too) needs a linear solver */
+    d->a = banded ? SUNBandMatrix(n, upper, lower, d->ctx) : SUNDenseMatrix(n, n, d->ctx);
+    d->ls = banded ? SUNLinSol_Band(d->y, d->a, d->ctx) : SUNLinSol_Dense(d->y, d->a, d->ctx);
+    if (!d->a || !d->ls) return NULL;
+    return d;
+}
+
+/* Start (or restart) at (t0, y0) with modes m, towards t_stop. 0 on success. */
+int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const double *m, double t_stop,
+                       double rtol, double atol, double max_step, double first_step, long max_steps)
+{
+    double *y = N_VGetArrayPointer(d->y);
+    for (int i = 0; i < d->n; i++) y[i] = y0[i];
+    for (int k = 0; k < d->switches; k++) d->m[k] = m[k];
+    d->bad = 0;
+    d->t_stop = t_stop;
+    int flag;
+    if (!d->started) {
+        flag = CVodeInit(d->cvode, driver_rhs, t0, d->y);
+        if (flag == 0) flag = CVodeSetUserData(d->cvode, d);
+        if (flag == 0 && d->ls) flag = CVodeSetLinearSolver(d->cvode, d->ls, d->a);
+        if (flag == 0 && d->ls) flag = CVodeSetJacFn(d->cvode, driver_jac);
+        if (flag != 0) return flag;
+        d->started = 1;
+    } else if ((flag = CVodeReInit(d->cvode, t0, d->y)) != 0) {
+        return flag;
+    }
+    if ((flag = CVodeSStolerances(d->cvode, rtol, atol)) != 0) return flag;
+    if ((flag = CVodeSetMaxStep(d->cvode, max_step)) != 0) return flag;
+    if ((flag = CVodeSetInitStep(d->cvode, first_step)) != 0) return flag;
+    if ((flag = CVodeSetMaxNumSteps(d->cvode, max_steps)) != 0) return flag;
+    return CVodeSetStopTime(d->cvode, t_stop);
+}
+
+/* Up to `capacity` internal steps, each stored in ts/ys. After each step the watched switching
+   functions are compared with their values at the step before (g_old, updated in place): a
+   switch in mode `signs[j]` (+1/-1) may have crossed when signs[j]*g + band[j] < 0.
+   Returns 0: capacity reached; 1: a possible crossing in the last stored step (g_old still holds
+   the values before it); 2: t_stop reached; 3: a law was not finite at a trial point (nothing
+   of the failed attempt is stored); 4: the state is not finite; < 0: CVODE's error flag. */
+int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
+                         const double *band, double *g_old, double *ts, double *ys, int *count)
+{
+    double *y = N_VGetArrayPointer(d->y);
+    *count = 0;
+    for (int k = 0; k < capacity; k++) {
+        double t;
+        int flag = CVode(d->cvode, d->t_stop, d->y, &t, 2);
+        if (flag < 0) return d->bad ? 3 : flag;
+        ts[k] = t;
+        for (int i = 0; i < d->n; i++) ys[(long)k * d->n + i] = y[i];
+        *count = k + 1;
+        if (!driver_finite(y, d->n)) return 4;
+        if (watched) {
+            int crossed = 0;
+            bondc_switches(t, y, d->p, d->m, d->g);
+            for (int j = 0; j < watched; j++) {
+                double before = signs[j] * g_old[j] + band[j], after = signs[j] * d->g[watch[j]] + band[j];
+                if (after < 0 || (after == 0 && before > 0)) crossed = 1;
+            }
+            if (crossed) return 1;
+            for (int j = 0; j < watched; j++) g_old[j] = d->g[watch[j]];
+        }
+        if (t >= d->t_stop) return 2;
+    }
+    return 0;
+}
+
+/* y(t) (k = 0) or its derivative (k = 1) inside the last step. */
+int bondc_driver_dky(bondc_driver *d, double t, int k, double *out)
+{
+    int flag = CVodeGetDky(d->cvode, t, k, d->work);
+    double *w = N_VGetArrayPointer(d->work);
+    for (int i = 0; i < d->n; i++) out[i] = w[i];
+    return flag;
+}
+
+void bondc_driver_counts(bondc_driver *d, long *out)
+{
+    CVodeGetNumRhsEvals(d->cvode, &out[0]);
+    out[1] = 0; out[2] = 0;
+    if (d->ls) {
+        CVodeGetNumJacEvals(d->cvode, &out[1]);
+        CVodeGetNumLinSolvSetups(d->cvode, &out[2]);
+    }
+}
+
+void bondc_driver_free(bondc_driver *d)
+{
+    if (!d) return;
+    if (d->cvode) CVodeFree(&d->cvode);
+    if (d->ls) SUNLinSolFree(d->ls);
+    if (d->a) SUNMatDestroy(d->a);
+    if (d->y) N_VDestroy(d->y);
+    if (d->work) N_VDestroy(d->work);
+    if (d->ctx) SUNContext_Free(&d->ctx);
+    free(d->m); free(d->g); free(d->values); free(d);
+}
+"""
+
+_DRIVER_DECLARATIONS = """
+typedef struct bondc_driver bondc_driver;
+bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows, const int *cols,
+                               int banded, int lower, int upper, int adams, double *p);
+int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const double *m, double t_stop,
+                       double rtol, double atol, double max_step, double first_step, long max_steps);
+int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
+                         const double *band, double *g_old, double *ts, double *ys, int *count);
+int bondc_driver_dky(bondc_driver *d, double t, int k, double *out);
+void bondc_driver_counts(bondc_driver *d, long *out);
+void bondc_driver_free(bondc_driver *d);
+"""
+_SUNDIALS_PARTS = ("core", "cvode", "nvecserial", "sunmatrixdense", "sunmatrixband", "sunlinsoldense",
+                   "sunlinsolband")
+
+
+def _sundials_link():
+    """``(C index type, library paths)`` of the SUNDIALS 7 that scikit-sundae ships (Linux wheels),
+    or None: then the driver is not built and the model's C functions run under scikit-sundae."""
+    import glob
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec("sksundae")
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.origin:
+        return None
+    package = os.path.dirname(spec.origin)
+    try:
+        with open(os.path.join(package, "py_config.pxi"), encoding="utf-8") as stream:
+            config = dict(line.replace('"', "").split(" = ", 1) for line in stream.read().splitlines()
+                          if " = " in line)
+    except (OSError, ValueError):
+        return None
+    index = {"int": "int", "int32_t": "int", "long": "long", "int64_t": "long long",
+             "long int": "long", "long long": "long long"}.get(config.get("SUNDIALS_INT_TYPE", "").strip())
+    if not config.get("SUNDIALS_VERSION", "").startswith("7.") or index is None \
+            or config.get("SUNDIALS_FLOAT_TYPE", "").strip() != "double":
+        return None
+    folder = os.path.join(os.path.dirname(package), "scikit_sundae.libs")
+    libraries = []
+    for part in _SUNDIALS_PARTS:
+        found = sorted(glob.glob(os.path.join(folder, f"libsundials_{part}-*.so*")))
+        if not found:
+            return None
+        libraries.append(found[0])
+    return index, tuple(libraries)
+
+
+def load_native(source, driver=True):
     """``(ffi, lib)`` for the C text ``source``, or ``(None, why not)``.
 
     The shared library is built once per distinct text with the system C compiler
     (``$CC``, else ``cc``/``gcc``/``clang``) into ``cache_dir()/native`` (built in a
     private folder, then renamed into place, so concurrent runs never see half a file)
-    and loaded with cffi. ``BONDC_NATIVE=0`` turns native code off.
+    and loaded with cffi. ``BONDC_NATIVE=0`` turns native code off. With ``driver`` and
+    scikit-sundae's SUNDIALS libraries at hand, bondc's CVODE driver is built in too
+    (``hasattr(lib, "bondc_driver_new")``); if that build fails, the model alone is built.
     """
     if os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false"):
         return None, "native code is turned off (BONDC_NATIVE=0)"
@@ -1912,10 +2364,25 @@ def load_native(source):
         source = "".join(source)
     if not source:
         return None, "the model has no native code"
+    link = _sundials_link() if driver else None
+    variants = []
+    if link is not None:
+        variants.append((source + "\n" + _DRIVER_SOURCE.replace("BONDC_INDEX_TYPE", link[0]), link[1]))
+    variants.append((source, ()))
+    why = ""
+    for text, libraries in variants:
+        ffi, lib = _build_native(text, libraries)
+        if ffi is not None:
+            return ffi, lib
+        why = why or lib
+    return None, why
+
+
+def _build_native(source, libraries):
     import hashlib
 
     flags = (next(flag for limit, flag in _NATIVE_OPTIMIZE if len(source) < limit), *_NATIVE_FLAGS)
-    digest = hashlib.sha256((" ".join(flags) + "\n" + source).encode("utf-8")).hexdigest()[:40]
+    digest = hashlib.sha256("\n".join((*flags, *libraries, source)).encode("utf-8")).hexdigest()[:40]
     if digest in _NATIVE_LIBRARIES:
         return _NATIVE_LIBRARIES[digest]
     try:
@@ -1932,13 +2399,14 @@ def load_native(source):
         compiler = os.environ.get("CC") or next(filter(None, map(shutil.which, ("cc", "gcc", "clang"))), None)
         if not compiler:
             return None, "no C compiler was found (set CC)"
+        link = [*libraries, *(f"-Wl,-rpath,{os.path.dirname(os.path.realpath(libraries[0]))}",)] if libraries else []
         try:
             os.makedirs(directory, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=directory, prefix="build-") as work:
                 c_file, built = os.path.join(work, "model.c"), os.path.join(work, "model.so")
                 with open(c_file, "w", encoding="utf-8") as stream:
                     stream.write(source)
-                done = subprocess.run([compiler, *flags, "-o", built, c_file, "-lm"],
+                done = subprocess.run([compiler, *flags, "-o", built, c_file, *link, "-lm"],
                                       capture_output=True, text=True, timeout=900)
                 if done.returncode != 0:
                     first = (done.stderr.strip().splitlines() or ["no message"])[0]
@@ -1948,7 +2416,7 @@ def load_native(source):
             return None, f"the C compiler could not run ({error})"
     ffi = cffi.FFI()
     ffi.cdef("".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
-                     for name in _NATIVE_FUNCTIONS))
+                     for name in _NATIVE_FUNCTIONS) + (_DRIVER_DECLARATIONS if libraries else ""))
     try:
         lib = ffi.dlopen(path)
     except OSError as error:
@@ -2034,6 +2502,8 @@ def attach_native(model, native=None):
         return out
 
     model.rhs, model.jac, model.switches, model.jac_entries = rhs, jac, switches, jac_entries
+    if hasattr(lib, "bondc_driver_new"):
+        model.native_library = (ffi, lib)
     return True, ""
 
 
