@@ -2033,7 +2033,8 @@ class _Run:
             # restarts that made no progress (a switch re-decided at the same instant) repeat a point:
             # keep its first record, so the time of the result strictly increases
             keep = np.concatenate([[True], np.diff(t) > 0])
-            t, x, outputs, variables = t[keep], x[:, keep], outputs[:, keep], variables[:, keep]
+            if not keep.all():      # (a copy of every variable at every point: only when needed)
+                t, x, outputs, variables = t[keep], x[:, keep], outputs[:, keep], variables[:, keep]
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
             message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
