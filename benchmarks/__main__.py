@@ -13,6 +13,8 @@ Three tables (see benchmarks/README.md for the targets and the last recorded run
    trajectories (relative to each state's range).
 3. **Startup**: whole-process wall time of ``bondc --help``, ``bondc check``,
    a cold ``bondc simulate`` (empty cache) and a cached one, on the flagship.
+4. **Analysis of a large model**: ``bondc equations`` and ``bondc linearize`` of
+   the 1000-section chain (100 with ``--quick``), cold and cached, with peak memory.
 
 Times are seconds on this machine now; the ratios in table 2 are what carries
 over between machines. ``--quick`` (under 2 minutes) stops the scaling at
@@ -172,6 +174,41 @@ def startup(repeat: int) -> dict:
     return rows
 
 
+# ------------------------------------------------------------------ 4. analysis of a large model
+
+_PEAK = ("import resource, sys\nfrom bondc.cli import main\ncode = main(sys.argv[1:])\n"
+         "sys.stderr.write('\\nPEAK %d\\n' % resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+         "sys.exit(code)")
+
+
+def analysis(n: int) -> dict:
+    """Whole-process time and peak memory of ``bondc equations`` and ``bondc linearize`` on the
+    N-section chain: cold (no compile cache) and cached."""
+    from benchmarks.chain import chain_source
+
+    folder = Path(tempfile.mkdtemp(prefix="bondc-bench-"))
+    path = folder / f"chain{n}.bg"
+    path.write_text(chain_source(n), encoding="utf-8")
+    environment = {**os.environ, "BONDC_CACHE_DIR": str(folder / "cache")}
+    rows = {}
+    for command, cache in (("equations", "cold"), ("linearize", "cold"), ("equations", "cached"),
+                           ("linearize", "cached")):
+        arguments = [command, str(path)] + (["--no-cache"] if cache == "cold" else [])
+        start = time.perf_counter()
+        done = subprocess.run([sys.executable, "-c", _PEAK, *arguments], env=environment, capture_output=True,
+                              text=True, cwd=ROOT)
+        seconds = time.perf_counter() - start
+        peak = [line for line in done.stderr.splitlines() if line.startswith("PEAK ")]
+        rows[f"bondc {command} chain N = {n}, {cache}"] = {
+            "seconds": seconds, "peak_mb": int(peak[-1].split()[1]) / 1024 if peak else None,
+            "ok": done.returncode == 0}
+        if cache == "cold" and command == "linearize":
+            # fill the cache for the cached runs (the cold runs bypass it)
+            subprocess.run([sys.executable, "-m", "bondc", "linearize", str(path)], env=environment,
+                           capture_output=True, cwd=ROOT)
+    return rows
+
+
 # ------------------------------------------------------------------ main
 
 def main(argv=None) -> int:
@@ -192,6 +229,8 @@ def main(argv=None) -> int:
         simulations.append(simulate_chain(1000, 1))
     print("startup", file=sys.stderr, flush=True)
     starts = startup(repeat)
+    print("equations and linearize of a large model", file=sys.stderr, flush=True)
+    analyses = analysis(100 if args.quick else 1000)
 
     print("\n## Compile scaling\n")
     stages = list(next(row for row in scaling["rows"] if "error" not in row)["stages"])
@@ -218,9 +257,15 @@ def main(argv=None) -> int:
     print("| --- | --- |")
     for name, seconds in starts.items():
         print(f"| {name} | {seconds:.2f} |")
+    print("\n## Equations and linearisation of a large model (whole process)\n")
+    print("| command | s | peak MB |")
+    print("| --- | --- | --- |")
+    for name, row in analyses.items():
+        peak = f"{row['peak_mb']:.0f}" if row["peak_mb"] is not None else "-"
+        print(f"| {name} | {row['seconds']:.2f}{'' if row['ok'] else ' (failed)'} | {peak} |")
     if args.json:
-        Path(args.json).write_text(json.dumps({"scaling": scaling, "simulation": simulations, "startup": starts},
-                                              indent=2), encoding="utf-8")
+        Path(args.json).write_text(json.dumps({"scaling": scaling, "simulation": simulations, "startup": starts,
+                                               "analysis": analyses}, indent=2), encoding="utf-8")
     return 0
 
 
