@@ -150,8 +150,11 @@ def _cmd_linearize(args) -> int:
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
+    from bondc.io import check_output
     from bondc.simulate import simulate, write
 
+    if args.output:
+        check_output(args.output)       # before any work
     graph, _, state_space, experiment = _derive(args)
     result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
     _print_diagnostics(result.warnings, graph.sources)
@@ -386,9 +389,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is: every command stops as on Ctrl-C (partial results kept)."""
+
+
+def _terminate(signum, frame):
+    from bondc.io import hold_termination
+
+    if not hold_termination(Terminated()):      # a file being written is finished first
+        raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     debug = "--debug" in argv
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    else:       # (signal handlers can only be set in the main thread)
+        previous = None
+    try:
+        return _main(argv, debug)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _main(argv: list[str], debug: bool) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -402,9 +431,10 @@ def main(argv: list[str] | None = None) -> int:
     except BondcError as error:
         _print_diagnostics(error.diagnostics, error.sources)
         return EXIT_ERRORS
-    except KeyboardInterrupt:
-        print("bondc: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as interrupt:
+        terminated = isinstance(interrupt, Terminated)
+        print(f"bondc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+        return 143 if terminated else 130
     except BrokenPipeError:
         return EXIT_OK
     except SystemExit as exit_:  # --help / --version

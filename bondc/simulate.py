@@ -280,7 +280,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
     return result
 
 
-_CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813"}
+_CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813", "points": "E814"}
 
 
 def _failure_diagnostic(graph, failure, raw) -> Diagnostic:
@@ -467,8 +467,11 @@ def run(path, *, model: str | None = None, experiment: str | None = None, sets: 
     model or usage problem. A failed run writes what it computed, then raises
     :class:`SimulationError` whose ``.result`` is the incomplete result.
     """
+    from bondc.io import check_output
     from bondc.pipeline import derive_file
 
+    if output is not None:
+        check_output(output)        # before any work: a bad path is not found after the run
     derived = derive_file(path, model=model, experiment=experiment, sets=sets)
     result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress)
     result.warnings = list(derived.notes) + result.warnings

@@ -385,3 +385,13 @@ def test_doctests():
 
     for module in (energy, stats):
         assert doctest.testmod(module).failed == 0
+
+
+def test_a_cycle_too_short_for_the_run_is_refused_before_any_window():
+    from bondc.analysis.energy import MAX_CYCLES, cycle_windows
+    from bondc.errors import AnalysisError
+
+    assert len(cycle_windows(0.0, 1.0, 1.0 / MAX_CYCLES)) == MAX_CYCLES
+    with pytest.raises(AnalysisError) as raised:
+        cycle_windows(0.0, 1.0, 1e-9)
+    assert raised.value.diagnostics[0].code == "E935" and "1e+09 cycles" in str(raised.value)

@@ -258,9 +258,12 @@ def test_a_failure_leaves_the_earlier_report_intact(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(bondc.io.os, "replace", broken_replace)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(UsageError, match="disk full") as raised:     # E004, naming where the report is kept
         build_report(model, output=target, date="2030-01-01")
     monkeypatch.undo()
+    kept = Path(raised.value.diagnostics[0].message.split("kept in '")[1].rstrip("'"))
+    assert raised.value.diagnostics[0].code == "E004" and b"2030-01-01" in kept.read_bytes()
+    kept.unlink()
     assert target.read_bytes() == earlier
     assert listing() == ["m.html"]                                       # no temporary file left behind
     # and a successful build replaces it

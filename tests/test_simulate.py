@@ -356,3 +356,25 @@ def test_an_infinite_power_stops_the_energy_account_with_a_diagnostic(tmp_path):
     with pytest.raises(AnalysisError) as caught:
         energy_account(derived.state_space, result)
     assert caught.value.diagnostics[0].code == "E934"
+
+
+def test_an_output_grid_too_fine_for_memory_is_refused_before_the_run():
+    _, ss, experiment = derive("msd")
+    with pytest.raises(UsageError) as raised:
+        simulate(ss, experiment, dt=1e-9)
+    message = str(raised.value)
+    assert raised.value.diagnostics[0].code == "E803"
+    assert "gives 2e+09 points" in message and "give a larger dt" in message
+
+
+def test_a_run_past_its_point_limit_stops_and_keeps_what_it_computed(monkeypatch):
+    from bondc.simulate import compile_model
+
+    _, ss, experiment = derive("msd")
+    namespace = compile_model(ss)
+    monkeypatch.setitem(namespace, "MAX_POINTS", 2000)      # the generated module's own limit
+    result = simulate(ss, experiment, t_end=100.0, max_step=1e-3)      # 100 000 steps would be needed
+    assert not result.complete
+    assert result.diagnostics[0].code == "E814"
+    assert 2000 < result.t.size <= 2000 + 4096           # stops at the first block past the limit
+    assert np.all(np.diff(result.t) > 0) and np.all(np.isfinite(result.states["spring.q"]))

@@ -349,6 +349,10 @@ def _error(code: str, message: str, hint: str | None = None) -> AnalysisError:
 # ---------------------------------------------------------------- windows
 
 
+#: At most this many cycles are analysed (each is a row of every per-cycle table).
+MAX_CYCLES = 10_000
+
+
 def cycle_windows(t_start: float, t_end: float, cycle: float | None) -> list[tuple[float, float, bool]]:
     """``(start, end, partial)`` of consecutive windows of length ``cycle`` from ``t_start``.
 
@@ -364,7 +368,11 @@ def cycle_windows(t_start: float, t_end: float, cycle: float | None) -> list[tup
         return [(t_start, t_end, False)]
     if not (isinstance(cycle, (int, float)) and math.isfinite(cycle) and cycle > 0):
         raise _error("E932", f"the cycle length must be a positive number of seconds, not {cycle!r}")
-    count = int(math.floor((t_end - t_start) / cycle * (1 + 1e-9) + 1e-9))
+    count = (t_end - t_start) / cycle
+    if count > MAX_CYCLES:      # before a window is made (cycle = 1e-9 s would be billions of them)
+        raise _error("E935", f"the run spans {count:.3g} cycles of {cycle:g} s; at most {MAX_CYCLES} cycles "
+                             f"are analysed", hint="check the cycle length (seconds), or analyse a shorter run")
+    count = int(math.floor(count * (1 + 1e-9) + 1e-9))
     if count == 0:
         return [(t_start, t_end, True)]
     windows = [(t_start + k * cycle, t_start + (k + 1) * cycle, False) for k in range(count)]

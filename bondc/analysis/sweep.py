@@ -156,6 +156,9 @@ def _range(item: str, spec: str) -> list[float]:
     if count < 2 or str(count) != parts[2].lstrip("+"):
         raise _usage("E962", f"--vary '{spec}': the count in '{item}' must be a whole number >= 2, "
                              f"got '{parts[2]}'", hint="start:stop:count includes both ends")
+    if count > MAX_RUNS:        # before anything is allocated (a count of 10^8 is 800 MB of values)
+        raise _usage("E964", f"--vary '{spec}' asks for {count} values; a sweep has at most {MAX_RUNS} runs",
+                     hint="use fewer points (a coarse grid first, then a finer one where it matters)")
     values = np.linspace(start, stop, count)
     values[0], values[-1] = start, stop
     return [float(v) for v in values]
@@ -768,6 +771,10 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         raise _usage("E967", f"jobs must be a whole number >= 1, got {jobs!r}")
     if output is not None and Path(output).suffix.lower() not in (".csv", ".json"):
         raise _usage("E969", f"cannot write '{output}': give a .csv or .json file")
+    if output is not None:
+        from bondc.io import check_output
+
+        check_output(output, "the sweep table")
     axes = [parse_vary(text) for text in vary]
     runs = math.prod(len(axis.values) for axis in axes)
     if runs > MAX_RUNS:
@@ -822,7 +829,7 @@ def _run_all(setup: _Setup, grid: list, jobs: int, report) -> list[SweepPoint]:
     from concurrent.futures.process import BrokenProcessPool
 
     done: dict[int, SweepPoint] = {}
-    executor = concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(grid)))
+    executor = concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(grid)), initializer=_worker_signals)
     try:
         futures = {executor.submit(_run_point, setup, index, values): index for index, values in enumerate(grid)}
         for future in concurrent.futures.as_completed(futures):
@@ -839,10 +846,22 @@ def _run_all(setup: _Setup, grid: list, jobs: int, report) -> list[SweepPoint]:
             if report is not None:
                 report(done[index], len(done), len(grid))
     except BaseException:
-        executor.shutdown(wait=True, cancel_futures=True)
+        # Ctrl-C, SIGTERM or an error: the workers stop now, not after their current points
+        for process in list((getattr(executor, "_processes", None) or {}).values()):
+            process.kill()
+        executor.shutdown(wait=False, cancel_futures=True)
         raise
     executor.shutdown(wait=True)
     return [done[index] for index in range(len(grid))]
+
+
+def _worker_signals() -> None:
+    """In a worker: Ctrl-C (sent to the whole process group) is the parent's to handle, and
+    SIGTERM ends the worker at once (the parent kills its workers when it stops)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
 class _ProgressLine:

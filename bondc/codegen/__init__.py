@@ -36,9 +36,11 @@ def compile_file(path, output=None, *, model: str | None = None, experiment: str
     module's source. Raises the stage errors (ModelError, CausalityError,
     EquationError, UsageError) for a model that cannot be compiled.
     """
-    from bondc.io import atomic_write_text
+    from bondc.io import atomic_write_text, check_output
     from bondc.pipeline import derive_file
 
+    if output is not None:
+        check_output(output)
     derived = derive_file(path, model=model, experiment=experiment, sets=sets)
     module_dir = Path(output).resolve().parent if output is not None else Path(path).resolve().parent
     source = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir,

@@ -415,6 +415,7 @@ class _Emitter:
                 data_paths[path] = relative_data_path(path, module_dir) if module_dir else Path(path).name
         self.data_paths = data_paths
         self.reduced: dict = {}        # body() memo, shared with the C emitter (a shallow copy of this one)
+        self.printed: dict = {}        # text() memo (keyed by the printer's class: numpy and C differ)
 
     def printer(self, extra_frozen=()):
         return BondcPrinter(self.names, mode_symbols=self.modes | set(extra_frozen), data_paths=self.data_paths)
@@ -477,7 +478,7 @@ class _Emitter:
                     continue
                 emit_replacements(substitutes[symbol])
                 emitted.add(symbol)
-                lines.append(self.assign_line(self.names[symbol], printer.doprint(substitutes[symbol])))
+                lines.append(self.assign_line(self.names[symbol], self.text(printer, substitutes[symbol])))
 
         position = 0
         for statement in kept:
@@ -490,7 +491,7 @@ class _Emitter:
         final_texts = []
         for expr in reduced[position:]:
             emit_replacements(expr)
-            final_texts.append(printer.doprint(expr))
+            final_texts.append(self.text(printer, expr))
         used = set()
         for _, expr in replacements:
             used |= expr.free_symbols
@@ -504,9 +505,18 @@ class _Emitter:
     def assign_line(name: str, text: str) -> str:
         return f"{name} = {text}"
 
+    def text(self, printer, expr) -> str:
+        """``printer.doprint(expr)``, once per expression and printer setting: most statements are
+        printed in several functions (the right-hand side, the variables, the outputs)."""
+        key = (type(printer), getattr(printer, "mode_symbols", None), expr)
+        text = self.printed.get(key)
+        if text is None:
+            text = self.printed[key] = printer.doprint(expr)
+        return text
+
     def statement_lines(self, statement, exprs, printer):
         if statement.kind == "assign":
-            return [self.assign_line(self.names[statement.defines[0]], printer.doprint(exprs[0]))]
+            return [self.assign_line(self.names[statement.defines[0]], self.text(printer, exprs[0]))]
         if statement.kind == "block":
             number = statement.data["number"]
             unknowns = ", ".join(self.names[u] for u in statement.defines) + ","
@@ -790,7 +800,7 @@ class _NativeEmitter(_Emitter):
     def statement_lines(self, statement, exprs, printer):
         if statement.kind != "assign":
             raise UnsupportedExpression("an algebraic loop is solved by the numpy module")
-        return [self.assign_line(self.names[statement.defines[0]], printer.doprint(exprs[0]))]
+        return [self.assign_line(self.names[statement.defines[0]], self.text(printer, exprs[0]))]
 
     def unpack(self, used, with_modes=True):
         lines = []

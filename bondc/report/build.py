@@ -50,7 +50,7 @@ import sympy
 from markupsafe import Markup
 
 from bondc.errors import Diagnostic, UsageError, render as render_diagnostic
-from bondc.io import atomic_write_text
+from bondc.io import atomic_write_text, check_output
 from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
@@ -202,6 +202,8 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
     not change it: that is ``bondc validate``'s job.
     """
     errors = errors if errors is not None else sys.stderr
+    if output is not None:
+        check_output(output, "the report", make_folder=True)
     target, run = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
                          motors=motors, output=output, t_end=t_end, date=date, progress=progress)
     _print_diagnostics(run, errors)
@@ -329,6 +331,9 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
     """
     stream = stream if stream is not None else sys.stdout
     errors = errors if errors is not None else sys.stderr
+    for given, what in ((junit, "the JUnit XML"), (output, "the report")):
+        if given is not None:
+            check_output(given, what, make_folder=True)
     specs, measured = _measured(data, compare)
     if not specs:
         raise UsageError(Diagnostic("error", "E001", "validate needs at least one comparison",

@@ -224,6 +224,12 @@ d("E813", "interrupted",
   "written with `-o`; the command exits with status 1. The example interrupts a run from its progress "
   "callback.",
   "Nothing to fix; simulate a shorter time with `--t-end` if the run is too slow.")
+d("E814", "too many points",
+  "A run keeps every state, output and bond variable at every point; it stops when its result would exceed "
+  "1 million points or 20 million numbers (about 1 GB with the recording and the analyses), and keeps what it "
+  "computed up to there, marked incomplete. A `dt` that would give more points than that is refused before the "
+  "run (E803).",
+  "Report on a coarser grid (`--dt`, or `dt` in the experiment), or simulate a shorter time.")
 d("W820", "chattering",
   "Switches changed mode faster than events can be located: they accumulate at an instant (a Zeno "
   "approach, like the twisting example, whose switching times shrink geometrically as it comes to rest), "
@@ -352,6 +358,11 @@ d("E934", "power not finite",
   "W821): there is no meaningful account, so `bondc simulate` prints this instead of the tables. The "
   "example's mass of 1e-320 kg makes its velocity `p/m` infinite at once.",
   "Fix the law W821 names: a division by a parameter that is zero or tiny, or a state outside its range.")
+d("E935", "too many cycles",
+  "The energy and power analysis splits the run into cycles of the experiment's `cycle` length; a run that "
+  "spans more than 10 000 of them is refused before any window is made (a cycle given in the wrong unit, "
+  "1e-9 s, would be billions).",
+  "Check the cycle length (seconds) in the experiment, or analyse a shorter run.")
 d("W930", "energy balance does not close",
   "After a run, bondc accounts the energy of every element per cycle; for a cycle, the sources' net energy "
   "differs from dissipated + stored + net work in by more than 1e-6 of the energy throughput. The residual is "
@@ -464,6 +475,17 @@ d("E002", "model file cannot be read",
   "The `.bg` file named on the command line does not exist, is a directory, or is not UTF-8 text. The "
   "command exits with status 2. (A file named by `import` is E307; a `csv(...)` file, E310.)",
   "Check the path (relative to the current directory); save the model as UTF-8.")
+d("E003", "output path cannot be written",
+  "An output file (`-o`, `--junit`) is checked before any work: its folder must exist and be writable, and "
+  "bondc replaces only regular files — never a folder, a symbolic link, a named pipe or a device. The command "
+  "exits with status 2 and computes nothing. (A report's or JUnit file's folder is created when missing.)",
+  "Give the path of a new file or of a regular file to replace, in a folder you may write; create the folder "
+  "first (`mkdir -p`).")
+d("E004", "output could not be written",
+  "Writing the output failed after the computation (a full disk, a folder removed meanwhile). The file at the "
+  "path is left as it was, and the content is written to a file in the system's temporary folder, which the "
+  "message names, so the results are not lost.",
+  "Free some space or choose another folder, then copy the kept file there (or run again).")
 
 # ================================================================== examples
 
@@ -615,6 +637,7 @@ live("E931", Api(_with(_ENERGY, _SPIN_API.replace("simulate(ss, graph.experiment
                                                   "simulate(ss, graph.experiments[\"run\"], t_eval=[0.0])"))
                  + "energy_account(ss, result)", {"spin.bg": SPIN}))
 live("E932", Api(_with(_ENERGY, _SPIN_API) + "energy_account(ss, result, cycle=0)", {"spin.bg": SPIN}))
+live("E935", Api(_with(_ENERGY, _SPIN_API) + "energy_account(ss, result, cycle=1e-9)", {"spin.bg": SPIN}))
 live("E933", Api(_with("from bondc.analysis.stats import power_statistics\n", _SPIN_API)
                  + "power_statistics(result, [\"power\"])", {"spin.bg": SPIN}))
 _TINY = """model Tiny
@@ -695,6 +718,7 @@ live("E813", Api(_RUNTIME.format(file="spin.bg")
 
 live("E001", Cli("bondc simulate --t-end 2"), Cli("bondc report spin.bg --compare omega=omega_meas", {"spin.bg": SPIN}))
 live("E002", Cli("bondc check spin.gb", {"spin.bg": SPIN}))
+live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
 
 # ================================================================== the page
 
