@@ -33,7 +33,7 @@ import sympy
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.precedence import precedence
 
-from bondc.codegen.printer import UnsupportedExpression
+from bondc.codegen.printer import BondcPrinting, UnsupportedExpression
 
 #: Helpers every native module starts with (numpy's semantics for nan and the ends of a table).
 PRELUDE = r"""#include <math.h>
@@ -73,8 +73,10 @@ def c_name(python_name: str, index: int) -> str:
     return f"w{index}"
 
 
-class NativePrinter(C99CodePrinter):
+class NativePrinter(BondcPrinting, C99CodePrinter):
     """C99 printer with bondc's names, exact doubles and numpy-compatible helpers."""
+
+    target = "native code"
 
     _default_settings = {**C99CodePrinter._default_settings, "allow_unknown_functions": False,
                          "order": "none"}
@@ -83,21 +85,7 @@ class NativePrinter(C99CodePrinter):
         super().__init__(settings or {})
         self.names = dict(names)
 
-    def _as_ordered_terms(self, expr, order=None):
-        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
-
-    def _handle_UnevaluatedExpr(self, expr):
-        return expr
-
     # -- names and numbers
-
-    def _print_Symbol(self, expr):
-        try:
-            return self.names[expr]
-        except KeyError:
-            raise UnsupportedExpression(f"unknown symbol {expr.name!r} in native code") from None
-
-    _print_Dummy = _print_Symbol
 
     def _print_Float(self, expr):
         value = float(expr)
@@ -163,13 +151,6 @@ class NativePrinter(C99CodePrinter):
         h0 = self._print(expr.args[1]) if len(expr.args) > 1 else "0.5"
         return f"bondc_heaviside({self._print(expr.args[0])}, {h0})"
 
-    def _fold(self, function, args):
-        args = [self._print(arg) for arg in args]
-        text = args[0]
-        for arg in args[1:]:
-            text = f"{function}({text}, {arg})"
-        return text
-
     def _print_Min(self, expr):
         return self._fold("bondc_min", expr.args)
 
@@ -192,10 +173,6 @@ class NativePrinter(C99CodePrinter):
         for value, cond in reversed(pieces):
             text = f"({self._print(cond)} ? {self._print(value)} : {text})"
         return text
-
-    def _print_Relational(self, expr):
-        op = {"==": "==", "!=": "!=", "<": "<", "<=": "<=", ">": ">", ">=": ">="}[expr.rel_op]
-        return f"({self._print(expr.lhs)} {op} {self._print(expr.rhs)})"
 
     def _print_And(self, expr):
         return "(" + " && ".join(self._print(arg) for arg in expr.args) + ")"
@@ -220,17 +197,3 @@ class NativePrinter(C99CodePrinter):
 
     def _print_Csv(self, expr):
         raise UnsupportedExpression("a measured csv signal has no native form")
-
-    # -- refuse the rest
-
-    def _print_Function(self, expr):
-        raise UnsupportedExpression(f"unsupported function {type(expr).__name__} in native code")
-
-    def _print_Derivative(self, expr):
-        raise UnsupportedExpression(f"unsupported derivative {expr} in native code")
-
-    def _print_DiracDelta(self, expr):
-        raise UnsupportedExpression("an impulse (DiracDelta) cannot be simulated")
-
-    def emptyPrinter(self, expr):
-        raise UnsupportedExpression(f"cannot print {type(expr).__name__} in native code")

@@ -60,7 +60,7 @@ from bondc import __version__
 from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import BondcPrinter, UnsupportedExpression, relative_data_path
-from bondc.symbolic import Csv, Table, as_sympy, partial_derivative
+from bondc.symbolic import as_sympy, partial_derivative
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
 ARGUMENTS = ("t", "x", "p", "m")

@@ -38,7 +38,55 @@ class UnsupportedExpression(Exception):
     """An expression the code generator cannot print."""
 
 
-class BondcPrinter(NumPyPrinter):
+class BondcPrinting:
+    """What bondc's numpy and C printers share: names only from the map, sums in sympy's argument
+    order with negative terms last, min/max folded pairwise, relations in parentheses, and a
+    refusal (:class:`UnsupportedExpression`) for anything they do not know. ``target`` names the
+    code in messages."""
+
+    target = "generated code"
+    names: Mapping
+
+    def _as_ordered_terms(self, expr, order=None):
+        # sympy's argument order, with the terms that print with a minus sign last: "t - 0.1"
+        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
+
+    def _handle_UnevaluatedExpr(self, expr):
+        return expr         # bondc never builds UnevaluatedExpr: skip the search for one in every expression
+
+    def _print_Symbol(self, expr):
+        try:
+            return self.names[expr]
+        except KeyError:
+            raise UnsupportedExpression(f"unknown symbol {expr.name!r} in {self.target}") from None
+
+    _print_Dummy = _print_Symbol
+
+    def _fold(self, function, args):
+        args = [self._print(arg) for arg in args]
+        text = args[0]
+        for arg in args[1:]:
+            text = f"{function}({text}, {arg})"
+        return text
+
+    def _print_Relational(self, expr):
+        op = {"==": "==", "!=": "!=", "<": "<", "<=": "<=", ">": ">", ">=": ">="}[expr.rel_op]
+        return f"({self._print(expr.lhs)} {op} {self._print(expr.rhs)})"
+
+    def _print_Function(self, expr):
+        raise UnsupportedExpression(f"unsupported function {type(expr).__name__} in {self.target}")
+
+    def _print_Derivative(self, expr):
+        raise UnsupportedExpression(f"unsupported derivative {expr} in {self.target}")
+
+    def _print_DiracDelta(self, expr):
+        raise UnsupportedExpression("an impulse (DiracDelta) cannot be simulated")
+
+    def emptyPrinter(self, expr):
+        raise UnsupportedExpression(f"unsupported expression {type(expr).__name__} in {self.target}")
+
+
+class BondcPrinter(BondcPrinting, NumPyPrinter):
     """numpy printer with bondc's names, exact floats, signals and frozen conditionals."""
 
     printmethod = "_bondccode"
@@ -54,26 +102,11 @@ class BondcPrinter(NumPyPrinter):
         self.mode_symbols = frozenset(mode_symbols)
         self.data_paths = dict(data_paths or {})
 
-    def _as_ordered_terms(self, expr, order=None):
-        # sympy's argument order, with the terms that print with a minus sign last: "t - 0.1"
-        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
-
-    def _handle_UnevaluatedExpr(self, expr):
-        return expr         # bondc never builds UnevaluatedExpr: skip the search for one in every expression
-
     # -- names and numbers
 
     def _module_format(self, fqn, register=True):
         text = super()._module_format(fqn, register)
         return "np." + text[len("numpy."):] if text.startswith("numpy.") else text
-
-    def _print_Symbol(self, expr):
-        try:
-            return self.names[expr]
-        except KeyError:
-            raise UnsupportedExpression(f"unknown symbol {expr.name!r} in generated code") from None
-
-    _print_Dummy = _print_Symbol
 
     def _print_Float(self, expr):
         value = float(expr)
@@ -133,13 +166,6 @@ class BondcPrinter(NumPyPrinter):
         h0 = self._print(expr.args[1]) if len(expr.args) > 1 else "0.5"
         return f"np.heaviside({x}, {h0})"
 
-    def _fold(self, function, args):
-        args = [self._print(arg) for arg in args]
-        text = args[0]
-        for arg in args[1:]:
-            text = f"{function}({text}, {arg})"
-        return text
-
     def _print_Min(self, expr):
         return self._fold("np.minimum", expr.args)
 
@@ -179,10 +205,6 @@ class BondcPrinter(NumPyPrinter):
             return f"np.logical_not({self._vector_condition(cond.args[0])})"
         return self._print(cond)
 
-    def _print_Relational(self, expr):
-        op = {"==": "==", "!=": "!=", "<": "<", "<=": "<=", ">": ">", ">=": ">="}[expr.rel_op]
-        return f"({self._print(expr.lhs)} {op} {self._print(expr.rhs)})"
-
     def _print_And(self, expr):
         return "(" + " and ".join(self._print(arg) for arg in expr.args) + ")"
 
@@ -207,19 +229,6 @@ class BondcPrinter(NumPyPrinter):
         path = self.data_paths.get(expr.path, expr.path)
         return f"csv_signal({self._print(expr.args[0])}, DATA_DIR, {path!r}, {expr.column!r})"
 
-    # -- refuse the rest
-
-    def _print_Function(self, expr):
-        raise UnsupportedExpression(f"unsupported function {type(expr).__name__} in generated code")
-
-    def _print_Derivative(self, expr):
-        raise UnsupportedExpression(f"unsupported derivative {expr} in generated code")
-
-    def _print_DiracDelta(self, expr):
-        raise UnsupportedExpression("an impulse (DiracDelta) cannot be simulated")
-
-    def emptyPrinter(self, expr):
-        raise UnsupportedExpression(f"unsupported expression {type(expr).__name__} in generated code")
 
 
 def relative_data_path(path: str, module_dir: str | Path) -> str:
