@@ -5,9 +5,12 @@ import tempfile
 
 import pytest
 
-# The compile cache and the compiled C libraries of this test run live in a folder of their own,
-# never in the user's cache (tests that need an empty cache make their own).
-os.environ["BONDC_CACHE_DIR"] = tempfile.mkdtemp(prefix="bondc-test-cache-")
+# Tests never reuse a derived model from the compile cache (a test that changes bondc's behaviour
+# must see it run; tests/test_cache.py turns the cache on in folders of its own). The compiled C
+# libraries, keyed by their exact text and flags, are kept between test sessions in a folder of
+# the tests' own, never in the user's cache.
+os.environ["BONDC_CACHE"] = "0"
+os.environ["BONDC_CACHE_DIR"] = os.path.join(tempfile.gettempdir(), f"bondc-test-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}")
 
 
 def pytest_addoption(parser):

@@ -370,7 +370,8 @@ HOSTILE_NAMES = [
 
 
 @pytest.mark.parametrize("name", HOSTILE_NAMES, ids=["triple-quotes", "newline", "line-separators", "quotes"])
-@pytest.mark.parametrize("standalone", [False, True], ids=["imports-runtime", "standalone"])
+@pytest.mark.parametrize("standalone", [pytest.param(False, marks=pytest.mark.slow), True],
+                         ids=["imports-runtime", "standalone"])
 def test_a_hostile_file_name_never_runs_as_code(tmp_path, monkeypatch, name, standalone):
     from bondc.codegen import compile_file
 

@@ -439,7 +439,8 @@ def _chain_text(n, m=1.0, k=400.0, b=2.0, b0=0.5, force=10.0, interleaved=False)
     return "\n".join(lines) + "\n"
 
 
-@pytest.mark.parametrize("solver, interleaved", [("dense", False), ("band", True), ("sparse", False)])
+@pytest.mark.parametrize("solver, interleaved", [pytest.param("dense", False, marks=pytest.mark.slow), ("band", True),
+                                                 pytest.param("sparse", False, marks=pytest.mark.slow)])
 def test_every_linear_solver_matches_the_hand_written_chain(tmp_path, monkeypatch, solver, interleaved):
     """Dense LU, banded LU (the interleaved chain's Jacobian has a band of 2 + 2) and SuperLU on
     the pattern (the other order's is wide). The size thresholds are performance settings: the
