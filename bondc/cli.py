@@ -439,6 +439,12 @@ def _main(argv: list[str], debug: bool) -> int:
         return EXIT_OK
     except SystemExit as exit_:  # --help / --version
         return int(exit_.code or 0)
+    except RecursionError:
+        _print_diagnostics([Diagnostic(
+            "error", "E005", "an expression is nested too deeply for bondc (a single sum, product or call "
+                             "chain of many thousands of terms)",
+            hint="split it: give parts of it names with param, or as fn definitions")])
+        return EXIT_ERRORS
     except Exception as error:  # an internal error: a bug in bondc, not in the model
         print(f"bondc: internal error: {type(error).__name__}: {error}", file=sys.stderr)
         print("This is a bug in bondc; please report it with the model file.", file=sys.stderr)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import re
+import sys
 from fractions import Fraction
 from importlib import resources
 from pathlib import Path
@@ -29,6 +30,13 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedEOF, UnexpectedInput
 from bondc import ast
 from bondc.errors import Diagnostic, ParseError
 from bondc.source import Source, Span
+
+#: Python's default of 1000 nested calls is reached by a sum of a few hundred terms: the parser,
+#: the syntax tree and the translation to sympy follow an operator chain one call per term.
+#: Python 3.11 keeps these calls off the C stack; a deeper chain is E005 (bondc.cli).
+RECURSION_LIMIT = 20_000
+if sys.getrecursionlimit() < RECURSION_LIMIT:
+    sys.setrecursionlimit(RECURSION_LIMIT)
 
 MAX_SYNTAX_ERRORS = 20
 

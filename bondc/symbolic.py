@@ -320,6 +320,14 @@ def _short_number(value) -> str:
     return text if len(text) <= 40 else f"{text[:20]}...({len(text)} digits)"
 
 
+#: At most this many function bodies are expanded in one law (each with distinct arguments).
+MAX_EXPANSIONS = 20_000
+
+
+class _Exploded(Exception):
+    """Raised past MAX_EXPANSIONS; the outermost call turns it into the law's diagnostic."""
+
+
 def _fail(node, message: str, hint: str | None = None) -> EquationError:
     return EquationError(Diagnostic("error", "E701", message, getattr(node, "span", None) or _no_span(), hint=hint))
 
@@ -364,6 +372,8 @@ class Translator:
         self.time = time if time is not None else sympy.Symbol("t", real=True)
         self._bound: list[Mapping[str, object]] = []    # fn parameters, innermost last
         self._calls: list[str] = []
+        self._applied: dict = {}        # (function, argument values) -> value
+        self._expansions = 0            # function bodies translated (the law's size, in a way)
 
     def __call__(self, node):
         return _as_value(self.translate(node))
@@ -467,13 +477,37 @@ class Translator:
         if function.name in self._calls:
             raise _fail(node, f"function '{function.name}' calls itself")
         bound = {param: self(arg) for param, arg in zip(function.params, node.args)}
+        # a function's value depends on its arguments only: translated once per distinct arguments,
+        # so functions that call earlier ones twice (f1(x) = f0(x) + f0(x), ...) stay linear in size
+        key = (function.name, tuple(bound.values()))
+        try:
+            known = self._applied.get(key)
+        except TypeError:       # an argument that cannot be a key: translate as it is
+            key, known = None, None
+        if known is not None:
+            return known
+        self._expansions += 1
+        outermost = not self._calls
+        if self._expansions > MAX_EXPANSIONS:
+            raise _Exploded()
         self._bound.append(bound)
         self._calls.append(function.name)
         try:
-            return self.translate(function.body)
+            value = self.translate(function.body)
+        except _Exploded:
+            if not outermost:
+                raise
+            # reported at the call in the law itself, with the function it starts from
+            raise _fail(node, f"expanding {function.name}() here calls functions more than {MAX_EXPANSIONS} "
+                              f"times with different arguments (they call one another at every level)",
+                        hint="compute the repeated part once: make it a parameter, an input or a model "
+                             "variable, or simplify the functions") from None
         finally:
             self._bound.pop()
             self._calls.pop()
+        if key is not None:
+            self._applied[key] = value
+        return value
 
     def _list(self, node) -> sympy.Tuple:
         if not isinstance(node, ast.ListExpr):

@@ -487,6 +487,11 @@ d("E004", "output could not be written",
   "message names, so the results are not lost.",
   "Free some space or choose another folder, then copy the kept file there (or run again).")
 
+d("E005", "expression nested too deeply",
+  "One expression is a chain of many thousands of terms (`1 + 1 + ... + 1`, generated text): the parser and "
+  "the translation to sympy follow it one level per term. Sums of a few thousand terms are fine; beyond "
+  "what Python's call depth allows (20 000 levels) the command stops with this error instead of a traceback.",
+  "Split the expression: name parts of it with `param` or write them as `fn` definitions.")
 # ================================================================== examples
 
 PARSE_EXAMPLES = {
