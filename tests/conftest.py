@@ -1,6 +1,7 @@
 """Shared pytest options: ``pytest --update-golden`` rewrites golden files instead of comparing."""
 
 import os
+import sys
 import tempfile
 
 import pytest
@@ -21,3 +22,12 @@ def pytest_addoption(parser):
 @pytest.fixture
 def update_golden(request) -> bool:
     return bool(request.config.getoption("--update-golden"))
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The fuzz harness's counts (tests/test_fuzz.py), when it ran."""
+    fuzz = sys.modules.get("test_fuzz")
+    if fuzz is not None and fuzz.SUMMARY:
+        terminalreporter.section("fuzz harness")
+        for line in fuzz.SUMMARY.values():
+            terminalreporter.write_line(line)

@@ -1,0 +1,161 @@
+"""Fuzz harness: mutants of every model in the project, checked and simulated as a user would.
+
+The corpus is every ``.bg`` file under ``models/`` and ``tests/``. Each mutant
+changes one to three lines of one file with a seeded random generator:
+
+- delete, duplicate or swap lines;
+- insert a token;
+- replace a number by an extreme one (0, -1, 1e308, 1e-320, 1e309);
+- swap an operator.
+
+Every mutant goes through ``bondc check``. A sample of those that pass also
+goes through ``bondc simulate``, in a subprocess with a time limit. The outcome
+must be a normal exit (0, 1 or 2), never an internal error (exit 3) or a
+Python traceback, and never a hang. Every error diagnostic of ``check`` must
+name where it is: ``file:line:col``, or the file for a whole-file problem. The
+counts are printed in the test session's summary (see ``conftest.py``).
+
+Mutants are reproducible: ``FUZZ_SEED`` picks the sequence, ``FUZZ_CHECKS`` and
+``FUZZ_RUNS`` its length. Both tests are marked slow, so CI runs them.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import random
+import re
+import subprocess
+import sys
+from contextlib import redirect_stderr, redirect_stdout
+from pathlib import Path
+
+import pytest
+
+from bondc.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+CORPUS = sorted(p for p in [*ROOT.glob("models/**/*.bg"), *ROOT.glob("tests/**/*.bg")] if p.is_file())
+SEED = int(os.environ.get("FUZZ_SEED", "20261124"))
+CHECKS = int(os.environ.get("FUZZ_CHECKS", "400"))
+RUNS = int(os.environ.get("FUZZ_RUNS", "24"))
+RUN_LIMIT = 60.0        # seconds for one simulate of a mutant (no run may hang)
+
+TOKENS = ["->", ":", "=", "(", ")", "[", "]", ",", ".", "+", "-", "*", "/", "^", "end", "model", "param",
+          "if", "then", "else", "0", "1", "1e309", "x", "e", "f", "q", "p", '"s"', "#", "[kg]", "[m/s]",
+          "sqrt(", "step(t, 1)", "table(t, [0, 1], [0, 1])", "0 j", "1 j", "R r", "C c", "I i", "Se s"]
+EXTREME = ["0", "-1", "1e308", "1e-320", "1e309", "0.0", "-0", "123456789012345678901234567890"]
+OPERATORS = {"+": "-", "-": "+", "*": "/", "/": "*", "^": "*", "<": ">=", ">": "<="}
+NUMBER = re.compile(r"(?<![\w.])\d+(\.\d*)?([eE][+-]?\d+)?")
+
+SUMMARY: dict = {}      # printed by conftest.pytest_terminal_summary
+
+
+def mutate(text: str, rng: random.Random) -> str:
+    lines = text.split("\n")
+    for _ in range(rng.randint(1, 3)):
+        if not lines:
+            break
+        index = rng.randrange(len(lines))
+        action = rng.choice(["delete", "duplicate", "swap", "insert", "number", "number", "operator"])
+        if action == "delete":
+            del lines[index]
+        elif action == "duplicate":
+            lines.insert(index, lines[rng.randrange(len(lines))])
+        elif action == "swap":
+            other = rng.randrange(len(lines))
+            lines[index], lines[other] = lines[other], lines[index]
+        elif action == "insert":
+            cut = rng.randint(0, len(lines[index]))
+            lines[index] = lines[index][:cut] + " " + rng.choice(TOKENS) + " " + lines[index][cut:]
+        elif action == "number":
+            numbers = list(NUMBER.finditer(lines[index]))
+            if numbers:
+                found = rng.choice(numbers)
+                lines[index] = lines[index][:found.start()] + rng.choice(EXTREME) + lines[index][found.end():]
+        else:
+            spots = [i for i, char in enumerate(lines[index]) if char in OPERATORS]
+            if spots:
+                i = rng.choice(spots)
+                lines[index] = lines[index][:i] + OPERATORS[lines[index][i]] + lines[index][i + 1:]
+    return "\n".join(lines)
+
+
+def mutants(count: int, seed: int):
+    """``count`` (source path, mutant text) pairs, the same for the same seed."""
+    rng = random.Random(seed)
+    texts = {path: path.read_text(encoding="utf-8") for path in CORPUS}
+    for _ in range(count):
+        path = rng.choice(CORPUS)
+        yield path, mutate(texts[path], rng)
+
+
+def _place(tmp_path: Path, source: Path, text: str, number: int) -> Path:
+    """The mutant beside a copy of its source's data files (imports and csv paths resolve alike)."""
+    folder = tmp_path / f"m{number}"
+    folder.mkdir()
+    for sibling in source.parent.iterdir():
+        if sibling.is_dir() and sibling.name in ("data", "lib"):
+            (folder / sibling.name).symlink_to(sibling)
+        elif sibling.suffix in (".csv", ".bg") and sibling != source:
+            (folder / sibling.name).symlink_to(sibling)
+    path = folder / source.name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def _check(path: Path) -> tuple[int, str]:
+    out, err = io.StringIO(), io.StringIO()
+    with redirect_stdout(out), redirect_stderr(err):
+        code = main(["check", str(path)])
+    return code, err.getvalue()
+
+
+@pytest.mark.slow
+def test_mutants_of_every_model_are_checked_without_an_internal_error(tmp_path, monkeypatch):
+    monkeypatch.setenv("BONDC_CACHE", "0")
+    outcomes = {0: 0, 1: 0, 2: 0}
+    problems = []
+    for number, (source, text) in enumerate(mutants(CHECKS, SEED)):
+        path = _place(tmp_path, source, text, number)
+        code, err = _check(path)
+        if code not in outcomes or "Traceback" in err or "internal error" in err:
+            problems.append(f"{source.relative_to(ROOT)} mutant {number}: exit {code}\n{err[-800:]}")
+            continue
+        outcomes[code] += 1
+        for line in err.splitlines():
+            # every model error names where: file:line:col, or the file for a whole-file one (E309 "no
+            # model in"); only command-line errors (E0xx) name no file
+            if line.startswith("error[") and not line.startswith("error[E0"):
+                problems.append(f"{source.relative_to(ROOT)} mutant {number}: an error without a position: {line}")
+    SUMMARY["check"] = (f"{CHECKS} mutants of {len(CORPUS)} models (seed {SEED}): {outcomes[0]} valid, "
+                        f"{outcomes[1]} with model errors, {outcomes[2]} usage errors, {len(problems)} problems")
+    assert not problems, "\n\n".join(problems[:5])
+
+
+@pytest.mark.slow
+def test_mutants_that_check_are_simulated_without_a_crash_or_a_hang(tmp_path):
+    environment = {**os.environ, "BONDC_CACHE": "0", "PYTHONPATH": str(ROOT)}
+    ran, outcomes, problems = 0, {}, []
+    for number, (source, text) in enumerate(mutants(CHECKS, SEED + 1)):
+        if ran >= RUNS:
+            break
+        path = _place(tmp_path, source, text, number)
+        if _check(path)[0] != 0 or "experiment" not in text:
+            continue
+        ran += 1
+        try:
+            done = subprocess.run([sys.executable, "-m", "bondc", "simulate", str(path), "--json"],
+                                  capture_output=True, text=True, timeout=RUN_LIMIT, env=environment)
+        except subprocess.TimeoutExpired:
+            problems.append(f"{source.relative_to(ROOT)} mutant {number}: no result in {RUN_LIMIT:g} s")
+            continue
+        outcomes[done.returncode] = outcomes.get(done.returncode, 0) + 1
+        if done.returncode not in (0, 1, 2) or "Traceback" in done.stderr or "internal error" in done.stderr:
+            problems.append(f"{source.relative_to(ROOT)} mutant {number}: exit {done.returncode}\n"
+                            f"{done.stderr[-800:]}")
+    SUMMARY["simulate"] = (f"{ran} mutants that check simulated (limit {RUN_LIMIT:g} s each): "
+                           + ", ".join(f"exit {code}: {count}" for code, count in sorted(outcomes.items()))
+                           + f"; {len(problems)} problems")
+    assert ran >= min(RUNS, 5), "too few mutants passed check to simulate"
+    assert not problems, "\n\n".join(problems[:5])
