@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 import time
 
+import pytest
 import sympy
 
 from bondc.cli import main
@@ -35,6 +36,7 @@ def test_a_sum_of_thousands_of_terms_is_checked_and_derived(tmp_path):
     assert derived.graph.parameters["a"].value == 3000.0
 
 
+@pytest.mark.slow
 def test_a_chain_beyond_the_call_depth_is_a_diagnostic(tmp_path, capsys):
     path = tmp_path / "huge.bg"
     path.write_text(CHAIN_MODEL.format(value="+".join(["1"] * 200_000)))
@@ -47,6 +49,7 @@ def test_a_chain_beyond_the_call_depth_is_a_diagnostic(tmp_path, capsys):
     assert "error[E005]" in err and "Traceback" not in err and "internal error" not in err
 
 
+@pytest.mark.slow
 def test_functions_whose_expansion_explodes_are_a_diagnostic_at_the_law(tmp_path, capsys):
     """f_i(x) = f_{i-1}(x + 1) + f_{i-1}(2*x): 2^30 calls with distinct arguments, an expression no
     simulator can hold."""
