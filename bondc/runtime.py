@@ -338,7 +338,6 @@ class _Model:
         self.when_conditions = optional("_when_conditions", lambda f: f, None)
         self.NATIVE_SOURCE = optional("NATIVE_SOURCE", lambda text: "".join(text), "")
         self.NATIVE_UNAVAILABLE = optional("NATIVE_UNAVAILABLE", str, "")
-        self.jac_entries = None
         self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
         self.parameter_names = tuple(self.PARAMETERS)
@@ -2519,21 +2518,15 @@ def attach_native(model, native=None):
         c_rhs(*arguments, buffer("double[]", out))
         return out
 
-    def jac_entries(t, x, p, m):
-        out = empty(len(pattern))
+    def jac(t, x, p, m):
         arguments = arrays(t, x, p, m)
         if arguments is None:
-            dense = numpy_jac(t, x, p, m)
-            return np.asarray(dense, dtype=float)[rows, cols] if len(pattern) else out
-        if len(pattern):
-            c_jac(*arguments, buffer("double[]", out))
-        return out
-
-    def jac(t, x, p, m):
-        if arrays(t, x, p, m) is None:
             return numpy_jac(t, x, p, m)
         matrix = np.zeros((n, n))
-        matrix[rows, cols] = jac_entries(t, x, p, m)
+        if len(pattern):
+            entries = empty(len(pattern))      # in JACOBIAN_PATTERN order
+            c_jac(*arguments, buffer("double[]", entries))
+            matrix[rows, cols] = entries
         return matrix
 
     def switches(t, x, p, m):
@@ -2545,7 +2538,7 @@ def attach_native(model, native=None):
             c_switches(*arguments, buffer("double[]", out))
         return out
 
-    model.rhs, model.jac, model.switches, model.jac_entries = rhs, jac, switches, jac_entries
+    model.rhs, model.jac, model.switches = rhs, jac, switches
     if hasattr(lib, "bondc_driver_new"):
         model.native_library = (ffi, lib)
     return True, ""
