@@ -792,6 +792,9 @@ def solver_class(method):
     return getattr(_integrate, name)
 
 
+#: A state beyond this magnitude (in SI units) has left every physical range: the run has diverged.
+DIVERGED = 1e30
+
 #: At most this many numbers in a run's result, points x (states + outputs + variables), and at
 #: most MAX_POINTS points: recording, the result and its analyses take about 1.2 kB per point of a
 #: small model (measured: 17 GB for 14 million points), so a run stays near 1 GB.
@@ -988,6 +991,16 @@ class _Run:
                 "left its physical range (a negative pressure, a closed gap) is the usual reason")
         return {"message": f"{context}{where}", "time": float(t), "variable": variable,
                 "law": law, "cause": cause, "hint": hint, "kind": "nonfinite"}
+
+    def diverged(self, t, y):
+        """The failure of a run whose state left every physical range (DIVERGED)."""
+        k = int(np.argmax(np.abs(y)))
+        name = self.model.STATE_NAMES[k]
+        return {"message": f"the state '{name}' grew beyond {DIVERGED:g} (to {float(y[k]):.3g}) at t={t:.6g}",
+                "time": float(t), "variable": name, "law": None, "kind": "diverged",
+                "cause": "the model is unstable (a negative damping or resistance, a positive feedback) or a "
+                         "law grows without bound",
+                "hint": "check the signs and values of the parameters that damp this state"}
 
     def solver_failure(self, t, message):
         failure = None
@@ -1372,6 +1385,10 @@ class _Run:
             while True:
                 code, ts, ys = driver.advance(watch, signs, band, g_old)
                 done = len(ts) - (1 if code in (1, 4) else 0)
+                grown = np.flatnonzero(np.max(np.abs(ys[:done]), axis=1, initial=0.0) >= DIVERGED) if done else ()
+                if len(grown):
+                    done = int(grown[0]) + 1        # keep the step where it happened, then stop
+                    code = "diverged"
                 if done > 0:
                     self.stats["steps"] += done
                     steps = np.diff(np.concatenate(([t_prev], ts[:done])))
@@ -1385,6 +1402,8 @@ class _Run:
                     t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
                     if self.progress is not None:
                         self.progress(t_prev)
+                if code == "diverged":
+                    raise _Stop(self.diverged(t_prev, y_prev))
                 if code == 0:
                     continue
                 if code == 2:
@@ -1467,6 +1486,10 @@ class _Run:
             if not (_all_finite(y_new) and _all_finite(derivative)):
                 self.collect(solver)
                 self.stop_nonfinite(solver, lambda tt, yy: self.rhs(tt, yy, modes), lambda tt, yy: modes, mode)
+            if not np.max(np.abs(y_new), initial=0.0) < DIVERGED:
+                self.collect(solver)
+                self.record(solver.t_old, t_new, y_new, None, mode)
+                raise _Stop(self.diverged(t_new, y_new))
             self._dense = None
             if index.size:
                 values_new = self.switches_at(t_new, y_new, modes, index)

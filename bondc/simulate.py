@@ -280,7 +280,8 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
     return result
 
 
-_CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813", "points": "E814"}
+_CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813", "points": "E814",
+          "diverged": "E815"}
 
 
 def _failure_diagnostic(graph, failure, raw) -> Diagnostic:

@@ -378,3 +378,24 @@ def test_a_run_past_its_point_limit_stops_and_keeps_what_it_computed(monkeypatch
     assert result.diagnostics[0].code == "E814"
     assert 2000 < result.t.size <= 2000 + 4096           # stops at the first block past the limit
     assert np.all(np.diff(result.t) > 0) and np.all(np.isfinite(result.states["spring.q"]))
+
+
+def test_a_diverging_run_stops_naming_the_state_and_keeps_its_results(tmp_path):
+    """Negative damping: the amplitude grows as exp(sigma t), sigma = |b|/(2m) = 3 /s, until a
+    state leaves every physical range (1e30); the run stops there with E815 and keeps the rest."""
+    text = (SIM / "msd.bg").read_text().replace("param b = 12", "param b = -12")
+    assert "param b = -12" in text
+    path = tmp_path / "unstable.bg"
+    path.write_text(text)
+    with pytest.raises(SimulationError) as raised:
+        run(path, t_end=200.0)
+    result = raised.value.result
+    diagnostic = result.diagnostics[0]
+    assert diagnostic.code == "E815" and "'mass.p' grew beyond 1e+30" in diagnostic.message
+    assert diagnostic.span.line > 0                       # at the mass's declaration
+    p, t = result.states["mass.p"], result.t
+    assert abs(p[-1]) >= 1e30 and np.all(np.abs(p[:-1]) < 1e30) and t[-1] < 200.0
+    peaks = [i for i in range(1, p.size - 1) if abs(p[i]) >= abs(p[i - 1]) and abs(p[i]) >= abs(p[i + 1])]
+    late = [i for i in peaks if t[i] > t[-1] / 2]
+    slope = np.polyfit(t[late], np.log(np.abs(p[late])), 1)[0]
+    assert slope == pytest.approx(12 / (2 * 2.0), rel=0.02)

@@ -230,6 +230,13 @@ d("E814", "too many points",
   "computed up to there, marked incomplete. A `dt` that would give more points than that is refused before the "
   "run (E803).",
   "Report on a coarser grid (`--dt`, or `dt` in the experiment), or simulate a shorter time.")
+d("E815", "the run diverged",
+  "A state grew beyond 1e30 in SI units, a magnitude no physical quantity of a machine reaches: the model is "
+  "unstable (a negative damping or resistance, a positive feedback) or a law grows without bound. The run "
+  "stops at that step and keeps what it computed, marked incomplete; the diagnostic points at the element "
+  "that owns the state.",
+  "Check the signs and values of the parameters that damp that state; `bondc linearize` shows the unstable "
+  "eigenvalues (positive real part).")
 d("W820", "chattering",
   "Switches changed mode faster than events can be located: they accumulate at an instant (a Zeno "
   "approach, like the twisting example, whose switching times shrink geometrically as it comes to rest), "
