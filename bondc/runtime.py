@@ -589,13 +589,11 @@ class CvodeSolver:
         self.pattern = None
         if jac is not None and method == "BDF":
             options["jacfn"] = self._jacobian
-            if pattern is not None and len(pattern) and self.n >= self.STRUCTURED_FROM:
-                lower = max(0, max(i - j for i, j in pattern))
-                upper = max(0, max(j - i for i, j in pattern))
-                if 4 * (lower + upper + 1) <= self.n:
-                    # banded LU: O(n b^2) work on the band only (a chain of sections)
-                    options.update(linsolver="band", lband=int(lower), uband=int(upper))
-                elif self.n >= self.SPARSE_FROM:
+            solver, lower, upper = self.linear_solver_for(self.n, pattern)
+            if solver == "band":
+                # banded LU: O(n b^2) work on the band only (a chain of sections)
+                options.update(linsolver="band", lband=lower, uband=upper)
+            elif solver == "sparse":
                     # SuperLU on the structural non-zeros (with the diagonal, which Newton's matrix has)
                     entries = sorted(set(map(tuple, pattern)) | {(i, i) for i in range(self.n)},
                                      key=lambda key: (key[1], key[0]))
@@ -611,6 +609,19 @@ class CvodeSolver:
             warnings.filterwarnings("ignore", message="Custom sparse Jacobian approximation")
             self._cvode = SundialsCvode(self._rhs, **options)
         self._cvode.init_step(self.t, self.y)
+
+    @classmethod
+    def linear_solver_for(cls, n, pattern) -> tuple:
+        """("dense" | "band" | "sparse", lower bandwidth, upper bandwidth) for ``n`` states whose
+        Jacobian has the structural non-zeros ``pattern`` (None: unknown)."""
+        pattern = tuple(pattern or ())
+        if not pattern or n < cls.STRUCTURED_FROM:
+            return "dense", 0, 0
+        lower = int(max(0, max(i - j for i, j in pattern)))
+        upper = int(max(0, max(j - i for i, j in pattern)))
+        if 4 * (lower + upper + 1) <= n:
+            return "band", lower, upper
+        return ("sparse" if n >= cls.SPARSE_FROM else "dense"), lower, upper
 
     def _rhs(self, t, y, yp):
         self.nfev += 1
@@ -697,17 +708,12 @@ class _NativeDriver:
         os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", os.devnull)
         n = len(model.STATE_NAMES)
         pattern = tuple(model.JACOBIAN_PATTERN or ())
-        lower = max([0] + [i - j for i, j in pattern])
-        upper = max([0] + [j - i for i, j in pattern])
-        solver = "dense"
-        if n >= CvodeSolver.STRUCTURED_FROM and pattern:
-            if 4 * (lower + upper + 1) <= n:
-                solver = "band"
-            elif n >= CvodeSolver.SPARSE_FROM:
-                return None         # SuperLU: scikit-sundae's solver, stepped from Python
+        solver, lower, upper = CvodeSolver.linear_solver_for(n, pattern)
+        if solver == "sparse":
+            return None         # SuperLU: scikit-sundae's solver, stepped from Python
         keep = {"rows": np.array([i for i, _ in pattern] or [0], dtype=np.intc),
                 "cols": np.array([j for _, j in pattern] or [0], dtype=np.intc),
-                "p": np.array(p, dtype=float), "solver": "band" if solver == "band" else "dense"}
+                "p": np.array(p, dtype=float), "solver": solver}
         buffer = ffi.from_buffer
         handle = lib.bondc_driver_new(n, len(model.SWITCHES), len(pattern), buffer("int[]", keep["rows"]),
                                       buffer("int[]", keep["cols"]), int(solver == "band"), int(lower),

@@ -59,7 +59,7 @@ from sympy.printing.str import StrPrinter
 from bondc import __version__
 from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
-from bondc.codegen.printer import BondcPrinter, UnsupportedExpression, relative_data_path
+from bondc.codegen.printer import BondcPrinter, UnsupportedExpression, negatives_last, relative_data_path
 from bondc.symbolic import as_sympy, partial_derivative
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
@@ -251,7 +251,7 @@ class _LawPrinter(StrPrinter):
     _default_settings = {**StrPrinter._default_settings, "order": "none"}
 
     def _as_ordered_terms(self, expr, order=None):
-        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
+        return negatives_last(expr)
 
 
 _LAW_PRINTER = _LawPrinter()
@@ -501,6 +501,9 @@ class _Emitter:
             used |= statement.uses
         return lines, final_texts, used
 
+    #: how a function body makes t a number with numpy's arithmetic (None: it already is one)
+    time_line = "t = as_time(t)"
+
     @staticmethod
     def assign_line(name: str, text: str) -> str:
         return f"{name} = {text}"
@@ -542,14 +545,14 @@ class _Emitter:
 
     def unpack(self, used, with_modes=True):
         lines = []
-        if self.plan.ss.time in used:
-            lines.append("t = as_time(t)")
+        if self.plan.ss.time in used and self.time_line:
+            lines.append(self.time_line)
         for symbol, i in sorted(self.parameter_index.items(), key=lambda item: item[1]):
             if symbol in used:
-                lines.append(f"{self.names[symbol]} = p[{i}]")
+                lines.append(self.assign_line(self.names[symbol], f"p[{i}]"))
         for symbol, i in sorted(self.state_index.items(), key=lambda item: item[1]):
             if symbol in used:
-                lines.append(f"{self.names[symbol]} = x[{i}]")
+                lines.append(self.assign_line(self.names[symbol], f"x[{i}]"))
         return lines
 
     def function(self, header, doc, statements, finals, tail, prologue=()):
@@ -790,6 +793,8 @@ class _NativeEmitter(_Emitter):
                 names[symbol] = c_name(name, index)
         self.names = names
 
+    time_line = None        # C's t is a double
+
     def printer(self, extra_frozen=()):
         return NativePrinter(self.names)
 
@@ -802,15 +807,6 @@ class _NativeEmitter(_Emitter):
             raise UnsupportedExpression("an algebraic loop is solved by the numpy module")
         return [self.assign_line(self.names[statement.defines[0]], self.text(printer, exprs[0]))]
 
-    def unpack(self, used, with_modes=True):
-        lines = []
-        for symbol, i in sorted(self.parameter_index.items(), key=lambda item: item[1]):
-            if symbol in used:
-                lines.append(f"const double {self.names[symbol]} = p[{i}];")
-        for symbol, i in sorted(self.state_index.items(), key=lambda item: item[1]):
-            if symbol in used:
-                lines.append(f"const double {self.names[symbol]} = x[{i}];")
-        return lines
 
     def c_function(self, name, statements, finals) -> str:
         lines, texts, used = self.body(statements, finals)

@@ -38,6 +38,12 @@ class UnsupportedExpression(Exception):
     """An expression the code generator cannot print."""
 
 
+def negatives_last(expr) -> list:
+    """A sum's terms in sympy's own (deterministic) argument order, those that print with a minus
+    sign last: ``t - 0.1``. Sorting every sum for display costs most of a large model's printing."""
+    return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
+
+
 class BondcPrinting:
     """What bondc's numpy and C printers share: names only from the map, sums in sympy's argument
     order with negative terms last, min/max folded pairwise, relations in parentheses, and a
@@ -48,8 +54,7 @@ class BondcPrinting:
     names: Mapping
 
     def _as_ordered_terms(self, expr, order=None):
-        # sympy's argument order, with the terms that print with a minus sign last: "t - 0.1"
-        return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
+        return negatives_last(expr)
 
     def _handle_UnevaluatedExpr(self, expr):
         return expr         # bondc never builds UnevaluatedExpr: skip the search for one in every expression
