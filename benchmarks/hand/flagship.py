@@ -194,29 +194,24 @@ def omega(t):
     return np.interp(t, TABLE_T, TABLE_W)
 
 
+def _psi(rho: float) -> tuple[float, float]:
+    """(psi, dpsi/drho): the orifice flow function of the model's fn psi (choked, linear near 1, subsonic)."""
+    if rho <= b_cr:
+        return _PSI_CHOKED, 0.0
+    if 1 - rho < 1e-4:
+        return _PSI_SLOPE * (1 - rho), -_PSI_SLOPE
+    a, b = rho ** _E1, rho ** _E2
+    psi = math.sqrt(_SUB * (a - b))
+    return psi, _SUB * (_E1 * a - _E2 * b) / (2 * psi * rho)
+
+
 def valve_flow(P: float) -> tuple[float, float]:
     """(Q, dQ/dP): the valve's volume flow into the chamber at chamber conditions, m^3/s, and its slope."""
     if P1 >= P:                      # from the supply into the chamber: pu = P1, pd = P
-        rho = P / P1
-        if rho <= b_cr:
-            psi, dpsi = _PSI_CHOKED, 0.0
-        elif 1 - rho < 1e-4:
-            psi, dpsi = _PSI_SLOPE * (1 - rho), -_PSI_SLOPE
-        else:
-            a, b = rho ** _E1, rho ** _E2
-            psi = math.sqrt(_SUB * (a - b))
-            dpsi = _SUB * (_E1 * a - _E2 * b) / (2 * psi * rho)
+        psi, dpsi = _psi(P / P1)
         Q = _C1 * P1 * psi / P
         return Q, _C1 * (dpsi / P - P1 * psi / (P * P))
-    rho = P1 / P                     # relief: pu = P, pd = P1, Q = -C1*P*psi/P
-    if rho <= b_cr:
-        psi, dpsi = _PSI_CHOKED, 0.0
-    elif 1 - rho < 1e-4:
-        psi, dpsi = _PSI_SLOPE * (1 - rho), -_PSI_SLOPE
-    else:
-        a, b = rho ** _E1, rho ** _E2
-        psi = math.sqrt(_SUB * (a - b))
-        dpsi = _SUB * (_E1 * a - _E2 * b) / (2 * psi * rho)
+    psi, dpsi = _psi(P1 / P)         # relief: pu = P, pd = P1, Q = -C1*P*psi/P
     return -_C1 * psi, _C1 * dpsi * P1 / (P * P)
 
 
