@@ -127,6 +127,7 @@ class LawAssign:
     value: Expr
     span: Span = _span()
     target_span: Span = _span()
+    unit: "Unit | None" = None   # only an instance's binding may carry one: ``A = 2e-5 [m^2]``
 
 
 @dataclass(frozen=True)
@@ -223,7 +224,7 @@ class BondChain:
 class Input:
     name: str
     unit: Unit | None
-    value: Expr
+    value: Expr | None          # None: a component's input that every instance must bind
     description: str | None
     span: Span = _span()
     name_span: Span = _span()
@@ -312,7 +313,25 @@ class Experiment:
     name_span: Span = _span()
 
 
-Statement = Union[Param, Element, Junction, BondChain, FnDef, Input, Output, StateDecl, Discrete, When, Experiment]
+@dataclass(frozen=True)
+class PortDecl:
+    """``port a, b``: the power ports of a model used as a component (LANGUAGE.md section 11)."""
+
+    names: tuple[str, ...]
+    span: Span = _span()
+    name_spans: tuple[Span, ...] = field(default=(), compare=False, repr=False)
+
+
+@dataclass(frozen=True)
+class Defaults:
+    """``defaults ... end``: settings every experiment of the model inherits (section 13)."""
+
+    body: tuple[Setting, ...]
+    span: Span = _span()
+
+
+Statement = Union[Param, Element, Junction, BondChain, FnDef, Input, Output, StateDecl, Discrete, When, Experiment,
+                  PortDecl, Defaults]
 
 
 @dataclass(frozen=True)

@@ -60,42 +60,88 @@ def _derive(args):
 
 # ------------------------------------------------------------------ commands
 
-def _cmd_check(args) -> int:
+def _check_one(args, model: str | None, component: bool) -> tuple:
+    """Load and check one model (causality too, unless it is a component with ports).
+
+    Returns (diagnostics, sources, graph, causal)."""
     from bondc import semantic
 
     diagnostics: list[Diagnostic] = []
-    graph = None
+    graph = causal = None
     sources = {}
-    causal = None
     try:
-        graph, warnings = semantic.load(Path(args.file), model=args.model, sets=_parse_sets(args.set))
+        graph, warnings = semantic.load(Path(args.file), model=model, sets=_parse_sets(args.set))
         diagnostics += warnings
         sources = graph.sources
-        from bondc.causality import assign_causality
+        if not component:
+            from bondc.causality import assign_causality
 
-        causal = assign_causality(graph)
-        diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
+            causal = assign_causality(graph)
+            diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
     except BondcError as error:
         if error.stage in ("usage",):
             raise
         diagnostics += error.diagnostics
         sources = error.sources
+    return diagnostics, sources, graph, causal
+
+
+def _models_to_check(args) -> list[tuple[str | None, bool]]:
+    """(model name, is a component) for each model ``check`` looks at: the one asked for, or every
+    model of the file (LANGUAGE.md section 11: a model with ports is a component)."""
+    from bondc import semantic
+    from bondc.flatten import ports_of
+
+    try:
+        files, _, _ = semantic.load_files(Path(args.file))
+    except BondcError:
+        return [(args.model, False)]      # the single run reports it
+    every = [m for f in files for m in f.models]
+    if args.model is not None:
+        chosen = [m for m in every if m.name == args.model]
+        return [(args.model, bool(chosen and ports_of(chosen[0])))]
+    own = files[0].models
+    if len(own) <= 1:
+        return [(None, bool(own and ports_of(own[0])))]
+    return [(m.name, bool(ports_of(m))) for m in own]
+
+
+def _cmd_check(args) -> int:
+    diagnostics: list[Diagnostic] = []
+    sources: dict = {}
+    results = []
+    for name, component in _models_to_check(args):
+        found, found_sources, graph, causal = _check_one(args, name, component)
+        diagnostics += [d for d in found if d not in diagnostics]
+        sources.update(found_sources or {})
+        results.append((graph, causal, component))
     ok = not any(d.is_error for d in diagnostics)
     if args.json:
-        summary = graph.summary() if graph is not None else None
-        if summary is not None and causal is not None:
-            summary["causality"] = causal.summary()
-        print(json.dumps({"ok": ok, "diagnostics": [d.to_json() for d in diagnostics], "model": summary},
-                         indent=2))
+        summaries = []
+        for graph, causal, component in results:
+            summary = graph.summary() if graph is not None else None
+            if summary is not None and causal is not None:
+                summary["causality"] = causal.summary()
+            if summary is not None and component:
+                summary["component"] = True
+            summaries.append(summary)
+        data = {"ok": ok, "diagnostics": [d.to_json() for d in diagnostics], "model": summaries[0]}
+        if len(summaries) > 1:
+            data["models"] = summaries
+        print(json.dumps(data, indent=2))
         return EXIT_OK if ok else EXIT_ERRORS
     _print_diagnostics(diagnostics, sources)
-    if graph is not None:
+    for graph, causal, component in results:
+        if graph is None:
+            continue
         counts = graph.summary()
         line = (f"{graph.name}: {counts['elements']} elements, {counts['junctions']} junctions, "
                 f"{counts['bonds']} bonds, {counts['storage_elements']} storage elements, "
                 f"{counts['states']} states")
         if causal is not None:
             line += f"; {causal.summary_text()}"
+        if component:
+            line += "; a component (its ports checked as boundaries; causality is checked where it is used)"
         print(line)
         if args.causality and causal is not None:
             from bondc.causality import format_table

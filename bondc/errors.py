@@ -49,7 +49,7 @@ class Diagnostic:
         return self.severity == "error"
 
     def to_json(self) -> dict:
-        return {
+        data = {
             "severity": self.severity,
             "code": self.code,
             "message": self.message,
@@ -71,6 +71,9 @@ class Diagnostic:
                 for rel in self.related
             ],
         }
+        if self.span.instance:
+            data["instance"] = self.span.instance    # inside a component: the instance path
+        return data
 
 
 class BondcError(Exception):
@@ -124,7 +127,7 @@ class DataError(BondcError):
 
 def sort_key(diagnostic: Diagnostic) -> tuple:
     span = diagnostic.span
-    return (span.file, span.line, span.column, diagnostic.code, diagnostic.message)
+    return (span.file, span.line, span.column, diagnostic.code, diagnostic.message, span.instance)
 
 
 def has_errors(diagnostics: Iterable[Diagnostic]) -> bool:
@@ -171,6 +174,8 @@ def render(diagnostic: Diagnostic, sources: Mapping[str, Source] | None = None) 
         head = ""
     lines = [f"{head}{diagnostic.severity}[{diagnostic.code}]: {diagnostic.message}"]
     lines += _excerpt(span, _source_for(span.file, sources))
+    if span.instance:
+        lines.append(f"  note: in {span.instance}")
     for rel in diagnostic.related:
         where = f"{rel.span.file}:{rel.span.line}:{rel.span.column}"
         lines.append(f"  note: {rel.label} ({where})")

@@ -151,7 +151,7 @@ def format_expr(expr: ast.Expr) -> str:
 
 def format_law(law: ast.Law) -> str:
     if isinstance(law, ast.LawAssign):
-        return f"{law.target} = {format_expr(law.value)}"
+        return _words(f"{law.target} = {format_expr(law.value)}", _unit(law.unit))
     if isinstance(law, ast.LawCall):
         return f"{law.func}({format_expr(law.arg)}) = {format_expr(law.value)}"
     if isinstance(law, ast.LawState):
@@ -162,6 +162,8 @@ def format_law(law: ast.Law) -> str:
 def _law_text(law: ast.Law, prefix_width: int) -> str:
     """A law as :func:`format_law` writes it, its if-chain broken if it would end past MAX_WIDTH."""
     if isinstance(law, ast.LawAssign):
+        if law.unit is not None:
+            return format_law(law)
         head = f"{law.target} = "
     elif isinstance(law, ast.LawCall):
         head = f"{law.func}({format_expr(law.arg)}) = "
@@ -225,7 +227,7 @@ def _laws_of(stmt) -> tuple:
 
 
 def _body_of(stmt) -> tuple | None:
-    return stmt.body if isinstance(stmt, (ast.Model, ast.Experiment)) else None
+    return stmt.body if isinstance(stmt, (ast.Model, ast.Experiment, ast.Defaults)) else None
 
 
 class _Comments:
@@ -622,6 +624,12 @@ class _Formatter:
     def _stmt_Experiment(self, stmt: ast.Experiment, indent, widths, attached) -> None:
         self._block(stmt, _words("experiment", stmt.name, _desc(stmt.description)), indent, attached)
 
+    def _stmt_Defaults(self, stmt: ast.Defaults, indent, widths, attached) -> None:
+        self._block(stmt, "defaults", indent, attached)
+
+    def _stmt_PortDecl(self, stmt: ast.PortDecl, indent, widths, attached) -> None:
+        self._laws("port ", list(stmt.names), indent, attached, fill=True)
+
     def _stmt_BondChain(self, stmt: ast.BondChain, indent, widths, attached) -> None:
         chain = " -> ".join(e.name if e.port is None else f"{e.name}.{e.port}" for e in stmt.endpoints)
         text = chain if stmt.label is None else f"{stmt.label}: {chain}"
@@ -691,13 +699,18 @@ class _Formatter:
             "keyword": max(len(_keyword(s)) for s in run),
             "name": _column([s.name for s in run]),
             "unit": _column([_unit(s.unit) for s in run]),
-            "value": _column([format_expr(s.value) for s in run if s.description is not None], VALUE_ALIGN_MAX),
+            "value": _column([format_expr(s.value) for s in run if s.description is not None and s.value is not None],
+                             VALUE_ALIGN_MAX),
         }
 
     def _signal(self, stmt, indent, widths, attached) -> None:
         keyword = _pad(_keyword(stmt), widths.get("keyword", 0))
         name = _pad(stmt.name, widths.get("name", 0))
         unit = _pad(_unit(stmt.unit), widths.get("unit", 0))
+        if stmt.value is None:    # a component's input without a default
+            self.code(indent, _words(keyword, name if stmt.description else stmt.name, unit if stmt.description else
+                                     _unit(stmt.unit), _desc(stmt.description)), attached.trailing)
+            return
         prefix = " ".join(part for part in (keyword, name, unit) if part) + " = "
         value = _value(stmt.value, len(indent + prefix))
         desc = _desc(stmt.description)

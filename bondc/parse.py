@@ -45,7 +45,7 @@ KEYWORDS = frozenset(
 )
 
 # Keywords only at the start of a statement (LANGUAGE.md section 11): names everywhere else.
-STATEMENT_KEYWORDS = frozenset({"discrete", "when"})
+STATEMENT_KEYWORDS = frozenset({"discrete", "when", "port", "defaults"})
 
 # What an expected terminal means to a user.
 TERMINAL_NAMES = {
@@ -98,8 +98,10 @@ class _LinePostLexer:
         for token in stream:
             if token.type == "NAME" and start and token.value in STATEMENT_KEYWORDS:
                 rest = self.text[token.end_pos:token.end_pos + 200].lstrip(" \t")
-                if token.value == "discrete":
+                if token.value in ("discrete", "port"):
                     keyword = rest[:1].isalpha() or rest[:1] == "_"
+                elif token.value == "defaults":
+                    keyword = rest == "" or rest.startswith(("\n", "\r", "#"))
                 else:
                     keyword = not rest.startswith(("->", ".", ":", "\n", "#")) and rest != ""
                 if keyword:
@@ -307,8 +309,8 @@ class _ToAst(Transformer):
 
     @v_args(meta=True)
     def law_assign(self, meta, children):
-        target, value = children
-        return ast.LawAssign(str(target), value, self._meta(meta), self._tok(target))
+        target, value, unit = children
+        return ast.LawAssign(str(target), value, self._meta(meta), self._tok(target), unit)
 
     @v_args(meta=True)
     def law_call(self, meta, children):
@@ -376,9 +378,23 @@ class _ToAst(Transformer):
 
     @v_args(meta=True)
     def element(self, meta, children):
-        kind, name, description, laws = children
-        return ast.Element(str(kind), str(name), _opt_str(description), laws or (), self._meta(meta),
-                           self._tok(kind), self._tok(name))
+        kind, member, name, description, laws = children
+        kind_span = self._tok(kind) if member is None else self._tok(kind).to(self._tok(member))
+        kind_text = str(kind) if member is None else f"{kind}.{member}"
+        return ast.Element(kind_text, str(name), _opt_str(description), laws or (), self._meta(meta),
+                           kind_span, self._tok(name))
+
+    @v_args(meta=True)
+    def port_decl(self, meta, children):
+        names = children[1:]
+        return ast.PortDecl(tuple(str(n) for n in names), self._meta(meta), tuple(self._tok(n) for n in names))
+
+    @v_args(meta=True)
+    def defaults(self, meta, children):
+        return ast.Defaults(tuple(c for c in children if isinstance(c, ast.Setting)), self._meta(meta))
+
+    def dotted_name(self, children):
+        return ".".join(str(c) for c in children)
 
     @v_args(meta=True)
     def junction(self, meta, children):

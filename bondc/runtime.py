@@ -2589,6 +2589,9 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     says which ran and ``stats["code_note"]`` why not C.
     """
     model = _Model(model)       # a copy: the native functions are attached to this run's only
+    padded = not model.STATE_NAMES
+    if padded:
+        model = _padded(model)
     native_used, native_note = attach_native(model, native)
     defaults = model.DEFAULTS
     t_end = defaults.get("t_end") if t_end is None else t_end
@@ -2621,4 +2624,29 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     run.stats["code"] = "native" if native_used else "numpy"
     if not native_used:
         run.stats["code_note"] = native_note
-    return run.run()
+    result = run.run()
+    if padded:
+        result.states.pop(_PADDING, None)
+        result.jumps = [(time, {}, {}) for time, _, _ in result.jumps]
+    return result
+
+
+_PADDING = "<no state>"
+
+
+def _padded(model):
+    """A model without states, given one state that stays 0: the step loop, the located switches
+    and the output grid of a purely algebraic model (a rectifier of R elements) need something to
+    integrate. Every function sees the model's own (empty) state vector."""
+    padded = _Model(model)
+    padded.STATE_NAMES = (_PADDING,)
+    original = {name: getattr(model, name) for name in ("outputs", "variables", "switches")}
+    padded.x0 = lambda p=None: np.zeros(1)
+    padded.rhs = lambda t, x, p, m: np.zeros_like(np.asarray(x, dtype=float))
+    padded.jac = lambda t, x, p, m: np.zeros((1, 1))
+    for name, function in original.items():
+        setattr(padded, name, lambda t, x, p, m, f=function: f(t, np.asarray(x, dtype=float)[:0], p, m))
+    padded.JACOBIAN_PATTERN = None
+    padded.NATIVE_SOURCE = ""
+    padded.NATIVE_UNAVAILABLE = "the model has no states: nothing to integrate in C"
+    return padded

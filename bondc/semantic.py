@@ -50,6 +50,7 @@ from bondc.model import (
     OutputDef, Parameter, Signal, StateVar, WhenDef,
 )
 from bondc.parse import parse_source
+from bondc.flatten import flatten, ports_of
 from bondc.source import Source, Span
 
 # Built-in functions and how many arguments each takes: (at least, at most); None is "no limit".
@@ -178,6 +179,9 @@ class _Model:
     used: set[str] = field(default_factory=set)
     csv_headers: dict[str, list[str] | str | None] = field(default_factory=dict)   # str: why unreadable
     misspelt: set[str] = field(default_factory=set)   # nodes a misspelt bond endpoint probably meant
+    bindings: list = field(default_factory=list)       # flatten.Binding: instances' parameter values
+    good_bindings: list = field(default_factory=list)  # those that fit their parameter
+    instances: list = field(default_factory=list)      # flatten.Instance: the instance tree
 
     def report(self, diagnostic: Diagnostic) -> None:
         self.diagnostics.append(diagnostic)
@@ -397,8 +401,13 @@ def check_bonds(m: _Model) -> None:
 def _name_part(endpoint: ast.Endpoint) -> Span:
     """The span of an endpoint's node name, without ``.port``."""
     span = endpoint.span
-    return Span(span.file, span.line, span.column, span.line, span.column + len(endpoint.name),
-                span.start, span.start + len(endpoint.name))
+    if endpoint.port is None:
+        return span
+    width = span.end - span.start - len(endpoint.port) - 1   # the name as written (a component's is not dotted)
+    if width <= 0 or span.end_line != span.line:
+        return span
+    return Span(span.file, span.line, span.column, span.line, span.column + width,
+                span.start, span.start + width, span.instance)
 
 
 def _bond_notes(m: _Model, ends: Sequence[_End]) -> list[Related]:
@@ -1386,8 +1395,18 @@ def check_units(m: _Model) -> None:
 # ================================================================= parameters
 
 def _parameter_definitions(m: _Model) -> dict[str, _Definition]:
-    return {p.name: _Definition(p.name, p.value, p.unit, p.span, p.unit, "declaration") for p in m.params
-            if m.decls.get(p.name) is not None and m.decls[p.name].node is p}
+    """Every parameter's declaration, with the values its instance binds (section 11)."""
+    definitions = {p.name: _Definition(p.name, p.value, p.unit, p.span, p.unit, "declaration") for p in m.params
+                   if m.decls.get(p.name) is not None and m.decls[p.name].node is p}
+    for binding in m.good_bindings:
+        _override(binding.name, binding.value, binding.unit, binding.span, binding.origin, definitions)
+    return definitions
+
+
+def check_bindings(m: _Model) -> None:
+    """An instance's parameter bindings: the value fits the parameter as an override would."""
+    m.good_bindings = [b for b in m.bindings
+                       if _check_override(m, b.name, b.name_span, b.value, b.unit, b.origin)]
 
 
 def _override(name: str, expr: ast.Expr, unit: ast.Unit | None, span: Span, origin: str,
@@ -1581,6 +1600,34 @@ class _ExperimentPlan:
     params: list[ast.Param] = field(default_factory=list)
     inputs: dict[str, ast.Input] = field(default_factory=dict)
     settings: dict[str, ast.Setting] = field(default_factory=dict)
+
+
+def _with_defaults(model: ast.Model) -> ast.Model:
+    """Each experiment with the settings of the model's ``defaults`` that it does not set itself."""
+    defaults = [item for s in model.body if isinstance(s, ast.Defaults) for item in s.body]
+    if not defaults:
+        return model
+    if not any(isinstance(s, ast.Experiment) for s in model.body):
+        # a model without experiments runs with its defaults, as an experiment called "defaults"
+        block = next(s for s in model.body if isinstance(s, ast.Defaults))
+        experiment = ast.Experiment("defaults", "the model's defaults", tuple(defaults), block.span, block.span)
+        return dataclasses.replace(model, body=model.body + (experiment,))
+    body = []
+    for statement in model.body:
+        if isinstance(statement, ast.Experiment):
+            own = {item.name for item in statement.body if isinstance(item, ast.Setting)}
+            inherited = tuple(item for item in defaults if item.name not in own)
+            statement = dataclasses.replace(statement, body=inherited + statement.body)
+        body.append(statement)
+    return dataclasses.replace(model, body=tuple(body))
+
+
+def check_defaults(m: _Model) -> None:
+    """``defaults`` blocks: settings only, each once (checked even where no experiment uses them)."""
+    plan = _ExperimentPlan(ast.Experiment("defaults", None, ()))
+    for block in m.statements(ast.Defaults):
+        for item in block.body:
+            _check_setting(m, plan, item)
 
 
 def check_experiments(m: _Model) -> list[_ExperimentPlan]:
@@ -1801,6 +1848,9 @@ def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Mode
                              hint=_join_hints(_did_you_mean(name, [m.name for m in every]),
                                               f"available models: {listing}"))]
     candidates = own or every
+    runnable = [model for model in candidates if not ports_of(model)]   # a model with ports is a component
+    if len(candidates) > 1 and len(runnable) == 1:
+        return runnable[0], []
     if len(candidates) == 1:
         return candidates[0], []
     if not candidates:
@@ -1841,7 +1891,10 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     chosen, problems = _select_model(files, model)
     if chosen is None:
         return None, problems
-    m = _Model(files[0], sources, chosen, tuple(files))
+    flat = flatten(chosen, files, standalone=bool(ports_of(chosen)))
+    m = _Model(files[0], sources, _with_defaults(flat.model), tuple(files))
+    m.diagnostics += flat.diagnostics
+    m.bindings, m.instances = flat.bindings, flat.instances
     selected, problems = _select_experiment(m, experiment)
     m.diagnostics += problems
     _declare(m)
@@ -1858,6 +1911,8 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     check_expressions(m)
     check_signal_cycles(m)
     check_units(m)
+    check_bindings(m)
+    check_defaults(m)
     plans = check_experiments(m)
     good_sets = check_sets(m, sets)
     base, base_values = check_parameters(m, good_sets)
@@ -2038,6 +2093,18 @@ def _read(path: Path, name: str) -> Source:
     return read_source(path, name)
 
 
+STD_LIBRARIES = ("mechanics", "rotational", "electrical", "hydraulics", "pneumatics", "transmissions")
+
+
+def _std_library(name: str) -> Path | None:
+    """The file of a shipped component library (``import "std:hydraulics"``)."""
+    if name not in STD_LIBRARIES:
+        return None
+    from importlib import resources
+
+    return Path(str(resources.files("bondc.std").joinpath(f"{name}.bg")))
+
+
 def load_files(path: str | Path) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:
     """Parse ``path`` and, recursively, the files it imports (each once).
 
@@ -2053,8 +2120,17 @@ def load_files(path: str | Path) -> tuple[list[ast.File], dict[str, Source], lis
 
     def visit(file: ast.File, source: Source, stack: list[tuple[Path, str]]) -> None:
         for item in file.imports:
-            target = source.path.parent / item.path
-            name = os.path.normpath(os.path.join(os.path.dirname(source.name), item.path))
+            if item.path.startswith("std:"):
+                target, name = _std_library(item.path[4:]), item.path
+                if target is None:
+                    diagnostics.append(_error("E307", f"no component library '{item.path}'", item.span,
+                                              hint=_join_hints(_did_you_mean(item.path[4:], STD_LIBRARIES),
+                                                               "shipped libraries: " + ", ".join(
+                                                                   f"std:{n}" for n in STD_LIBRARIES))))
+                    continue
+            else:
+                target = source.path.parent / item.path
+                name = os.path.normpath(os.path.join(os.path.dirname(source.name), item.path))
             key = target.resolve()
             keys = [k for k, _ in stack]
             if key in keys:

@@ -28,11 +28,12 @@ class Span:
     end_column: int
     start: int = 0
     end: int = 0
+    instance: str = ""      # inside a component: the instance path from the top model (``plant.valve``)
 
     def to(self, other: "Span") -> "Span":
         """The span from the start of ``self`` to the end of ``other``."""
         return Span(self.file, self.line, self.column, other.end_line, other.end_column,
-                    self.start, other.end)
+                    self.start, other.end, self.instance)
 
     def __str__(self) -> str:
         return f"{self.file}:{self.line}:{self.column}"

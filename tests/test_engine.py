@@ -506,3 +506,14 @@ def test_a_branch_is_never_evaluated_outside_its_domain_beyond_its_switch():
     # the tank reaches its switch at t = 1 s (and is held on it: both branches leave it at rest)
     switched = [time for time, label in result.events if "if b2.e > 0" in label]
     assert switched and switched[0] == pytest.approx(1.0, abs=1e-3)
+
+
+def test_a_model_without_states_is_evaluated_on_its_grid(tmp_path):
+    # Nothing to integrate (a source into a resistor): the run still reports every point.
+    path = tmp_path / "resistive.bg"
+    path.write_text("model Resistive\n  Se s : e = 10*sin(2*pi*50*t)\n  R r : e = 100*f\n  s -> r\n"
+                    "  output i [A] = r.f\nend\n")
+    result = run(path, t_end=0.02, dt=0.001)
+    assert result.complete, result.message
+    assert result.states == {}
+    assert np.allclose(result.outputs["i"], 0.1 * np.sin(2 * np.pi * 50 * result.t), atol=1e-15)

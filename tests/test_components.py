@@ -1,0 +1,316 @@
+"""Submodels and ports (LANGUAGE.md section 11): flattening, diagnostics, and the flat equivalent.
+
+A hierarchical model must mean exactly what the hand-flattened model means: the
+same state equations (compared numerically at random points) and the same
+trajectories. Malformed components are reported at the right line of the right
+file, with the instance path.
+"""
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+from bondc.cli import main
+from bondc.errors import ModelError
+from bondc.equations import _display
+from bondc.pipeline import derive_file
+from bondc.semantic import load
+from bondc.simulate import run
+
+FIXTURES = Path(__file__).parent / "fixtures" / "components"
+MODELS = Path(__file__).parent.parent / "models"
+
+
+def _rates(path, model=None):
+    """The state equations of a model, fully expanded, as functions of named states and inputs."""
+    ss = derive_file(path, model=model, cache=False).state_space
+    expand = _display(ss)
+    names = list(ss.state_names)
+    symbols = [ss.symbol(n) for n in names]
+    params = ss.parameter_values()
+    functions = {}
+    for name in names:
+        expr = expand(ss.derivatives[name]).xreplace(params)
+        functions[name] = sympy.lambdify([symbols, ss.time], expr, "numpy")
+    return names, functions
+
+
+# ------------------------------------------------------------ the section 11 example
+
+def test_the_section_11_example_checks_and_simulates_to_the_closed_form():
+    # Tank C = 1e-9 m^3/Pa filled through the orifice from p_s: with u = p_s - p,
+    # du/dt = -(k/C)*sqrt(u), so sqrt(u) = sqrt(p_s) - k/(2C)*t, k = Cd*A*sqrt(2/rho).
+    result = run(FIXTURES / "circuit.bg", t_end=4.0, dt=0.5)
+    assert result.complete, result.message
+    p_s, cap, k = 100e5, 1e-9, 0.7 * 2e-5 * math.sqrt(2 / 850)
+    root = np.sqrt(p_s) - k / (2 * cap) * result.t
+    pressure = result.states["tank.q"] / cap
+    assert np.allclose(pressure, p_s - root ** 2, rtol=1e-5, atol=1.0)
+    assert np.allclose(result.outputs["Q"], k * root, rtol=1e-5)
+    assert np.allclose(result.outputs["valve.Q"], result.outputs["Q"])   # an instance's output, dotted
+
+
+def test_a_hierarchical_model_has_the_state_equations_of_its_hand_flattened_version():
+    names, hierarchical = _rates(FIXTURES / "circuit.bg")
+    flat_names, flat = _rates(FIXTURES / "circuit_flat.bg")
+    assert names == flat_names == ["tank.q"]
+    rng = np.random.default_rng(7)
+    for q, t in zip(rng.uniform(-0.02, 0.02, 50), rng.uniform(0, 5, 50)):
+        assert hierarchical["tank.q"]([q], t) == pytest.approx(flat["tank.q"]([q], t), rel=1e-12)
+
+
+def test_bindings_convert_units_and_the_rest_keep_their_defaults():
+    graph, _ = load(FIXTURES / "circuit.bg")
+    values = {name: p.value for name, p in graph.parameters.items()}
+    assert values["valve.A"] == pytest.approx(2e-5)         # bound with a unit
+    assert values["valve.Cd"] == pytest.approx(0.7)         # bound, a number in the declared unit
+    assert values["valve.rho"] == pytest.approx(850)        # default
+    assert [b.name for b in graph.bonds] == ["b1", "b2", "b3", "valve.b3"]
+    assert set(graph.elements) == {"supply", "valve.loss", "tank"}
+
+
+def test_set_reaches_a_parameter_inside_an_instance():
+    result = run(FIXTURES / "circuit.bg", sets=["valve.A=1e-5 [m^2]"], t_end=0.5, dt=0.5)
+    k = 0.7 * 1e-5 * math.sqrt(2 / 850)
+    assert result.outputs["Q"][0] == pytest.approx(k * math.sqrt(100e5), rel=1e-9)
+
+
+def test_check_on_a_file_with_a_component_and_a_model_checks_both(tmp_path, capsys):
+    text = (FIXTURES / "lib" / "hydraulics.bg").read_text() + "\n" + \
+        (FIXTURES / "circuit.bg").read_text().replace('import "lib/hydraulics.bg"', "")
+    path = tmp_path / "both.bg"
+    path.write_text(text)
+    assert main(["check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "Orifice:" in out and "a component" in out and "Circuit:" in out
+    # the runnable model is the one without ports
+    assert run(path, t_end=0.1, dt=0.1).model == "Circuit"
+
+
+# ------------------------------------------------------------ nesting, ports, references
+
+NESTED = '''
+model Pipe "a laminar restriction"
+  port a, b
+  param R_h = 1e9 [Pa*s/m^3]
+  R loss : e = R_h*f
+  1 j
+  a -> j -> b
+  j -> loss
+  output Q [m^3/s] = loss.f
+end
+
+model TwoPipes "two pipes in series, passing ports straight through"
+  port inlet, outlet
+  param R_h = 1e9 [Pa*s/m^3]
+  Pipe first : R_h = R_h
+  Pipe second : R_h = 2*R_h
+  inlet -> first.a
+  first.b -> second.a
+  second.b -> outlet
+end
+
+model Plant
+  param p_s = 10 [bar]
+  Se supply : e = p_s
+  TwoPipes line : R_h = 3e9 [Pa*s/m^3]
+  C tank : e = q/2e-12
+  supply -> line.inlet
+  line.outlet -> tank
+  output Q [m^3/s] = line.first.loss.f
+  output R2 [Pa*s/m^3] = line.second.R_h
+  defaults
+    rtol = 1e-9
+    atol = 1e-18
+  end
+  experiment fill
+    t_end = 0.05 [s]
+  end
+end
+'''
+
+
+def test_nested_instances_and_ports_passed_straight_through(tmp_path):
+    # Series resistance 3e9 + 6e9 into a tank of 2e-12 m^3/Pa: p = p_s*(1 - exp(-t/(R*C))).
+    path = tmp_path / "nested.bg"
+    path.write_text(NESTED)
+    result = run(path, dt=0.01)
+    assert result.complete, result.message
+    assert result.settings["rtol"] == 1e-9          # from the model's defaults
+    tau = 9e9 * 2e-12
+    expected = 10e5 * (1 - np.exp(-result.t / tau))
+    assert np.allclose(result.states["tank.q"] / 2e-12, expected, rtol=1e-5, atol=1e-3 * 10e5 * 1e-3)
+    assert np.allclose(result.outputs["Q"], (10e5 - expected) / 9e9, rtol=1e-4, atol=1e-12)
+    assert result.outputs["R2"][0] == pytest.approx(6e9)
+    graph, _ = load(path)
+    assert set(graph.elements) == {"supply", "line.first.loss", "line.second.loss", "tank"}
+
+
+def test_equations_and_csv_columns_use_dotted_names(tmp_path, capsys):
+    path = tmp_path / "nested.bg"
+    path.write_text(NESTED)
+    assert main(["equations", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "line.first.R_h" in text and "line.second.R_h" in text
+    out = tmp_path / "out.csv"
+    assert main(["simulate", str(path), "--t-end", "0.01", "-o", str(out)]) == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert "line.first.Q" in header and "tank.q" in header
+
+
+def test_the_same_text_gives_the_same_flat_model_and_code_twice(tmp_path):
+    from bondc.codegen.emit import emit as generate_module
+
+    path = tmp_path / "nested.bg"
+    path.write_text(NESTED)
+    first = generate_module(derive_file(path, cache=False).state_space)
+    second = generate_module(derive_file(path, cache=False).state_space)
+    assert first == second
+
+
+# ------------------------------------------------------------ diagnostics
+
+def _errors(tmp_path, text, name="m.bg", files=None):
+    for file_name, file_text in (files or {}).items():
+        (tmp_path / file_name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / file_name).write_text(file_text)
+    path = tmp_path / name
+    path.write_text(text)
+    with pytest.raises(ModelError) as caught:
+        load(path)
+    return caught.value.diagnostics
+
+
+PIPE = '''model Pipe
+  port a, b
+  param R_h = 1e9 [Pa*s/m^3]
+  R loss : e = R_h*f
+  1 j
+  a -> j -> b
+  j -> loss
+end
+'''
+
+
+def _plant(*lines):
+    return PIPE + "model Plant\n  Se s : e = 1\n  C tank : e = q\n" + "".join(f"  {line}\n" for line in lines) + "end\n"
+
+
+@pytest.mark.parametrize("lines, code, line_number, text", [
+    (["Pipe p", "s -> p.a", "p.c -> tank"], "E341", 14, "no port 'c'"),
+    (["Pipe p", "s -> p.a", "tank -> p.b"], "E342", 14, "disagree on the power direction"),
+    (["Pipe p", "s -> p.a", "p.b -> tank", "p.b -> tank"], "E339", 15, "bonded twice"),
+    (["Pipe p : R_x = 2", "s -> p.a", "p.b -> tank"], "E337", 12, "no parameter or input 'R_x'"),
+    (["Pipe p", "s -> p", "p.b -> tank"], "E340", 13, "bond one of its ports"),
+    (["Pipe p : q(0) = 1", "s -> p.a", "p.b -> tank"], "E335", 12, "bindings"),
+    (["Pipe p", "s -> p.a", "p.b -> tank", "output y = p.nothing.e"], "E312", 15, "has no 'nothing'"),
+])
+def test_malformed_instances_are_reported_at_the_instance(tmp_path, lines, code, line_number, text):
+    diagnostics = _errors(tmp_path, _plant(*lines))
+    found = [d for d in diagnostics if d.code == code]
+    assert found, [(d.code, d.message) for d in diagnostics]
+    assert found[0].span.line == line_number and found[0].span.file.endswith("m.bg")
+    assert text in found[0].message
+
+
+def test_an_error_inside_a_component_points_into_its_file_and_names_the_instance_path(tmp_path):
+    library = PIPE.replace("e = R_h*f", "e = R_h*f + undefined_name")
+    text = ('import "lib/pipes.bg"\n'
+            "model Line\n  port a, b\n  Pipe inner\n  a -> inner.a\n  inner.b -> b\nend\n"
+            "model Plant\n  Se s : e = 1\n  C tank : e = q\n  Line line\n  s -> line.a\n  line.b -> tank\nend\n")
+    diagnostics = _errors(tmp_path, text, files={"lib/pipes.bg": library})
+    undefined = [d for d in diagnostics if d.code == "E301"]
+    assert len(undefined) == 1
+    span = undefined[0].span
+    assert span.file.endswith("pipes.bg") and span.line == 4 and span.instance == "line.inner"
+    from bondc.errors import render
+
+    assert "in line.inner" in render(undefined[0])
+    assert undefined[0].to_json()["instance"] == "line.inner"
+
+
+@pytest.mark.parametrize("component, code, text", [
+    ("model Pipe\n  port a, b\n  R loss : e = f\n  1 j\n  a -> j\n  j -> loss\nend\n", "E333", "not bonded"),
+    ("model Pipe\n  port a, b\n  R loss : e = f\n  1 j\n  a -> j -> b\n  a -> loss\nend\n", "E339", "twice"),
+    ("model Pipe\n  port a, b\n  a -> b\nend\n", "E338", "two ports"),
+    ("model Pipe\n  port a, b\n  param b = 2\n  1 j\n  a -> j -> b\nend\n", "E302", "port"),
+])
+def test_malformed_components_are_reported_in_the_component(tmp_path, component, code, text):
+    plant = "model Plant\n  Se s : e = 1\n  C tank : e = q\n  Pipe p\n  s -> p.a\n  p.b -> tank\nend\n"
+    diagnostics = _errors(tmp_path, component + plant)
+    found = [d for d in diagnostics if d.code == code]
+    assert found and text in found[0].message, [(d.code, d.message) for d in diagnostics]
+    assert found[0].span.line < component.count("\n") + 1       # inside the component's text
+
+
+def test_a_model_that_instantiates_itself_is_an_error(tmp_path):
+    text = ("model A\n  port a\n  B inner\n  a -> inner.a\nend\n"
+            "model B\n  port a\n  A inner\n  a -> inner.a\nend\n"
+            "model Top\n  Se s : e = 1\n  A x\n  s -> x.a\nend\n")
+    diagnostics = _errors(tmp_path, text)
+    assert any(d.code == "E332" and "A -> B -> A" in d.message for d in diagnostics), \
+        [(d.code, d.message) for d in diagnostics]
+
+
+def test_an_unbound_input_without_default_is_an_error_at_the_instance(tmp_path):
+    text = ("model Push\n  port a\n  input F [N]\n  Se s : e = F\n  s -> a\nend\n"
+            "model Top\n  I m : f = p\n  Push push\n  push.a -> m\nend\n")
+    diagnostics = _errors(tmp_path, text)
+    found = [d for d in diagnostics if d.code == "E334"]
+    assert found and found[0].span.line == 9 and "must bind input 'F'" in found[0].message
+
+
+def test_two_imports_defining_one_name_need_the_library_name(tmp_path):
+    files = {"one.bg": PIPE, "two.bg": PIPE}
+    text = ('import "one.bg"\nimport "two.bg"\n'
+            "model Top\n  Se s : e = 1\n  C tank : e = q\n  Pipe p\n  s -> p.a\n  p.b -> tank\nend\n")
+    diagnostics = _errors(tmp_path, text, files=files)
+    assert any(d.code == "E331" and "one.bg" in d.message and "two.bg" in d.message for d in diagnostics)
+    qualified = text.replace("  Pipe p", "  two.Pipe p")
+    path = tmp_path / "q.bg"
+    path.write_text(qualified)
+    graph, _ = load(path)
+    assert "p.loss" in set(graph.elements)
+    unknown = text.replace("  Pipe p", "  three.Pipe p")
+    assert any(d.code == "E330" for d in _errors(tmp_path, unknown, name="u.bg"))
+
+
+def test_an_unknown_std_library_is_an_error_with_the_list(tmp_path):
+    path = tmp_path / "m.bg"
+    path.write_text('import "std:hydraulic"\nmodel M\n  C c : e = q\n  Se s : e = 1\n  s -> c\nend\n')
+    with pytest.raises(ModelError) as caught:
+        load(path)
+    (error,) = [d for d in caught.value.diagnostics if d.code == "E307"]
+    assert "std:hydraulics" in error.hint
+
+
+def test_check_json_names_the_instance_path(tmp_path, capsys):
+    library = PIPE.replace("e = R_h*f", "e = R_h*f + nope")
+    path = tmp_path / "m.bg"
+    path.write_text(library + "model Top\n  Se s : e = 1\n  C tank : e = q\n  Pipe p\n  s -> p.a\n  p.b -> tank\nend\n")
+    assert main(["check", "--model", "Top", "--json", str(path)]) == 1
+    data = json.loads(capsys.readouterr().out)
+    assert [d["instance"] for d in data["diagnostics"] if d["code"] == "E301"] == ["p"]
+
+
+# ------------------------------------------------------------ the flagship from components
+
+@pytest.mark.slow
+def test_the_component_flagship_gives_the_cycle_figures_of_the_flat_one():
+    flat = run(MODELS / "electro_pneumatic_hybrid.bg")
+    parts = run(MODELS / "electro_pneumatic_hybrid_components.bg")
+    assert flat.complete and parts.complete
+    for name in ("torque", "power", "x", "v", "F_nut", "mdot_valve"):
+        a = np.interp(flat.t, parts.t, parts.outputs[name])
+        scale = np.max(np.abs(flat.outputs[name]))
+        assert np.max(np.abs(a - flat.outputs[name])) < 1e-4 * scale, name
+    for stat in (np.max, np.min):
+        assert stat(parts.outputs["torque"]) == pytest.approx(stat(flat.outputs["torque"]), rel=1e-4)
+    rms = [math.sqrt(np.trapezoid(r.outputs["torque"] ** 2, r.t) / r.t[-1]) for r in (flat, parts)]
+    assert rms[1] == pytest.approx(rms[0], rel=1e-5)
+    energy = [np.trapezoid(np.maximum(r.outputs["power"], 0), r.t) for r in (flat, parts)]
+    assert energy[1] == pytest.approx(energy[0], rel=1e-5)
