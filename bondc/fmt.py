@@ -32,6 +32,7 @@ from pathlib import Path
 
 from bondc import ast
 from bondc.io import read_source
+from bondc.model import KINDS
 from bondc.parse import parse_source, parse_text
 from bondc.source import Source, Span
 
@@ -322,6 +323,15 @@ class _Line:
     aligned: bool = True  # False for block headers and 'end': their comments stay apart
 
 
+def _is_instance(stmt) -> bool:
+    """A submodel instance (``Orifice valve : A = 2e-5``): an element statement whose kind is a model."""
+    return isinstance(stmt, ast.Element) and stmt.kind not in KINDS
+
+
+def _group(stmt) -> str | None:
+    return "instance" if _is_instance(stmt) else _GROUP.get(type(stmt))
+
+
 _GROUP = {
     ast.Param: "param",
     ast.Element: "element",
@@ -554,10 +564,10 @@ class _Formatter:
         widths: list[dict] = [{} for _ in entries]
         start = 0
         while start < len(entries):
-            group = _GROUP.get(type(entries[start][0]))
+            group = _group(entries[start][0])
             end = start + 1
             while (group is not None and end < len(entries)
-                   and _GROUP.get(type(entries[end][0])) == group
+                   and _group(entries[end][0]) == group
                    and not any(entries[end][1]) and not entries[end][2]):
                 end += 1
             if group is not None:
@@ -593,7 +603,14 @@ class _Formatter:
         def render(item, prefix: str) -> str:
             return item if isinstance(item, str) else _law_text(item, len(indent) + len(prefix))
 
-        current, first_line = head + render(items[0], head), True
+        first = render(items[0], head)
+        if head.endswith(" : ") and len(indent + head) + len(first.split(_ELSE_BREAK)[0]) > MAX_WIDTH \
+                and not isinstance(items[0], str):
+            # a long first law starts on the next line (a newline may follow the colon)
+            self.code(indent, head.rstrip(), None)
+            head = CONTINUATION
+            first = render(items[0], head)
+        current, first_line = head + first, True
         for k in range(1, len(items)):
             gap = attached.gaps.get(k - 1)
             plain = items[k] if isinstance(items[k], str) else format_law(items[k])  # one line
@@ -674,7 +691,7 @@ class _Formatter:
     def _widths_element(self, run, block) -> dict:
         elements = [s for s in run if isinstance(s, ast.Element)]
         # one kind column for the whole block, so every element's name starts in one column
-        kind = max(len(s.kind) for s in block if isinstance(s, (ast.Element, ast.Junction)))
+        kind = max(len(s.kind) for s in block if isinstance(s, (ast.Element, ast.Junction)) and not _is_instance(s))
         name = max((len(s.name) for s in elements if s.description is not None or s.laws), default=0)
         heads = [self._element_head(s, kind, name) for s in elements if s.laws]
         return {"kind": kind, "name": name, "colon": _column(heads, HEAD_ALIGN_MAX)}
@@ -683,10 +700,20 @@ class _Formatter:
     def _element_head(stmt: ast.Element, kind: int, name: int) -> str:
         return _words(_pad(stmt.kind, kind), _pad(stmt.name, name), _desc(stmt.description)).rstrip()
 
+    # instances: MODEL NAME "DESC" : BINDING, ... aligned among themselves, bindings filling lines
+    def _widths_instance(self, run, block) -> dict:
+        kind = max(len(s.kind) for s in run)
+        name = max((len(s.name) for s in run if s.description is not None or s.laws), default=0)
+        heads = [self._element_head(s, kind, name) for s in run if s.laws]
+        return {"kind": kind, "name": name, "colon": _column(heads, HEAD_ALIGN_MAX)}
+
     def _stmt_Element(self, stmt: ast.Element, indent, widths, attached) -> None:
         head = self._element_head(stmt, widths.get("kind", 0), widths.get("name", 0))
         if stmt.laws:
             head = _pad(head, widths.get("colon", 0)) + " : "
+        if _is_instance(stmt):
+            self._laws(head, [format_law(law) for law in stmt.laws], indent, attached, fill=True)
+            return
         self._laws(head, list(stmt.laws), indent, attached)
 
     def _stmt_Junction(self, stmt: ast.Junction, indent, widths, attached) -> None:

@@ -75,7 +75,7 @@ def _grammar_text() -> str:
 
 
 class _LinePostLexer:
-    """Drops newlines inside brackets, after a trailing comma, and repeated ones.
+    """Drops newlines inside brackets, after a trailing comma or colon, and repeated ones.
 
     Comments are taken out of the token stream and kept in ``comments`` for fmt.
     """
@@ -125,7 +125,7 @@ class _LinePostLexer:
                 kind = token.value.upper()
                 token = Token.new_borrow_pos(kind, token.value, token)
             if kind == "_NL":
-                if depth > 0 or previous is None or previous.type in ("_NL", "COMMA"):
+                if depth > 0 or previous is None or previous.type in ("_NL", "COMMA", "COLON"):
                     continue
             elif kind in ("LPAR", "LSQB"):
                 depth += 1

@@ -51,6 +51,7 @@ from bondc.model import (
 )
 from bondc.parse import parse_source
 from bondc.flatten import flatten, ports_of
+from bondc.std import LIBRARIES as STD_LIBRARIES, path_of as std_path_of
 from bondc.source import Source, Span
 
 # Built-in functions and how many arguments each takes: (at least, at most); None is "no limit".
@@ -1930,7 +1931,32 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     if selected is not None:
         inputs.update(experiment_defs[selected.name].inputs)
     graph = _graph(m, _parameters(m, chosen_definitions, chosen_values), inputs, experiment_defs)
+    dimension_errors = check_dimensions(m, graph, chosen_values)
+    if dimension_errors:
+        return None, _unique(diagnostics + dimension_errors)
     return graph, diagnostics
+
+
+def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -> list[Diagnostic]:
+    """E210: laws, outputs and inputs dimensionally consistent (LANGUAGE.md section 14)."""
+    from bondc import dimensions
+
+    state_units: dict[str, ast.Unit | None] = {}
+    for element in m.elements:
+        for law in element.laws:
+            if isinstance(law, ast.LawState):
+                state_units[f"{element.name}.{law.name}"] = law.unit
+    for statement in m.statements(ast.StateDecl):
+        state_units[statement.name] = statement.unit
+    for statement in m.statements(ast.Discrete):
+        state_units[statement.name] = statement.unit
+    context = dimensions.Context(
+        graph=graph, unit_of=lambda unit: _resolve_unit(m, unit),
+        params={p.name: p for p in m.params if m.decls.get(p.name) is not None and m.decls[p.name].node is p},
+        inputs={i.name: i for i in m.inputs}, outputs={o.name: o for o in m.outputs},
+        discretes={d.name: d for d in m.statements(ast.Discrete)}, state_units=state_units,
+        functions=graph.functions, values=values)
+    return dimensions.check(context)
 
 
 def check_parameters(m: _Model, sets: Sequence[ast.SetValue]) -> tuple[dict[str, _Definition], dict[str, float]]:
@@ -2093,16 +2119,10 @@ def _read(path: Path, name: str) -> Source:
     return read_source(path, name)
 
 
-STD_LIBRARIES = ("mechanics", "rotational", "electrical", "hydraulics", "pneumatics", "transmissions")
-
-
 def _std_library(name: str) -> Path | None:
     """The file of a shipped component library (``import "std:hydraulics"``)."""
-    if name not in STD_LIBRARIES:
-        return None
-    from importlib import resources
-
-    return Path(str(resources.files("bondc.std").joinpath(f"{name}.bg")))
+    found = std_path_of(name)
+    return None if found is None else Path(str(found))
 
 
 def load_files(path: str | Path) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:

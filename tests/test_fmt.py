@@ -455,3 +455,11 @@ def test_doctests():
     for module in (bondc.fmt, bondc.io):
         result = doctest.testmod(module)
         assert result.attempted and not result.failed, module.__name__
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parent.parent / "models").glob("*.bg"))
+                         + sorted((Path(__file__).parent.parent / "bondc" / "std").glob("*.bg")), ids=_id)
+def test_shipped_models_and_libraries_are_formatted(path):
+    # `bondc fmt --check` passes on every model in models/ and every std: library
+    text = path.read_text(encoding="utf-8")
+    assert fmt(text, str(path)) == text

@@ -1,7 +1,7 @@
 """Every code block of the language reference parses and checks.
 
 ``tests/fixtures/language/`` holds each block of the reference (sections 2 to
-10) as a model: the block verbatim, wrapped in a model that declares the names
+13) as a model: the block verbatim, wrapped in a model that declares the names
 it uses, with placeholders (``...statements...``, ``then ... else ...``) filled
 in. The complete model of section 10 is there exactly as the reference prints
 it. Each must parse and check with no errors.
@@ -22,7 +22,7 @@ EXAMPLES = sorted(FIXTURES.glob("*.bg"))
 
 def test_every_section_has_examples():
     sections = {path.name[:3] for path in EXAMPLES}
-    assert sections == {f"s{n:02d}" for n in range(2, 11)}
+    assert sections == {f"s{n:02d}" for n in range(2, 14)}
 
 
 @pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
@@ -63,3 +63,15 @@ def test_section_3_parameters_in_si():
     assert values["lead"] == 0.005
     assert values["n"] == pytest.approx(104.7197551)
     assert values["Ar"] == pytest.approx(3.141592653589793 / 4 * (0.04 ** 2 - 0.02 ** 2))
+
+
+def test_section_13_experiments_inherit_the_defaults():
+    graph, _ = semantic.load(FIXTURES / "s13_builtins_defaults.bg", experiment="cycle")
+    cycle = graph.experiments["cycle"]
+    assert (cycle.solver, cycle.rtol, cycle.cycle, cycle.t_end) == ("Radau", 1e-6, 4.2, 4.2)
+
+
+def test_section_11_instance_names_are_dotted():
+    graph, _ = semantic.load(FIXTURES / "s11_submodels.bg")
+    assert set(graph.elements) == {"supply", "valve.loss", "tank"}
+    assert graph.parameters["valve.A"].value == 2e-5 and graph.parameters["valve.Cd"].value == 0.7

@@ -173,7 +173,7 @@ def test_hostile_text_is_shown_as_text(tmp_path):
 
 FAILING = """\
 model Failing "A force that becomes nan at t = 0.5 s"
-  param m = 1 [kg]
+  param m = 1
   Se push : e = sqrt(0.5 - t)
   I mass : f = p/m
   1 j

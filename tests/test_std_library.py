@@ -490,3 +490,12 @@ def test_every_library_component_declares_ports_and_describes_itself(name):
         for statement in model.body:
             if type(statement).__name__ == "Param":
                 assert statement.description, f"{model.name}.{statement.name} has no description"
+
+
+def test_the_component_page_is_up_to_date():
+    from pathlib import Path
+
+    from bondc.std import describe
+
+    page = Path(__file__).parent.parent / "docs" / "components.md"
+    assert page.read_text(encoding="utf-8") == describe(), "run: python -m bondc.std > docs/components.md"

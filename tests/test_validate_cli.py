@@ -119,8 +119,9 @@ def test_bad_measured_data_is_a_clear_data_error(tmp_path, csv, spec, code, word
 def test_incomplete_simulation_does_not_validate(simulated, tmp_path, capsys):
     """A run that stops early is compared over what it computed, and validation fails (exit 1)."""
     model = tmp_path / "failing.bg"
-    text = MODEL.read_text(encoding="utf-8").replace("input u [V] = step(t, t_step) * U0",
-                                                     "input u [V] = step(t, t_step) * U0 * sqrt(0.01 - t)/0.1")
+    original = MODEL.read_text(encoding="utf-8")
+    text = original.replace("input u [V] = step(t, t_step)*U0", "input u [V] = step(t, t_step)*U0*sqrt(0.01 - t)/0.1")
+    assert text != original
     model.write_text(text, encoding="utf-8")
     data = write_measured(tmp_path / "bench.csv", *noisy(simulated))
     results, code = run_validate(model, data=data, compare=["v_C=v_C_meas:r2=-100,nrmse=10"],

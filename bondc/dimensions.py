@@ -1,0 +1,471 @@
+"""Dimension checking (LANGUAGE.md section 14): laws, outputs, inputs and bindings are consistent.
+
+Every quantity has one of three kinds of dimension:
+
+- **known**: a vector of exponents over the SI base dimensions (angles count
+  as dimensionless), possibly still containing unknowns (below);
+- **free**: a number without a unit, a parameter declared without a unit, and
+  what is built from them (``2*f``, ``q/1e-9``, ``step(t, 1)*10``, a quantity
+  raised to a power that is not a constant simple fraction (denominator at
+  most 4), as in an empirical fit ``a*abs(v)^0.27``): it takes whatever dimension makes its expression
+  consistent, so it is never an error;
+- **unknown**: a measured signal (``csv``), whose dimension is not checked.
+
+The efforts and flows of the bonds are the unknowns. All bonds at a junction
+share the dimension of their efforts and of their flows; a transformer or
+gyrator relates the two sides by the dimension of its ratio; a storage
+element's ``q`` is its flow times seconds and ``p`` its effort times seconds.
+Each law, sum, comparison and declared unit is an equation between
+dimensions, linear in the exponents. They are solved in tiers — sources and
+ratios first, then storage elements, then resistors, then the rest — each
+equation with one unknown left fixing it, so that an inconsistent law is
+reported where it is written and not where the domain was first inferred.
+Whatever stays unknown is not checked. Every equation whose two sides are
+then known and differ is an error (E210) naming both dimensions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Callable, Mapping
+
+from bondc import ast
+from bondc.errors import Diagnostic, Related
+from bondc.source import Span
+from bondc.units import BASE_DIMENSIONS, SIUnit
+
+_N = len(BASE_DIMENSIONS) - 1          # the angle pseudo-dimension is dropped: angles are dimensionless
+_ZERO = (Fraction(0),) * _N
+_SECOND = tuple(Fraction(1 if name == "s" else 0) for name in BASE_DIMENSIONS[:_N])
+FREE, UNKNOWN = "free", "unknown"
+
+
+def _vec(dims) -> tuple[Fraction, ...]:
+    return tuple(Fraction(d) for d in dims[:_N])
+
+
+@dataclass(frozen=True)
+class Form:
+    """A dimension: ``const`` plus a combination of unknowns (exponent vectors add: ``a*b`` -> ``a + b``)."""
+
+    const: tuple[Fraction, ...]
+    terms: tuple[tuple[int, Fraction], ...] = ()
+
+    @staticmethod
+    def of(dims) -> "Form":
+        return Form(_vec(dims))
+
+    @staticmethod
+    def var(index: int) -> "Form":
+        return Form(_ZERO, ((index, Fraction(1)),))
+
+    def plus(self, other: "Form", sign: int = 1) -> "Form":
+        terms = dict(self.terms)
+        for index, coefficient in other.terms:
+            terms[index] = terms.get(index, Fraction(0)) + sign * coefficient
+        const = tuple(a + sign * b for a, b in zip(self.const, other.const))
+        return Form(const, tuple(sorted((i, c) for i, c in terms.items() if c != 0)))
+
+    def times(self, factor: Fraction) -> "Form":
+        return Form(tuple(a * factor for a in self.const), tuple((i, c * factor) for i, c in self.terms if c * factor))
+
+
+Dim = object     # Form | FREE | UNKNOWN
+
+
+def text(vector) -> str:
+    return SIUnit(1.0, tuple(vector) + (Fraction(0),), "").dimension_text()
+
+
+def _mul(a, b, sign: int = 1):
+    if a == FREE or b == FREE:
+        return FREE
+    if a == UNKNOWN or b == UNKNOWN:
+        return UNKNOWN
+    return a.plus(b, sign)
+
+
+@dataclass
+class _Equation:
+    left: Form
+    right: Form
+    span: Span
+    kind: str           # "law", "sum", "compare", "output", "input", "binding", "branch", "argument", ...
+    what: str           # for the message: "e of R 'valve'", "the output 'v'", ...
+    tier: int
+
+
+@dataclass
+class Context:
+    """What the checker needs from the semantic stage."""
+
+    graph: object                                        # model.BondGraph
+    unit_of: Callable[[ast.Unit | None], object]         # ast.Unit -> SIUnit | None
+    params: Mapping[str, ast.Param]
+    inputs: Mapping[str, ast.Input]
+    outputs: Mapping[str, ast.Output]
+    discretes: Mapping[str, ast.Discrete]
+    state_units: Mapping[str, ast.Unit | None]           # qualified state name -> declared unit
+    functions: Mapping[str, object]                      # name -> FnDef/Function (params, body)
+    values: Mapping[str, float]                          # parameter SI values (constant exponents)
+
+
+@dataclass
+class _Checker:
+    ctx: Context
+    equations: list[_Equation] = field(default_factory=list)
+    names: list[str] = field(default_factory=list)      # unknown index -> what it is
+    effort: dict[int, int] = field(default_factory=dict)
+    flow: dict[int, int] = field(default_factory=dict)
+    state: dict[str, int] = field(default_factory=dict)
+    memo: dict = field(default_factory=dict)
+    tier: int = 3
+
+    # -- unknowns
+
+    def new(self, what: str) -> Form:
+        self.names.append(what)
+        return Form.var(len(self.names) - 1)
+
+    def declared(self, unit) -> Form | None:
+        resolved = self.ctx.unit_of(unit) if unit is not None else None
+        return None if resolved is None else Form.of(resolved.dims)
+
+    # -- expressions
+
+    def dim(self, node, local: Mapping[str, object], owner=None):
+        method = getattr(self, "_" + type(node).__name__)
+        return method(node, local, owner)
+
+    def _Num(self, node, local, owner):
+        return FREE
+
+    def _Str(self, node, local, owner):
+        return UNKNOWN
+
+    def _ListExpr(self, node, local, owner):
+        return self.agree([self.dim(item, local, owner) for item in node.items], node.items, "list")
+
+    def _Name(self, node, local, owner):
+        name = node.name
+        if name in local:
+            return local[name]
+        if name == "t":
+            return Form(_SECOND)
+        if name == "pi":
+            return FREE
+        ctx = self.ctx
+        if name in ctx.params:
+            return self.declared(ctx.params[name].unit) or FREE
+        if name in ctx.inputs:
+            item = ctx.inputs[name]
+            return self.declared(item.unit) or self.signal(("input", name), item.value)
+        if name in ctx.outputs:
+            item = ctx.outputs[name]
+            return self.declared(item.unit) or self.signal(("output", name), item.value)
+        if name in ctx.discretes:
+            item = ctx.discretes[name]
+            return self.declared(item.unit) or self.signal(("discrete", name), item.value)
+        if name in self.state:
+            return Form.var(self.state[name])
+        return UNKNOWN
+
+    def signal(self, key, expr):
+        """The dimension of a named expression (an input or output without a unit), once."""
+        if key in self.memo:
+            return self.memo[key]
+        self.memo[key] = UNKNOWN           # a cycle (reported elsewhere) stays unchecked
+        value = self.dim(expr, {}) if expr is not None else UNKNOWN
+        self.memo[key] = value
+        return value
+
+    def _Ref(self, node, local, owner):
+        from bondc.causality import resolve_reference
+
+        target = resolve_reference(self.ctx.graph, {}, node.parts, owner)
+        if target is None:
+            return UNKNOWN
+        kind, what = target
+        if kind == "state":
+            return Form.var(self.state[what]) if what in self.state else UNKNOWN
+        return Form.var(self.effort[what] if kind == "e" else self.flow[what])
+
+    def _Unary(self, node, local, owner):
+        value = self.dim(node.operand, local, owner)
+        return FREE if node.op == "not" else value
+
+    def _Binary(self, node, local, owner):
+        op = node.op
+        if op in ("and", "or"):
+            self.dim(node.left, local, owner)
+            self.dim(node.right, local, owner)
+            return FREE
+        left = self.dim(node.left, local, owner)
+        if op == "^":
+            return self.power(left, node.right, local, owner)
+        right = self.dim(node.right, local, owner)
+        if op == "*":
+            return _mul(left, right)
+        if op == "/":
+            return _mul(left, right, -1)
+        kind = "sum" if op in ("+", "-") else "compare"
+        self.equal(left, right, node.span, kind, f"'{op}'")
+        if kind == "compare":
+            return FREE
+        return right if left == FREE or left == UNKNOWN else left
+
+    def power(self, base, exponent_node, local, owner):
+        exponent = self.dim(exponent_node, local, owner)
+        if isinstance(exponent, Form):
+            self.equal(exponent, Form(_ZERO), exponent_node.span, "exponent", "an exponent")
+        if base == FREE or base == UNKNOWN:
+            return base
+        value = self.constant(exponent_node)
+        if value is None:
+            return Form(_ZERO) if not base.terms and base.const == _ZERO else FREE
+        fraction = Fraction(value).limit_denominator(4)     # 2, -1, 1/2, 1/3, 3/4: exact; 1.7: a fit
+        if abs(float(fraction) - value) > 1e-12:
+            return FREE if base.terms or base.const != _ZERO else base
+        return base.times(fraction)
+
+    def constant(self, node) -> float | None:
+        """The value of a constant exponent (numbers and parameters), else None."""
+        from bondc.evaluate import EvaluationError, evaluate
+
+        if any(isinstance(n, (ast.Ref, ast.Call)) or (isinstance(n, ast.Name) and n.name not in self.ctx.values
+                                                       and n.name != "pi") for n in ast.walk(node)):
+            return None
+        try:
+            return float(evaluate(node, self.ctx.values, {}))
+        except (EvaluationError, TypeError, ValueError, ZeroDivisionError, OverflowError):
+            return None
+
+    def _If(self, node, local, owner):
+        self.dim(node.cond, local, owner)
+        then = self.dim(node.then, local, owner)
+        orelse = self.dim(node.orelse, local, owner)
+        self.equal(then, orelse, node.span, "branch", "the branches of 'if'")
+        return orelse if then in (FREE, UNKNOWN) else then
+
+    def agree(self, values, nodes, what):
+        """The common dimension of arguments that must agree (each pair checked)."""
+        known = None
+        for value, node in zip(values, nodes):
+            if value in (FREE, UNKNOWN):
+                continue
+            if known is None:
+                known = value
+            else:
+                self.equal(known, value, node.span, "argument", what)
+        return known if known is not None else (UNKNOWN if UNKNOWN in values else FREE)
+
+    def _Call(self, node, local, owner):
+        func, args = node.func, node.args
+        if func in self.ctx.functions:
+            return self.call(func, [self.dim(a, local, owner) for a in args])
+        if func == "csv":
+            return UNKNOWN
+        values = [self.dim(a, local, owner) for a in args]
+        if func in ("abs", "floor", "ceil"):
+            return values[0] if values else FREE
+        if func in ("min", "max", "mod"):
+            return self.agree(values, args, f"the arguments of '{func}'")
+        if func == "sqrt":
+            return values[0].times(Fraction(1, 2)) if isinstance(values[0], Form) else values[0]
+        if func == "table" and len(args) == 3:
+            x = values[0]
+            xs = values[1]
+            if isinstance(x, Form) and isinstance(xs, Form):
+                self.equal(x, xs, args[1].span, "argument", "the breakpoints and the value of 'table'")
+            return values[2]
+        if func == "step" and len(args) == 2:
+            self.agree(values, args, "the arguments of 'step'")
+            return FREE
+        if func == "atan2":
+            self.agree(values, args, "the arguments of 'atan2'")
+            return FREE
+        if func == "coulomb":
+            return self.agree(values[1:], args[1:], "the friction limits of 'coulomb'")
+        return FREE           # sign, pwm, exp, log, sin, cos, tan, tanh, atan: numbers
+
+    def call(self, name, arguments):
+        function = self.ctx.functions[name]
+        key = (name, tuple(repr(a) for a in arguments))
+        if key in self.memo:
+            return self.memo[key]
+        self.memo[key] = UNKNOWN            # recursion (an error elsewhere) stays unchecked
+        body = getattr(function, "body")
+        value = self.dim(body, dict(zip(function.params, arguments)))
+        self.memo[key] = value
+        return value
+
+    # -- equations
+
+    def equal(self, left, right, span: Span, kind: str, what: str) -> None:
+        if isinstance(left, Form) and isinstance(right, Form):
+            self.equations.append(_Equation(left, right, span, kind, what, self.tier))
+
+
+def _substitute(form: Form, known: Mapping[int, tuple]) -> Form:
+    const = list(form.const)
+    terms = []
+    for index, coefficient in form.terms:
+        if index in known:
+            const = [a + coefficient * b for a, b in zip(const, known[index])]
+        else:
+            terms.append((index, coefficient))
+    return Form(tuple(const), tuple(terms))
+
+
+def _solve(equations: list[_Equation], source: dict[int, _Equation] | None = None) -> dict[int, tuple]:
+    """Fix every unknown that some equation determines, tier by tier (``source``: which one)."""
+    known: dict[int, tuple] = {}
+    source = {} if source is None else source
+    for tier in sorted({e.tier for e in equations}):
+        active = [e for e in equations if e.tier <= tier]
+        changed = True
+        while changed:
+            changed = False
+            for equation in active:
+                difference = _substitute(equation.left.plus(equation.right, -1), known)
+                if len(difference.terms) == 1:
+                    index, coefficient = difference.terms[0]
+                    known[index] = tuple(-c / coefficient for c in difference.const)
+                    source[index] = equation
+                    changed = True
+    return known
+
+
+def check(ctx: Context) -> list[Diagnostic]:
+    """E210 for every equation between dimensions whose two sides are known and differ."""
+    graph = ctx.graph
+    c = _Checker(ctx)
+    # unknowns: one effort and one flow dimension per set of bonds joined at junctions
+    parent = {b.number: b.number for b in graph.bonds}
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for junction in graph.junctions.values():
+        for a, b in zip(junction.bonds, junction.bonds[1:]):
+            parent[find(a)] = find(b)
+    roots: dict[int, tuple[int, int]] = {}
+    for bond in graph.bonds:
+        root = find(bond.number)
+        if root not in roots:
+            roots[root] = (c.new(f"effort of bond {bond.name}").terms[0][0], c.new(f"flow of bond {bond.name}").terms[0][0])
+        c.effort[bond.number], c.flow[bond.number] = roots[root]
+    for state in graph.states:
+        unit = ctx.state_units.get(state.qualified)
+        declared = c.declared(unit)
+        index = c.new(f"state {state.qualified}").terms[0][0]
+        c.state[state.qualified] = index
+        if declared is not None:
+            c.tier = 0
+            c.equal(Form.var(index), declared, state.span, "state", f"state '{state.qualified}'")
+
+    for element in graph.elements.values():
+        kind = element.kind
+        tier = {"Se": 0, "Sf": 0, "MSe": 0, "MSf": 0, "TF": 0, "GY": 0, "MTF": 0, "MGY": 0, "C": 1, "I": 1}.get(kind, 2)
+        c.tier = tier
+        local: dict[str, object] = {}
+        if len(element.bonds) == 1:
+            bond = element.bond
+            local["e"], local["f"] = Form.var(c.effort[bond]), Form.var(c.flow[bond])
+        for state in element.states:
+            own = Form.var(c.state[state.qualified])
+            local[state.name] = own
+            if state.rate is None:      # default q = integral of f, p = integral of e
+                integral = local["f" if state.name == "q" else "e"].plus(Form(_SECOND))
+                c.equal(own, integral, state.span, "state", f"'{state.qualified}'")
+        for target, expr in element.laws.items():
+            span = element.law_spans.get(target, element.span) if element.law_spans else element.span
+            value = c.dim(expr, local, element.name)
+            if target in ("e", "f") and len(element.bonds) == 1:
+                c.equal(local[target], value, span, "law", f"{target} of {kind} '{element.name}'")
+            elif target == "r" and len(element.bonds) == 2 and isinstance(value, Form):
+                b1, b2 = element.bonds
+                e1, f1 = Form.var(c.effort[b1]), Form.var(c.flow[b1])
+                e2, f2 = Form.var(c.effort[b2]), Form.var(c.flow[b2])
+                if kind in ("TF", "MTF"):
+                    c.equal(e1, value.plus(e2), span, "ratio", f"p1.e = r*p2.e of {kind} '{element.name}'")
+                    c.equal(f2, value.plus(f1), span, "ratio", f"p2.f = r*p1.f of {kind} '{element.name}'")
+                else:
+                    c.equal(e1, value.plus(f2), span, "ratio", f"p1.e = r*p2.f of {kind} '{element.name}'")
+                    c.equal(e2, value.plus(f1), span, "ratio", f"p2.e = r*p1.f of {kind} '{element.name}'")
+        for state in element.states:
+            own = Form.var(c.state[state.qualified])
+            if state.rate is not None:
+                rate = c.dim(state.rate, local, element.name)
+                c.equal(own.plus(Form(_SECOND), -1), rate, state.span, "rate", f"der({state.qualified})")
+            if state.initial is not None:
+                c.equal(own, c.dim(state.initial, local, element.name), state.span, "initial",
+                        f"the initial value of '{state.qualified}'")
+    c.tier = 3
+    for state in graph.model_states:
+        own = Form.var(c.state[state.qualified])
+        if state.rate is not None:
+            c.equal(own.plus(Form(_SECOND), -1), c.dim(state.rate, {}), state.span, "rate", f"der({state.name})")
+        if state.initial is not None:
+            c.equal(own, c.dim(state.initial, {}), state.span, "initial", f"the initial value of '{state.name}'")
+    for name, item in ctx.outputs.items():
+        declared = c.declared(item.unit)
+        value = c.dim(item.value, {})
+        if declared is not None:
+            c.equal(declared, value, item.value.span, "output", f"output '{name}' [{item.unit.text}]")
+    for name, item in ctx.inputs.items():
+        declared = c.declared(item.unit)
+        if declared is not None and item.value is not None:
+            c.equal(declared, c.dim(item.value, {}), item.value.span, "input", f"input '{name}' [{item.unit.text}]")
+    for when in getattr(graph, "whens", ()):
+        c.dim(when.condition, {})
+
+    source: dict[int, _Equation] = {}
+    known = _solve(c.equations, source)
+    diagnostics = []
+    for equation in c.equations:
+        left = _substitute(equation.left, known)
+        right = _substitute(equation.right, known)
+        if left.terms or right.terms or left.const == right.const:
+            continue
+        related = []
+        for index, _ in equation.left.terms + equation.right.terms:
+            origin = source.get(index)
+            if origin is not None and origin is not equation and origin.span != equation.span \
+                    and all(r.span != origin.span for r in related):
+                related.append(Related(origin.span, f"the {c.names[index]} is {text(known[index])} from "
+                                                    f"{origin.what} here"))
+        diagnostics.append(_diagnostic(equation, left.const, right.const, related[:2]))
+    return diagnostics
+
+
+def _diagnostic(equation: _Equation, left, right, related=()) -> Diagnostic:
+    a, b = text(left), text(right)
+    kind = equation.kind
+    if kind == "sum":
+        message = f"cannot add or subtract {a} and {b}"
+        hint = "both terms of a sum must measure the same quantity; check the units of the names involved"
+    elif kind == "compare":
+        message = f"cannot compare {a} with {b}"
+        hint = "both sides of a comparison must measure the same quantity"
+    elif kind == "branch":
+        message = f"the branches of 'if' differ: {a} and {b}"
+        hint = "both branches must give the same quantity"
+    elif kind == "output" or kind == "input":
+        message = f"{equation.what} is {a}, but its expression is {b}"
+        hint = "declare the unit of what the expression computes, or fix the expression"
+    elif kind == "law":
+        message = f"the two sides of the law differ: {equation.what} is {a}, but the expression is {b}"
+        hint = ("the bond's domain comes from the elements around it; check the units of the parameters in "
+                "the law")
+    elif kind == "exponent":
+        message = f"an exponent must be dimensionless, not {b}"
+        hint = "divide by a reference quantity of the same unit"
+    else:
+        message = f"dimensions differ in {equation.what}: {a} and {b}"
+        hint = "check the units of the quantities involved"
+    return Diagnostic("error", "E210", message, equation.span, hint, tuple(related))
