@@ -211,6 +211,10 @@ def _cmd_simulate(args) -> int:
     account = None
     if result.t.size > 1:
         summary["statistics"] = output_statistics(result)
+        for name, row in summary["statistics"].items():         # each output in its declared unit
+            unit, scale = result.units.get(name, (None, 1.0))
+            if unit is not None:
+                row.update({key: value / scale for key, value in row.items()}, unit=unit)
         cycle = experiment.cycle if experiment is not None else None
         summary["power"] = power_statistics(result, power_outputs(graph), cycle)
         try:
@@ -239,9 +243,8 @@ def _cmd_simulate(args) -> int:
             print()
             print(f"  {'output':<14} {'unit':<8} {'min':>12} {'max':>12} {'rms':>12} {'final':>12}")
             for name, row in stats.items():
-                unit = graph.outputs[name].unit_text or ""
-                factor = graph.outputs[name].display_factor or 1.0
-                print(f"  {name:<14} {unit:<8} " + " ".join(f"{row[key] / factor:>12.5g}"
+                unit = row.get("unit") or ""
+                print(f"  {name:<14} {unit:<8} " + " ".join(f"{row[key]:>12.5g}"
                                                           for key in ("min", "max", "rms", "final")))
         if account is not None:
             print()

@@ -339,6 +339,12 @@ def _solve(equations: list[_Equation], source: dict[int, _Equation] | None = Non
 
 def check(ctx: Context) -> list[Diagnostic]:
     """E210 for every equation between dimensions whose two sides are known and differ."""
+    return analyse(ctx)[0]
+
+
+def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
+    """The E210 diagnostics, and the SI unit of every state and bond variable whose dimension is
+    known: ``{"mass.p": "kg*m/s", "b3.e": "kg/(m*s^2)", ...}`` (for result files)."""
     graph = ctx.graph
     c = _Checker(ctx)
     # unknowns: one effort and one flow dimension per set of bonds joined at junctions
@@ -440,7 +446,16 @@ def check(ctx: Context) -> list[Diagnostic]:
                 related.append(Related(origin.span, f"the {c.names[index]} is {text(known[index])} from "
                                                     f"{origin.what} here"))
         diagnostics.append(_diagnostic(equation, left.const, right.const, related[:2]))
-    return diagnostics
+    found: dict[str, str] = {}
+    for qualified, index in c.state.items():
+        if index in known:
+            found[qualified] = text(known[index])
+    for bond in graph.bonds:
+        for variable, table in (("e", c.effort), ("f", c.flow)):
+            index = table.get(bond.number)
+            if index in known:
+                found[f"{bond.name}.{variable}"] = text(known[index])
+    return diagnostics, found
 
 
 def _diagnostic(equation: _Equation, left, right, related=()) -> Diagnostic:

@@ -213,6 +213,8 @@ class BondGraph:
     # discrete variables are model states whose rate is 0 (they change only in when clauses)
     discrete: tuple[str, ...] = ()
     whens: tuple[WhenDef, ...] = ()
+    # the SI unit (as dimensions: "kg*m/s") of each state and bond variable whose dimension is known
+    si_units: Mapping[str, str] = field(default_factory=dict, compare=False)
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]

@@ -203,11 +203,27 @@ def open_data(path, encoding="utf-8"):
     return open(path, newline="", encoding=encoding)
 
 
+def header_cell(cell):
+    """``"omega [rpm]"`` -> ``("omega", "rpm")``; ``"omega"`` -> ``("omega", None)``: a column's name
+    and the unit its header gives (the language reference, section 14)."""
+    cell = cell.strip()
+    if cell.endswith("]") and "[" in cell:
+        name, _, unit = cell[:-1].rpartition("[")
+        if name.strip():
+            return name.strip(), unit.strip() or None
+    return cell, None
+
+
 def csv_header(path):
-    """The column names of a csv file (``[]`` when it has no header line)."""
+    """The column names of a csv file, without their units (``[]`` when it has no header line)."""
+    return [name for name, _ in csv_columns(path)]
+
+
+def csv_columns(path):
+    """``[(name, unit or None), ...]``: the header of a csv file."""
     with open_data(path) as handle:
         rows = csv_rows(handle)
-    return [cell.strip() for cell in rows[0]] if rows else []
+    return [header_cell(cell) for cell in rows[0]] if rows else []
 
 
 def load_csv(path, column):
@@ -216,7 +232,9 @@ def load_csv(path, column):
     The one reader of measured signals: ``bondc check``, the equations stage
     (``linearize``) and the simulation all read files through it. The time is
     the column named ``t`` or ``time`` (any case), else the first column;
-    rows as :func:`csv_rows` gives them. Times must not decrease.
+    rows as :func:`csv_rows` gives them. Times must not decrease. Columns are
+    matched by name; a unit in the header (``omega [rpm]``) is not applied
+    here: the compiler scales the signal (see :func:`bondc.symbolic.csv_scales`).
     """
     path = os.path.abspath(path)
     key = (path, column)
@@ -226,7 +244,7 @@ def load_csv(path, column):
         rows = csv_rows(handle)
     if not rows:
         raise CsvError(f"{path}: empty csv file")
-    header = [cell.strip() for cell in rows[0]]
+    header = [header_cell(cell)[0] for cell in rows[0]]
     lowered = [name.lower() for name in header]
     time_index = lowered.index("t") if "t" in lowered else (lowered.index("time") if "time" in lowered else 0)
     if column not in header:
@@ -248,14 +266,17 @@ def load_csv(path, column):
     return times, values
 
 
-def csv_signal(x, base_dir, path, column):
-    """A measured signal: ``column`` of the csv file at ``x``, linearly interpolated, held at the ends."""
+def csv_signal(x, base_dir, path, column, time_scale=1.0, value_scale=1.0):
+    """A measured signal: ``column`` of the csv file at ``x``, linearly interpolated, held at the ends.
+
+    ``time_scale``/``value_scale``: the SI factors of the units the file's header gives (the compiler
+    reads them), so that ``x`` is in s and the result in SI."""
     times, values = load_csv(os.path.join(base_dir, path), column)
-    return np.interp(x, times, values)
+    return value_scale * np.interp(x / time_scale, times, values)
 
 
-def csv_times(base_dir, path, column):
-    return load_csv(os.path.join(base_dir, path), column)[0]
+def csv_times(base_dir, path, column, time_scale=1.0):
+    return load_csv(os.path.join(base_dir, path), column)[0] * time_scale
 
 
 # -------------------------------------------------------- algebraic loops

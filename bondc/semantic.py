@@ -1041,6 +1041,15 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     elif len(header) < 2:
         report(_error("E310", f"CSV file '{path_arg.value}' needs a time column and a value column",
                       path_arg.span, hint="the first column (or the column t or time) is time"))
+    else:
+        from bondc.symbolic import csv_scales
+
+        try:
+            csv_scales(str(path), column_arg.value)
+        except ValueError as problem:
+            report(_error("E310", f"CSV file '{path_arg.value}': {problem} in its header", column_arg.span,
+                          hint="a header names a column's unit in brackets, e.g. 'omega [rpm]', 't [ms]'; "
+                               "a column without one is SI"))
 
 
 def _check_expr(m: _Model, expr: ast.Expr, scope: _Scope) -> bool:
@@ -1931,14 +1940,15 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     if selected is not None:
         inputs.update(experiment_defs[selected.name].inputs)
     graph = _graph(m, _parameters(m, chosen_definitions, chosen_values), inputs, experiment_defs)
-    dimension_errors = check_dimensions(m, graph, chosen_values)
+    dimension_errors, si_units = check_dimensions(m, graph, chosen_values)
     if dimension_errors:
         return None, _unique(diagnostics + dimension_errors)
-    return graph, diagnostics
+    return dataclasses.replace(graph, si_units=si_units), diagnostics
 
 
-def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -> list[Diagnostic]:
-    """E210: laws, outputs and inputs dimensionally consistent (LANGUAGE.md section 14)."""
+def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -> tuple[list[Diagnostic], dict]:
+    """E210: laws, outputs and inputs dimensionally consistent (LANGUAGE.md section 14); and the SI
+    unit of every state and bond variable whose dimension is known."""
     from bondc import dimensions
 
     state_units: dict[str, ast.Unit | None] = {}
@@ -1956,7 +1966,7 @@ def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -
         inputs={i.name: i for i in m.inputs}, outputs={o.name: o for o in m.outputs},
         discretes={d.name: d for d in m.statements(ast.Discrete)}, state_units=state_units,
         functions=graph.functions, values=values)
-    return dimensions.check(context)
+    return dimensions.analyse(context)
 
 
 def check_parameters(m: _Model, sets: Sequence[ast.SetValue]) -> tuple[dict[str, _Definition], dict[str, float]]:

@@ -89,6 +89,9 @@ class SimResult:
     warnings: list = field(default_factory=list)
     settings: dict = field(default_factory=dict)
     jumps: list = field(default_factory=list)    # (t, states before, states after) of when clauses
+    # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
+    # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
+    units: dict = field(default_factory=dict)
 
     @property
     def t_reached(self) -> float:
@@ -236,6 +239,28 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
     return _result(ss, experiment, namespace, raw, settings)
 
 
+def result_units(graph) -> dict:
+    """Each result column's unit: ``{"t": ("s", 1.0), "P_kPa": ("kPa", 1000.0), "mass.p": ("kg*m/s", 1.0)}``.
+
+    An output is shown in its declared unit; a state or bond variable in SI when its dimension is
+    known (the dimension check infers it); a column whose unit is unknown has none."""
+    units = {"t": ("s", 1.0)}
+    if graph is None:
+        return units
+    for name, unit in getattr(graph, "si_units", {}).items():
+        units[name] = (unit, 1.0)
+    from bondc.units import lookup
+
+    for state in graph.states:
+        declared = lookup(state.unit_text) if state.unit_text else None
+        if declared is not None and declared.is_coherent:       # "chamber.P [Pa]" rather than kg/(m*s^2)
+            units[state.qualified] = (state.unit_text, 1.0)
+    for name, output in graph.outputs.items():
+        if output.unit_text:
+            units[name] = (output.unit_text, output.display_factor or 1.0)
+    return units
+
+
 def _result(ss, experiment, namespace, raw, settings) -> SimResult:
     bond_names = namespace["BOND_VARIABLES"]
     graph = getattr(ss, "graph", None)
@@ -247,6 +272,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
         model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
     )
+    result.units = result_units(graph)
     if raw.failure is not None:
         result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw))
     for group, values in (("output", result.outputs), ("bond variable", result.bonds)):
@@ -411,14 +437,29 @@ def _columns(result: SimResult, all_bonds: bool):
     return names, columns
 
 
+def column_header(name: str, units: Mapping) -> str:
+    """``P_kPa [kPa]``: a column's name with its unit (the language reference, section 14)."""
+    unit = units.get(name)
+    return f"{name} [{unit[0]}]" if unit else name
+
+
 def csv_text(result: SimResult, all_bonds: bool = False) -> str:
+    """The result as csv: a header of names with units (``t [s]``, ``P_kPa [kPa]``), then one row per
+    point; each output in its declared unit, states and bond variables in SI."""
     names, columns = _columns(result, all_bonds)
+    scales = [result.units.get(name, (None, 1.0))[1] for name in names]
+    columns = [column if scale == 1.0 else np.asarray(column) / scale for column, scale in zip(columns, scales)]
     out = io.StringIO()
-    out.write(",".join(names) + "\n")
+    out.write(",".join(_csv_cell(column_header(name, result.units)) for name in names) + "\n")
     if result.t.size:
         for row in np.column_stack(columns).tolist():
             out.write(",".join(map(repr, row)) + "\n")
     return out.getvalue()
+
+
+def _csv_cell(text: str) -> str:
+    """A header cell, quoted when it holds a comma or a quote (a unit never does; a name never can)."""
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
 
 
 def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:

@@ -176,12 +176,22 @@ def pwm_value(x, f, d):
 class Csv(sympy.Function):
     """``csv("file", "column")``: a measured signal of time, linearly interpolated.
 
-    ``args`` are ``(t, Str(absolute path), Str(column))``; use :attr:`path`
-    and :attr:`column`.
+    ``args`` are ``(t, Str(absolute path), Str(column))``, and when the file's
+    header gives units (``t [ms]``, ``omega [rpm]``) the two SI scales
+    ``(time_scale, value_scale)`` after them; use :attr:`path`, :attr:`column`,
+    :attr:`time_scale` and :attr:`value_scale`.
     """
 
-    nargs = 3
+    nargs = (3, 5)
     is_real = True
+
+    @property
+    def time_scale(self) -> float:
+        return float(self.args[3]) if len(self.args) > 3 else 1.0
+
+    @property
+    def value_scale(self) -> float:
+        return float(self.args[4]) if len(self.args) > 4 else 1.0
 
     @property
     def path(self) -> str:
@@ -206,7 +216,7 @@ class Csv(sympy.Function):
         x = self.args[0]
         if not x.is_number:
             return None
-        return sympy.Float(csv_value(float(x), self.path, self.column), prec)
+        return sympy.Float(csv_value(float(x), self.path, self.column, self.time_scale, self.value_scale), prec)
 
     def _sympystr(self, printer):
         return f'csv({printer._print(self.args[0])}, "{Path(self.path).name}", "{self.column}")'
@@ -216,7 +226,8 @@ class Csv(sympy.Function):
             self.column.replace("_", r"\_"), printer._print(self.args[0]))
 
     def _numpycode(self, printer):
-        return f"Csv({printer._print(self.args[0])}, {self.path!r}, {self.column!r})"
+        scales = f", {self.time_scale!r}, {self.value_scale!r}" if len(self.args) > 3 else ""
+        return f"Csv({printer._print(self.args[0])}, {self.path!r}, {self.column!r}{scales})"
 
     _pythoncode = _numpycode
 
@@ -258,9 +269,41 @@ def read_csv_column(path: str, column: str) -> tuple[np.ndarray, np.ndarray]:
     return load_csv(str(path), str(column))
 
 
-def csv_value(x, path, column):
+def csv_value(x, path, column, time_scale=1.0, value_scale=1.0):
     times, values = read_csv_column(str(path), str(column))
-    return float(np.interp(x, times, values))
+    return float(value_scale * np.interp(x / time_scale, times, values))
+
+
+def csv_scales(path: str, column: str) -> tuple[float, float]:
+    """The SI scales of a csv file's time column and of ``column`` from the units in its header
+    (``t [ms]`` -> 0.001, ``omega [rpm]`` -> 0.1047...); 1.0 where the header gives none (SI).
+
+    Raises ValueError naming a unit it does not know."""
+    from bondc.runtime import csv_columns
+
+    columns = csv_columns(path)
+    names = [name.lower() for name, _ in columns]
+    time_index = names.index("t") if "t" in names else (names.index("time") if "time" in names else 0)
+    units = dict(columns)
+    return (unit_scale(columns[time_index][1]) if columns else 1.0), unit_scale(units.get(column))
+
+
+def unit_scale(text: str | None) -> float:
+    """The SI factor of a unit written as text (``"kPa"`` -> 1000.0); None -> 1.0."""
+    if text is None:
+        return 1.0
+    from bondc.errors import BondcError
+    from bondc.parse import parse_set_value
+    from bondc.units import resolve
+
+    try:
+        unit = parse_set_value(f"x = 1 [{text}]", "<header>").unit
+    except BondcError:
+        unit = None
+    resolved = resolve(unit)[0] if unit is not None else None
+    if resolved is None:
+        raise ValueError(f"unknown unit [{text}]")
+    return float(resolved.factor)
 
 
 #: What ``lambdify``/generated numpy code needs besides numpy for bondc's functions.
@@ -565,7 +608,14 @@ class Translator:
         if len(node.args) != 2 or not all(isinstance(arg, ast.Str) for arg in node.args):
             raise _fail(node, 'csv() takes 2 strings: csv("file.csv", "column")')
         file_arg, column = node.args
-        return Csv(self.time, _SymStr(self._resolve_path(file_arg)), _SymStr(column.value))
+        path = self._resolve_path(file_arg)
+        try:
+            scales = csv_scales(path, column.value)
+        except (OSError, ValueError):        # reported by the semantic stage; the reader says it again
+            scales = (1.0, 1.0)
+        if scales == (1.0, 1.0):
+            return Csv(self.time, _SymStr(path), _SymStr(column.value))
+        return Csv(self.time, _SymStr(path), _SymStr(column.value), sympy.Float(scales[0]), sympy.Float(scales[1]))
 
     def _resolve_path(self, node: ast.Str) -> str:
         path = Path(node.value)

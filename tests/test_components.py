@@ -159,7 +159,7 @@ def test_equations_and_csv_columns_use_dotted_names(tmp_path, capsys):
     out = tmp_path / "out.csv"
     assert main(["simulate", str(path), "--t-end", "0.01", "-o", str(out)]) == 0
     header = out.read_text().splitlines()[0].split(",")
-    assert "line.first.Q" in header and "tank.q" in header
+    assert "line.first.Q [m^3/s]" in header and "tank.q [m^3]" in header and header[0] == "t [s]"
 
 
 def test_the_same_text_gives_the_same_flat_model_and_code_twice(tmp_path):

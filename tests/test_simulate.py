@@ -278,15 +278,17 @@ def test_csv_columns_and_all_bonds(tmp_path):
     path = tmp_path / "out.csv"
     write_csv(result, path)
     lines = path.read_text().splitlines()
-    assert lines[0] == "t,x,mass.p,spring.q"
+    # every column with its unit: outputs as declared, states and bond variables in SI (inferred)
+    assert lines[0] == "t [s],x [m],mass.p [kg*m/s],spring.q [m]"
     assert len(lines) == 1 + 21
     write_csv(result, path, all_bonds=True)
     header = path.read_text().splitlines()[0].split(",")
-    assert header[:4] == ["t", "x", "mass.p", "spring.q"]
-    assert sorted(header[4:]) == sorted(f"b{i}.{v}" for i in range(1, 5) for v in "ef")
+    assert header[:4] == ["t [s]", "x [m]", "mass.p [kg*m/s]", "spring.q [m]"]
+    assert sorted(header[4:]) == sorted(f"b{i}.{v} [{'kg*m/s^2' if v == 'e' else 'm/s'}]"
+                                        for i in range(1, 5) for v in "ef")
     data = np.loadtxt(path, delimiter=",", skiprows=1)
     np.testing.assert_array_equal(data[:, 0], result.t)                  # exact round trip
-    np.testing.assert_array_equal(data[:, header.index("b4.e")], result.bonds["b4.e"])
+    np.testing.assert_array_equal(data[:, header.index("b4.e [kg*m/s^2]")], result.bonds["b4.e"])
     assert [p.name for p in tmp_path.iterdir()] == ["out.csv"]           # no temporary left
 
 

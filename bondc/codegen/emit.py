@@ -751,8 +751,9 @@ class _Emitter:
             if item.csv is not None:
                 csv = item.csv
                 path = self.data_paths.get(csv.path, csv.path)
+                scale = f", {csv.time_scale!r}" if csv.time_scale != 1.0 else ""
                 text = (f"[(time, {item.label!r}, 'csv') for time in csv_times(DATA_DIR, {path!r}, "
-                        f"{csv.column!r})]")
+                        f"{csv.column!r}{scale})]")
                 if text not in csvs:
                     csvs.append(text)
             else:

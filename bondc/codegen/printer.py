@@ -232,7 +232,8 @@ class BondcPrinter(BondcPrinting, NumPyPrinter):
 
     def _print_Csv(self, expr):
         path = self.data_paths.get(expr.path, expr.path)
-        return f"csv_signal({self._print(expr.args[0])}, DATA_DIR, {path!r}, {expr.column!r})"
+        scales = f", {expr.time_scale!r}, {expr.value_scale!r}" if len(expr.args) > 3 else ""
+        return f"csv_signal({self._print(expr.args[0])}, DATA_DIR, {path!r}, {expr.column!r}{scales})"
 
 
 

@@ -252,6 +252,24 @@ def simulated_signals(result) -> dict[str, np.ndarray]:
     return signals
 
 
+def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> list[Diagnostic]:
+    """W954: a measured column without a unit compared with an output declared in a non-SI unit —
+    the column is taken as SI, which the engineer may not have meant."""
+    units = getattr(measured, "units", {})
+    found = []
+    for spec in specs:
+        output = run.graph.outputs.get(spec.output)
+        if output is None or not output.unit_text or units.get(spec.column) is not None:
+            continue
+        if abs((output.display_factor or 1.0) - 1.0) > 1e-12:
+            found.append(Diagnostic(
+                "warning", "W954", f"measured column '{spec.column}' has no unit: it is taken as SI, while output "
+                                   f"'{spec.output}' is declared in [{output.unit_text}]",
+                hint=f"if the data is in {output.unit_text}, write the header as '{spec.column} "
+                     f"[{output.unit_text}]'"))
+    return found
+
+
 def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
                 specs: Iterable[CompareSpec]) -> list[SignalResult]:
     """:func:`~bondc.report.validate.compare` the run's signals with the measured columns."""
@@ -341,6 +359,11 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     results = compare_run(run, measured, specs)
     _print_diagnostics(run, errors)
+    assumed = unit_warnings(run, measured, specs)
+    if assumed:
+        from bondc.errors import render_all
+
+        print(render_all(assumed), file=errors)
     print(validation_table(results), file=stream)
     suite = run.graph.name + (f".{run.experiment.name}" if run.experiment is not None else "")
     if junit is not None:

@@ -26,8 +26,6 @@ E957   a CSV row has the wrong number of cells, or the header repeats a name
 
 >>> spec = parse_compare_spec("x=x_meas:rmse=0.1")
 >>> import numpy as np
-
-from bondc.runtime import CsvError, open_data
 >>> t = np.linspace(0, 1, 11)
 >>> [r] = compare(t, {"x": t}, {"t": t, "x_meas": t + 0.01}, [spec])
 >>> r.passed, round(r.rmse, 6)
@@ -49,8 +47,9 @@ import numpy as np
 
 from bondc.errors import DataError, Diagnostic
 from bondc.io import atomic_write_text
-from bondc.runtime import CsvError, open_data
+from bondc.runtime import CsvError, header_cell, open_data
 from bondc.source import NO_SPAN, Span
+from bondc.symbolic import unit_scale
 
 __all__ = [
     "TIME_KEY", "METRICS", "DEFAULT_TOLERANCES", "CompareSpec", "Check", "SignalResult",
@@ -98,8 +97,19 @@ def _cell_span(path: str, line_number: int, line: str, index: int) -> Span:
     return Span(path, line_number, 1, line_number, len(line) + 1)
 
 
+class MeasuredData(dict):
+    """``{"t": time, column: values}`` in SI, and ``units``: the unit each column's header gave (or None)."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.units: dict[str, str | None] = {}
+
+
 def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str, np.ndarray]:
     """Measured data: ``{"t": time, column: values, ...}``, every array float and the same length.
+
+    A header cell may give the column's unit in brackets (``t [ms]``, ``P [bar]``): its values are
+    converted to SI, as every simulated signal is; a column without a unit is taken as SI.
 
     The first line is the header. The time column is the one named ``t`` or
     ``time`` (any case), else the first; it must increase strictly. Blank lines
@@ -124,7 +134,17 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
         raise _error("E950", f"measured data file '{name}' is empty",
                      hint="expected a header line such as 't,omega' and then rows of numbers")
     header_number, header_line = lines[0]
-    header = [cell.strip() for cell in next(csv.reader([header_line]))]
+    header_cells = [header_cell(cell) for cell in next(csv.reader([header_line]))]
+    header = [cell_name for cell_name, _ in header_cells]
+    scales = []
+    for index, (cell, unit) in enumerate(header_cells):
+        try:
+            scales.append(unit_scale(unit))
+        except ValueError:
+            raise _error("E957", f"column '{cell}' of '{name}' names an unknown unit [{unit}]",
+                         _cell_span(name, header_number, header_line, index),
+                         hint="a header gives a column's unit in brackets, e.g. 'P [bar]'; a column without one "
+                              "is SI") from None
     for index, cell in enumerate(header):
         if not cell:
             raise _error("E957", f"column {index + 1} of the header of '{name}' has no name",
@@ -161,6 +181,7 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
                              _cell_span(name, number, line, index))
             values[row, index] = value
 
+    values = values * np.asarray(scales)       # every column in SI, as the simulation
     time = values[:, time_index]
     steps = np.diff(time)
     if np.any(steps <= 0):
@@ -176,10 +197,11 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
                  + ("" if header[time_index].lower() in TIME_NAMES else
                     " (the first column, as no column is named 't' or 'time')"))
 
-    data = {TIME_KEY: time.copy()}
+    data = MeasuredData({TIME_KEY: time.copy()})
     for index, cell in enumerate(header):
         if index != time_index:
             data[cell] = values[:, index].copy()
+            data.units[cell] = header_cells[index][1]
     for column in columns:
         if column not in data:
             raise _error("E953", f"measured data file '{name}' has no column '{column}'",

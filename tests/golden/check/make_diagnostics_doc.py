@@ -478,9 +478,10 @@ d("E956", "simulation and measurement do not overlap",
   "compared: usually the data is in another time unit (ms) or starts later than the run ends.",
   "Check the experiment's `t_end` (or `--t-end`) and that the time column is in seconds.")
 d("E957", "measured data header or row shape",
-  "The measured data's header has an empty or repeated column name, or a row has more or fewer cells than the "
+  "The measured data's header has an empty or repeated column name, names a unit bondc does not know (`P [barr]`), or a row has more or fewer cells than the "
   "header.",
   "Give every column a unique name; look for a missing or extra comma in the row.")
+d("W954", "measured column without a unit", "`bondc validate` compares a measured column whose header gives no unit with an output declared in a unit that is not SI (`[kPa]`, `[bar]`, `[mm]`, `[rpm]`): the column is taken as SI, as the language reference says, but the data may well be in the output's unit.", "Give the column's unit in its header, e.g. `P [kPa]`; values are converted.")
 
 # -- command line and files
 
