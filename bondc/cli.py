@@ -67,7 +67,7 @@ def _check_one(args, model: str | None, component: bool) -> tuple:
     from bondc import semantic
 
     diagnostics: list[Diagnostic] = []
-    graph = causal = None
+    graph = causal = state_space = None
     sources = {}
     try:
         graph, warnings = semantic.load(Path(args.file), model=model, sets=_parse_sets(args.set))
@@ -75,15 +75,20 @@ def _check_one(args, model: str | None, component: bool) -> tuple:
         sources = graph.sources
         if not component:
             from bondc.causality import assign_causality
+            from bondc.equations import derive
 
             causal = assign_causality(graph)
             diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
+            # what simulate would reject about the model itself (a law that cannot be inverted,
+            # E605), and the states the equations keep
+            state_space = derive(causal)
+            diagnostics += [d for d in state_space.diagnostics if d not in diagnostics]
     except BondcError as error:
         if error.stage in ("usage",):
             raise
         diagnostics += error.diagnostics
-        sources = error.sources
-    return diagnostics, sources, graph, causal
+        sources = error.sources or sources
+    return diagnostics, sources, graph, causal, state_space
 
 
 def _models_to_check(args) -> list[tuple[str | None, bool]]:
@@ -111,17 +116,19 @@ def _cmd_check(args) -> int:
     sources: dict = {}
     results = []
     for name, component in _models_to_check(args):
-        found, found_sources, graph, causal = _check_one(args, name, component)
+        found, found_sources, graph, causal, state_space = _check_one(args, name, component)
         diagnostics += [d for d in found if d not in diagnostics]
         sources.update(found_sources or {})
-        results.append((graph, causal, component))
+        results.append((graph, causal, component, state_space))
     ok = not any(d.is_error for d in diagnostics)
     if args.json:
         summaries = []
-        for graph, causal, component in results:
+        for graph, causal, component, state_space in results:
             summary = graph.summary() if graph is not None else None
             if summary is not None and causal is not None:
                 summary["causality"] = causal.summary()
+            if summary is not None and state_space is not None:
+                summary["states_kept"] = len(state_space.states)
             if summary is not None and component:
                 summary["component"] = True
             summaries.append(summary)
@@ -131,13 +138,15 @@ def _cmd_check(args) -> int:
         print(json.dumps(data, indent=2))
         return EXIT_OK if ok else EXIT_ERRORS
     _print_diagnostics(diagnostics, sources)
-    for graph, causal, component in results:
+    for graph, causal, component, state_space in results:
         if graph is None:
             continue
         counts = graph.summary()
         line = (f"{graph.name}: {counts['elements']} elements, {counts['junctions']} junctions, "
                 f"{counts['bonds']} bonds, {counts['storage_elements']} storage elements, "
                 f"{counts['states']} states")
+        if state_space is not None and len(state_space.states) != counts["states"]:
+            line += f" ({len(state_space.states)} kept by the equations)"
         if causal is not None:
             line += f"; {causal.summary_text()}"
         if component:

@@ -40,10 +40,12 @@ from __future__ import annotations
 import heapq
 import json
 import math
+import re
 from pathlib import Path
 from typing import Mapping
 
 import sympy
+from sympy.printing.str import StrPrinter
 
 from bondc import ast
 from bondc.causality import (CONDUCTANCE, DERIVATIVE, ROLES, CausalGraph, describe_node, element_span, join_words,
@@ -675,6 +677,17 @@ def _display(ss: StateSpace):
     return lambda expr: as_sympy(expr).xreplace(mapping)
 
 
+def _latex_symbol(name: str) -> str:
+    """A name as LaTeX: Greek letters as symbols, a multi-letter name upright as one word
+    (``Iz`` -> ``\mathit{Iz}``, not I times z), the part after ``_`` a subscript."""
+    base, _, sub = name.partition("_")
+    shown = sympy.latex(sympy.Symbol(base)) if base else ""
+    letters = re.match(r"[A-Za-z]*", base).group(0)
+    if len(letters) > 1 and not shown.startswith("\\"):       # (t1 stays t_1, as sympy writes it)
+        shown = r"\mathit{%s}" % base
+    return shown + (r"_{\mathrm{%s}}" % sub.replace("_", r"\_") if sub else "")
+
+
 def _latex_name(name: str) -> str:
     def mathrm(text):
         return r"\mathrm{%s}" % text.replace("_", r"\_")
@@ -682,13 +695,13 @@ def _latex_name(name: str) -> str:
     if name.startswith("der(") and name.endswith(")"):
         inner = name[4:-1]
         if "." in inner:
-            owner, variable = inner.split(".", 1)
-            return r"\dot{%s}_{%s}" % (variable, mathrm(owner))
+            owner, variable = inner.rsplit(".", 1)
+            return r"\dot{%s}_{%s}" % (_latex_symbol(variable), mathrm(owner))
         return r"\dot{%s}" % _latex_name(inner)
     if "." in name:
-        owner, variable = name.split(".", 1)
-        return "%s_{%s}" % (variable, mathrm(owner))
-    return sympy.latex(sympy.Symbol(name))
+        owner, variable = name.rsplit(".", 1)
+        return "%s_{%s}" % (_latex_symbol(variable), mathrm(owner))
+    return _latex_symbol(name)
 
 
 def format_equations(ss: StateSpace, fmt: str = "text") -> str:
@@ -725,6 +738,75 @@ def _format_json(ss: StateSpace, show) -> str:
     return json.dumps(data, indent=2) + "\n"
 
 
+class BgPrinter(StrPrinter):
+    """Expressions in ``.bg`` syntax for ``bondc equations --format text``: ``abs``, ``^``,
+    ``if ... then ... else``, ``min``/``max``, ``and``/``or``/``not``, ``==``/``!=``.
+
+    >>> x, y = sympy.symbols("x y", real=True)
+    >>> bg_text(sympy.Piecewise((sympy.Abs(x)**3, x < y), (sympy.Max(x, 1), True)))
+    '(if x < y then abs(x)^3 else max(1, x))'
+    """
+
+    def _print_Pow(self, expr, rational=False):
+        return super()._print_Pow(expr, rational).replace("**", "^")
+
+    def _print_Abs(self, expr):
+        return f"abs({self._print(expr.args[0])})"
+
+    def _print_Min(self, expr):
+        return f"min({', '.join(self._print(a) for a in expr.args)})"
+
+    def _print_Max(self, expr):
+        return f"max({', '.join(self._print(a) for a in expr.args)})"
+
+    def _print_ceiling(self, expr):
+        return f"ceil({self._print(expr.args[0])})"
+
+    def _print_floor(self, expr):
+        return f"floor({self._print(expr.args[0])})"
+
+    def _print_Mod(self, expr):
+        return f"mod({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+
+    def _print_Exp1(self, expr):
+        return "exp(1)"
+
+    def _print_Piecewise(self, expr):
+        parts = []
+        for value, condition in expr.args[:-1]:
+            parts.append(f"if {self._print(condition)} then {self._print(value)}")
+        last_value, last_condition = expr.args[-1]
+        tail = self._print(last_value) if last_condition == sympy.true else \
+            f"if {self._print(last_condition)} then {self._print(last_value)} else nan"
+        return "(" + " else ".join(parts + [tail]) + ")" if parts else tail
+
+    def _print_Equality(self, expr):
+        return f"{self._print(expr.lhs)} == {self._print(expr.rhs)}"
+
+    def _print_Unequality(self, expr):
+        return f"{self._print(expr.lhs)} != {self._print(expr.rhs)}"
+
+    def _print_And(self, expr):
+        return " and ".join(f"({self._print(a)})" for a in expr.args)
+
+    def _print_Or(self, expr):
+        return " or ".join(f"({self._print(a)})" for a in expr.args)
+
+    def _print_Not(self, expr):
+        return f"not ({self._print(expr.args[0])})"
+
+    def _print_BooleanTrue(self, expr):
+        return "1"
+
+    def _print_BooleanFalse(self, expr):
+        return "0"
+
+
+def bg_text(expr) -> str:
+    """An expression in ``.bg`` syntax (see :class:`BgPrinter`)."""
+    return BgPrinter().doprint(as_sympy(expr))
+
+
 def _format_text(ss: StateSpace, show) -> str:
     values = ss.initial_values()       # once: it evaluates every state's initial value
     graph = ss.graph
@@ -743,26 +825,26 @@ def _format_text(ss: StateSpace, show) -> str:
     for s, unit in zip(ss.states, units):
         initial = as_sympy(s.initial)
         value = repr(values[s.name])
-        shown = value if initial.is_number else f"{sympy.sstr(initial)} = {value}"
+        shown = value if initial.is_number else f"{bg_text(initial)} = {value}"
         cells = [s.name.ljust(width)] + ([unit.ljust(unit_width)] if unit_width else []) + [f"initial {shown}"]
         rows.append("  ".join(cells))
     section("states", rows)
-    section("inputs", [f"{name} = {sympy.sstr(expr)}" for name, (_, expr) in ss.inputs.items()])
+    section("inputs", [f"{name} = {bg_text(expr)}" for name, (_, expr) in ss.inputs.items()])
     section("parameters (SI)", [f"{name} = {value!r}" for name, (_, value) in ss.parameters.items()])
-    section("state equations", [f"der({name}) = {sympy.sstr(show(expr))}" for name, expr in ss.derivatives.items()])
-    section("outputs", [f"{name} = {sympy.sstr(show(expr))}" for name, expr in ss.outputs.items()])
+    section("state equations", [f"der({name}) = {bg_text(show(expr))}" for name, expr in ss.derivatives.items()])
+    section("outputs", [f"{name} = {bg_text(show(expr))}" for name, expr in ss.outputs.items()])
     if ss.eliminated:
         section("eliminated states (derivative causality)",
-                [f"{symbol.name} = {sympy.sstr(show(symbol))}" for symbol in ss.eliminated.values()])
+                [f"{symbol.name} = {bg_text(show(symbol))}" for symbol in ss.eliminated.values()])
     if ss.algebraic_blocks:
         rows = []
         for block in ss.algebraic_blocks:
             rows.append(f"solve for {', '.join(u.name for u in block.unknowns)}:")
-            rows += [f"  0 = {sympy.sstr(show(r))}" for r in block.residuals]
+            rows += [f"  0 = {bg_text(show(r))}" for r in block.residuals]
         section("algebraic loops (solved numerically)", rows)
     if ss.events:
         section("when clauses (at the instant the condition becomes true)",
-                [f"{label} then " + ", ".join(f"{name} = {sympy.sstr(value)}" for name, value in actions)
+                [f"{label} then " + ", ".join(f"{name} = {bg_text(value)}" for name, value in actions)
                  for label, _, actions in ss.events])
     return "\n".join(lines) + "\n"
 

@@ -26,6 +26,7 @@ E311 cannot evaluate: log of 0 (its argument must be positive)
 
 from __future__ import annotations
 
+from collections import ChainMap
 import math
 import operator
 from typing import Callable, Mapping, Protocol, Sequence
@@ -141,10 +142,14 @@ def interpolate(x: float, xs: Sequence[float], ys: Sequence[float]) -> float:
 class _Evaluator:
     """Walks an expression; one ``_eval_<Class>`` method per AST node class."""
 
-    def __init__(self, values: Mapping[str, float], functions: Mapping[str, FunctionLike], depth: int = 0):
+    def __init__(self, values: Mapping[str, float], functions: Mapping[str, FunctionLike], depth: int = 0,
+                 constants: Mapping[str, float] | None = None):
         self.values = values
         self.functions = functions
         self.depth = depth
+        # what a function body may use besides its arguments: the model's parameters (a function
+        # declared inside a model may use them; the semantic stage keeps file-level ones to arguments)
+        self.constants = values if constants is None else constants
 
     def __call__(self, node) -> float:
         method = getattr(self, f"_eval_{type(node).__name__}", None)
@@ -247,7 +252,7 @@ class _Evaluator:
         if self.depth >= MAX_CALL_DEPTH:
             raise _fail(node, f"calls nested more than {MAX_CALL_DEPTH} deep (is '{function.name}' recursive?)")
         args = {name: self(arg) for name, arg in zip(function.params, node.args)}
-        inner = _Evaluator(args, self.functions, self.depth + 1)
+        inner = _Evaluator(ChainMap(args, self.constants), self.functions, self.depth + 1, self.constants)
         try:
             return inner(function.body)
         except EvaluationError as error:

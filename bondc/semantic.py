@@ -1081,9 +1081,14 @@ def check_functions(m: _Model) -> None:
         file_level = function.name in m.file_functions and m.file_functions[function.name] is function
         callable_ = m.file_functions if file_level else m.functions
         arguments = ", ".join(function.params) or "none"
-        scope = _Scope(what=f"function '{function.name}'", allowed=frozenset(), functions=callable_,
-                       rule=f"a function uses only its arguments ({arguments}), pi, numbers and functions; pass "
-                            f"other values as arguments",
+        if file_level:
+            allowed, rule = frozenset(), (f"a file-level function uses only its arguments ({arguments}), pi, "
+                                          f"numbers and functions; pass other values as arguments")
+        else:       # a function inside a model may also use the model's parameters (constants)
+            allowed, rule = frozenset({"parameter"}), (f"a function uses its arguments ({arguments}), the "
+                                                       f"model's parameters, pi, numbers and functions; pass "
+                                                       f"signals and graph variables as arguments")
+        scope = _Scope(what=f"function '{function.name}'", allowed=allowed, functions=callable_, rule=rule,
                        local={p: "argument" for p in function.params}, constant_locals=True)
         _check_expr(m, function.body, scope)
     calls = {name: [c for c in _calls(f.body) if c in m.functions] for name, f in m.functions.items()}
@@ -1456,7 +1461,8 @@ def _check_override(m: _Model, name: str, name_span: Span, expr: ast.Expr, unit:
 def _evaluate_parameters(m: _Model, definitions: Mapping[str, _Definition]) -> dict[str, float]:
     """Every parameter's SI value, in dependency order; problems reported, failed ones left out."""
     order = list(definitions)
-    edges = {name: [n for n in _names(d.expr) if n in definitions] for name, d in definitions.items()}
+    edges = {name: [n for n in _names(d.expr) + _names_in_functions(m, d.expr) if n in definitions]
+             for name, d in definitions.items()}
     in_cycle: set[str] = set()
     for cycle in _cycles(order, edges):
         in_cycle.update(cycle)
@@ -1494,6 +1500,17 @@ def _evaluate_parameters(m: _Model, definitions: Mapping[str, _Definition]) -> d
     for name in order:
         visit(name)
     return values
+
+
+def _names_in_functions(m: _Model, expr: ast.Expr) -> list[str]:
+    """The names the bodies of the functions ``expr`` calls use (a model's function may use its
+    parameters), arguments left out."""
+    found: list[str] = []
+    for name in sorted(_function_closure(m, _calls(expr))):
+        function = m.functions.get(name)
+        if function is not None:
+            found += [n for n in _names(function.body) if n not in function.params]
+    return found
 
 
 def _function_closure(m: _Model, names: Iterable[str]) -> set[str]:

@@ -83,7 +83,10 @@ class Table(sympy.Function):
         return sympy.diff(self.argument, symbol) * self.fdiff(1)
 
     def _latex(self, printer):
-        return r"\operatorname{table}\left(%s\right)" % printer._print(self.argument)
+        points = ", ".join(printer._print(x) for x in self.breakpoints)
+        values = ", ".join(printer._print(v) for v in self.values)
+        return r"\operatorname{table}\left(%s;\ \left[%s\right],\ \left[%s\right]\right)" % (
+            printer._print(self.argument), points, values)
 
     def _eval_evalf(self, prec):
         x = self.argument

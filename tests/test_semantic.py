@@ -443,7 +443,7 @@ def test_contexts(tmp_path):
     found = errors(tmp_path, model("""
         param a = t
         input F [N] = mass.f
-        fn g(x) = x*a
+        fn g(x) = x*a*F
         param c = sqrt(1, 2) + g(1, 2) + nope(1)
         MSe force : e = F + a + c + "text"
         I mass : f = p/2
@@ -451,7 +451,8 @@ def test_contexts(tmp_path):
     """))
     assert [(d.code, d.span.line) for d in found] == [
         ("E316", 2), ("E316", 3), ("E316", 4), ("E306", 5), ("E306", 5), ("E301", 5), ("E313", 6)]
-    assert found[2].message == "function 'g' cannot use parameter 'a'"
+    # a function inside a model may use the model's parameters (a), not its signals (F)
+    assert found[2].message == "function 'g' cannot use input 'F'"
 
 
 def test_recursive_functions(tmp_path):

@@ -1,0 +1,118 @@
+"""Version 2 details (issue 11, item 7): functions using a model's parameters, what ``check``
+reports, equations printed in ``.bg`` syntax, LaTeX that keeps what the model says."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+from bondc.cli import main
+from bondc.equations import format_equations
+from bondc.errors import ModelError
+from bondc.parse import parse_set_value
+from bondc.pipeline import derive_file
+from bondc.semantic import load
+from bondc.simulate import run
+from bondc.symbolic import Translator
+
+ROOT = Path(__file__).resolve().parent.parent
+FLAGSHIP = ROOT / "models" / "electro_pneumatic_hybrid.bg"
+
+SPRING_FN = """model F
+  param k  = 800 [N/m]
+  param m  = 2   [kg]
+  param F0 = 10  [N]
+  fn spring_force(x) = k*x
+  param F_half = spring_force(0.005) [N]
+  Se push : e = F0
+  I mass : f = p/m
+  C spring : e = spring_force(q)
+  1 j
+  push -> j
+  j -> mass
+  j -> spring
+  output Fh [N] = F_half
+  output Fs [N] = spring.e
+end
+"""
+
+
+def test_a_function_inside_a_model_may_use_its_parameters(tmp_path):
+    path = tmp_path / "f.bg"
+    path.write_text(SPRING_FN)
+    result = run(path, t_end=0.2, dt=0.05)
+    assert result.outputs["Fh"][0] == pytest.approx(800 * 0.005)
+    assert np.allclose(result.outputs["Fs"], 800 * result.states["spring.q"], rtol=1e-12)
+    # an override of the parameter reaches what the function computes, in parameters and laws
+    changed = run(path, t_end=0.2, dt=0.05, sets=["k=1000"])
+    assert changed.outputs["Fh"][0] == pytest.approx(1000 * 0.005)
+    assert np.allclose(changed.outputs["Fs"], 1000 * changed.states["spring.q"], rtol=1e-12)
+
+
+def test_a_file_level_function_still_uses_only_its_arguments(tmp_path):
+    text = SPRING_FN.replace("  fn spring_force(x) = k*x\n", "").replace("model F", "fn spring_force(x) = k*x\nmodel F")
+    path = tmp_path / "f.bg"
+    path.write_text(text)
+    with pytest.raises(ModelError) as caught:
+        load(path)
+    assert any(d.code in ("E316", "E301") and d.span.line == 1 for d in caught.value.diagnostics)
+
+
+def test_check_reports_a_law_that_cannot_be_inverted_and_the_states_kept(tmp_path, capsys):
+    path = tmp_path / "e605.bg"
+    # at a 0-junction with a capacitor the resistor is given its effort: its law must be solved for f
+    path.write_text("model Friction\n  Sf pump : f = 2\n  R  friction : e = 3*abs(f)^1.5*sign(f)\n"
+                    "  C  tank : e = q/0.5\n  0  node\n  pump -> node\n  node -> friction\n  node -> tank\nend\n")
+    assert main(["check", str(path)]) == 1
+    assert "E605" in capsys.readouterr().err
+    # two rigidly coupled masses: 2 storage states, one of them in derivative causality
+    path = tmp_path / "rigid.bg"
+    path.write_text("model Rigid\n  param m = 2 [kg]\n  Se push : e = 1\n  I a : f = p/m\n  I b : f = p/m\n  1 j\n"
+                    "  push -> j\n  j -> a\n  j -> b\nend\n")
+    assert main(["check", str(path)]) == 0
+    assert "2 states (1 kept by the equations)" in capsys.readouterr().out
+
+
+def _as_sympy(text: str, symbols):
+    """A right-hand side printed by ``bondc equations`` read back as a .bg expression."""
+    expr = parse_set_value(f"x = {text}", "<printed>").value
+
+    def name(n, node):
+        return symbols[n]
+
+    def ref(node):
+        return symbols[node.dotted]
+
+    return Translator(name, ref)(expr)
+
+
+@pytest.mark.parametrize("model", ["electro_pneumatic_hybrid.bg", "quarter_car.bg", "dc_motor_gear.bg"])
+def test_equations_as_text_are_bg_expressions_that_mean_the_same(model):
+    ss = derive_file(ROOT / "models" / model, cache=False).state_space
+    text = format_equations(ss, "text")
+    assert "**" not in text and "Abs(" not in text and "Piecewise" not in text
+    symbols = {s.name: s for s in ss.symbols.values()}
+    symbols.update({name: symbol for name, symbol in ss.symbols.items()})
+    section = text.split("state equations\n")[1].split("\n\n")[0].splitlines()
+    rng = np.random.default_rng(3)
+    expand = __import__("bondc.equations", fromlist=["_display"])._display(ss)
+    params = ss.parameter_values()
+    for line, (name, expr) in zip(section, ss.derivatives.items()):
+        left, right = line.strip().split(" = ", 1)
+        assert left == f"der({name})"
+        reread = _as_sympy(right, symbols).xreplace(params)
+        original = expand(expr).xreplace(params)
+        free = sorted(original.free_symbols | reread.free_symbols, key=str)
+        f_original = sympy.lambdify(free, original, "numpy")
+        f_reread = sympy.lambdify(free, reread, "numpy")
+        for _ in range(20):
+            point = rng.uniform(0.1, 2.0, len(free))
+            assert f_reread(*point) == pytest.approx(f_original(*point), rel=1e-12, abs=1e-12), line
+
+
+def test_latex_keeps_table_breakpoints_and_multi_letter_names():
+    ss = derive_file(FLAGSHIP, cache=False).state_space
+    latex = format_equations(ss, "latex")
+    assert r"\operatorname{table}\left(t;\ \left[0, t_{1}, t_{2}" in latex
+    assert r"\mathit{Iz}" in latex and r"\kappa" in latex
