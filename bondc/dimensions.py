@@ -455,6 +455,16 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
             index = table.get(bond.number)
             if index in known:
                 found[f"{bond.name}.{variable}"] = text(known[index])
+    # a pseudo bond graph (temperature and heat flow: e*f in K*W) has its own "energy" unit
+    joule = Form.of(SIUnit(1.0, (2, 1, -2, 0, 0, 0, 0, 0), "J").dims).const
+    for element in graph.elements.values():
+        bond = element.bonds[0] if element.bonds else None
+        e, f = (c.effort.get(bond), c.flow.get(bond)) if bond is not None else (None, None)
+        if e in known and f in known:
+            energy = tuple(a + b + s for a, b, s in zip(known[e], known[f], _SECOND))
+            if energy != joule:         # written relative to the joule: K*J, J/m
+                rest = text(tuple(a - b for a, b in zip(energy, joule)))
+                found[f"energy:{element.name}"] = f"J/{rest[2:]}" if rest.startswith("1/") else f"{rest}*J"
     return diagnostics, found
 
 

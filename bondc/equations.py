@@ -678,7 +678,7 @@ def _display(ss: StateSpace):
 
 
 def _latex_symbol(name: str) -> str:
-    """A name as LaTeX: Greek letters as symbols, a multi-letter name upright as one word
+    r"""A name as LaTeX: Greek letters as symbols, a multi-letter name upright as one word
     (``Iz`` -> ``\mathit{Iz}``, not I times z), the part after ``_`` a subscript."""
     base, _, sub = name.partition("_")
     shown = sympy.latex(sympy.Symbol(base)) if base else ""

@@ -395,3 +395,25 @@ def test_a_cycle_too_short_for_the_run_is_refused_before_any_window():
     with pytest.raises(AnalysisError) as raised:
         cycle_windows(0.0, 1.0, 1e-9)
     assert raised.value.diagnostics[0].code == "E935" and "1e+09 cycles" in str(raised.value)
+
+
+def test_a_thermal_pseudo_bond_graph_keeps_its_own_energy_unit():
+    # Temperature and heat flow: e*f is K*W, so the "energies" are K*J, never printed as joules.
+    from bondc.pipeline import derive_file
+    from bondc.simulate import simulate
+
+    derived = derive_file(Path(__file__).parent / "fixtures" / "sim" / "thermal_wall.bg", cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    Cth, Rth, T_amb, P = 5000.0, 0.05, 293.0, 200.0
+    expected = T_amb + P * Rth * (1 - np.exp(-result.t / (Rth * Cth)))
+    assert np.allclose(result.outputs["T"], expected, rtol=1e-8)
+    account = energy_account(derived.state_space, result)
+    assert account.unit == "K*J"
+    text = account.to_text()
+    assert "pseudo bond graph" in text and " J " not in text and "K*J" in text
+    (window,) = account.windows
+    mass = window.element("mass")
+    T0, T1 = result.outputs["T"][0], result.outputs["T"][-1]
+    assert mass.stored_change == pytest.approx(Cth / 2 * (T1 ** 2 - T0 ** 2), rel=1e-9)    # C*T^2/2
+    assert window.balance.relative_residual < 1e-6
+    assert account.to_json()["unit"] == "K*J"

@@ -140,6 +140,7 @@ class ElementEnergy:
     port_work: tuple[float, float] | None = None
     energy_function: str | None = None          # "analytic", "numeric" or None
     event_change: float | None = None           # stored energy changed by when clauses (reinit) in the window
+    unit: str = "J"                             # a pseudo bond graph's own unit (e*f*s), e.g. K*J for heat
 
     @property
     def storage_defect(self) -> float | None:
@@ -224,6 +225,13 @@ class EnergyAccount:
     diagnostics: tuple[Diagnostic, ...] = ()
 
     @property
+    def unit(self) -> str:
+        """The unit of every energy: J, a pseudo bond graph's own (``kg*m^2*K/s^2`` for temperature and
+        heat flow), or "mixed" when elements differ (then the balance adds unlike quantities)."""
+        found = {e.unit for w in self.windows for e in w.elements}
+        return found.pop() if len(found) == 1 else ("J" if not found else "mixed")
+
+    @property
     def max_relative_residual(self) -> float:
         values = [w.balance.relative_residual for w in self.windows if w.balance.relative_residual is not None]
         return max(values) if values else 0.0
@@ -261,6 +269,7 @@ class EnergyAccount:
             "method": self.method,
             "quadrature": dict(self.quadrature),
             "max_relative_residual": self.max_relative_residual,
+            "unit": self.unit,
             "cycles": [
                 {
                     "index": window.index, "t_start": window.t_start, "t_end": window.t_end,
@@ -277,6 +286,13 @@ class EnergyAccount:
         """Readable tables, one per cycle: element, kind, supplied, returned, dissipated, change of
         stored energy and net work in, in J; then the balance."""
         out = [f"Energy account of {self.model}" + (f" ({self.experiment})" if self.experiment else "")]
+        unit = self.unit
+        if unit != "J":
+            pseudo = sorted({e.element for w in self.windows for e in w.elements if e.unit != "J"})
+            out.append(f"(a pseudo bond graph: effort times flow is not a power for {', '.join(pseudo)}; "
+                       + (f"its integrals are in {unit}, not joules)" if unit != "mixed" else
+                          "each element's integrals are in its own unit, so the balance adds unlike quantities)"))
+        J = "J" if unit == "J" else ("" if unit == "mixed" else unit)
         if not self.complete:
             out.append("(the run stopped early: the account covers what was simulated)")
         for window in self.windows:
@@ -286,12 +302,12 @@ class EnergyAccount:
             out += _table(window)
             b = window.balance
             relative = "-" if b.relative_residual is None else f"{b.relative_residual:.2e}"
-            events = f" - changed at events {_j(b.event_change)} J" if b.event_change else ""
-            out.append(f"balance: sources net {_j(b.sources_net)} J = dissipated {_j(b.dissipated)} J"
-                       f" + stored {_j(b.stored_change)} J + net work in {_j(b.net_work_in)} J{events}"
-                       f"; residual {b.residual:.3e} J ({relative} of throughput {_j(b.throughput)} J)")
+            events = f" - changed at events {_j(b.event_change)} {J}" if b.event_change else ""
+            out.append(f"balance: sources net {_j(b.sources_net)} {J} = dissipated {_j(b.dissipated)} {J}"
+                       f" + stored {_j(b.stored_change)} {J} + net work in {_j(b.net_work_in)} {J}{events}"
+                       f"; residual {b.residual:.3e} {J} ({relative} of throughput {_j(b.throughput)} {J})")
             if any(e.role == "converter" for e in window.elements):
-                out.append(f"two-ports: work in at both ports {b.converter_work:.3e} J (ideally 0)")
+                out.append(f"two-ports: work in at both ports {b.converter_work:.3e} {J} (ideally 0)")
         for diagnostic in self.diagnostics:
             out.append(f"{diagnostic.severity}[{diagnostic.code}]: {diagnostic.message}")
         return "\n".join(out)
@@ -309,6 +325,8 @@ def _element_json(entry: ElementEnergy) -> dict:
             data[key] = value
     if entry.port_work is not None:
         data["port_work"] = {"p1": entry.port_work[0], "p2": entry.port_work[1]}
+    if entry.unit != "J":
+        data["unit"] = entry.unit
     if entry.storage_defect is not None:
         data["storage_defect"] = entry.storage_defect
     return data
@@ -832,6 +850,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     resimulated = not _at_solver_steps(result)
     steps = _resimulate(ss, result) if resimulated else result
 
+    units = getattr(graph, "si_units", {}) or {}
     namespace = compile_model(ss)
     model = _Model(namespace, steps.parameters)
     boundaries = sorted({edge for start, end, _ in windows for edge in (start, end)})
@@ -884,7 +903,8 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
             negative = [float(np.sum(i[2][mask])) for i in integrals]
             work_in = sum(net)
             gross = sum(positive) - sum(negative)
-            common = dict(element=element.name, kind=element.kind, role=role, work_in=work_in, gross=gross)
+            common = dict(element=element.name, kind=element.kind, role=role, work_in=work_in, gross=gross,
+                          unit=units.get(f"energy:{element.name}", "J"))
             if role == "source":
                 entries.append(ElementEnergy(**common, supplied=-negative[0], returned=positive[0]))
             elif role == "dissipator":
