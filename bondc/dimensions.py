@@ -363,7 +363,8 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
     for bond in graph.bonds:
         root = find(bond.number)
         if root not in roots:
-            roots[root] = (c.new(f"effort of bond {bond.name}").terms[0][0], c.new(f"flow of bond {bond.name}").terms[0][0])
+            roots[root] = (c.new(f"effort of bond {bond.name}").terms[0][0],
+                           c.new(f"flow of bond {bond.name}").terms[0][0])
         c.effort[bond.number], c.flow[bond.number] = roots[root]
     for state in graph.states:
         unit = ctx.state_units.get(state.qualified)

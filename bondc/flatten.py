@@ -232,7 +232,8 @@ class _Flattener:
             elif isinstance(statement, ast.BondChain) and statement.label is not None:
                 x.nodes.add(statement.label)
             elif isinstance(statement, ast.PortDecl):
-                for name, span in zip(statement.names, statement.name_spans or (statement.span,) * 9999):
+                spans = statement.name_spans or (statement.span,) * len(statement.names)
+                for name, span in zip(statement.names, spans):
                     if self.standalone and not prefix:
                         x.nodes.add(name)
                     elif name not in x.ports:
@@ -241,9 +242,7 @@ class _Flattener:
                 sub = self.component(statement.kind, model, statement.kind_span)
                 if sub is not None:
                     kinds[id(statement)] = sub
-                elif statement.kind not in KINDS and "." in statement.kind:
-                    pass   # reported by component(); not an element either
-                else:
+                else:       # an element (an unknown library model was reported by component())
                     x.nodes.add(statement.name)
         for port in x.ports.values():
             if port.name in x.values | x.nodes | x.functions or any(
@@ -308,7 +307,8 @@ class _Flattener:
         bound: dict[str, Span] = {}
         for law in statement.laws:
             if not isinstance(law, ast.LawAssign):
-                self.report(_error("E335", f"an instance takes bindings 'NAME = value', not '{law.func if isinstance(law, ast.LawCall) else 'state'} ...'",
+                written = law.func if isinstance(law, ast.LawCall) else "state"
+                self.report(_error("E335", f"an instance takes bindings 'NAME = value', not '{written} ...'",
                                    law.span, hint=f"bind a parameter or input of '{sub.model.name}', e.g. "
                                                   f"'{next(iter(sorted(sub.params)), 'k')} = 2'"))
                 continue
@@ -601,11 +601,10 @@ def flatten(model: ast.Model, files: Sequence[ast.File], *, standalone: bool = F
     a component): each port becomes a zero-effort source so that everything inside can be checked.
     """
     flat = Flat(model)
-    if not any(isinstance(s, ast.PortDecl) for s in model.body) and not _has_instances(model, files):
-        if any(isinstance(s, ast.Input) and s.value is None for s in model.body):
-            pass   # reported below through the expansion
-        else:
-            return flat
+    plain = not any(isinstance(s, ast.PortDecl) or (isinstance(s, ast.Input) and s.value is None)
+                    for s in model.body)
+    if plain and not _has_instances(model, files):
+        return flat         # a version-1 model: nothing to expand
     flattener = _Flattener(files, flat, standalone)
     x = flattener.expand(model, "", ((model, model.name),))
     body = [s for s in x.statements if not isinstance(s, _InstanceMark)] + x.bonds

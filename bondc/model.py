@@ -215,6 +215,8 @@ class BondGraph:
     whens: tuple[WhenDef, ...] = ()
     # the SI unit (as dimensions: "kg*m/s") of each state and bond variable whose dimension is known
     si_units: Mapping[str, str] = field(default_factory=dict, compare=False)
+    # submodel instances (flatten.Instance: path, model, description, ports), outermost first
+    instances: tuple = field(default=(), compare=False)
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]

@@ -317,3 +317,16 @@ def test_docstring_examples():
 
     result = doctest.testmod(build)
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_a_component_is_drawn_as_a_box_whose_contents_expand(tmp_path):
+    model = Path(__file__).parent / "fixtures" / "components" / "circuit.bg"
+    html = build_report(model, output=tmp_path / "r.html", date=DATE).read_text(encoding="utf-8")
+    checker = check_html(html)
+    assert len(checker.ids) == len(set(checker.ids)), "duplicate ids"
+    collapsed, expanded = re.findall(r'<svg[^>]*class="bond-graph".*?</svg>', html, flags=re.S)
+    # the top view: the instance as one box bonded at its two ports, its insides left out
+    assert collapsed.count('class="component"') == 1 and "Orifice:valve" in collapsed
+    assert "valve.loss" not in collapsed and collapsed.count('class="bond"') == 3
+    # expanded: every element of the flat graph, under its dotted name, every bond
+    assert "<details" in html and "R:valve.loss" in expanded and expanded.count('class="bond"') == 4

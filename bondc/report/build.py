@@ -385,6 +385,16 @@ def _failure(run: PipelineRun) -> Diagnostic:
 
 # ---------------------------------------------------------------- the report's contents
 
+def _diagram(graph, causal):
+    """The bond graph as drawn first: each top-level component a box (its contents expand below)."""
+    from bondc.report.diagram import collapsed_graph, collapsed_setters
+
+    collapsed = collapsed_graph(graph)
+    if collapsed is None:
+        return bond_graph_svg(graph, causal)
+    return bond_graph_svg(collapsed, collapsed_setters(causal, graph, collapsed) if causal is not None else None)
+
+
 def report_context(run: PipelineRun, *, validation: ValidationSection | None = None,
                    motors: str | Path | None = None, date: str | None = None) -> ReportContext:
     """Everything the report of ``run`` shows (see the module docstring)."""
@@ -413,7 +423,9 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         header=_header(run, date),
         source_html=highlight_bg(run.source_text),
         parameters=_parameter_rows(run),
-        diagram_svg=bond_graph_svg(graph, run.causal),
+        diagram_svg=_diagram(graph, run.causal),
+        diagram_expanded_svg=(bond_graph_svg(graph, run.causal, id_prefix="expanded-")
+                              if getattr(graph, "instances", ()) else None),
         causality=causality_rows(run.causal),
         causality_notes=causality_notes(run.causal),
         equations=equations,

@@ -56,7 +56,7 @@ from markupsafe import Markup
 
 from bondc.model import KINDS, BondGraph
 
-__all__ = ["bond_graph_svg", "effort_setters"]
+__all__ = ["bond_graph_svg", "collapsed_graph", "collapsed_setters", "effort_setters"]
 
 SVG_NS = "http://www.w3.org/2000/svg"
 
@@ -163,7 +163,57 @@ def _neighbours(graph: BondGraph, nodes: Mapping[str, _Node]) -> dict[str, list[
 
 
 def _is_one_port(graph: BondGraph, name: str) -> bool:
-    return name in graph.elements and KINDS[graph.elements[name].kind].ports == 1
+    if name not in graph.elements:
+        return False
+    kind = KINDS.get(graph.elements[name].kind)
+    return (kind.ports if kind is not None else len(graph.elements[name].bonds)) == 1   # a component box
+
+
+def collapsed_setters(causal: Any, graph: BondGraph, collapsed: BondGraph) -> dict[int, str]:
+    """The effort setters of :func:`collapsed_graph`'s bonds: a setter inside an instance is its box."""
+    setters = effort_setters(causal, graph)
+    kept = {bond.number: bond for bond in collapsed.bonds}
+    out = {}
+    for number, setter in setters.items():
+        bond = kept.get(number)
+        if bond is None:
+            continue
+        original = graph.bond(number)
+        out[number] = bond.tail if setter == original.tail else bond.head
+    return out
+
+
+def collapsed_graph(graph: BondGraph) -> BondGraph | None:
+    """``graph`` with each top-level submodel instance drawn as one box (``Orifice:valve``), bonded
+    by the bonds that cross its boundary; None when the model has no instances. The bonds inside
+    an instance are left out; the expanded drawing is the flat graph itself."""
+    import dataclasses
+
+    from bondc.model import ElementNode
+
+    top = {i.path: i for i in getattr(graph, "instances", ()) if "." not in i.path}
+    if not top:
+        return None
+
+    def owner(name: str) -> str:
+        head = name.split(".", 1)[0]
+        return head if "." in name and head in top else name
+
+    bonds = []
+    for bond in graph.bonds:
+        tail, head = owner(bond.tail), owner(bond.head)
+        if tail == head and tail in top:
+            continue
+        bonds.append(dataclasses.replace(bond, tail=tail, head=head,
+                                         tail_port=None if tail in top else bond.tail_port,
+                                         head_port=None if head in top else bond.head_port))
+    elements = {name: e for name, e in graph.elements.items() if owner(name) == name}
+    for path, instance in top.items():
+        numbers = tuple(b.number for b in bonds if path in (b.tail, b.head))
+        elements[path] = ElementNode(instance.model, path, instance.description, {}, {}, (), numbers,
+                                     (1,) * len(numbers))
+    junctions = {name: j for name, j in graph.junctions.items() if owner(name) == name}
+    return dataclasses.replace(graph, elements=elements, junctions=junctions, bonds=tuple(bonds))
 
 
 def _layout(graph: BondGraph, orientation: str) -> tuple[dict[str, _Node], float, float]:
@@ -422,11 +472,12 @@ def effort_setters(causal: Any, graph: BondGraph) -> dict[int, str]:
         raise TypeError(f"cannot read a causal assignment from {type(causal).__name__}: expected a "
                         "CausalGraph or a mapping {bond number: node that sets the effort}")
     out: dict[int, str] = {}
+    bonds = {bond.number: bond for bond in graph.bonds}
     for number, setter in mapping.items():
         number = int(number)
-        if not 1 <= number <= len(graph.bonds):
+        if number not in bonds:
             raise ValueError(f"causal assignment names bond {number}, which the graph does not have")
-        bond = graph.bond(number)
+        bond = bonds[number]
         if setter not in (bond.tail, bond.head):
             raise ValueError(f"bond {number} joins {bond.tail!r} and {bond.head!r}; "
                              f"{setter!r} cannot set its effort")
@@ -473,9 +524,9 @@ def _sub(parent: ET.Element, tag: str, text: str | None = None, **attributes: st
     return element
 
 
-def _draw_node(parent: ET.Element, node: _Node, graph: BondGraph) -> None:
+def _draw_node(parent: ET.Element, node: _Node, graph: BondGraph, id_prefix: str = "") -> None:
     group = _sub(parent, "g", class_="junction" if node.is_junction else "element",
-                 id_=f"node-{_css_id(node.name)}")
+                 id_=f"{id_prefix}node-{_css_id(node.name)}")
     if node.is_junction:
         _sub(group, "title", f"{node.kind}-junction {node.name}")
         symbol_width = _text_width(node.kind, JUNCTION_SIZE)
@@ -484,8 +535,16 @@ def _draw_node(parent: ET.Element, node: _Node, graph: BondGraph) -> None:
         _sub(group, "text", node.name, x=_fmt(node.x + symbol_width / 2 + 3), y=_fmt(node.y + JUNCTION_SIZE * 0.35),
              font_size=_fmt(NAME_SIZE), fill="#57606a", class_="junction-name")
     else:
-        info = KINDS[node.kind]
-        title = f"{node.kind} {node.name} ({info.description})"
+        info = KINDS.get(node.kind)
+        if info is None:        # a submodel instance drawn as a box
+            group.set("class", "component")
+            title = f"component {node.name}, an instance of model {node.kind}"
+            width = node.width - 2 * NODE_PAD + 8
+            _sub(group, "rect", x=_fmt(node.x - width / 2), y=_fmt(node.y - LABEL_SIZE * 0.9),
+                 width=_fmt(width), height=_fmt(LABEL_SIZE * 1.8), rx="3", fill="none", stroke=INK,
+                 stroke_width="1")
+        else:
+            title = f"{node.kind} {node.name} ({info.description})"
         if node.description:
             title += f": {node.description}"
         _sub(group, "title", title)
@@ -497,7 +556,8 @@ def _css_id(name: str) -> str:
     return "".join(ch if ch.isalnum() or ch in "-_" else "_" for ch in name)
 
 
-def bond_graph_svg(graph: BondGraph, causal: Any = None, orientation: str = "auto") -> Markup:
+def bond_graph_svg(graph: BondGraph, causal: Any = None, orientation: str = "auto",
+                   id_prefix: str = "") -> Markup:
     """An SVG drawing of ``graph``; with ``causal``, causal strokes on the bonds.
 
     ``causal`` is anything :func:`effort_setters` accepts, e.g.
@@ -508,7 +568,8 @@ def bond_graph_svg(graph: BondGraph, causal: Any = None, orientation: str = "aut
     (:data:`FIT_WIDTH` x :data:`FIT_HEIGHT`) at a larger scale, as long chains
     do. The result is a standalone ``<svg>`` element with
     ``width``/``height``/``viewBox``, every text XML-escaped, returned as
-    ``Markup`` so a report template inserts it as it is.
+    ``Markup`` so a report template inserts it as it is. ``id_prefix`` starts every element id,
+    so that two drawings in one page (a model and its expanded components) have distinct ids.
     """
     if orientation not in ORIENTATIONS + ("auto",):
         raise ValueError(f"orientation must be 'auto', 'horizontal' or 'vertical', not {orientation!r}")
@@ -563,7 +624,7 @@ def bond_graph_svg(graph: BondGraph, causal: Any = None, orientation: str = "aut
         x1, y1 = _clip(tail, ux, uy, ox, oy)
         x2, y2 = _clip(head, -ux, -uy, ox, oy)
 
-        group = _sub(bonds_group, "g", class_="bond", id_=f"bond-{bond.number}")
+        group = _sub(bonds_group, "g", class_="bond", id_=f"{id_prefix}bond-{bond.number}")
         tail_text = f"{bond.tail}.{bond.tail_port}" if bond.tail_port else bond.tail
         head_text = f"{bond.head}.{bond.head_port}" if bond.head_port else bond.head
         caption = f"bond {bond.number}" + (f" ({bond.label})" if bond.label else "")
@@ -610,7 +671,7 @@ def bond_graph_svg(graph: BondGraph, causal: Any = None, orientation: str = "aut
         _sub(labels_group, "text", text, class_="bond-number", x=_fmt(mx), y=_fmt(my), text_anchor=anchor)
 
     for node in nodes.values():
-        _draw_node(nodes_group, node, graph)
+        _draw_node(nodes_group, node, graph, id_prefix)
 
     if not nodes:
         _sub(nodes_group, "text", "(empty bond graph)", x=_fmt(MARGIN), y=_fmt(MARGIN + 4),

@@ -183,7 +183,7 @@ class ValidationSection:
     junit_file: str | None = None
 
 
-_TRUSTED = ("source_html", "diagram_svg")
+_TRUSTED = ("source_html", "diagram_svg", "diagram_expanded_svg")
 
 #: SI units of the experiment settings that have one (the model stores them in SI).
 SETTING_UNITS: Mapping[str, str] = {"t_end": "s", "max_step": "s", "cycle": "s", "first_step": "s", "dt": "s"}
@@ -196,7 +196,8 @@ class ReportContext:
     header: ReportHeader
     source_html: Markup                         # highlight_bg(source text)
     parameters: Sequence[ParameterRow] = ()
-    diagram_svg: Markup | None = None           # bond_graph_svg(graph, causal)
+    diagram_svg: Markup | None = None           # bond_graph_svg(graph, causal), components as boxes
+    diagram_expanded_svg: Markup | None = None  # with components: every component's contents drawn
     causality: Sequence[CausalityRow] = ()
     causality_notes: Sequence[str] = ()
     equations: Sequence[Equation] = ()
