@@ -89,6 +89,13 @@ def _step(x: float, x0: float) -> float:
     return 1.0 if x >= x0 else 0.0
 
 
+def _mod(x: float, y: float) -> float:
+    """The remainder with the sign of ``y`` (as numpy's ``mod``)."""
+    if y == 0:
+        raise ValueError("mod(x, 0) is undefined")
+    return x - y * math.floor(x / y)
+
+
 MATH_BUILTINS: Mapping[str, Callable[..., float]] = {
     "abs": abs,
     "sign": _sign,
@@ -103,6 +110,9 @@ MATH_BUILTINS: Mapping[str, Callable[..., float]] = {
     "atan2": math.atan2,
     "min": min,
     "max": max,
+    "floor": lambda x: float(math.floor(x)),
+    "ceil": lambda x: float(math.ceil(x)),
+    "mod": lambda x, y: _mod(x, y),
 }
 
 _BINARY: Mapping[str, Callable[[float, float], float]] = {

@@ -40,7 +40,7 @@ from fractions import Fraction
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 
-from bondc import ast, units
+from bondc import ast, builtins, units
 from bondc.io import read_source
 from bondc.runtime import CsvError, csv_header
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
@@ -55,20 +55,7 @@ from bondc.std import LIBRARIES as STD_LIBRARIES, path_of as std_path_of
 from bondc.source import Source, Span
 
 # Built-in functions and how many arguments each takes: (at least, at most); None is "no limit".
-BUILTINS: Mapping[str, tuple[int, int | None]] = {
-    **{name: (1, 1) for name in "abs sign sqrt exp log sin cos tan tanh atan".split()},
-    "atan2": (2, 2),
-    "min": (2, None),
-    "max": (2, None),
-    "table": (3, 3),
-    "step": (2, 2),
-    "coulomb": (2, 3),
-    "pwm": (3, 3),
-    "mod": (2, 2),
-    "floor": (1, 1),
-    "ceil": (1, 1),
-    "csv": (2, 2),
-}
+BUILTINS: Mapping[str, tuple[int, int | None]] = {name: b.arity for name, b in builtins.BUILTINS.items()}
 
 RESERVED = {"t": "time", "pi": "the constant pi"}
 
@@ -2152,14 +2139,16 @@ def _std_library(name: str) -> Path | None:
     return None if found is None else Path(str(found))
 
 
-def load_files(path: str | Path) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:
+def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:
     """Parse ``path`` and, recursively, the files it imports (each once).
 
-    Returns the files (the main one first), their sources by name, and E307/E308 diagnostics.
-    I/O errors on the main file raise UsageError; syntax errors raise ParseError.
+    ``text``: the main file's text as an editor holds it (unsaved); imports are still read from
+    disk, relative to ``path``. Returns the files (the main one first), their sources by name, and
+    E307/E308 diagnostics. I/O errors on the main file raise UsageError; syntax errors raise
+    ParseError.
     """
     path = Path(path)
-    main = _read(path, str(path))
+    main = _read(path, str(path)) if text is None else Source(str(path), text, path)
     sources = {main.name: main}
     files = [parse_source(main)]
     diagnostics: list[Diagnostic] = []
@@ -2210,13 +2199,14 @@ def load_files(path: str | Path) -> tuple[list[ast.File], dict[str, Source], lis
 
 
 def load(path: str | Path, *, model: str | None = None, experiment: str | None = None,
-         sets: Sequence[ast.SetValue] = ()) -> tuple[BondGraph, list[Diagnostic]]:
+         sets: Sequence[ast.SetValue] = (), text: str | None = None) -> tuple[BondGraph, list[Diagnostic]]:
     """Read, parse and check a ``.bg`` file; return its graph and warnings, or raise ModelError.
 
     ``experiment`` names the experiment whose overrides apply (None: none; :data:`FIRST`: the first);
-    ``sets`` are command-line ``--set`` values (from ``parse_set_value``), applied last.
+    ``sets`` are command-line ``--set`` values (from ``parse_set_value``), applied last; ``text``
+    is the file's text when it is not read from disk (an editor's unsaved buffer).
     """
-    files, sources, diagnostics = load_files(path)
+    files, sources, diagnostics = load_files(path, text)
     for assignment in sets:
         if assignment.source is not None:
             sources[assignment.source.name] = assignment.source

@@ -314,3 +314,18 @@ def test_the_component_flagship_gives_the_cycle_figures_of_the_flat_one():
     assert rms[1] == pytest.approx(rms[0], rel=1e-5)
     energy = [np.trapezoid(np.maximum(r.outputs["power"], 0), r.t) for r in (flat, parts)]
     assert energy[1] == pytest.approx(energy[0], rel=1e-5)
+
+
+def test_an_unsaved_buffer_is_checked_with_its_imports_from_disk(tmp_path):
+    # what an editor does: the text on screen, not the file on disk; imports resolve beside the file
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "hydraulics.bg").write_text((FIXTURES / "lib" / "hydraulics.bg").read_text())
+    path = tmp_path / "circuit.bg"
+    path.write_text("model Stale\nend\n")
+    buffer = (FIXTURES / "circuit.bg").read_text().replace("Cd = 0.7", "Cd = 0.65")
+    graph, _ = load(path, text=buffer)
+    assert graph.name == "Circuit" and graph.parameters["valve.Cd"].value == 0.65
+    with pytest.raises(ModelError) as caught:
+        load(path, text=buffer.replace("valve.b -> n", "valve.c -> n"))
+    (error,) = [d for d in caught.value.diagnostics if d.code == "E341"]
+    assert error.span.file == str(path) and error.span.line == 12

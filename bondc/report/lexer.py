@@ -41,15 +41,17 @@ from pygments.token import (
     Whitespace,
 )
 
+from bondc.builtins import BUILTINS as LANGUAGE_BUILTINS
+
 __all__ = ["BgLexer", "BgStyle", "UNIT", "highlight_bg", "lexer_css", "CSS_SCOPE"]
 
 KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment",
-            "import", "if", "then", "else")
+            "import", "if", "then", "else", "port", "defaults", "discrete", "when")
 WORD_OPERATORS = ("and", "or", "not")
 ELEMENT_KINDS = ("MSe", "MSf", "MTF", "MGY", "Se", "Sf", "TF", "GY", "R", "C", "I")
 JUNCTION_KINDS = ("0", "1")
-BUILTINS = ("abs", "sign", "sqrt", "exp", "log", "sin", "cos", "tan", "tanh", "atan2", "atan",
-            "min", "max", "table", "step", "csv", "der")
+# longest first, so that atan2 is not read as atan
+BUILTINS = tuple(sorted(LANGUAGE_BUILTINS, key=lambda name: (-len(name), name))) + ("der",)
 
 #: Token type of a unit in brackets, ``[N*m/rad]`` (a subtype of ``Literal``,
 #: so any Pygments style still colours it).
