@@ -37,6 +37,7 @@ that cannot be resolved, ``W604`` nonlinear algebraic loop solved numerically,
 
 from __future__ import annotations
 
+import dataclasses
 import heapq
 import json
 import math
@@ -516,11 +517,19 @@ class _Deriver:
                                      "another eliminated state's rate; bondc cannot eliminate it",
                              element_span(dependent.element),
                              hint="add compliance or inertia so that it gets integral causality")
-            rate = sympy.diff(value, self.t)
-            for state in states:
-                if state in value.free_symbols:
-                    qualified = state.name
-                    rate += sympy.diff(value, state) * self.rates[qualified].xreplace(partial)
+            try:
+                rate = sympy.diff(value, self.t)
+                for state in states:
+                    if state in value.free_symbols:
+                        qualified = state.name
+                        rate += sympy.diff(value, state) * self.rates[qualified].xreplace(partial)
+            except EquationError as error:      # a measured signal cannot be differentiated: say where
+                first = error.diagnostics[0]
+                if first.span.line > 0:
+                    raise
+                raise EquationError(dataclasses.replace(
+                    first, span=element_span(dependent.element),
+                    message=f"{describe_node(self.graph, dependent.element.name)}: {first.message}")) from None
             rate = strip_impulses(rate)
             if rate.has(sympy.Derivative):
                 raise _error("E703", f"the rate of {describe_node(self.graph, dependent.element.name)} needs the "

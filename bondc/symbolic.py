@@ -488,9 +488,14 @@ class Translator:
         if op == "*":
             return left * right
         if op == "/":
+            if right.is_zero:
+                raise _fail(node, "division by zero", hint="the divisor is 0 for every value of the variables")
             return left / right
         if op == "^":
-            return sympy.Pow(left, right)
+            value = sympy.Pow(left, right)
+            if value.has(sympy.zoo, sympy.nan):
+                raise _fail(node, "0 raised to a negative power", hint="the base is 0 for every value")
+            return value
         raise _fail(node, f"unsupported operator '{op}'")
 
     def _If(self, node: ast.If):

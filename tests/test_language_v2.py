@@ -118,3 +118,12 @@ def test_latex_keeps_table_breakpoints_and_multi_letter_names():
     latex = format_equations(ss, "latex")
     assert r"\operatorname{table}\left(t;\ \left[0, t_{1}, t_{2}" in latex
     assert r"\mathit{Iz}" in latex and r"\kappa" in latex
+
+
+@pytest.mark.parametrize("law, message", [("f = p/0", "division by zero"), ("f = p*0^(-1)", "negative power")])
+def test_check_reports_a_law_that_divides_by_zero_at_its_position(tmp_path, capsys, law, message):
+    path = tmp_path / "z.bg"
+    path.write_text(f"model Z\n  Se s : e = 1\n  I mass : {law}\n  s -> mass\nend\n")
+    assert main(["check", str(path)]) == 1
+    err = capsys.readouterr().err
+    assert "z.bg:3:" in err and message in err

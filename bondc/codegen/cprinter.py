@@ -105,6 +105,9 @@ class NativePrinter(BondcPrinting, C99CodePrinter):
     def _print_NaN(self, expr):
         return "NAN"
 
+    def _print_ComplexInfinity(self, expr):     # x/0 as sympy writes it: numpy gives inf or nan, run there
+        raise UnsupportedExpression("a division by zero (complex infinity) has no native form")
+
     def _print_Infinity(self, expr):
         return "INFINITY"
 
