@@ -298,9 +298,19 @@ def _cmd_validate(args) -> int:
 def _cmd_sweep(args) -> int:
     from bondc.analysis.sweep import run_sweep
 
-    result = run_sweep(args.file, model=args.model, experiment=args.experiment, sets=args.set or (),
-                       vary=args.vary or (), metrics=args.metric, output=args.output, jobs=args.jobs,
-                       t_end=args.t_end, dt=args.dt, rederive=args.rederive, progress=not args.json)
+    try:
+        result = run_sweep(args.file, model=args.model, experiment=args.experiment, sets=args.set or (),
+                           vary=args.vary or (), samples=args.samples, ranges=args.ranges or (), seed=args.seed,
+                           metrics=args.metric, output=args.output, jobs=args.jobs, t_end=args.t_end, dt=args.dt,
+                           rederive=args.rederive, progress=not args.json, point_timeout=args.point_timeout,
+                           motors=args.motors)
+    except KeyboardInterrupt as interrupt:
+        partial = getattr(interrupt, "sweep_result", None)
+        if partial is not None:
+            where = f"; they are in {args.output}, and the same command resumes" if args.output else \
+                    " (give -o FILE to keep them and resume)"
+            print(f"sweep stopped after {len(partial.points)} of {partial.total} points{where}", file=sys.stderr)
+        raise
     _print_diagnostics(list(result.warnings) + result.diagnostics())
     if args.json:
         _print_json(result.to_json())
@@ -419,7 +429,17 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--vary", action="append", metavar="NAME=VALUES",
                        help='values of a parameter: "k=400,800,1600", "lead=5,10 [mm]" or "M=20:40:5 [kg]" '
                             "(start:stop:count, both ends included); without a unit, the parameter's declared "
-                            "unit; several --vary make a grid (at most 200 runs)")
+                            "unit; several --vary make a full grid")
+    sweep.add_argument("--samples", type=int, metavar="N",
+                       help="instead of a grid: N Latin-hypercube samples over the --range bounds")
+    sweep.add_argument("--range", action="append", dest="ranges", metavar="NAME=LOW:HIGH",
+                       help='bounds of a sampled parameter, e.g. "M=20:45 [kg]" (with --samples; repeatable)')
+    sweep.add_argument("--seed", type=int, help="seed of the Latin hypercube (the same seed, the same points)")
+    sweep.add_argument("--point-timeout", type=float, metavar="SECONDS",
+                       help="stop a point that runs longer and record it as timed out (default: 20 times the "
+                            "median point time, at least 60 s; 0: no limit)")
+    sweep.add_argument("--motors", metavar="CATALOGUE.csv",
+                       help="per point, which motors of the catalogue cover its torque and speed")
     sweep.add_argument("--metric", action="append", metavar="NAME",
                        help="a column: OUTPUT.min, .max, .mean, .rms, .final, OUTPUT.*, energy.residual, "
                             "energy.relative_residual, motor.* (default: all but the means; repeatable)")
@@ -429,7 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--rederive", action="store_true",
                        help="derive and compile the model again for every point (slower; for laws whose "
                             "inversion depends on parameter values)")
-    sweep.add_argument("-o", "--output", help="write the table: .csv (SI) or .json")
+    sweep.add_argument("-o", "--output", help="write the table: .csv (SI; rows added as points finish) or .json; "
+                                              "the same command again resumes, skipping the points already there")
     sweep.add_argument("--json", action="store_true", help="print the result as JSON")
     sweep.set_defaults(run=_cmd_sweep)
 

@@ -489,7 +489,8 @@ class Translator:
             return left * right
         if op == "/":
             if right.is_zero:
-                raise _fail(node, "division by zero", hint="the divisor is 0 for every value of the variables")
+                raise _fail(node, "a division by zero: the divisor is 0", hint="the divisor is 0 for every value "
+                                                                              "of the variables")
             return left / right
         if op == "^":
             value = sympy.Pow(left, right)

@@ -78,8 +78,8 @@ bondc.errors.UsageError: --vary 'k=abc': 'abc' is not a number
 
 from __future__ import annotations
 
-import concurrent.futures
 import csv
+import dataclasses
 import difflib
 import io
 import itertools
@@ -87,11 +87,13 @@ import json
 import math
 import os
 import re
+import statistics
 import sys
+import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -99,8 +101,17 @@ from bondc.errors import BondcError, Diagnostic, UsageError
 from bondc.io import json_safe
 from bondc.pipeline import chosen_experiment
 
-#: The most runs one sweep may ask for.
-MAX_RUNS = 200
+#: The most runs one sweep may ask for (checked before the grid is made).
+MAX_RUNS = 100_000
+
+#: Without --point-timeout: a point may take 20 times the median time of the points done so far,
+#: at least this long [s]; before any point is done, FIRST_POINT_LIMIT.
+MIN_POINT_LIMIT = 60.0
+FIRST_POINT_LIMIT = 600.0
+#: Not on a terminal, a progress line at most this often [s].
+PLAIN_PROGRESS_EVERY = 10.0
+
+STATUSES = ("ok", "failed", "timed out", "incomplete")
 
 OUTPUT_STATISTICS = ("min", "max", "mean", "rms", "final")
 DEFAULT_OUTPUT_STATISTICS = ("min", "max", "rms", "final")
@@ -310,7 +321,7 @@ class SweepPoint:
 
     index: int
     values: tuple[float, ...]                    # per axis, as given
-    status: str                                  # "ok" or "failed"
+    status: str                                  # "ok", "failed", "timed out" or "incomplete" (a metric is nan)
     message: str | None = None
     path: str | None = None                      # "fast", "rederived" or None (not run)
     parameters: dict = field(default_factory=dict)   # varied parameter -> SI value
@@ -319,10 +330,17 @@ class SweepPoint:
     diagnostics: tuple[Diagnostic, ...] = ()     # why it failed
     warnings: tuple[Diagnostic, ...] = ()
     traceback: str | None = None                 # an internal error's traceback
+    wall_time: float | None = None               # seconds this point took (in its worker)
+    motors: tuple[str, ...] | None = None        # with --motors: the catalogue motors that qualify
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    @property
+    def ran(self) -> bool:
+        """The simulation completed (its metrics are there, maybe not all of them)."""
+        return self.status in ("ok", "incomplete")
 
 
 @dataclass(frozen=True)
@@ -337,8 +355,10 @@ class SweepResult:
     axis_si_units: tuple[str | None, ...]
     metrics: tuple[Metric, ...]
     points: tuple[SweepPoint, ...]
-    settings: dict = field(default_factory=dict)     # t_end, dt, rederive
+    settings: dict = field(default_factory=dict)     # t_end, dt, rederive, samples, seed, point_timeout
     warnings: tuple[Diagnostic, ...] = ()        # from loading and deriving the base model
+    total: int | None = None                     # the points asked for (more than ``points`` if interrupted)
+    motors: bool = False                         # a motors column (--motors)
 
     @property
     def failed(self) -> tuple[SweepPoint, ...]:
@@ -346,8 +366,15 @@ class SweepResult:
 
     @property
     def exit_code(self) -> int:
-        """0 when every point ran, 1 when any failed."""
-        return 1 if self.failed else 0
+        """0 when every point ran with all its metrics, 1 otherwise."""
+        return 1 if self.failed or self.interrupted else 0
+
+    @property
+    def interrupted(self) -> bool:
+        return self.total is not None and len(self.points) < self.total
+
+    def counts(self) -> dict[str, int]:
+        return {status: sum(p.status == status for p in self.points) for status in STATUSES}
 
     def describe(self, point: SweepPoint) -> str:
         """``k=400 N/m, b=12`` for a point, in the units as given."""
@@ -387,7 +414,9 @@ class SweepResult:
                            for axis, unit, si_unit in zip(self.axes, self.axis_units, self.axis_si_units)],
             "metrics": [{"name": m.name, "si_unit": m.si_unit} for m in self.metrics],
             "runs": len(self.points),
+            "total": self.total if self.total is not None else len(self.points),
             "failed": len(self.failed),
+            "counts": self.counts(),
             "points": [{
                 "index": point.index,
                 "values": list(point.values),
@@ -396,7 +425,9 @@ class SweepResult:
                 "message": point.message,
                 "path": point.path,
                 "t_reached": point.t_reached,
-                "metrics": {m.name: point.metrics.get(m.name) for m in self.metrics} if point.ok else {},
+                "metrics": {m.name: point.metrics.get(m.name) for m in self.metrics} if point.ran else {},
+                "wall_time": point.wall_time,
+                **({"motors": list(point.motors)} if point.motors is not None else {}),
                 "diagnostics": [d.to_json() for d in point.diagnostics],
                 "warnings": [d.to_json() for d in point.warnings],
                 **({"traceback": point.traceback} if point.traceback else {}),
@@ -410,20 +441,29 @@ class SweepResult:
     # ---------------------------------------------------------------- csv
 
     def csv_text(self) -> str:
-        """Columns ``index``, each varied parameter, each metric (SI, the unit in the header), ``status``,
-        ``message``; one row per point; values are the shortest text that reads back to the same float."""
+        """Columns ``index``, each varied parameter, each metric (SI, the unit in the header), ``motors``
+        (with --motors), ``status``, ``message``, ``wall_time``; one row per point; values are the
+        shortest text that reads back to the same float."""
         out = io.StringIO()
         writer = csv.writer(out, lineterminator="\n")
+        writer.writerow(self.csv_header())
+        for point in self.points:
+            writer.writerow(self.csv_row(point))
+        return out.getvalue()
+
+    def csv_header(self) -> list[str]:
         header = ["index"]
         header += [_with_unit(axis.name, unit) for axis, unit in zip(self.axes, self.axis_si_units)]
         header += [_with_unit(m.name, m.si_unit) for m in self.metrics]
-        writer.writerow(header + ["status", "message"])
-        for point in self.points:
-            row = [point.index]
-            row += [_csv_number(point.parameters.get(axis.name)) for axis in self.axes]
-            row += [_csv_number(point.metrics.get(m.name)) if point.ok else "" for m in self.metrics]
-            writer.writerow(row + [point.status, point.message or ""])
-        return out.getvalue()
+        return header + (["motors"] if self.motors else []) + ["status", "message", "wall_time [s]"]
+
+    def csv_row(self, point: SweepPoint) -> list:
+        row = [point.index]
+        row += [_csv_number(point.parameters.get(axis.name)) for axis in self.axes]
+        row += [_csv_number(point.metrics.get(m.name)) if point.ran else "" for m in self.metrics]
+        if self.motors:
+            row.append(";".join(point.motors or ()))
+        return row + [point.status, point.message or "", _csv_number(point.wall_time)]
 
     def write_csv(self, path) -> None:
         """Write :meth:`csv_text` atomically."""
@@ -451,10 +491,14 @@ class SweepResult:
         Metric columns that do not fit in ``width`` go to further tables that repeat the parameters.
         """
         shape = " x ".join(str(len(axis.values)) for axis in self.axes)
+        counts = self.counts()
+        states = ", ".join(f"{n} {status}" for status, n in counts.items() if n and status != "ok")
         head = [f"sweep of {self.model}" + (f" ({self.experiment})" if self.experiment else "")
                 + f": {len(self.points)} run{'s' if len(self.points) != 1 else ''}"
-                + (f" ({shape})" if len(self.axes) > 1 else "") + ", "
-                + (f"{len(self.failed)} failed" if self.failed else "all complete")]
+                + (f" ({shape})" if len(self.axes) > 1 and not self.settings.get("samples") else "")
+                + (f" (Latin hypercube, seed {self.settings.get('seed')})" if self.settings.get("samples") else "")
+                + ", " + (f"{counts['ok']} ok, {states}" if states else "all complete")
+                + (f"; interrupted after {len(self.points)} of {self.total} points" if self.interrupted else "")]
         keys = [_with_unit(axis.name, unit) for axis, unit in zip(self.axes, self.axis_units)]
         fixed = [[key] + [f"{value:.6g}" for value in (p.values[i] for p in self.points)]
                  for i, key in enumerate(keys)]
@@ -463,7 +507,7 @@ class SweepResult:
         for metric in self.metrics:
             cells = [_with_unit(metric.name, metric.unit)]
             for point in self.points:
-                value = point.metrics.get(metric.name) if point.ok else None
+                value = point.metrics.get(metric.name) if point.ran else None
                 cells.append("-" if value is None else _format(value / metric.display_factor))
             columns.append(cells)
         blocks, block, used = [], [], sum(_width(c) + 2 for c in fixed) + _width(status)
@@ -488,10 +532,12 @@ class SweepResult:
                 lines.append("  ".join(cells).rstrip())
         notes = []
         for point in self.points:
-            if not point.ok:
+            if not point.ran:
                 # its warnings (outputs not finite, ...) follow from the failure: see to_json()
-                notes.append(f"  point {point.index} ({self.describe(point)}) failed: {point.message}")
+                notes.append(f"  point {point.index} ({self.describe(point)}) {point.status}: {point.message}")
                 continue
+            if point.status == "incomplete":
+                notes.append(f"  point {point.index} ({self.describe(point)}) incomplete: {point.message}")
             for warning in point.warnings:
                 notes.append(f"  point {point.index}: {warning.severity}[{warning.code}]: {warning.message}")
         if notes:
@@ -537,6 +583,7 @@ class _Setup:
     t_end: float | None
     dt: float | None
     rederive: bool
+    motors: str | None = None                # a motor catalogue (csv): which motors qualify per point
 
 
 @dataclass
@@ -653,7 +700,39 @@ def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> Swee
         return SweepPoint(index, values, "failed", message, path, parameters, {}, result.t_reached,
                           diagnostics, tuple(warnings))
     metrics = _measure(setup, state_space, graph, experiment, result, warnings)
-    return SweepPoint(index, values, "ok", None, path, parameters, metrics, result.t_reached, (), tuple(warnings))
+    motors = _qualifying_motors(setup, result, graph, warnings) if setup.motors else None
+    missing = [name for name, value in metrics.items() if not math.isfinite(value)]
+    if missing or (setup.motors and motors is None):
+        why = (f"not computed: {', '.join(missing)}" if missing else "") + \
+              ("; " if missing and setup.motors and motors is None else "") + \
+              ("no motor selection" if setup.motors and motors is None else "")
+        reasons = "; ".join(f"{w.code}: {w.message}" for w in warnings if w.code.startswith(("W9", "E9")))
+        return SweepPoint(index, values, "incomplete", why + (f" ({reasons})" if reasons else ""), path,
+                          parameters, metrics, result.t_reached, (), tuple(warnings), motors=motors)
+    return SweepPoint(index, values, "ok", None, path, parameters, metrics, result.t_reached, (), tuple(warnings),
+                      motors=motors)
+
+
+_CATALOGUES: dict[str, list] = {}
+
+
+def _qualifying_motors(setup: _Setup, result, graph, warnings: list) -> tuple[str, ...] | None:
+    """The catalogue motors that cover this point's torque and speed (None: no selection possible)."""
+    from bondc.analysis.motor_report import SPEED_NAMES, TORQUE_NAMES, cycle_window, find_signal
+    from bondc.analysis.motors import load_catalogue, requirements, select
+
+    try:
+        catalogue = _CATALOGUES.get(setup.motors)
+        if catalogue is None:
+            catalogue = _CATALOGUES[setup.motors] = load_catalogue(setup.motors)
+        _, _, torque = find_signal(result, TORQUE_NAMES, "torque")
+        _, _, speed = find_signal(result, SPEED_NAMES, "speed")
+        need = requirements(result.t, torque, speed, cycle=cycle_window(result, graph))
+        return tuple(candidate.motor.name for candidate in select(need, catalogue) if candidate.qualifies)
+    except BondcError as error:
+        warnings += [Diagnostic("warning", d.code, f"no motor selection: {d.message}", d.span, d.hint)
+                     for d in error.diagnostics]
+        return None
 
 
 def _measure(setup: _Setup, state_space, graph, experiment, result, warnings: list) -> dict:
@@ -746,39 +825,83 @@ def _check_axes(graph, axes: Sequence[Axis], sets: Sequence) -> tuple[list, list
     return shown, si_units, converters
 
 
+def parse_range(text: str) -> Axis:
+    """``--range NAME=lo:hi [unit]`` for Latin-hypercube samples: an axis whose values are its bounds.
+
+    >>> axis = parse_range("M=20:45 [kg]")
+    >>> axis.name, axis.values, axis.unit
+    ('M', (20.0, 45.0), 'kg')
+    """
+    match = _VARY.fullmatch(text.strip())
+    if match is None or ":" not in match.group("values") or match.group("values").count(":") != 1:
+        raise _usage("E960", f"--range '{text}': write NAME=LOW:HIGH, optionally with a unit: \"M=20:45 [kg]\"")
+    low_text, high_text = match.group("values").split(":")
+    low, high = _number(low_text, text), _number(high_text, text)
+    if not high > low:
+        raise _usage("E962", f"--range '{text}': the upper bound must be above the lower one")
+    return Axis(match.group("name"), (low, high), match.group("unit"), text)
+
+
+def latin_hypercube(axes: Sequence[Axis], samples: int, seed: int | None) -> list[tuple[float, ...]]:
+    """``samples`` points of a Latin hypercube over the axes' [low, high] (scipy.stats.qmc), the same
+    for the same seed."""
+    from scipy.stats import qmc
+
+    unit = qmc.LatinHypercube(d=len(axes), seed=seed).random(samples)
+    lows = np.array([axis.values[0] for axis in axes])
+    highs = np.array([axis.values[1] for axis in axes])
+    return [tuple(float(v) for v in row) for row in qmc.scale(unit, lows, highs)]
+
+
 def run_sweep(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
-              vary: Sequence[str], metrics: Sequence[str] | None = None, output=None, jobs: int = 1,
+              vary: Sequence[str] = (), samples: int | None = None, ranges: Sequence[str] = (),
+              seed: int | None = None, metrics: Sequence[str] | None = None, output=None, jobs: int = 1,
               t_end: float | None = None, dt: float | None = None, rederive: bool = False,
-              progress: bool | Callable[[SweepPoint, int, int], None] = False) -> SweepResult:
-    """``bondc sweep``: run the model at every point of the grid of ``vary``; see the module docstring.
+              progress: bool | Callable[[SweepPoint, int, int], None] = False,
+              point_timeout: float | None = None, motors=None) -> SweepResult:
+    """``bondc sweep``: run the model at every point of the grid of ``vary`` (or at ``samples``
+    Latin-hypercube points over ``ranges``, reproducible with ``seed``); see the module docstring.
 
     ``sets`` are ``--set`` texts or parsed ``ast.SetValue`` applied to every
     point; ``experiment`` None takes the first; ``t_end``/``dt`` override the
-    experiment's; ``output`` a ``.csv`` or ``.json`` path written atomically;
-    ``progress`` True draws a line on stderr when it is a terminal, or is
-    called as ``progress(point, done, total)`` in the main process.
+    experiment's; ``output`` a ``.csv`` (rows appended as points finish) or
+    ``.json`` path. When ``output`` already holds points of the same sweep,
+    they are kept and only the others run (resuming). ``point_timeout``:
+    seconds a point may take (None: 20 times the median, at least 60 s; 0: no
+    limit, points run in this process). ``motors``: a motor catalogue (csv);
+    each point lists the motors that qualify. ``progress`` True shows progress
+    on stderr, or is called as ``progress(point, done, total)``.
 
-    Raises UsageError (E960-E967, E969) for a bad request and the stage
+    Raises UsageError (E960-E967, E969, E970) for a bad request and the stage
     errors of loading or deriving the base model; a point that fails is
-    recorded, not raised (:attr:`SweepResult.exit_code`).
+    recorded, not raised (:attr:`SweepResult.exit_code`). Ctrl-C and SIGTERM
+    stop the sweep after writing every finished point; the exception raised
+    carries the partial result as ``sweep_result``.
     """
     from bondc import semantic
     from bondc.parse import parse_set_value
 
-    if not vary:
-        raise _usage("E960", "nothing to vary", hint='give --vary, e.g. --vary "k=400,800,1600"')
+    if not vary and not samples:
+        raise _usage("E960", "nothing to vary", hint='give --vary, e.g. --vary "k=400,800,1600", or --samples N '
+                                                    'with --range NAME=LOW:HIGH')
+    if vary and (samples or ranges):
+        raise _usage("E960", "give either --vary (a grid) or --samples with --range (a Latin hypercube)")
+    if samples is not None and (not isinstance(samples, int) or samples < 1 or not ranges):
+        raise _usage("E960", "--samples needs a whole number >= 1 and at least one --range NAME=LOW:HIGH")
     if not isinstance(jobs, int) or jobs < 1:
         raise _usage("E967", f"jobs must be a whole number >= 1, got {jobs!r}")
+    if point_timeout is not None and not point_timeout >= 0:
+        raise _usage("E967", f"--point-timeout must be a number of seconds >= 0 (0: no limit), got {point_timeout!r}")
     if output is not None and Path(output).suffix.lower() not in (".csv", ".json"):
         raise _usage("E969", f"cannot write '{output}': give a .csv or .json file")
     if output is not None:
         from bondc.io import check_output
 
         check_output(output, "the sweep table")
-    axes = [parse_vary(text) for text in vary]
-    runs = math.prod(len(axis.values) for axis in axes)
+    axes = [parse_range(text) for text in ranges] if samples else [parse_vary(text) for text in vary]
+    runs = samples if samples else math.prod(len(axis.values) for axis in axes)
     if runs > MAX_RUNS:
-        shape = f" ({' x '.join(str(len(axis.values)) for axis in axes)})" if len(axes) > 1 else ""
+        shape = f" ({' x '.join(str(len(axis.values)) for axis in axes)})" if len(axes) > 1 and not samples else ""
         raise _usage("E964", f"the sweep has {runs} runs{shape}; at most {MAX_RUNS} are allowed",
                      hint="use fewer values, or split the sweep")
     parsed_sets = tuple(parse_set_value(item, f"--set #{number}") if isinstance(item, str) else item
@@ -793,66 +916,222 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     chosen = chosen_experiment(graph, experiment)
     if t_end is None and getattr(chosen, "t_end", None) is None:
         raise _usage("E801", "no end time for the simulation", hint="give --t-end, or set t_end in the experiment")
+    if motors is not None:
+        from bondc.analysis.motors import load_catalogue
+
+        load_catalogue(motors)          # a bad catalogue is an error now, not at every point
 
     setup = _Setup(key=(os.getpid(), next(_COUNTER)), path=str(path), model=model, experiment=experiment,
                    sets=parsed_sets, names=tuple(axis.name for axis in axes),
                    units=tuple(axis.unit for axis in axes), converters=tuple(converters),
-                   metrics=tuple(m.name for m in chosen_metrics), t_end=t_end, dt=dt, rederive=rederive)
+                   metrics=tuple(m.name for m in chosen_metrics), t_end=t_end, dt=dt, rederive=rederive,
+                   motors=str(motors) if motors is not None else None)
+    grid = latin_hypercube(axes, samples, seed) if samples else list(itertools.product(*(axis.values for axis in axes)))
+    settings = {"t_end": t_end if t_end is not None else chosen.t_end, "dt": dt, "rederive": rederive,
+                "point_timeout": point_timeout}
+    if samples:
+        settings.update(samples=samples, seed=seed)
+
+    def result_of(points) -> SweepResult:
+        return SweepResult(
+            model=graph.name, experiment=getattr(chosen, "name", None), file=str(path), axes=tuple(axes),
+            axis_units=tuple(shown_units), axis_si_units=tuple(si_units), metrics=chosen_metrics,
+            points=tuple(sorted(points, key=lambda p: p.index)), settings=settings, warnings=tuple(base.warnings),
+            total=len(grid), motors=motors is not None)
+
+    names = [axis.name for axis in axes]
+    keys = [_key({n: c.to_si(v) for n, c, v in zip(names, converters, values)}, names) for values in grid]
+    previous: dict[tuple, SweepPoint] = {}
+    if output is not None:
+        template = SweepResult(graph.name, None, str(path), tuple(axes), tuple(shown_units), tuple(si_units),
+                               chosen_metrics, (), motors=motors is not None)
+        previous = _previous_points(output, template.csv_header(), axes, chosen_metrics, motors is not None)
+    done: dict[int, SweepPoint] = {}
+    for index, (key, values) in enumerate(zip(keys, grid)):
+        if key in previous:
+            done[index] = dataclasses.replace(previous[key], index=index, values=values)
+    tasks = [(index, values) for index, values in enumerate(grid) if index not in done]
+
     base = _base(setup, (graph, warnings))     # before any worker starts: forked workers inherit it
-    grid = list(itertools.product(*(axis.values for axis in axes)))
-    report = _progress_reporter(progress)
+    journal = None
+    if output is not None and Path(output).suffix.lower() == ".csv":
+        journal = _Journal(output, result_of(()).csv_header(), keep_rows=bool(previous))
+    report = _progress_reporter(progress, len(tasks))
+
+    def on_done(point: SweepPoint) -> None:
+        done[point.index] = point
+        if journal is not None:
+            journal.add(result_of(()).csv_row(point))
+
     try:
-        points = _run_all(setup, grid, jobs, report)
+        if tasks:
+            _run_all(setup, tasks, jobs, report, point_timeout, on_done)
+    except KeyboardInterrupt as interrupt:
+        result = result_of(done.values())
+        _finish(result, output, journal)
+        interrupt.sweep_result = result
+        raise
     finally:
         _BASES.pop(setup.key, None)
         if report is not None and hasattr(report, "close"):
             report.close()
-    result = SweepResult(
-        model=graph.name, experiment=getattr(chosen, "name", None), file=str(path), axes=tuple(axes),
-        axis_units=tuple(shown_units), axis_si_units=tuple(si_units), metrics=chosen_metrics,
-        points=tuple(points), settings={"t_end": t_end if t_end is not None else chosen.t_end, "dt": dt,
-                                        "rederive": rederive},
-        warnings=tuple(base.warnings))
-    if output is not None:
-        result.write(output)
+    result = result_of(done.values())
+    _finish(result, output, journal)
     return result
 
 
-def _run_all(setup: _Setup, grid: list, jobs: int, report) -> list[SweepPoint]:
-    if jobs == 1 or len(grid) == 1:
-        points = []
-        for index, values in enumerate(grid):
-            points.append(_run_point(setup, index, values))
-            if report is not None:
-                report(points[-1], len(points), len(grid))
-        return points
-    from concurrent.futures.process import BrokenProcessPool
+def _finish(result: SweepResult, output, journal) -> None:
+    """Close the journal and write the whole table in grid order (atomically)."""
+    if journal is not None:
+        journal.close()
+    if output is not None:
+        result.write(output)
 
-    done: dict[int, SweepPoint] = {}
-    executor = concurrent.futures.ProcessPoolExecutor(max_workers=min(jobs, len(grid)), initializer=_worker_signals)
-    try:
-        futures = {executor.submit(_run_point, setup, index, values): index for index, values in enumerate(grid)}
-        for future in concurrent.futures.as_completed(futures):
-            index = futures[future]
-            try:
-                done[index] = future.result()
-            except BrokenProcessPool as error:
-                done[index] = SweepPoint(index, grid[index], "failed",
-                                         f"E968: a worker process died ({error or 'no reason given'})")
-            except Exception as error:   # e.g. a value that does not pickle: record it, keep the others
-                done[index] = SweepPoint(index, grid[index], "failed",
-                                         f"E968: internal error: {type(error).__name__}: {error}",
-                                         traceback="".join(traceback.format_exception(error)))
+
+def _run_all(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float | None,
+             on_done: Callable[[SweepPoint], None]) -> None:
+    """Run every ``(index, values)`` task; ``on_done(point)`` in the main process as each finishes.
+
+    ``point_timeout`` 0 runs the points one after the other in this process (no time limit);
+    otherwise they run in ``jobs`` worker processes, and a point that takes longer than its limit
+    (``point_timeout`` seconds, or None: 20 times the median of the points done so far, at least
+    :data:`MIN_POINT_LIMIT`) is stopped and recorded as timed out. Ctrl-C and SIGTERM stop the
+    workers at once; what finished has been handed to ``on_done``.
+    """
+    total = len(tasks)
+    if point_timeout == 0:
+        for count, (index, values) in enumerate(tasks, 1):
+            started = time.perf_counter()
+            point = _run_point(setup, index, values)
+            point = dataclasses.replace(point, wall_time=time.perf_counter() - started)
+            on_done(point)
             if report is not None:
-                report(done[index], len(done), len(grid))
-    except BaseException:
-        # Ctrl-C, SIGTERM or an error: the workers stop now, not after their current points
-        for process in list((getattr(executor, "_processes", None) or {}).values()):
+                report(point, count, total)
+        return
+    workers = _Workers(setup, min(jobs, total))
+    try:
+        workers.run(tasks, point_timeout, on_done, report)
+    finally:
+        workers.stop()
+
+
+def _worker_main(setup: _Setup, connection) -> None:
+    """A worker process: run the points it is sent, one at a time, until it is sent None."""
+    _worker_signals()
+    while True:
+        try:
+            task = connection.recv()
+        except (EOFError, OSError):
+            return
+        if task is None:
+            return
+        index, values = task
+        started = time.perf_counter()
+        point = _run_point(setup, index, values)
+        point = dataclasses.replace(point, wall_time=time.perf_counter() - started)
+        try:
+            connection.send(point)
+        except Exception as error:      # a value that does not pickle: send what can be sent
+            connection.send(SweepPoint(index, values, "failed", f"E968: internal error: cannot send the result "
+                                                                f"({type(error).__name__}: {error})",
+                                       wall_time=point.wall_time))
+
+
+class _Workers:
+    """Worker processes with a time limit per point: a point over its limit is killed with its
+    worker, recorded as timed out, and a new worker takes the next point."""
+
+    def __init__(self, setup: _Setup, count: int):
+        import multiprocessing
+
+        methods = multiprocessing.get_all_start_methods()
+        # fork: a worker starts with the base model already compiled in this process
+        self.context = multiprocessing.get_context("fork" if "fork" in methods else "spawn")
+        self.setup = setup
+        self.count = max(count, 1)
+        self.idle: list = []
+        self.busy: dict = {}            # connection -> (process, index, values, started)
+        self.times: list[float] = []
+
+    def _start(self):
+        parent, child = self.context.Pipe()
+        process = self.context.Process(target=_worker_main, args=(self.setup, child), daemon=True)
+        process.start()
+        child.close()
+        return process, parent
+
+    def limit(self, point_timeout: float | None) -> float:
+        if point_timeout is not None:
+            return point_timeout
+        if not self.times:
+            return FIRST_POINT_LIMIT
+        return max(MIN_POINT_LIMIT, 20.0 * statistics.median(self.times))
+
+    def run(self, tasks: list, point_timeout, on_done, report) -> None:
+        from multiprocessing.connection import wait
+
+        pending = list(reversed(tasks))
+        total, done = len(tasks), 0
+        self.idle = [self._start() for _ in range(min(self.count, total))]
+        while pending or self.busy:
+            while self.idle and pending:
+                process, connection = self.idle.pop()
+                index, values = pending.pop()
+                connection.send((index, values))
+                self.busy[connection] = (process, index, values, time.monotonic())
+            limit = self.limit(point_timeout)
+            now = time.monotonic()
+            next_deadline = min(started + limit for _, _, _, started in self.busy.values())
+            ready = wait(list(self.busy), timeout=max(0.0, min(next_deadline - now, 1.0)))
+            finished = []
+            for connection in ready:
+                process, index, values, started = self.busy.pop(connection)
+                try:
+                    point = connection.recv()
+                    self.idle.append((process, connection))
+                    self.times.append(point.wall_time or (time.monotonic() - started))
+                except (EOFError, OSError):
+                    code = process.exitcode
+                    process.join(timeout=1)
+                    point = SweepPoint(index, values, "failed",
+                                       f"E968: the worker process running this point died (exit code {code})",
+                                       wall_time=time.monotonic() - started)
+                    self.idle.append(self._start())
+                finished.append(point)
+            now = time.monotonic()
+            for connection, (process, index, values, started) in list(self.busy.items()):
+                if now - started > limit:
+                    del self.busy[connection]
+                    process.kill()
+                    process.join(timeout=5)
+                    connection.close()
+                    finished.append(SweepPoint(
+                        index, values, "timed out", f"stopped after {limit:.3g} s (the limit per point; "
+                                                    "--point-timeout sets it)", wall_time=now - started))
+                    if pending:
+                        self.idle.append(self._start())
+            for point in finished:
+                done += 1
+                on_done(point)
+                if report is not None:
+                    report(point, done, total)
+
+    def stop(self) -> None:
+        """Stop every worker now (Ctrl-C, SIGTERM, an error, or the end)."""
+        for process, connection in self.idle:
+            try:
+                connection.send(None)
+            except (OSError, ValueError):
+                pass
+        for process, *_ in list(self.busy.values()):
             process.kill()
-        executor.shutdown(wait=False, cancel_futures=True)
-        raise
-    executor.shutdown(wait=True)
-    return [done[index] for index in range(len(grid))]
+        for process, connection in self.idle + [(v[0], k) for k, v in self.busy.items()]:
+            process.join(timeout=2)
+            if process.is_alive():
+                process.kill()
+                process.join(timeout=2)
+            connection.close()
+        self.idle, self.busy = [], {}
 
 
 def _worker_signals() -> None:
@@ -864,35 +1143,159 @@ def _worker_signals() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-class _ProgressLine:
-    """``sweep: 3/12 runs (1 failed)`` on stderr, redrawn in place, only on a terminal."""
+class _Progress:
+    """Progress on stderr: a tqdm bar on a terminal (points done and failed, rate, ETA); elsewhere
+    (CI logs) a plain line at most every :data:`PLAIN_PROGRESS_EVERY` seconds and at the end."""
 
-    def __init__(self, stream=None):
+    def __init__(self, total: int, stream=None, terminal: bool | None = None):
         self.stream = stream or sys.stderr
-        self.failed = 0
-        self.drawn = False
+        self.total = total
+        self.counts = {status: 0 for status in STATUSES}
+        self.started = time.monotonic()
+        self.last = self.started
+        if terminal is None:
+            try:
+                terminal = self.stream.isatty()
+            except (AttributeError, ValueError):
+                terminal = False
+        self.bar = None
+        if terminal:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, file=self.stream, unit="point", desc="sweep", leave=False,
+                            dynamic_ncols=True)
+
+    def _states(self) -> str:
+        return ", ".join(f"{n} {status}" for status, n in self.counts.items() if n and status != "ok")
 
     def __call__(self, point: SweepPoint, done: int, total: int) -> None:
-        self.failed += not point.ok
-        text = f"sweep: {done}/{total} runs" + (f" ({self.failed} failed)" if self.failed else "")
-        self.stream.write("\r" + text.ljust(40))
-        self.stream.flush()
-        self.drawn = True
+        self.counts[point.status] = self.counts.get(point.status, 0) + 1
+        if self.bar is not None:
+            self.bar.update(1)
+            states = self._states()
+            if states:
+                self.bar.set_postfix_str(states, refresh=False)
+            return
+        now = time.monotonic()
+        if now - self.last >= PLAIN_PROGRESS_EVERY or done == total:
+            self.last = now
+            rate = done / max(now - self.started, 1e-9)
+            left = (total - done) / rate if rate > 0 else float("nan")
+            states = self._states()
+            print(f"sweep: {done}/{total} points" + (f" ({states})" if states else "")
+                  + f", {rate:.3g} points/s" + (f", about {left:.0f} s left" if done < total else ""),
+                  file=self.stream, flush=True)
 
     def close(self) -> None:
-        if self.drawn:
-            self.stream.write("\r" + " " * 40 + "\r")
-            self.stream.flush()
+        if self.bar is not None:
+            self.bar.close()
 
 
-def _progress_reporter(progress):
+def _progress_reporter(progress, total: int):
     if callable(progress):
         return progress
     if not progress:
         return None
+    return _Progress(total)
+
+
+# ------------------------------------------------------------------ resuming
+
+
+def _key(parameters: Mapping, names: Sequence[str]) -> tuple:
+    """A point's identity in a results file: its varied parameters' SI values (12 digits)."""
+    return tuple(f"{float(parameters[name]):.12g}" for name in names)
+
+
+def _previous_points(path, result_header: list[str], axes, metrics, motors: bool) -> dict[tuple, SweepPoint]:
+    """The points an earlier run of the same sweep wrote to ``path`` (a .csv or .json), by key.
+
+    A file of another sweep (other columns) is not resumed: E970 says so rather than mixing them."""
+    path = Path(path)
+    if not path.exists():
+        return {}
+    names = [axis.name for axis in axes]
+    found: dict[tuple, SweepPoint] = {}
     try:
-        if not sys.stderr.isatty():
-            return None
-    except (AttributeError, ValueError):
-        return None
-    return _ProgressLine()
+        if path.suffix.lower() == ".json":
+            data = json.loads(path.read_text(encoding="utf-8"))
+            if [p["name"] for p in data.get("parameters", [])] != names or \
+                    [m["name"] for m in data.get("metrics", [])] != [m.name for m in metrics]:
+                raise ValueError("other columns")
+            for item in data.get("points", []):
+                point = SweepPoint(int(item["index"]), tuple(item["values"]), item["status"], item.get("message"),
+                                   item.get("path"), dict(item["parameters"]),
+                                   {k: _from_json_number(v) for k, v in (item.get("metrics") or {}).items()},
+                                   item.get("t_reached"), wall_time=item.get("wall_time"),
+                                   motors=tuple(item["motors"]) if "motors" in item else None)
+                found[_key(point.parameters, names)] = point
+            return found
+        with open(path, newline="", encoding="utf-8") as handle:
+            rows = list(csv.reader(handle))
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as error:
+        raise _usage("E970", f"cannot resume from '{path}': {error}",
+                     hint="it is not the table of this sweep; write to another file, or delete it to start "
+                          "again") from None
+    if not rows:
+        return {}
+    if rows[0] != result_header:
+        raise _usage("E970", f"'{path}' holds the table of another sweep (other columns)",
+                     hint="write to another file, or delete it to start again")
+    width = len(result_header)
+    columns = {name: number for number, name in enumerate(result_header)}
+    for row in rows[1:]:
+        if len(row) != width or row[columns["status"]] not in STATUSES:
+            continue            # a row cut short by an interruption: that point runs again
+        parameters = {axis.name: float(row[1 + i]) for i, axis in enumerate(axes)}
+        metrics_values = {m.name: _from_csv(row[1 + len(axes) + i]) for i, m in enumerate(metrics)}
+        status = row[columns["status"]]
+        point = SweepPoint(int(row[0]), (), status, row[columns["message"]] or None, None, parameters,
+                           metrics_values if status in ("ok", "incomplete") else {},
+                           wall_time=_from_csv(row[columns["wall_time [s]"]]),
+                           motors=tuple(m for m in row[columns["motors"]].split(";") if m) if motors else None)
+        found[_key(parameters, names)] = point
+    return found
+
+
+def _from_csv(text: str) -> float | None:
+    return None if text == "" else float(text)
+
+
+def _from_json_number(value):
+    return float(value) if isinstance(value, str) else value
+
+
+class _Journal:
+    """The csv results file, one row appended and flushed as each point finishes, so that nothing
+    finished is lost whatever stops the sweep; at the end the file is rewritten in grid order."""
+
+    def __init__(self, path, header: list[str], keep_rows: bool):
+        self.path = Path(path)
+        fresh = not keep_rows or not self.path.exists() or self.path.stat().st_size == 0
+        if fresh:
+            from bondc.io import atomic_write_text
+
+            buffer = io.StringIO()
+            csv.writer(buffer, lineterminator="\n").writerow(header)
+            atomic_write_text(self.path, buffer.getvalue())
+        self.handle = open(self.path, "a", newline="", encoding="utf-8")
+        if not fresh:
+            self._end_line()
+        self.writer = csv.writer(self.handle, lineterminator="\n")
+
+    def _end_line(self) -> None:
+        """A row an interruption cut short stays a separate (ignored) line."""
+        with open(self.path, "rb") as check:
+            check.seek(0, os.SEEK_END)
+            if check.tell():
+                check.seek(-1, os.SEEK_END)
+                if check.read(1) != b"\n":
+                    self.handle.write("\n")
+
+    def add(self, row: list) -> None:
+        self.writer.writerow(row)
+        self.handle.flush()
+        os.fsync(self.handle.fileno())
+
+    def close(self) -> None:
+        self.handle.close()

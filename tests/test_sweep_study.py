@@ -1,0 +1,172 @@
+"""Design studies (issue 12): a grid equals single runs, Latin hypercubes are reproducible, a
+point that hangs is timed out, an interrupted sweep keeps its points and resumes, and each point
+says which motors qualify."""
+
+import csv
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bondc.analysis.motor_report import SPEED_NAMES, TORQUE_NAMES, cycle_window, find_signal
+from bondc.analysis.motors import load_catalogue, requirements, select
+from bondc.analysis.stats import output_statistics
+from bondc.analysis.sweep import latin_hypercube, parse_range, run_sweep
+from bondc.pipeline import derive_file
+from bondc.simulate import run
+
+ROOT = Path(__file__).resolve().parent.parent
+MSD = ROOT / "models" / "mass_spring_damper.bg"
+MOTOR_MODEL = ROOT / "models" / "dc_motor_gear.bg"
+CATALOGUE = ROOT / "models" / "data" / "motors.csv"
+
+
+def test_a_3x3_grid_equals_nine_single_runs():
+    study = run_sweep(MSD, vary=["k=400,800,1600", "b=6,12,24"], metrics=["x.max", "x.rms", "v.min"], t_end=2.0)
+    assert [p.status for p in study.points] == ["ok"] * 9
+    for point in study.points:
+        k, b = point.values
+        single = run(MSD, sets=[f"k={k}", f"b={b}"], t_end=2.0)
+        stats = output_statistics(single)
+        for metric in ("x.max", "x.rms", "v.min"):
+            output, _, statistic = metric.partition(".")
+            assert point.metrics[metric] == pytest.approx(stats[output][statistic], rel=1e-9, abs=1e-15)
+
+
+def test_latin_hypercube_samples_are_reproducible_and_stratified():
+    axes = [parse_range("k=400:1600"), parse_range("b=5:20 [N*s/m]")]
+    first = latin_hypercube(axes, 8, seed=7)
+    assert first == latin_hypercube(axes, 8, seed=7) and first != latin_hypercube(axes, 8, seed=8)
+    values = np.array(first)
+    for column, (low, high) in enumerate([(400, 1600), (5, 20)]):
+        strata = np.floor((values[:, column] - low) / (high - low) * 8).astype(int)
+        assert sorted(strata) == list(range(8))          # one sample in each eighth of each range
+    study = run_sweep(MSD, samples=8, ranges=["k=400:1600", "b=5:20 [N*s/m]"], seed=7, metrics=["x.final"],
+                      t_end=1.0)
+    assert [p.values for p in study.points] == first
+    assert all(p.parameters["k"] == pytest.approx(v[0]) for p, v in zip(study.points, first))
+    assert "Latin hypercube, seed 7" in study.to_text()
+
+
+HANGING = """model Slow
+  param m = 2   [kg]
+  param k = 800 [N/m]
+  param h = 1   [ms]   "largest step"
+  Se push : e = 10
+  I mass : f = p/m
+  C spring : e = k*q
+  1 j
+  push -> j
+  j -> mass
+  j -> spring
+  output x [m] = spring.q
+  experiment run
+    t_end    = 100 [s]
+    max_step = h
+  end
+end
+"""
+
+
+@pytest.mark.slow
+def test_a_point_that_hangs_is_timed_out_and_the_others_complete(tmp_path):
+    # h = 1e-7 ms: 1e12 steps (reported every second, so no point limit stops it); the time limit
+    # stops it and the sweep goes on
+    path = tmp_path / "slow.bg"
+    path.write_text(HANGING)
+    started = time.monotonic()
+    study = run_sweep(path, vary=["h=10,1e-7,20"], metrics=["x.final"], point_timeout=3.0, jobs=2, dt=1.0)
+    assert [p.status for p in study.points] == ["ok", "timed out", "ok"]
+    assert "stopped after 3 s" in study.points[1].message and study.points[1].wall_time >= 3.0
+    assert time.monotonic() - started < 60
+    assert study.exit_code == 1
+    # undamped: the spring swings between 0 and twice the static deflection
+    assert all(0 <= p.metrics["x.final"] <= 2 * 10 / 800 * (1 + 1e-6) for p in (study.points[0], study.points[2]))
+
+
+def _rows(path):
+    with open(path, newline="") as handle:
+        return list(csv.reader(handle))
+
+
+@pytest.mark.slow
+def test_an_interrupted_sweep_keeps_every_finished_point_and_the_same_command_resumes(tmp_path):
+    out = tmp_path / "study.csv"
+    command = [sys.executable, "-m", "bondc", "sweep", str(MSD), "--vary", "k=400:1600:12",
+               "--metric", "x.final", "--t-end", "5", "-o", str(out), "--point-timeout", "0"]
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and (not out.exists() or len(_rows(out)) < 4):
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err
+    assert "sweep stopped after" in err and "the same command resumes" in err
+    kept = _rows(out)[1:]
+    assert 3 <= len(kept) < 12
+    # the same command again: only the missing points run, and every point appears once
+    again = subprocess.run(command, capture_output=True, text=True, env=env, timeout=300)
+    assert again.returncode == 0, again.stderr
+    rows = _rows(out)[1:]
+    assert [int(row[0]) for row in rows] == list(range(12))
+    assert {row[0] for row in kept} <= {row[0] for row in rows}
+    for row in rows:
+        assert float(row[2]) == pytest.approx(10 / float(row[1]), rel=1e-3)     # x.final = F0/k
+    # a third run has nothing left to do and changes nothing but the order
+    third = subprocess.run(command, capture_output=True, text=True, env=env, timeout=300)
+    assert third.returncode == 0 and _rows(out)[1:] == rows
+
+
+def test_resuming_skips_the_points_already_in_the_file(tmp_path):
+    out = tmp_path / "study.csv"
+    first = run_sweep(MSD, vary=["k=400,800"], metrics=["x.final"], t_end=2.0, output=out, point_timeout=0)
+    calls = []
+    second = run_sweep(MSD, vary=["k=400,800,1600"], metrics=["x.final"], t_end=2.0, output=out,
+                       point_timeout=0, progress=lambda point, done, total: calls.append(point.index))
+    assert calls == [2]                               # only the new point ran
+    assert [p.metrics["x.final"] for p in second.points[:2]] == [p.metrics["x.final"] for p in first.points]
+    other = tmp_path / "other.csv"
+    other.write_text("index,z [m],status\n")
+    from bondc.errors import UsageError
+
+    with pytest.raises(UsageError) as caught:
+        run_sweep(MSD, vary=["k=400"], metrics=["x.final"], t_end=2.0, output=other)
+    assert caught.value.diagnostics[0].code == "E970"
+
+
+def test_each_point_lists_the_motors_that_qualify():
+    catalogue = load_catalogue(CATALOGUE)
+    study = run_sweep(MOTOR_MODEL, vary=["U_s=12,48"], metrics=["torque.max"], motors=CATALOGUE, point_timeout=0)
+    assert study.motors and [p.status for p in study.points] == ["ok", "ok"]
+    for point in study.points:
+        single = run(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"])
+        graph = derive_file(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"]).graph
+        _, _, torque = find_signal(single, TORQUE_NAMES, "torque")
+        _, _, speed = find_signal(single, SPEED_NAMES, "speed")
+        need = requirements(single.t, torque, speed, cycle=cycle_window(single, graph))
+        expected = tuple(c.motor.name for c in select(need, catalogue) if c.qualifies)
+        assert point.motors == expected
+    assert len(study.points[0].motors) >= len(study.points[1].motors)     # more voltage, more torque
+    assert "motors" in study.csv_header()
+
+
+def test_a_point_without_its_metrics_is_incomplete_not_ok():
+    # the mass-spring-damper has no torque output: no motor can be chosen for its points
+    study = run_sweep(MSD, vary=["k=400"], metrics=["x.final"], t_end=1.0, motors=CATALOGUE, point_timeout=0)
+    (point,) = study.points
+    assert point.status == "incomplete" and "no motor selection" in point.message
+    assert 0 < point.metrics["x.final"] < 2 * 10 / 400 and study.exit_code == 1
+
+
+def test_progress_without_a_terminal_is_a_plain_line(capsys):
+    run_sweep(MSD, vary=["k=400,800"], metrics=["x.final"], t_end=1.0, point_timeout=0, progress=True)
+    err = capsys.readouterr().err
+    assert "sweep: 2/2 points" in err and "points/s" in err
+    assert math.isfinite(float(err.split("sweep: 2/2 points, ")[1].split(" ")[0]))
