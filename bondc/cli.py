@@ -303,7 +303,7 @@ def _cmd_sweep(args) -> int:
                            vary=args.vary or (), samples=args.samples, ranges=args.ranges or (), seed=args.seed,
                            metrics=args.metric, output=args.output, jobs=args.jobs, t_end=args.t_end, dt=args.dt,
                            rederive=args.rederive, progress=not args.json, point_timeout=args.point_timeout,
-                           motors=args.motors)
+                           motors=args.motors, executor=args.executor, scheduler=args.scheduler)
     except KeyboardInterrupt as interrupt:
         partial = getattr(interrupt, "sweep_result", None)
         if partial is not None:
@@ -438,6 +438,11 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--point-timeout", type=float, metavar="SECONDS",
                        help="stop a point that runs longer and record it as timed out (default: 20 times the "
                             "median point time, at least 60 s; 0: no limit)")
+    sweep.add_argument("--executor", choices=("local", "dask"), default="local",
+                       help="local: worker processes on this machine (-j of them); dask: a dask.distributed "
+                            "cluster (a LocalCluster of -j workers, or --scheduler)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="an existing Dask scheduler, e.g. tcp://host:8786 (implies --executor dask)")
     sweep.add_argument("--motors", metavar="CATALOGUE.csv",
                        help="per point, which motors of the catalogue cover its torque and speed")
     sweep.add_argument("--metric", action="append", metavar="NAME",

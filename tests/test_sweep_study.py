@@ -170,3 +170,61 @@ def test_progress_without_a_terminal_is_a_plain_line(capsys):
     err = capsys.readouterr().err
     assert "sweep: 2/2 points" in err and "points/s" in err
     assert math.isfinite(float(err.split("sweep: 2/2 points, ")[1].split(" ")[0]))
+
+
+def _without_times(result):
+    import dataclasses
+
+    return dataclasses.replace(result, points=tuple(dataclasses.replace(p, wall_time=None) for p in result.points),
+                               settings={k: v for k, v in result.settings.items() if k != "executor"})
+
+
+@pytest.mark.slow
+def test_local_workers_and_a_dask_cluster_give_identical_rows():
+    pytest.importorskip("distributed")
+    request = dict(vary=["k=400,1600", "b=6,24"], metrics=["x.max", "x.final", "energy.residual"], t_end=2.0)
+    local = run_sweep(MSD, jobs=2, **request)
+    dask = run_sweep(MSD, executor="dask", jobs=2, **request)
+    assert _without_times(dask).csv_text() == _without_times(local).csv_text()
+    assert _without_times(dask).to_json() == _without_times(local).to_json()
+
+
+@pytest.mark.slow
+def test_a_sweep_on_a_dask_scheduler_with_two_workers_started_from_the_command_line(tmp_path):
+    # what README's "Sweeps on a Dask cluster" says to do, with the scheduler and workers as processes here
+    pytest.importorskip("distributed")
+    scheduler_file = tmp_path / "scheduler.json"
+    bin_dir = Path(sys.executable).parent
+    dask_cli = [str(bin_dir / "dask")] if (bin_dir / "dask").exists() else [sys.executable, "-m", "dask"]
+    processes = [subprocess.Popen(dask_cli + ["scheduler", "--scheduler-file", str(scheduler_file),
+                                              "--port", "0", "--dashboard-address", ":0"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        import json
+
+        address = json.loads(scheduler_file.read_text())["address"]
+        for _ in range(2):
+            processes.append(subprocess.Popen(dask_cli + ["worker", address, "--nthreads", "1",
+                                                          "--dashboard-address", ":0"],
+                                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        out = tmp_path / "study.csv"
+        env = dict(os.environ, PYTHONPATH=str(ROOT))
+        done = subprocess.run([sys.executable, "-m", "bondc", "sweep", str(MSD), "--vary", "k=400,800,1600",
+                               "--metric", "x.final", "--t-end", "5", "--scheduler", address, "-o", str(out)],
+                              capture_output=True, text=True, env=env, timeout=300)
+        assert done.returncode == 0, done.stderr
+        rows = _rows(out)[1:]
+        assert [row[-3] for row in rows] == ["ok"] * 3
+        local = run_sweep(MSD, vary=["k=400,800,1600"], metrics=["x.final"], t_end=5.0)
+        assert [float(row[2]) for row in rows] == [p.metrics["x.final"] for p in local.points]
+    finally:
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()

@@ -48,11 +48,22 @@ the means). Only what is selected is computed.
 that gives nan, a solver failure) gets ``status`` "failed", its message and
 diagnostics, and the sweep goes on; :attr:`SweepResult.exit_code` is then 1.
 A metric that cannot be computed for a point that ran (energy account, motor
-profile) is nan with a warning.
+profile) is nan with a warning, and the point is "incomplete".
 
-**Parallel runs.** ``jobs > 1`` runs points in a
-:class:`~concurrent.futures.ProcessPoolExecutor`; every point is computed
-the same way in whichever process, so the result does not depend on ``jobs``.
+**Running the points.** Points run in ``jobs`` worker processes (forked with
+the base model compiled), each with a time limit (``point_timeout``, default
+20 times the median point time, at least 60 s): a point over its limit is
+killed with its worker and recorded as "timed out". ``point_timeout=0`` runs
+them one after the other in this process. ``executor="dask"`` runs them on a
+``dask.distributed`` cluster instead. Every point is computed the same way in
+whichever process, so the result does not depend on ``jobs`` or the executor.
+Rows are appended to the csv as points finish (flushed), Ctrl-C and SIGTERM
+keep them, and running the same sweep again resumes: the points already in the
+file (matched by their parameter values) are not run again.
+
+**Statuses.** "ok"; "failed" (it did not load, or its run stopped early);
+"timed out"; "incomplete" (it ran, but a metric or the motor selection could
+not be computed: never "ok" with nan).
 
 Problems with the request are :class:`~bondc.errors.UsageError` with codes
 E960 (a vary text that is not ``NAME=VALUES [unit]``, or an empty list),
@@ -60,8 +71,10 @@ E961 (not a parameter), E962 (a value that is not a finite number, a bad
 ``start:stop:count``), E963 (a unit bondc does not know, or of another
 quantity than the parameter's), E964 (more than :data:`MAX_RUNS` runs),
 E965 (an unknown metric), E966 (a parameter varied twice, or varied and
-``--set``), E967 (jobs < 1), E969 (an output file that is not .csv or
-.json). E968 is a failed point's diagnostic when it has none of its own
+``--set``), E967 (jobs < 1, a negative time limit), E969 (an output file
+that is not .csv or .json), E970 (an output file holding another sweep's
+table), E971 (Dask not installed, an unknown executor, an unreachable
+scheduler). E968 is a failed point's diagnostic when it has none of its own
 (the model file changed during the sweep, a worker process died, an
 internal error).
 
@@ -84,6 +97,7 @@ import difflib
 import io
 import itertools
 import json
+import logging
 import math
 import os
 import re
@@ -858,7 +872,8 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
               seed: int | None = None, metrics: Sequence[str] | None = None, output=None, jobs: int = 1,
               t_end: float | None = None, dt: float | None = None, rederive: bool = False,
               progress: bool | Callable[[SweepPoint, int, int], None] = False,
-              point_timeout: float | None = None, motors=None) -> SweepResult:
+              point_timeout: float | None = None, motors=None, executor: str = "local",
+              scheduler: str | None = None) -> SweepResult:
     """``bondc sweep``: run the model at every point of the grid of ``vary`` (or at ``samples``
     Latin-hypercube points over ``ranges``, reproducible with ``seed``); see the module docstring.
 
@@ -870,7 +885,11 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     seconds a point may take (None: 20 times the median, at least 60 s; 0: no
     limit, points run in this process). ``motors``: a motor catalogue (csv);
     each point lists the motors that qualify. ``progress`` True shows progress
-    on stderr, or is called as ``progress(point, done, total)``.
+    on stderr, or is called as ``progress(point, done, total)``. ``executor``
+    "local" runs ``jobs`` worker processes here; "dask" runs the points on a
+    ``dask.distributed`` cluster: ``scheduler`` (``tcp://host:8786``) or a
+    ``LocalCluster`` of ``jobs`` workers (the model file must be readable at
+    the same path on every worker).
 
     Raises UsageError (E960-E967, E969, E970) for a bad request and the stage
     errors of loading or deriving the base model; a point that fails is
@@ -890,6 +909,10 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         raise _usage("E960", "--samples needs a whole number >= 1 and at least one --range NAME=LOW:HIGH")
     if not isinstance(jobs, int) or jobs < 1:
         raise _usage("E967", f"jobs must be a whole number >= 1, got {jobs!r}")
+    if executor not in ("local", "dask"):
+        raise _usage("E971", f"unknown executor {executor!r}", hint="choose local or dask")
+    if scheduler and executor != "dask":
+        executor = "dask"           # --scheduler means a Dask cluster
     if point_timeout is not None and not point_timeout >= 0:
         raise _usage("E967", f"--point-timeout must be a number of seconds >= 0 (0: no limit), got {point_timeout!r}")
     if output is not None and Path(output).suffix.lower() not in (".csv", ".json"):
@@ -928,7 +951,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
                    motors=str(motors) if motors is not None else None)
     grid = latin_hypercube(axes, samples, seed) if samples else list(itertools.product(*(axis.values for axis in axes)))
     settings = {"t_end": t_end if t_end is not None else chosen.t_end, "dt": dt, "rederive": rederive,
-                "point_timeout": point_timeout}
+                "point_timeout": point_timeout, "executor": executor}
     if samples:
         settings.update(samples=samples, seed=seed)
 
@@ -965,7 +988,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
 
     try:
         if tasks:
-            _run_all(setup, tasks, jobs, report, point_timeout, on_done)
+            _run_all(setup, tasks, jobs, report, point_timeout, on_done, executor, scheduler)
     except KeyboardInterrupt as interrupt:
         result = result_of(done.values())
         _finish(result, output, journal)
@@ -989,7 +1012,7 @@ def _finish(result: SweepResult, output, journal) -> None:
 
 
 def _run_all(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float | None,
-             on_done: Callable[[SweepPoint], None]) -> None:
+             on_done: Callable[[SweepPoint], None], executor: str = "local", scheduler: str | None = None) -> None:
     """Run every ``(index, values)`` task; ``on_done(point)`` in the main process as each finishes.
 
     ``point_timeout`` 0 runs the points one after the other in this process (no time limit);
@@ -999,6 +1022,9 @@ def _run_all(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float
     workers at once; what finished has been handed to ``on_done``.
     """
     total = len(tasks)
+    if executor == "dask":
+        _run_dask(setup, tasks, jobs, report, point_timeout, on_done, scheduler)
+        return
     if point_timeout == 0:
         for count, (index, values) in enumerate(tasks, 1):
             started = time.perf_counter()
@@ -1013,6 +1039,84 @@ def _run_all(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float
         workers.run(tasks, point_timeout, on_done, report)
     finally:
         workers.stop()
+
+
+def _timed_point(setup: _Setup, index: int, values: tuple) -> SweepPoint:
+    """One point with its wall time (what a Dask worker runs)."""
+    started = time.perf_counter()
+    point = _run_point(setup, index, values)
+    return dataclasses.replace(point, wall_time=time.perf_counter() - started)
+
+
+def _run_dask(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float | None, on_done,
+              scheduler: str | None) -> None:
+    """The points on a Dask cluster: an existing one (``scheduler``, ``tcp://host:8786``) or a
+    ``LocalCluster`` of ``jobs`` worker processes. As many points are in flight as there are
+    workers, so a point's time runs from when it was sent; one over its limit is recorded as timed
+    out and released (on a cluster of its own the sweep closes it at the end, stopping such a point;
+    on an existing cluster the worker finishes it in the background)."""
+    try:
+        from distributed import Client, LocalCluster, wait
+    except ImportError:
+        raise _usage("E971", "--executor dask needs dask.distributed, which is not installed",
+                     hint='pip install "dask[distributed]"') from None
+    cluster = None
+    try:
+        if scheduler:
+            client = Client(scheduler, timeout="30s")
+        else:
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.ERROR)
+            client = Client(cluster)
+    except (OSError, TimeoutError) as error:
+        raise _usage("E971", f"cannot reach the Dask scheduler {scheduler!r}: {error}",
+                     hint="start one with 'dask scheduler' and workers with 'dask worker ADDRESS'") from None
+    try:
+        slots = max(1, len(client.scheduler_info().get("workers", {})) or jobs)
+        pending = list(reversed(tasks))
+        flying: dict = {}                 # future -> (index, values, sent)
+        times: list[float] = []
+        done, total = 0, len(tasks)
+        while pending or flying:
+            while pending and len(flying) < slots:
+                index, values = pending.pop()
+                flying[client.submit(_timed_point, setup, index, values, pure=False)] = (index, values,
+                                                                                           time.monotonic())
+            limit = point_timeout if point_timeout is not None else (
+                FIRST_POINT_LIMIT if not times else max(MIN_POINT_LIMIT, 20.0 * statistics.median(times)))
+            oldest = min(sent for _, _, sent in flying.values())
+            try:
+                finished_set, _ = wait(list(flying), timeout=max(0.05, min(oldest + limit - time.monotonic(), 1.0)),
+                                       return_when="FIRST_COMPLETED")
+            except TimeoutError:        # nothing finished within the wait
+                finished_set = set()
+            finished = []
+            for future in finished_set:
+                index, values, sent = flying.pop(future)
+                try:
+                    point = future.result()
+                    times.append(point.wall_time or time.monotonic() - sent)
+                except Exception as error:     # a worker lost, a value that does not pickle
+                    point = SweepPoint(index, values, "failed", f"E968: the Dask task failed: "
+                                                                f"{type(error).__name__}: {error}")
+                finished.append(point)
+            now = time.monotonic()
+            for future, (index, values, sent) in list(flying.items()):
+                if now - sent > limit:
+                    del flying[future]
+                    future.cancel()
+                    finished.append(SweepPoint(index, values, "timed out",
+                                               f"stopped after {limit:.3g} s (the limit per point; "
+                                               "--point-timeout sets it)", wall_time=now - sent))
+            for point in finished:
+                done += 1
+                on_done(point)
+                if report is not None:
+                    report(point, done, total)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def _worker_main(setup: _Setup, connection) -> None:

@@ -447,6 +447,16 @@ d("E968", "a sweep point failed without a diagnostic of its own",
 d("E969", "sweep output file",
   "`bondc sweep -o FILE`: the file name does not end in `.csv` or `.json`.",
   "Name the output `results.csv` (SI values) or `results.json`.")
+d("E970", "sweep output holds another sweep",
+  "`bondc sweep -o FILE` resumes from the points already in FILE; FILE holds a table with other columns "
+  "(other varied parameters or metrics) or cannot be read as a sweep table, so its rows cannot be the points of "
+  "this sweep.",
+  "Write to another file, or delete FILE to start the study again.")
+d("E971", "sweep executor",
+  "`--executor dask` (or `--scheduler`) needs `dask.distributed`, which is not installed; or the scheduler "
+  "given with `--scheduler` cannot be reached; or the executor is neither `local` nor `dask`.",
+  "`pip install \"dask[distributed]\"`; start a scheduler with `dask scheduler` and workers with "
+  "`dask worker ADDRESS`, and pass the address the scheduler prints.")
 
 # -- validation against measured data (bondc/report/validate.py)
 
