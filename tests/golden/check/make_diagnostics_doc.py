@@ -425,7 +425,8 @@ d("E963", "--vary unit",
   "declared unit (the same rule as `--set`, E204).",
   "Give the values in the parameter's unit (leave out `[ ]`) or in a unit of the same kind.")
 d("E964", "too many runs",
-  "`bondc sweep`: the grid (the product of the numbers of values of every `--vary`) has more than 200 runs.",
+  "`bondc sweep`: the grid (the product of the numbers of values of every `--vary`), or `--samples`, has more "
+  "than 100000 runs. It is checked before the grid is made.",
   "Use fewer values, or split the sweep into several.")
 d("E965", "unknown metric",
   "`bondc sweep --metric`: not a column the sweep can compute. Columns are `OUTPUT.min .max .mean .rms "
@@ -698,7 +699,7 @@ live("E960", Cli(_SWEEP + "--vary J", {"spin.bg": SPIN}))
 live("E961", Cli(_SWEEP + "--vary j=1e-4,2e-4", {"spin.bg": SPIN}))
 live("E962", Cli(_SWEEP + "--vary J=1e-4:4e-4:1", {"spin.bg": SPIN}))
 live("E963", Cli(_SWEEP + "--vary 'J=1,2 [kg]'", {"spin.bg": SPIN}))
-live("E964", Cli(_SWEEP + "--vary J=1e-4:4e-4:201", {"spin.bg": SPIN}))
+live("E964", Cli(_SWEEP + "--vary J=1e-4:4e-4:400 --vary b=1e-4:1e-3:400", {"spin.bg": SPIN}))
 live("E965", Cli(_SWEEP + "--vary J=1e-4,2e-4 --metric omgea.max", {"spin.bg": SPIN}))
 live("E966", Cli(_SWEEP + "--vary J=1e-4 --vary J=2e-4", {"spin.bg": SPIN}))
 live("E967", Cli(_SWEEP + "--vary J=1e-4 --jobs 0", {"spin.bg": SPIN}))
