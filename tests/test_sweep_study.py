@@ -228,3 +228,18 @@ def test_a_sweep_on_a_dask_scheduler_with_two_workers_started_from_the_command_l
                 process.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 process.kill()
+
+
+def test_the_motors_that_cover_the_whole_study():
+    study = run_sweep(MOTOR_MODEL, vary=["U_s=12,24,48"], metrics=["torque.max"], motors=CATALOGUE, point_timeout=0)
+    common = study.motors_for_all()
+    for point in study.points:
+        assert set(common) <= set(point.motors)
+    every = set(load_catalogue_names())
+    for name in every - set(common):
+        assert any(name not in point.motors for point in study.points)
+    assert f"smallest: {common[0]}" in study.to_text() and study.to_json()["motors_for_all"] == common
+
+
+def load_catalogue_names():
+    return [motor.name for motor in load_catalogue(CATALOGUE)]

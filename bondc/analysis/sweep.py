@@ -390,6 +390,17 @@ class SweepResult:
     def counts(self) -> dict[str, int]:
         return {status: sum(p.status == status for p in self.points) for status in STATUSES}
 
+    def motors_for_all(self) -> list[str] | None:
+        """With --motors: the motors that qualify at every point that ran, smallest first (the
+        catalogue order of each point's selection); None without --motors."""
+        if not self.motors:
+            return None
+        selections = [p.motors for p in self.points if p.motors is not None]
+        if not selections:
+            return []
+        common = set(selections[0]).intersection(*map(set, selections[1:]))
+        return [name for name in selections[0] if name in common]
+
     def describe(self, point: SweepPoint) -> str:
         """``k=400 N/m, b=12`` for a point, in the units as given."""
         parts = []
@@ -429,6 +440,7 @@ class SweepResult:
             "metrics": [{"name": m.name, "si_unit": m.si_unit} for m in self.metrics],
             "runs": len(self.points),
             "total": self.total if self.total is not None else len(self.points),
+            **({"motors_for_all": self.motors_for_all()} if self.motors else {}),
             "failed": len(self.failed),
             "counts": self.counts(),
             "points": [{
@@ -517,6 +529,10 @@ class SweepResult:
         fixed = [[key] + [f"{value:.6g}" for value in (p.values[i] for p in self.points)]
                  for i, key in enumerate(keys)]
         status = ["status"] + [point.status for point in self.points]
+        if self.motors:         # the smallest qualifying motor and how many more
+            fixed.append(["motors"] + ["-" if not p.motors else
+                                       p.motors[0] + (f" +{len(p.motors) - 1}" if len(p.motors) > 1 else "")
+                                       for p in self.points])
         columns = []
         for metric in self.metrics:
             cells = [_with_unit(metric.name, metric.unit)]
@@ -556,6 +572,10 @@ class SweepResult:
                 notes.append(f"  point {point.index}: {warning.severity}[{warning.code}]: {warning.message}")
         if notes:
             lines += [""] + notes
+        common = self.motors_for_all()
+        if common is not None:
+            lines += ["", "motors that qualify at every point: " + (", ".join(common) + f" (smallest: {common[0]})"
+                                                                    if common else "none")]
         return "\n".join(lines)
 
 
