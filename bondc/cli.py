@@ -280,6 +280,15 @@ def _cmd_compile(args) -> int:
 def _cmd_report(args) -> int:
     from bondc.report.build import run_report
 
+    if args.sweep:
+        from bondc.report.sweep_report import build_sweep_report
+
+        target = build_sweep_report(args.sweep, args.output, args.motors)
+        print(f"wrote {target}")
+        return EXIT_OK
+    if not args.file:
+        raise UsageError(Diagnostic("error", "E001", "bondc report: give a model file, or --sweep STUDY.csv",
+                                    hint="see 'bondc report --help'"))
     _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
                          data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
                          t_end=args.t_end, progress=True)
@@ -333,8 +342,8 @@ def _cmd_fit_friction(args) -> int:
 
 # ------------------------------------------------------------------- parser
 
-def _add_model_args(parser, *, sets=True) -> None:
-    parser.add_argument("file", help="the .bg model file")
+def _add_model_args(parser, *, sets=True, optional=False) -> None:
+    parser.add_argument("file", help="the .bg model file", nargs="?" if optional else None)
     parser.add_argument("--model", help="the model to use when the file holds several")
     parser.add_argument("--no-cache", action="store_true",
                         help="derive and compile again instead of reusing the compile cache")
@@ -400,7 +409,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     report = commands.add_parser("report", help="one self-contained HTML report: model, bond graph, equations, "
                                                 "plots, energy per cycle, motor choice")
-    _add_model_args(report)
+    _add_model_args(report, optional=True)
+    report.add_argument("--sweep", metavar="STUDY.csv",
+                        help="instead of a model: the report of a design study (the table of bondc sweep -o)")
     report.add_argument("--experiment", help="the experiment to run (default: the first)")
     report.add_argument("--t-end", type=float, help="end time, s (overrides the experiment's t_end)")
     report.add_argument("--data", help="measured CSV to compare with (adds a validation section)")

@@ -243,3 +243,41 @@ def test_the_motors_that_cover_the_whole_study():
 
 def load_catalogue_names():
     return [motor.name for motor in load_catalogue(CATALOGUE)]
+
+
+def test_the_report_of_a_study_shows_its_metrics_heat_maps_failures_and_motors(tmp_path):
+    import re
+
+    from bondc.report.sweep_report import build_sweep_report, read_study
+    from test_report_build import assert_self_contained
+    from test_report_render import check_html
+
+    table = tmp_path / "grid.csv"
+    run_sweep(MSD, vary=["k=400,1600", "m=0,2"], metrics=["x.max", "x.final"], t_end=2.0, output=table)
+    study = read_study(table)
+    assert [name for name, _ in study.parameters] == ["k", "m"] and len(study.rows) == 4
+    html = build_sweep_report(table, tmp_path / "grid.html").read_text(encoding="utf-8")
+    check_html(html)
+    assert_self_contained(html)
+    assert html.count('<figure class="plot">') == 4              # 2 metrics x (against k, heat map)
+    assert html.count("failed or timed out") == 2 and "2 failed" in html
+    assert len(re.findall(r"<tr class=\"bad\">", html)) == 2 and "E810" in html
+    # a motor study: the operating points against every catalogue motor's envelopes
+    table = tmp_path / "motors.csv"
+    run_sweep(MOTOR_MODEL, vary=["U_s=12,48"], metrics=["motor.peak_speed", "motor.peak_torque",
+                                                       "motor.rms_torque"], motors=CATALOGUE, output=table)
+    html = build_sweep_report(table, tmp_path / "motors.html", motors=CATALOGUE).read_text(encoding="utf-8")
+    for motor in load_catalogue(CATALOGUE):
+        assert f"{motor.name} continuous" in html
+    assert "Motors that cover every point" in html
+
+
+def test_report_sweep_from_the_command_line(tmp_path):
+    from bondc.cli import main
+
+    table = tmp_path / "s.csv"
+    run_sweep(MSD, vary=["k=400,800"], metrics=["x.final"], t_end=1.0, output=table, point_timeout=0)
+    assert main(["report", "--sweep", str(table), "-o", str(tmp_path / "s.html")]) == 0
+    assert "x.final" in (tmp_path / "s.html").read_text(encoding="utf-8")
+    (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
+    assert main(["report", "--sweep", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "b.html")]) == 1

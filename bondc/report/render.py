@@ -457,11 +457,7 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
     styles = styles or {}
 
     # text.parse_math off: labels come from model and data files; a header "$\\foo$" is not mathtext
-    with matplotlib.rc_context({"svg.fonttype": "none", "svg.hashsalt": key, "text.parse_math": False,
-                                "axes.spines.top": False,
-                                "axes.spines.right": False, "axes.grid": True, "grid.color": "#dddddd",
-                                "grid.linewidth": 0.6, "font.size": 9, "axes.titlesize": 10,
-                                "legend.frameon": False, "lines.linewidth": 1.4}):
+    with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key}):
         figure = Figure(figsize=size, layout="constrained")
         axes = figure.add_subplot()
         for label, values in arrays.items():
@@ -477,9 +473,20 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
                 axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
             else:
                 axes.legend(loc="best")
-        buffer = io.StringIO()
-        figure.savefig(buffer, format="svg",
-                       metadata={"Date": None, "Creator": None, "Format": None, "Type": None})
+        return figure_svg(figure, title, key)
+
+
+PLOT_STYLE = {"svg.fonttype": "none", "text.parse_math": False, "axes.spines.top": False,
+              "axes.spines.right": False, "axes.grid": True, "grid.color": "#dddddd", "grid.linewidth": 0.6,
+              "font.size": 9, "axes.titlesize": 10, "legend.frameon": False, "lines.linewidth": 1.4}
+
+
+def figure_svg(figure, title: str, key: str) -> Markup:
+    """A matplotlib ``Figure`` as an inline SVG element, as :func:`plot_svg` makes them: text as
+    text, ids deterministic (from ``key``) and unique, no prolog, metadata or external reference,
+    the title in ``<title>``. Call it inside ``matplotlib.rc_context(PLOT_STYLE | {"svg.hashsalt": key})``."""
+    buffer = io.StringIO()
+    figure.savefig(buffer, format="svg", metadata={"Date": None, "Creator": None, "Format": None, "Type": None})
     svg = buffer.getvalue()
     svg = svg[svg.index("<svg"):]
     svg = re.sub(r"<metadata>.*?</metadata>\s*", "", svg, flags=re.S)

@@ -453,6 +453,10 @@ d("E970", "sweep output holds another sweep",
   "(other varied parameters or metrics) or cannot be read as a sweep table, so its rows cannot be the points of "
   "this sweep.",
   "Write to another file, or delete FILE to start the study again.")
+d("E972", "not a sweep table",
+  "`bondc report --sweep FILE`: FILE cannot be read, or is not the csv `bondc sweep -o` wrote (its header "
+  "starts with `index` and has a `status` column).",
+  "Give the table the sweep wrote.")
 d("E971", "sweep executor",
   "`--executor dask` (or `--scheduler`) needs `dask.distributed`, which is not installed; or the scheduler "
   "given with `--scheduler` cannot be reached; or the executor is neither `local` nor `dask`.",
