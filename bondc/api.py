@@ -1,0 +1,320 @@
+"""The Python API of bondc, for scripts and notebooks (``docs/api.md``).
+
+Every function takes a model file (``path``), or its text with ``text=`` (the
+path then only names it and anchors its imports and data files). Parameter
+``overrides`` is a dict ``{name: value}``: a number in the parameter's
+declared unit (as ``--set``), a string with a unit (``"5 [mm]"``), or a pair
+``(5, "mm")``. Model errors raise :class:`bondc.errors.BondcError` (its
+``diagnostics`` say what and where), except in :func:`check`, which returns
+them.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from bondc.errors import BondcError, Diagnostic
+
+__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation"]
+
+
+def _sets(overrides: Mapping[str, Any] | None) -> list[str]:
+    texts = []
+    for name, value in (overrides or {}).items():
+        if isinstance(value, tuple):
+            number, unit = value
+            texts.append(f"{name}={float(number)!r} [{unit}]")
+        elif isinstance(value, str):
+            texts.append(f"{name}={value}")
+        else:
+            texts.append(f"{name}={float(value)!r}")
+    return texts
+
+
+def _source(path, text):
+    """The path to load and, for an in-memory text, the text."""
+    return Path(path) if path is not None else Path("<text>.bg"), text
+
+
+@dataclass(frozen=True)
+class Model:
+    """A checked model: its graph and the warnings of checking it."""
+
+    graph: Any
+    warnings: tuple[Diagnostic, ...]
+
+    @property
+    def name(self) -> str:
+        return self.graph.name
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """Every parameter's value, SI."""
+        return {name: p.value for name, p in self.graph.parameters.items()}
+
+    @property
+    def states(self) -> list[str]:
+        return [s.qualified for s in self.graph.states]
+
+    @property
+    def outputs(self) -> dict[str, str | None]:
+        """Each output's declared unit."""
+        return {name: o.unit_text for name, o in self.graph.outputs.items()}
+
+    @property
+    def experiments(self) -> list[str]:
+        return list(self.graph.experiments)
+
+    def _repr_html_(self) -> str:
+        rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{v:.6g}</td></tr>" for n, v in self.parameters.items())
+        return (f"<p><b>{html.escape(self.name)}</b>: {len(self.graph.elements)} elements, "
+                f"{len(self.graph.bonds)} bonds, {len(self.states)} states</p>"
+                f"<table><tr><th>parameter</th><th>SI value</th></tr>{rows}</table>")
+
+
+def load(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+         overrides: Mapping[str, Any] | None = None) -> Model:
+    """Read and check a model; raises :class:`BondcError` with every problem.
+
+    >>> m = load("models/mass_spring_damper.bg")
+    >>> m.name, m.states, m.parameters["k"]
+    ('MassSpringDamper', ['mass.p', 'spring.q'], 800.0)
+    """
+    from bondc import semantic
+    from bondc.pipeline import parse_sets
+
+    path, text = _source(path, text)
+    graph, warnings = semantic.load(path, model=model, experiment=experiment, sets=parse_sets(_sets(overrides)),
+                                    text=text)
+    return Model(graph, tuple(warnings))
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """What ``bondc check`` says: ``ok`` and every diagnostic (errors and warnings)."""
+
+    ok: bool
+    diagnostics: tuple[Diagnostic, ...]
+    model: Model | None = None
+
+    @property
+    def errors(self) -> list[Diagnostic]:
+        return [d for d in self.diagnostics if d.is_error]
+
+    def __str__(self) -> str:
+        from bondc.errors import render_all
+
+        return render_all(self.diagnostics) if self.diagnostics else "ok"
+
+    def _repr_html_(self) -> str:
+        if not self.diagnostics:
+            return "<p>ok: no problems</p>"
+        rows = "".join(f"<tr><td>{html.escape(d.severity)}</td><td>{html.escape(d.code)}</td>"
+                       f"<td>{d.span.line}:{d.span.column}</td><td>{html.escape(d.message)}</td></tr>"
+                       for d in self.diagnostics)
+        return f"<table><tr><th></th><th>code</th><th>where</th><th>message</th></tr>{rows}</table>"
+
+
+def check(path=None, *, text: str | None = None, model: str | None = None) -> CheckResult:
+    """Check a model (names, units, dimensions, causality, equations); never raises for the model.
+
+    >>> result = check(text="model M\\n  C c : e = q\\n  Se s : e = 1\\n  s -> c\\n  output y [m/s] = s.e\\nend\\n")
+    >>> result.ok
+    True
+    >>> check(text="model M\\n  R r : e = f\\n  r -> nowhere\\nend\\n").errors[0].code
+    'E404'
+    """
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+
+    try:
+        loaded = load(path, text=text, model=model)
+        causal = assign_causality(loaded.graph)
+        state_space = derive(causal)
+    except BondcError as error:
+        return CheckResult(False, tuple(error.diagnostics))
+    diagnostics = list(loaded.warnings)
+    diagnostics += [d for d in list(causal.diagnostics) + list(state_space.diagnostics) if d not in diagnostics]
+    return CheckResult(not any(d.is_error for d in diagnostics), tuple(diagnostics), loaded)
+
+
+def _derived(path, text, model, experiment, overrides):
+    from bondc.pipeline import derive_file
+
+    if text is None:
+        return derive_file(Path(path), model=model, experiment=experiment, sets=_sets(overrides))
+    from bondc import semantic
+    from bondc.causality import assign_causality
+    from bondc.equations import derive
+    from bondc.pipeline import Derived, chosen_experiment, parse_sets
+
+    sets = parse_sets(_sets(overrides))
+    path, text = _source(path, text)
+    graph, warnings = semantic.load(path, model=model, text=text, sets=sets,
+                                    experiment=experiment if experiment is not None else semantic.FIRST)
+    causal = assign_causality(graph)
+    return Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment), tuple(sets))
+
+
+def equations(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+              overrides: Mapping[str, Any] | None = None, format: str = "text") -> str:
+    """The state and output equations as ``bondc equations`` prints them (text, latex or json).
+
+    >>> text = equations("models/mass_spring_damper.bg")
+    >>> [line.strip() for line in text.split("state equations")[1].split("outputs")[0].strip().splitlines()]
+    ['der(mass.p) = F - b*mass.p/m - k*spring.q', 'der(spring.q) = mass.p/m']
+    """
+    from bondc.equations import format_equations
+
+    return format_equations(_derived(path, text, model, experiment, overrides).state_space, format)
+
+
+def linearize(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+              overrides: Mapping[str, Any] | None = None, at: str = "initial", time: float = 0.0):
+    """A, B, C, D and the eigenvalues (:class:`bondc.analysis.linearize.Linearization`).
+
+    >>> lin = linearize("models/mass_spring_damper.bg")
+    >>> [round(float(abs(e)), 6) for e in lin.eigenvalues]    # sqrt(k/m) = 20 rad/s
+    [20.0, 20.0]
+    """
+    from bondc.analysis.linearize import linearize as linearise
+
+    return linearise(_derived(path, text, model, experiment, overrides).state_space, time=time, at=at)
+
+
+def compile(path, output=None, *, model: str | None = None, experiment: str | None = None,
+            overrides: Mapping[str, Any] | None = None, standalone: bool = False) -> Path:
+    """Write the model's Python module (``bondc compile``); returns its path. ``standalone``: the
+    module carries bondc's runtime (it runs where bondc is not installed)."""
+    from bondc.codegen import compile_file, default_output
+
+    output = Path(output) if output is not None else default_output(path)
+    compile_file(Path(path), output, model=model, experiment=experiment, sets=_sets(overrides),
+                 standalone=standalone)
+    return output
+
+
+@dataclass
+class Simulation:
+    """A simulation: arrays by name (SI), the units result files use, and helpers for notebooks.
+
+    ``sim["x"]`` is an output, state or bond variable (SI); ``sim.t`` the times.
+    """
+
+    result: Any                                  # bondc.simulate.SimResult
+    warnings: tuple = field(default_factory=tuple)
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.result.t
+
+    @property
+    def complete(self) -> bool:
+        return self.result.complete
+
+    @property
+    def outputs(self) -> dict[str, np.ndarray]:
+        return self.result.outputs
+
+    @property
+    def states(self) -> dict[str, np.ndarray]:
+        return self.result.states
+
+    @property
+    def units(self) -> dict[str, tuple[str, float]]:
+        """``{name: (unit, scale)}``: a column's value in its unit is the SI value / scale."""
+        return self.result.units
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        for group in (self.result.outputs, self.result.states, self.result.bonds, self.result.variables):
+            if name in group:
+                return group[name]
+        raise KeyError(name)
+
+    def in_unit(self, name: str) -> np.ndarray:
+        """A column in the unit result files show it in (an output in its declared unit)."""
+        _, scale = self.result.units.get(name, (None, 1.0))
+        return np.asarray(self[name]) / scale
+
+    def to_dataframe(self, all_bonds: bool = False):
+        """A pandas DataFrame indexed by time, one column per output and state, named with their units
+        (``P_kPa [kPa]``) and in those units, as the csv; needs pandas."""
+        try:
+            import pandas
+        except ImportError:
+            raise ImportError("to_dataframe needs pandas: pip install pandas") from None
+        from bondc.simulate import _columns, column_header
+
+        names, columns = _columns(self.result, all_bonds)
+        data = {column_header(n, self.result.units): np.asarray(c) / self.result.units.get(n, (None, 1.0))[1]
+                for n, c in zip(names[1:], columns[1:])}
+        return pandas.DataFrame(data, index=pandas.Index(self.result.t, name="t [s]"))
+
+    def plot(self, names: Sequence[str] | None = None):
+        """A matplotlib Figure of the outputs ``names`` (default: every output) against time, each in
+        its declared unit, one axis per unit."""
+        from matplotlib.figure import Figure
+
+        names = list(names) if names is not None else list(self.result.outputs)
+        by_unit: dict[str, list[str]] = {}
+        for name in names:
+            by_unit.setdefault(self.result.units.get(name, ("", 1.0))[0] or "", []).append(name)
+        figure = Figure(figsize=(7, 2.4 * max(len(by_unit), 1)), layout="constrained")
+        axes_list = figure.subplots(max(len(by_unit), 1), 1, sharex=True, squeeze=False)[:, 0]
+        for axes, (unit, group) in zip(axes_list, by_unit.items()):
+            for name in group:
+                axes.plot(self.t, self.in_unit(name), label=name)
+            axes.set_ylabel(f"[{unit}]" if unit else "")
+            axes.legend(loc="best")
+            axes.grid(True, alpha=0.3)
+        axes_list[-1].set_xlabel("t [s]")
+        return figure
+
+    def summary(self) -> list[dict]:
+        """Per output: unit, min, max, final (in its unit)."""
+        rows = []
+        for name in self.result.outputs:
+            values = self.in_unit(name)
+            finite = values[np.isfinite(values)]
+            rows.append({"output": name, "unit": self.result.units.get(name, ("", 1.0))[0],
+                         "min": float(finite.min()) if finite.size else math.nan,
+                         "max": float(finite.max()) if finite.size else math.nan,
+                         "final": float(values[-1]) if values.size else math.nan})
+        return rows
+
+    def _repr_html_(self) -> str:
+        state = "complete" if self.complete else f"INCOMPLETE: {html.escape(self.result.message)}"
+        rows = "".join(f"<tr><td>{html.escape(r['output'])}</td><td>{html.escape(r['unit'] or '')}</td>"
+                       f"<td>{r['min']:.5g}</td><td>{r['max']:.5g}</td><td>{r['final']:.5g}</td></tr>"
+                       for r in self.summary())
+        return (f"<p><b>{html.escape(self.result.model)}</b>: {self.t.size} points to t = {self.result.t_reached:g} s, "
+                f"{state}, {len(self.result.events)} events</p><table><tr><th>output</th><th>unit</th><th>min</th>"
+                f"<th>max</th><th>final</th></tr>{rows}</table>")
+
+
+def simulate(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+             overrides: Mapping[str, Any] | None = None, t_end: float | None = None,
+             dt: float | None = None) -> Simulation:
+    """Simulate (``bondc simulate``); a run that stops early raises SimulationError with the partial
+    result as ``.result``.
+
+    >>> sim = simulate("models/mass_spring_damper.bg", overrides={"k": (1.6, "kN/m")}, dt=0.5)
+    >>> sim.complete, abs(float(sim["x"][-1]) - 10/1600) < 1e-4    # x settles at F0/k
+    (True, True)
+    >>> sim.units["x"]
+    ('m', 1.0)
+    """
+    from bondc.simulate import simulate as run_simulation
+
+    derived = _derived(path, text, model, experiment, overrides)
+    result = run_simulation(derived.state_space, derived.experiment, t_end=t_end, dt=dt)
+    error = result.error()
+    if error is not None:
+        raise error
+    return Simulation(result, tuple(derived.notes) + tuple(result.warnings))

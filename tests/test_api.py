@@ -1,0 +1,65 @@
+"""The Python API (docs/api.md): its examples run as written, and its results convert."""
+
+import doctest
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import bondc
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_the_api_page_examples_run_as_written(monkeypatch):
+    monkeypatch.chdir(ROOT)
+    failures, tests = doctest.testfile(str(ROOT / "docs" / "api.md"), module_relative=False,
+                                       optionflags=doctest.ELLIPSIS)
+    assert tests > 10 and failures == 0
+
+
+def test_the_api_docstrings_run(monkeypatch):
+    from bondc import api
+
+    monkeypatch.chdir(ROOT)
+    assert doctest.testmod(api).failed == 0
+
+
+def test_every_exported_name_is_there():
+    for name in bondc.__all__:
+        assert getattr(bondc, name) is not None
+    assert callable(bondc.simulate) and callable(bondc.equations)     # modules of the pipeline, callable
+
+
+def test_simulation_results_convert_to_a_plot_a_table_and_a_dataframe():
+    sim = bondc.simulate(ROOT / "models" / "electro_pneumatic_hybrid.bg", dt=0.1, t_end=0.5)
+    figure = sim.plot(["P_kPa", "x"])
+    assert len(figure.axes) == 2                          # one axis per unit: kPa and m
+    html = sim._repr_html_()
+    assert "P_kPa" in html and "kPa" in html and "<table>" in html
+    assert np.allclose(sim.in_unit("P_kPa"), sim["P_kPa"] / 1000)
+    pytest.importorskip("pandas")
+    frame = sim.to_dataframe()
+    assert "P_kPa [kPa]" in frame.columns and frame.index.name == "t [s]"
+    assert np.allclose(frame["P_kPa [kPa]"].to_numpy(), sim["P_kPa"] / 1000)
+
+
+def test_check_returns_problems_instead_of_raising(tmp_path):
+    result = bondc.check(text="model M\n  R r : e = f\n  r -> nowhere\nend\n")
+    assert not result.ok and result.errors[0].code == "E404" and "E404" in str(result)
+    assert "<table>" in result._repr_html_()
+
+
+def test_load_with_overrides_in_units():
+    model = bondc.load(ROOT / "models" / "mass_spring_damper.bg", overrides={"k": "1.2 [kN/m]", "m": (500, "g")})
+    assert model.parameters["k"] == 1200.0 and model.parameters["m"] == 0.5
+
+
+def test_compile_writes_a_module_that_runs(tmp_path):
+    out = bondc.compile(ROOT / "models" / "mass_spring_damper.bg", tmp_path / "msd_gen.py")
+    import runpy
+
+    namespace = runpy.run_path(str(out))
+    result = namespace["simulate"](t_end=1.0)
+    assert result.complete
