@@ -330,6 +330,12 @@ def _cmd_sweep(args) -> int:
     return EXIT_ERRORS if result.exit_code else EXIT_OK
 
 
+def _cmd_lsp(args) -> int:
+    from bondc.lsp import main as serve
+
+    return serve()
+
+
 def _cmd_fit_friction(args) -> int:
     from bondc.analysis.friction import run_fit_friction
 
@@ -469,6 +475,9 @@ def build_parser() -> argparse.ArgumentParser:
                                               "the same command again resumes, skipping the points already there")
     sweep.add_argument("--json", action="store_true", help="print the result as JSON")
     sweep.set_defaults(run=_cmd_sweep)
+
+    lsp_ = commands.add_parser("lsp", help="the language server for editors (Language Server Protocol on stdio)")
+    lsp_.set_defaults(run=_cmd_lsp)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")

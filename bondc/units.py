@@ -247,6 +247,11 @@ _TABLE = _build_table()
 KNOWN_NAMES: tuple[str, ...] = tuple(name for name in _TABLE if name != "1")
 
 
+def unit_names() -> list[str]:
+    """Every unit name bondc knows, without prefixes (``m``, ``N``, ``bar``, ``rpm``, ...), sorted."""
+    return sorted(_TABLE)
+
+
 def lookup(name: str) -> SIUnit | None:
     """The SI meaning of one unit name (``"kPa"``, ``"rpm"``, ``"1"``), or None if unknown."""
     entry = _TABLE.get(name)

@@ -1,0 +1,572 @@
+"""``bondc lsp``: a Language Server Protocol server on stdio (pygls), for editors.
+
+It works on the editor's buffers, saved or not:
+
+- diagnostics as you type (debounced): everything ``bondc check`` reports up to
+  causality — syntax, names, units and dimensions, causal conflicts — with the
+  same codes, ranges and related locations, every model of the file;
+- hover: an element's kind, laws, bonds and causality; a parameter's value in
+  SI and as written; a component's ports and description;
+- go to definition and find references for parameters, elements, junctions,
+  functions, models and components (across imports, ``std:`` included), and
+  dotted names (``valve.loss.f``);
+- completion of names, element kinds, built-ins, units, and members after a
+  dot (``valve.`` lists the instance's ports, elements and outputs);
+- document symbols (the outline) and formatting (``bondc fmt``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import unquote, urlparse
+
+from lsprotocol import types as lsp
+from pygls.lsp.server import LanguageServer
+
+from bondc import __version__, ast
+from bondc.builtins import BUILTINS
+from bondc.errors import BondcError, Diagnostic
+from bondc.model import KINDS
+
+DEBOUNCE = 0.15          # seconds after the last change before the buffer is checked
+KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment", "import", "if", "then",
+            "else", "and", "or", "not", "port", "defaults", "discrete", "when")
+_DOCS = Path(__file__).resolve().parent.parent / "docs" / "diagnostics.md"
+
+
+def path_of(uri: str) -> Path:
+    parsed = urlparse(uri)
+    return Path(unquote(parsed.path)) if parsed.scheme in ("file", "") else Path(uri)
+
+
+def _range(span) -> lsp.Range:
+    line, column = max(span.line - 1, 0), max(span.column - 1, 0)
+    end_line, end_column = max(span.end_line - 1, 0), max(span.end_column - 1, 0)
+    if (end_line, end_column) <= (line, column):
+        end_line, end_column = line, column + 1
+    return lsp.Range(lsp.Position(line, column), lsp.Position(end_line, end_column))
+
+
+def _contains(span, line: int, column: int) -> bool:
+    """Whether 0-based (line, column) is inside ``span``."""
+    start = (span.line - 1, span.column - 1)
+    end = (span.end_line - 1, span.end_column - 1)
+    return start <= (line, column) <= end
+
+
+# ------------------------------------------------------------------ diagnostics
+
+def to_lsp(diagnostic: Diagnostic, path: Path) -> lsp.Diagnostic:
+    severity = {"error": lsp.DiagnosticSeverity.Error, "warning": lsp.DiagnosticSeverity.Warning}.get(
+        diagnostic.severity, lsp.DiagnosticSeverity.Information)
+    message = diagnostic.message + (f"\n{diagnostic.hint}" if diagnostic.hint else "")
+    if diagnostic.span.instance:
+        message += f"\n(in {diagnostic.span.instance})"
+    related = [lsp.DiagnosticRelatedInformation(lsp.Location(Path(r.span.file).resolve().as_uri()
+                                                             if r.span.file and r.span.line > 0 else path.as_uri(),
+                                                             _range(r.span)), r.label)
+               for r in diagnostic.related if r.span.line > 0 and not r.span.file.startswith("std:")]
+    description = (lsp.CodeDescription(href=_DOCS.as_uri() + f"#{diagnostic.code.lower()}")
+                   if _DOCS.exists() else None)
+    return lsp.Diagnostic(range=_range(diagnostic.span), message=message, severity=severity,
+                          code=diagnostic.code, code_description=description, source="bondc",
+                          related_information=related or None)
+
+
+def check_text(path: Path, text: str) -> tuple[list[Diagnostic], object]:
+    """Every diagnostic of the buffer (all its models), and the graph of its runnable model (or None)."""
+    from bondc import semantic
+    from bondc.causality import assign_causality
+    from bondc.flatten import ports_of
+
+    found: list[Diagnostic] = []
+    graph = None
+    try:
+        files, _, _ = semantic.load_files(path, text)
+        own = files[0].models
+    except BondcError as error:
+        return list(error.diagnostics), None
+    names = [None] if len(own) <= 1 else [m.name for m in own]
+    for name in names:
+        try:
+            loaded, warnings = semantic.load(path, model=name, text=text)
+            found += [d for d in warnings if d not in found]
+            component = any(m.name == loaded.name and ports_of(m) for m in own)
+            if not component:
+                causal = assign_causality(loaded)
+                found += [d for d in causal.diagnostics if d not in found]
+                graph = graph or loaded
+        except BondcError as error:
+            found += [d for d in error.diagnostics if d not in found]
+    return found, graph
+
+
+# ------------------------------------------------------------------ the index
+
+@dataclass
+class Symbol:
+    name: str
+    category: str             # parameter element junction input output state function model port ...
+    span: object              # the name as written
+    statement: object         # its AST statement (for hover)
+    model: str | None         # the model it belongs to (None: file level)
+    file: str
+
+
+@dataclass
+class Use:
+    name: str                 # the name used (its first part for dotted references)
+    span: object
+    model: str | None
+    parts: tuple[str, ...] = ()
+    part_spans: tuple = ()
+
+
+@dataclass
+class Index:
+    symbols: list[Symbol] = field(default_factory=list)
+    uses: list[Use] = field(default_factory=list)
+    models: dict[str, tuple[ast.Model, str]] = field(default_factory=dict)   # every model: (model, file)
+
+    def declared(self, name: str, model: str | None) -> Symbol | None:
+        for symbol in self.symbols:
+            if symbol.name == name and symbol.model == model:
+                return symbol
+        for symbol in self.symbols:
+            if symbol.name == name and symbol.model is None:
+                return symbol
+        return None
+
+
+def _ref_parts(node: ast.Ref) -> tuple:
+    """Spans of each part of a dotted reference (``valve.loss.f``)."""
+    spans, column, offset = [], node.span.column, node.span.start
+    for part in node.parts:
+        spans.append(type(node.span)(node.span.file, node.span.line, column, node.span.line, column + len(part),
+                                     offset, offset + len(part)))
+        column += len(part) + 1
+        offset += len(part) + 1
+    return tuple(spans)
+
+
+def build_index(files) -> Index:
+    index = Index()
+    for file in files:
+        for item in file.items:
+            if isinstance(item, ast.FnDef):
+                index.symbols.append(Symbol(item.name, "function", item.name_span, item, None, file.path))
+            elif isinstance(item, ast.Model):
+                index.models[item.name] = (item, file.path)
+                index.symbols.append(Symbol(item.name, "model", item.name_span, item, None, file.path))
+                _index_model(index, item, file.path)
+    return index
+
+
+def _index_model(index: Index, model: ast.Model, path: str) -> None:
+    name = model.name
+
+    def add(symbol_name, category, span, statement):
+        index.symbols.append(Symbol(symbol_name, category, span, statement, name, path))
+
+    def uses_in(expr):
+        for node in ast.walk(expr):
+            if isinstance(node, ast.Name):
+                index.uses.append(Use(node.name, node.span, name))
+            elif isinstance(node, ast.Ref):
+                index.uses.append(Use(node.parts[0], node.span, name, node.parts, _ref_parts(node)))
+            elif isinstance(node, ast.Call):
+                index.uses.append(Use(node.func, node.func_span, name))
+
+    for statement in model.body:
+        if isinstance(statement, (ast.Param, ast.Input, ast.Output, ast.Discrete)):
+            category = {ast.Param: "parameter", ast.Input: "input", ast.Output: "output",
+                        ast.Discrete: "discrete"}[type(statement)]
+            add(statement.name, category, statement.name_span, statement)
+            if statement.value is not None:
+                uses_in(statement.value)
+        elif isinstance(statement, ast.StateDecl):
+            add(statement.name, "state", statement.name_span, statement)
+            for law in statement.laws:
+                for expr in (getattr(law, "value", None), getattr(law, "arg", None)):
+                    if expr is not None:
+                        uses_in(expr)
+        elif isinstance(statement, ast.FnDef):
+            add(statement.name, "function", statement.name_span, statement)
+            uses_in(statement.body)
+        elif isinstance(statement, ast.Element):
+            category = "element" if statement.kind in KINDS else "instance"
+            add(statement.name, category, statement.name_span, statement)
+            if category == "instance":
+                index.uses.append(Use(statement.kind.rpartition(".")[2], statement.kind_span, None))
+            for law in statement.laws:
+                for expr in (getattr(law, "value", None), getattr(law, "arg", None)):
+                    if expr is not None:
+                        uses_in(expr)
+        elif isinstance(statement, ast.Junction):
+            spans = statement.name_spans or (statement.span,) * len(statement.names)
+            for junction, span in zip(statement.names, spans):
+                add(junction, "junction", span, statement)
+        elif isinstance(statement, ast.PortDecl):
+            spans = statement.name_spans or (statement.span,) * len(statement.names)
+            for port, span in zip(statement.names, spans):
+                add(port, "port", span, statement)
+        elif isinstance(statement, ast.BondChain):
+            if statement.label:
+                add(statement.label, "bond label", statement.label_span, statement)
+            for end in statement.endpoints:
+                span = end.span
+                width = len(end.name)
+                name_span = type(span)(span.file, span.line, span.column, span.line, span.column + width,
+                                       span.start, span.start + width)
+                index.uses.append(Use(end.name, name_span, name, (end.name,) + ((end.port,) if end.port else ()),
+                                      (name_span,)))
+        elif isinstance(statement, ast.When):
+            uses_in(statement.condition)
+            for action in statement.actions:
+                for expr in ([action.value] if isinstance(action, ast.WhenAssign) else list(action.args)):
+                    uses_in(expr)
+        elif isinstance(statement, ast.Experiment):
+            add(statement.name, "experiment", statement.name_span, statement)
+            for item in statement.body:
+                if isinstance(item, (ast.Param, ast.Input)):
+                    index.uses.append(Use(item.name, item.name_span, name))
+                    uses_in(item.value)
+
+
+# ------------------------------------------------------------------ the server
+
+@dataclass
+class Document:
+    uri: str
+    text: str
+    version: int
+    path: Path
+    files: list = field(default_factory=list)
+    index: Index | None = None
+    graph: object = None
+
+
+class BondcServer(LanguageServer):
+    def __init__(self):
+        super().__init__("bondc", __version__)
+        self.documents: dict[str, Document] = {}
+
+    def analyse(self, uri: str, text: str, version: int) -> None:
+        from bondc import semantic
+
+        document = Document(uri, text, version, path_of(uri))
+        diagnostics, document.graph = check_text(document.path, text)
+        try:
+            document.files, _, _ = semantic.load_files(document.path, text)
+            document.index = build_index(document.files)
+        except BondcError:
+            previous = self.documents.get(uri)
+            document.files, document.index = (previous.files, previous.index) if previous else ([], None)
+        self.documents[uri] = document
+        mine = [d for d in diagnostics if not d.span.file or Path(d.span.file) == document.path
+                or d.span.file == str(document.path) or d.span.line == 0]
+        self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(
+            uri=uri, diagnostics=[to_lsp(d, document.path) for d in mine], version=version))
+
+
+server = BondcServer()
+
+
+@server.feature(lsp.TEXT_DOCUMENT_DID_OPEN)
+def did_open(ls: BondcServer, params: lsp.DidOpenTextDocumentParams):
+    document = params.text_document
+    ls.analyse(document.uri, document.text, document.version)
+
+
+@server.feature(lsp.TEXT_DOCUMENT_DID_CHANGE)
+async def did_change(ls: BondcServer, params: lsp.DidChangeTextDocumentParams):
+    uri, version = params.text_document.uri, params.text_document.version
+    await asyncio.sleep(DEBOUNCE)                       # typing: only the last change is checked
+    document = ls.workspace.get_text_document(uri)
+    if document.version != version:
+        return
+    ls.analyse(uri, document.source, version)
+
+
+@server.feature(lsp.TEXT_DOCUMENT_DID_SAVE)
+def did_save(ls: BondcServer, params: lsp.DidSaveTextDocumentParams):
+    document = ls.workspace.get_text_document(params.text_document.uri)
+    ls.analyse(document.uri, document.source, document.version or 0)
+
+
+def _at(document: Document, position: lsp.Position):
+    """The use or declaration under the cursor: (Symbol or None, Use or None, part index)."""
+    index = document.index
+    if index is None:
+        return None, None, 0
+    here = str(document.path)
+    for use in index.uses:
+        if use.span.file != here:
+            continue
+        if use.part_spans:
+            for number, span in enumerate(use.part_spans):
+                if _contains(span, position.line, position.character):
+                    return None, use, number
+        elif _contains(use.span, position.line, position.character):
+            return None, use, 0
+    for symbol in index.symbols:
+        if symbol.file == here and _contains(symbol.span, position.line, position.character):
+            return symbol, None, 0
+    return None, None, 0
+
+
+def resolve(document: Document, use: Use, part: int = 0) -> Symbol | None:
+    """The declaration a use names; through instances for a dotted name."""
+    index = document.index
+    model = use.model
+    if part == 0 or not use.parts:
+        found = index.declared(use.name, model)
+        if found is None and use.model is None:
+            found = index.declared(use.name, None)
+        return found
+    symbol = index.declared(use.parts[0], model)
+    for number in range(1, part + 1):
+        if symbol is None or symbol.category != "instance":
+            return None
+        kind = symbol.statement.kind.rpartition(".")[2]
+        symbol = index.declared(use.parts[number], kind)
+    return symbol
+
+
+def _symbol_at(ls: BondcServer, uri: str, position: lsp.Position) -> Symbol | None:
+    document = ls.documents.get(uri)
+    if document is None:
+        return None
+    symbol, use, part = _at(document, position)
+    if symbol is not None:
+        return symbol
+    return resolve(document, use, part) if use is not None else None
+
+
+def _location(symbol: Symbol) -> lsp.Location | None:
+    if symbol.file.startswith("std:"):
+        from bondc.std import path_of as std_path
+
+        path = Path(str(std_path(symbol.file[4:])))
+    else:
+        path = Path(symbol.file).resolve()
+    return lsp.Location(path.as_uri(), _range(symbol.span))
+
+
+@server.feature(lsp.TEXT_DOCUMENT_DEFINITION)
+def definition(ls: BondcServer, params: lsp.DefinitionParams):
+    symbol = _symbol_at(ls, params.text_document.uri, params.position)
+    return _location(symbol) if symbol is not None else None
+
+
+@server.feature(lsp.TEXT_DOCUMENT_REFERENCES)
+def references(ls: BondcServer, params: lsp.ReferenceParams):
+    document = ls.documents.get(params.text_document.uri)
+    symbol = _symbol_at(ls, params.text_document.uri, params.position)
+    if document is None or symbol is None:
+        return []
+    found = [_location(symbol)] if params.context.include_declaration else []
+    for use in document.index.uses:
+        for part in range(max(len(use.parts), 1)):
+            if resolve(document, use, part) is symbol:
+                span = use.part_spans[part] if use.part_spans else use.span
+                found.append(lsp.Location(Path(span.file).resolve().as_uri(), _range(span)))
+    return found
+
+
+def hover_text(document: Document, symbol: Symbol) -> str:
+    from bondc.fmt import format_law, unit_text
+
+    statement = symbol.statement
+    graph = document.graph
+    lines = []
+    if symbol.category == "parameter":
+        written = f"{_expr(statement.value)}" + (f" {unit_text(statement.unit)}" if statement.unit else "")
+        lines.append(f"**param {symbol.name}** = {written}")
+        if graph is not None and symbol.name in graph.parameters:
+            lines.append(f"SI value: `{graph.parameters[symbol.name].value:.6g}`")
+        if statement.description:
+            lines.append(statement.description)
+    elif symbol.category == "element":
+        kind = KINDS[statement.kind]
+        lines.append(f"**{statement.kind} {symbol.name}** — {kind.description}")
+        if statement.description:
+            lines.append(statement.description)
+        lines += [f"`{format_law(law)}`" for law in statement.laws]
+        if graph is not None and symbol.name in graph.elements:
+            element = graph.elements[symbol.name]
+            bonds = ", ".join(str(b) for b in element.bonds)
+            lines.append(f"bonds: {bonds}" + (f"; states: {', '.join(s.qualified for s in element.states)}"
+                                              if element.states else ""))
+            causality = _causality(document, symbol.name)
+            if causality:
+                lines.append(causality)
+    elif symbol.category in ("instance", "model"):
+        model_name = statement.kind.rpartition(".")[2] if symbol.category == "instance" else symbol.name
+        found = document.index.models.get(model_name)
+        if found is not None:
+            model, path = found
+            from bondc.flatten import ports_of
+
+            ports = ports_of(model)
+            lines.append(f"**{model.name}**" + (f" — {model.description}" if model.description else ""))
+            if ports:
+                lines.append(f"ports: {', '.join(ports)}")
+            params = [s for s in model.body if isinstance(s, ast.Param)]
+            if params:
+                lines.append("parameters: " + ", ".join(f"{p.name}" + (f" [{p.unit.text}]" if p.unit else "")
+                                                        for p in params))
+            if symbol.category == "instance" and statement.laws:
+                lines.append("bound: " + ", ".join(format_law(law) for law in statement.laws))
+    else:
+        text = getattr(statement, "description", None)
+        lines.append(f"**{symbol.category} {symbol.name}**" + (f" — {text}" if text else ""))
+        value = getattr(statement, "value", None)
+        if isinstance(value, (ast.Num, ast.Binary, ast.Call, ast.Name, ast.Ref, ast.If, ast.Unary)):
+            lines.append(f"`{_expr(value)}`")
+    return "\n\n".join(lines)
+
+
+def _expr(expr) -> str:
+    from bondc.fmt import format_expr
+
+    return format_expr(expr)
+
+
+def _causality(document: Document, name: str) -> str | None:
+    try:
+        from bondc.causality import assign_causality
+
+        causal = assign_causality(document.graph)
+        row = [r for r in causal.summary().get("derivative_storage", []) if r == name]
+        setter = causal.effort_setter
+        element = document.graph.elements[name]
+        parts = []
+        for bond in element.bonds:
+            parts.append(f"bond {bond}: effort set by {setter.get(bond, '?')}")
+        return "; ".join(parts) + (" (derivative causality)" if row else "")
+    except BondcError:
+        return None
+
+
+@server.feature(lsp.TEXT_DOCUMENT_HOVER)
+def hover(ls: BondcServer, params: lsp.HoverParams):
+    document = ls.documents.get(params.text_document.uri)
+    symbol = _symbol_at(ls, params.text_document.uri, params.position)
+    if document is None or symbol is None:
+        return None
+    return lsp.Hover(contents=lsp.MarkupContent(kind=lsp.MarkupKind.Markdown, value=hover_text(document, symbol)))
+
+
+_MEMBER = re.compile(r"([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)\.[A-Za-z0-9_]*$")
+
+
+def completions(document: Document, line_text: str, model: str | None) -> list[lsp.CompletionItem]:
+    from bondc.units import unit_names
+
+    index = document.index
+    if index is None:
+        return []
+    if re.search(r"\[[^\]]*$", line_text):                        # inside a unit
+        return [lsp.CompletionItem(label=name, kind=lsp.CompletionItemKind.Unit) for name in unit_names()]
+    member = _MEMBER.search(line_text)
+    if member:
+        parts = member.group(1).split(".")
+        symbol = index.declared(parts[0], model)
+        for part in parts[1:]:
+            if symbol is None or symbol.category != "instance":
+                symbol = None
+                break
+            symbol = index.declared(part, symbol.statement.kind.rpartition(".")[2])
+        if symbol is None:
+            return []
+        if symbol.category == "instance":
+            inner = symbol.statement.kind.rpartition(".")[2]
+            return [lsp.CompletionItem(label=s.name, kind=lsp.CompletionItemKind.Field, detail=s.category)
+                    for s in index.symbols if s.model == inner and s.category in
+                    ("port", "element", "junction", "output", "parameter", "instance", "state", "input")]
+        if symbol.category == "element":
+            kind = KINDS[symbol.statement.kind]
+            names = ["p1.e", "p1.f", "p2.e", "p2.f"] if kind.ports == 2 else ["e", "f"]
+            names += [kind.state] if kind.state else []
+            return [lsp.CompletionItem(label=n, kind=lsp.CompletionItemKind.Field) for n in names]
+        if symbol.category == "junction":
+            return [lsp.CompletionItem(label="e" if symbol.statement.kind == "0" else "f",
+                                       kind=lsp.CompletionItemKind.Field)]
+        return []
+    items = [lsp.CompletionItem(label=s.name, kind=lsp.CompletionItemKind.Variable, detail=s.category)
+             for s in index.symbols if s.model in (model, None) and s.category != "experiment"]
+    items += [lsp.CompletionItem(label=kind, kind=lsp.CompletionItemKind.Class, detail=KINDS[kind].description)
+              for kind in KINDS]
+    items += [lsp.CompletionItem(label=name, kind=lsp.CompletionItemKind.Class, detail="model")
+              for name in index.models]
+    items += [lsp.CompletionItem(label=name, kind=lsp.CompletionItemKind.Function, detail=b.summary)
+              for name, b in BUILTINS.items()]
+    items += [lsp.CompletionItem(label=word, kind=lsp.CompletionItemKind.Keyword) for word in KEYWORDS]
+    return items
+
+
+def _model_at(document: Document, line: int) -> str | None:
+    if not document.files:
+        return None
+    for model in document.files[0].models:
+        if model.span.line - 1 <= line <= model.span.end_line - 1:
+            return model.name
+    return None
+
+
+@server.feature(lsp.TEXT_DOCUMENT_COMPLETION, lsp.CompletionOptions(trigger_characters=[".", "["]))
+def completion(ls: BondcServer, params: lsp.CompletionParams):
+    document = ls.documents.get(params.text_document.uri)
+    if document is None:
+        return []
+    lines = ls.workspace.get_text_document(params.text_document.uri).lines
+    line_text = lines[params.position.line][:params.position.character] if params.position.line < len(lines) else ""
+    return lsp.CompletionList(is_incomplete=False,
+                              items=completions(document, line_text, _model_at(document, params.position.line)))
+
+
+@server.feature(lsp.TEXT_DOCUMENT_DOCUMENT_SYMBOL)
+def document_symbols(ls: BondcServer, params: lsp.DocumentSymbolParams):
+    document = ls.documents.get(params.text_document.uri)
+    if document is None or document.index is None:
+        return []
+    kinds = {"parameter": lsp.SymbolKind.Constant, "element": lsp.SymbolKind.Object,
+             "instance": lsp.SymbolKind.Module, "junction": lsp.SymbolKind.Struct, "input": lsp.SymbolKind.Variable,
+             "output": lsp.SymbolKind.Variable, "state": lsp.SymbolKind.Variable, "function": lsp.SymbolKind.Function,
+             "port": lsp.SymbolKind.Interface, "experiment": lsp.SymbolKind.Event,
+             "discrete": lsp.SymbolKind.Variable, "bond label": lsp.SymbolKind.Field}
+    here = str(document.path)
+    out = []
+    for model in (document.files[0].models if document.files else ()):
+        children = [lsp.DocumentSymbol(name=s.name, detail=s.category, kind=kinds.get(s.category, lsp.SymbolKind.Field),
+                                       range=_range(s.span), selection_range=_range(s.span))
+                    for s in document.index.symbols if s.model == model.name and s.file == here]
+        out.append(lsp.DocumentSymbol(name=model.name, detail=model.description or "model", kind=lsp.SymbolKind.Class,
+                                      range=_range(model.span), selection_range=_range(model.name_span),
+                                      children=children))
+    return out
+
+
+@server.feature(lsp.TEXT_DOCUMENT_FORMATTING)
+def formatting(ls: BondcServer, params: lsp.DocumentFormattingParams):
+    from bondc.fmt import fmt
+
+    document = ls.workspace.get_text_document(params.text_document.uri)
+    try:
+        formatted = fmt(document.source, str(path_of(document.uri)))
+    except BondcError:
+        return None                     # a syntax error: diagnostics say where; nothing to format
+    if formatted == document.source:
+        return []
+    lines = document.source.splitlines()
+    end = lsp.Position(len(lines), 0)
+    return [lsp.TextEdit(range=lsp.Range(lsp.Position(0, 0), end), new_text=formatted)]
+
+
+def main() -> int:
+    server.start_io()
+    return 0

@@ -1,0 +1,182 @@
+"""``bondc lsp``: the language server, driven as an editor does — JSON-RPC over the process's stdio."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+FLAGSHIP = ROOT / "models" / "electro_pneumatic_hybrid.bg"
+COMPONENTS = ROOT / "tests" / "fixtures" / "components" / "circuit.bg"
+
+
+class Client:
+    """A minimal LSP client: requests and notifications with Content-Length framing."""
+
+    def __init__(self):
+        self.process = subprocess.Popen([sys.executable, "-m", "bondc", "lsp"], stdin=subprocess.PIPE,
+                                        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+        self.next_id = 0
+        self.notifications = []
+
+    def send(self, message):
+        body = json.dumps(message).encode()
+        self.process.stdin.write(f"Content-Length: {len(body)}\r\n\r\n".encode() + body)
+        self.process.stdin.flush()
+
+    def read(self):
+        length = None
+        while True:
+            line = self.process.stdout.readline()
+            if not line:
+                raise EOFError("the server closed its output")
+            if line in (b"\r\n", b"\n"):
+                break
+            if line.lower().startswith(b"content-length:"):
+                length = int(line.split(b":")[1])
+        return json.loads(self.process.stdout.read(length))
+
+    def request(self, method, params):
+        self.next_id += 1
+        self.send({"jsonrpc": "2.0", "id": self.next_id, "method": method, "params": params})
+        while True:
+            message = self.read()
+            if message.get("id") == self.next_id and "method" not in message:
+                return message.get("result")
+            if "method" in message and "id" not in message:
+                self.notifications.append(message)
+
+    def notify(self, method, params):
+        self.send({"jsonrpc": "2.0", "method": method, "params": params})
+
+    def diagnostics(self, uri, timeout=30.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for message in self.notifications:
+                if message["method"] == "textDocument/publishDiagnostics" and message["params"]["uri"] == uri:
+                    self.notifications.remove(message)
+                    return message["params"]["diagnostics"]
+            message = self.read()
+            if "method" in message and "id" not in message:
+                self.notifications.append(message)
+        raise TimeoutError("no diagnostics")
+
+    def open(self, path, text=None, version=1):
+        uri = path.resolve().as_uri()
+        self.notify("textDocument/didOpen", {"textDocument": {"uri": uri, "languageId": "bondgraph",
+                                                               "version": version,
+                                                               "text": text if text is not None else path.read_text()}})
+        return uri
+
+    def close(self):
+        try:
+            self.request("shutdown", None)
+            self.notify("exit", None)
+            self.process.wait(timeout=10)
+        finally:
+            if self.process.poll() is None:
+                self.process.kill()
+
+
+@pytest.fixture(scope="module")
+def client():
+    c = Client()
+    c.request("initialize", {"processId": None, "rootUri": ROOT.as_uri(), "capabilities": {}})
+    c.notify("initialized", {})
+    yield c
+    c.close()
+
+
+def _position(text, needle, offset=0):
+    index = text.index(needle) + offset
+    line = text.count("\n", 0, index)
+    return {"line": line, "character": index - (text.rfind("\n", 0, index) + 1)}
+
+
+def test_diagnostics_as_you_type_with_codes_and_ranges(client, tmp_path):
+    path = tmp_path / "m.bg"
+    text = "model M\n  param k = 800 [N/m]\n  Sf s : f = 1\n  C c : e = k*q\n  s -> c\nend\n"
+    uri = client.open(path, text)
+    assert client.diagnostics(uri) == []
+    broken = text.replace("e = k*q", "e = k + kk")
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": broken}]})
+    (problem,) = client.diagnostics(uri)
+    assert problem["code"] == "E301" and problem["range"]["start"] == {"line": 3, "character": 16}
+    assert "did you mean 'k'" in problem["message"] and problem["source"] == "bondc"
+    assert problem["codeDescription"]["href"].endswith("diagnostics.md#e301")
+    # every problem at once, dimensions too
+    worse = text.replace("e = k*q", "e = k + q").replace("s -> c", "s -> c\n  s -> nowhere")
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 3},
+                                              "contentChanges": [{"text": worse}]})
+    codes = sorted(d["code"] for d in client.diagnostics(uri))
+    assert "E404" in codes
+
+
+def test_the_flagship_is_checked_quickly_after_an_edit(client):
+    uri = client.open(FLAGSHIP)
+    assert [d for d in client.diagnostics(uri) if d["severity"] == 1] == []
+    text = FLAGSHIP.read_text()
+    started = time.monotonic()
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": text.replace("31.7", "31.8")}]})
+    client.diagnostics(uri)
+    # the debounce (0.15 s) plus the check; a generous bound for a loaded CI machine
+    assert time.monotonic() - started < 3.0
+
+
+def test_hover_definition_references_in_a_model(client):
+    text = FLAGSHIP.read_text()
+    uri = client.open(FLAGSHIP, text)
+    client.diagnostics(uri)
+    use = _position(text, "e = K*q", 4)                     # the K in the coupling's law
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": use})
+    assert "param K" in hover["contents"]["value"] and "SI value: `120.9`" in hover["contents"]["value"]
+    definition = client.request("textDocument/definition", {"textDocument": {"uri": uri}, "position": use})
+    assert definition["range"]["start"]["line"] == text[:text.index("param K ")].count("\n")
+    refs = client.request("textDocument/references", {"textDocument": {"uri": uri}, "position": use,
+                                                       "context": {"includeDeclaration": True}})
+    assert len(refs) >= 3                                   # the declaration, the law, theta0
+    element = _position(text, "C  coupling", 4)
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": element})
+    assert "capacitor" in hover["contents"]["value"] and "e = K*q" in hover["contents"]["value"]
+
+
+def test_components_definitions_across_files_and_dotted_completion(client):
+    text = COMPONENTS.read_text()
+    uri = client.open(COMPONENTS, text)
+    assert client.diagnostics(uri) == []
+    kind = _position(text, "Orifice valve", 1)
+    definition = client.request("textDocument/definition", {"textDocument": {"uri": uri}, "position": kind})
+    assert definition["uri"].endswith("lib/hydraulics.bg")
+    dotted = _position(text, "valve.Q", 7)                  # the Q of valve.Q: the component's output
+    definition = client.request("textDocument/definition", {"textDocument": {"uri": uri}, "position": dotted})
+    assert definition["uri"].endswith("lib/hydraulics.bg") and definition["range"]["start"]["line"] == 9
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": kind})
+    assert "ports: a, b" in hover["contents"]["value"]
+    line = text[:text.index("output Q")].count("\n")
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": {"line": line, "character": 27}})
+    labels = {item["label"] for item in items["items"]}
+    assert {"a", "b", "loss", "Q", "A"} <= labels
+
+
+def test_outline_completion_and_formatting(client, tmp_path):
+    path = tmp_path / "f.bg"
+    text = "model F\n  param  k = 800   [N/m]\n  Sf s : f = 1\n  C c : e = k*q\n  s -> c\nend\n"
+    uri = client.open(path, text)
+    client.diagnostics(uri)
+    symbols = client.request("textDocument/documentSymbol", {"textDocument": {"uri": uri}})
+    assert symbols[0]["name"] == "F" and {c["name"] for c in symbols[0]["children"]} >= {"k", "s", "c"}
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": {"line": 3, "character": 12}})
+    labels = {item["label"] for item in items["items"]}
+    assert {"k", "Se", "coulomb", "table"} <= labels
+    edits = client.request("textDocument/formatting", {"textDocument": {"uri": uri},
+                                                       "options": {"tabSize": 2, "insertSpaces": True}})
+    from bondc.fmt import fmt
+
+    assert edits[0]["newText"] == fmt(text)
