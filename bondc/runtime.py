@@ -2610,6 +2610,7 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     says which ran and ``stats["code_note"]`` why not C.
     """
     model = _Model(model)       # a copy: the native functions are attached to this run's only
+    _BLOCK_SOLUTIONS.clear()    # algebraic loops start from their guesses: a run never depends on the runs before it
     padded = not model.STATE_NAMES
     if padded:
         model = _padded(model)

@@ -61,6 +61,7 @@ def test_every_builtin_has_a_case_here():
     assert set(CASES) | SPECIAL == set(BUILTINS)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_every_builtin_is_simulated_in_numpy_and_c_code(name, tmp_path):
     call, reference, _, _ = CASES[name]

@@ -139,6 +139,7 @@ def _checkable():
     return [f for f in files if "lib" not in f.parts and "data" not in f.parts]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", _checkable(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_no_false_positive_on_the_shipped_models_and_fixtures(path):
     try:

@@ -281,3 +281,14 @@ def test_report_sweep_from_the_command_line(tmp_path):
     assert "x.final" in (tmp_path / "s.html").read_text(encoding="utf-8")
     (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
     assert main(["report", "--sweep", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "b.html")]) == 1
+
+
+def test_points_with_an_algebraic_loop_do_not_depend_on_the_points_run_before():
+    # a nonlinear loop is solved from a warm start within a run; a run never starts from another's
+    loop = ROOT / "tests" / "fixtures" / "sim" / "nonlinear_loop.bg"
+    request = dict(metrics=["i.final", "u.max"], point_timeout=0)
+    forward = run_sweep(loop, vary=["V=5,10,20"], **request)
+    backward = run_sweep(loop, vary=["V=20,10,5"], **request)
+    assert [p.metrics for p in forward.points] == [p.metrics for p in reversed(backward.points)]
+    alone = run_sweep(loop, vary=["V=10"], **request)
+    assert alone.points[0].metrics == forward.points[1].metrics
