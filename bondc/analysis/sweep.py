@@ -12,17 +12,17 @@ Several specs make a full grid (the cartesian product, the first spec
 varying slowest, rows ordered by grid index), at most :data:`MAX_RUNS` runs.
 
 **How a point is run.** The model is loaded, checked, derived and compiled
-once, with the base ``sets``. For each point the file is loaded again with
-the base ``sets`` plus the point's values as ``--set`` overrides, so units,
-validation and every parameter defined by others (the flagship's ``F_n0 =
-M*g - ...``, ``delta0``, ``theta0``) follow exactly the ``--set`` rules; the
-point's whole parameter vector (SI) is then passed to the compiled module as
-overrides (every parameter given, so nothing is recomputed there). Loading is
-cheap (about 20 ms); deriving and compiling is not (about 1.5 s), so this is
-the fast path (``path`` "fast"). A point whose load gives a different
-structure (other parameters or inputs) is derived and compiled again
-("rederived"); ``rederive=True`` does that for every point, for a model whose
-derivation depends on parameter values (a nonlinear law inverted with
+once, with the base ``sets``. A point is then a vector of values (late
+binding, ``path`` "bound"): the varied parameters in SI go to the compiled
+module, which recomputes every parameter defined by others (the flagship's
+``F_n0 = M*g - ...``, ``delta0``, ``theta0``); the file is not read again, so
+editing it during a study changes nothing. When a varied parameter also sets
+something the check fixes outside the compiled module (an experiment setting
+such as ``max_step = h``, seen by loading the first and the last point), every
+point loads the file again with its values as ``--set`` overrides ("fast"), so
+units and validation follow exactly the ``--set`` rules; ``rederive=True``
+also derives and compiles again for every point ("rederived"), for a model
+whose derivation depends on parameter values (a nonlinear law inverted with
 ``sympy.solve`` keeps the branch that reproduces the law at the parameters'
 values).
 
@@ -618,6 +618,7 @@ class _Setup:
     dt: float | None
     rederive: bool
     motors: str | None = None                # a motor catalogue (csv): which motors qualify per point
+    bound: bool = False                      # late binding: points are vectors of values (see _measure_point)
 
 
 @dataclass
@@ -697,7 +698,12 @@ def _run_point(setup: _Setup, index: int, values: tuple[float, ...]) -> SweepPoi
 
 
 def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> SweepPoint:
-    """Load, simulate and measure one grid point; every bondc error becomes a failed point."""
+    """Simulate and measure one grid point; every bondc error becomes a failed point.
+
+    Late binding (``setup.bound``): the model checked and compiled once, the point only its vector
+    of values; the compiled module recomputes every parameter defined by others (the flagship's
+    ``F_n0 = M*g - ...``). Otherwise (a varied parameter sets an experiment setting, or
+    ``rederive``) the file is loaded again with the point's values as ``--set`` overrides."""
     from bondc import semantic
     from bondc.parse import parse_set_value
     from bondc.simulate import simulate
@@ -705,6 +711,11 @@ def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> Swee
     base = _base(setup)
     parameters = {name: unit.to_si(value) for name, unit, value in zip(setup.names, setup.converters, values)}
     try:
+        if setup.bound:
+            graph, experiment = base.graph, chosen_experiment(base.graph, setup.experiment)
+            state_space, path = base.state_space, "bound"
+            result = simulate(state_space, experiment, t_end=setup.t_end, dt=setup.dt, overrides=dict(parameters))
+            return _finish_point(setup, index, values, path, parameters, state_space, graph, experiment, result)
         sets = list(setup.sets) + [parse_set_value(_set_text(name, value, unit), f"--vary {name}")
                                    for name, unit, value in zip(setup.names, setup.units, values)]
         graph, _ = semantic.load(Path(setup.path), model=setup.model, experiment=_experiment_selector(setup),
@@ -727,6 +738,43 @@ def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> Swee
     except BondcError as error:
         message = "; ".join(f"{d.code}: {d.message}" for d in error.diagnostics) or str(error)
         return SweepPoint(index, values, "failed", message, None, parameters, diagnostics=tuple(error.diagnostics))
+    return _finish_point(setup, index, values, path, parameters, state_space, graph, experiment, result)
+
+
+def _can_bind(setup: _Setup, base: _Base, grid: list) -> bool:
+    """Whether the points can be bound late: the varied parameters change nothing the check fixes
+    outside the compiled module (the experiment's settings: t_end, max_step, cycle, ...). Loaded at
+    the first and the last point and compared with the base model."""
+    from bondc import semantic
+    from bondc.parse import parse_set_value
+
+    if setup.rederive:
+        return False
+    reference = chosen_experiment(base.graph, setup.experiment)
+    for values in (grid[0], grid[-1]):
+        sets = list(setup.sets) + [parse_set_value(_set_text(name, value, unit), f"--vary {name}")
+                                   for name, unit, value in zip(setup.names, setup.units, values)]
+        try:
+            graph, _ = semantic.load(Path(setup.path), model=setup.model, experiment=_experiment_selector(setup),
+                                     sets=sets)
+        except BondcError:
+            return False            # the points say why, one by one
+        experiment = chosen_experiment(graph, setup.experiment)
+        if _structure(graph) != base.structure or _settings(experiment) != _settings(reference):
+            return False
+    return True
+
+
+def _settings(experiment) -> tuple:
+    if experiment is None:
+        return ()
+    return (experiment.t_end, experiment.solver, experiment.rtol, experiment.atol, experiment.max_step,
+            experiment.cycle, tuple(sorted(experiment.settings.items())))
+
+
+def _finish_point(setup: _Setup, index: int, values, path, parameters, state_space, graph, experiment,
+                  result) -> SweepPoint:
+    """A point that ran (or stopped early): its status, metrics and motors."""
     warnings = list(result.warnings)
     if not result.complete:
         diagnostics = tuple(result.diagnostics) or (Diagnostic("error", "E968", result.message),)
@@ -996,6 +1044,8 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     tasks = [(index, values) for index, values in enumerate(grid) if index not in done]
 
     base = _base(setup, (graph, warnings))     # before any worker starts: forked workers inherit it
+    if tasks and _can_bind(setup, base, grid):
+        setup = dataclasses.replace(setup, bound=True)
     journal = None
     if output is not None and Path(output).suffix.lower() == ".csv":
         journal = _Journal(output, result_of(()).csv_header(), keep_rows=bool(previous))
@@ -1049,6 +1099,8 @@ def _run_all(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float
         for count, (index, values) in enumerate(tasks, 1):
             started = time.perf_counter()
             point = _run_point(setup, index, values)
+            if any(d.code == "E813" for d in point.diagnostics):
+                raise KeyboardInterrupt     # Ctrl-C stopped this point's run: stop the sweep, keep the rest
             point = dataclasses.replace(point, wall_time=time.perf_counter() - started)
             on_done(point)
             if report is not None:
