@@ -301,3 +301,30 @@ def test_E925_cycle_window():
 def test_E914_negative_load_inertia(hand_made):
     error = error_of(select, requirements(*sine_cycle()), hand_made, load_inertia=-1e-5)
     assert codes(error) == ["E914"]
+
+
+def test_the_recommended_motor_passes_the_inertia_ratio_check_and_says_why():
+    from pathlib import Path
+
+    import numpy as np
+
+    from bondc.analysis.motors import MAX_INERTIA_RATIO, load_catalogue, requirements, select
+
+    catalogue = load_catalogue(Path(__file__).parent.parent / "models" / "data" / "motors.csv")
+    t = np.linspace(0, 1, 201)
+    need = requirements(t, 0.2 * np.sin(2 * np.pi * t), 100 * np.sin(2 * np.pi * t))
+    plain = select(need, catalogue)
+    smallest = plain.best
+    assert plain.recommended is smallest and "the smallest that qualifies" in plain.recommendation()
+    # a load 12 times the smallest motor's rotor inertia: it fails the ratio check, a bigger one does not
+    load = 12 * smallest.motor.rotor_inertia
+    checked = select(need, catalogue, load_inertia=load)
+    chosen = checked.recommended
+    assert checked.best.motor.name == smallest.motor.name and chosen.motor.name != smallest.motor.name
+    assert load / chosen.motor.rotor_inertia <= MAX_INERTIA_RATIO
+    assert all(load / c.motor.rotor_inertia > MAX_INERTIA_RATIO for c in checked.qualified
+               if c.motor.rated_power < chosen.motor.rated_power)
+    text = checked.to_text()
+    assert f"smallest qualifying motor: {smallest.motor.name}" in text
+    assert f"recommended: {chosen.motor.name}" in text and "inertia ratio of 12" in text
+    assert checked.to_json()["recommended"] == chosen.motor.name

@@ -110,7 +110,8 @@ def test_flagship_report():
     # the motor: requirements and the catalogue's motors, with the choice
     motors = html[html.index('<section id="motor-requirements">'):html.index('<section id="source"')]
     assert "RMS torque" in motors and "SV-200" in motors and "Choice: SV-200" in motors
-    assert "smallest suitable motor" in header + html[:html.index('<section id="bond-graph">')]
+    top = header + html[:html.index('<section id="bond-graph">')]
+    assert "smallest qualifying motor" in top and "recommended motor" in top
     assert len(html) < 3_000_000
 
 

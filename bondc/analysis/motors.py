@@ -433,12 +433,36 @@ class Selection(list):
         """The smallest qualifying motor, or None if none qualifies."""
         return self.qualified[0] if self.qualified else None
 
+    @property
+    def recommended(self) -> Candidate | None:
+        """The smallest qualifying motor without a warning (the load/rotor inertia ratio), else the
+        smallest qualifying one."""
+        clean = [candidate for candidate in self.qualified if not candidate.warnings]
+        return (clean or self.qualified or [None])[0]
+
+    def recommendation(self) -> str:
+        """Why the recommended motor: the smallest one, or the first after the inertia-ratio check."""
+        best, chosen = self.best, self.recommended
+        if best is None:
+            return "no motor of the catalogue qualifies"
+        if chosen is best:
+            ratio = "" if best.inertia_ratio is None else f" and its load/rotor inertia ratio {best.inertia_ratio:.3g}"
+            return f"{best.motor.name}: the smallest that qualifies{ratio} is within the limit"
+        why = (f"a load/rotor inertia ratio of {best.inertia_ratio:.3g}, above {MAX_INERTIA_RATIO:g}"
+               if best.inertia_ratio is not None else "; ".join(w.message for w in best.warnings))
+        if chosen.warnings:
+            return f"{best.motor.name}: the smallest that qualifies; every qualifying motor has {why}"
+        return (f"{chosen.motor.name}: the smallest that qualifies, {best.motor.name}, has {why}; "
+                f"{chosen.motor.name} is the smallest without")
+
     def to_json(self) -> dict:
         return {
             "requirements": self.requirements.to_json(),
             "load_inertia": self.load_inertia,
             "include_rotor_inertia": self.include_rotor_inertia,
             "best": self.best.motor.name if self.best else None,
+            "recommended": self.recommended.motor.name if self.recommended else None,
+            "recommendation": self.recommendation(),
             "candidates": [candidate.to_json() for candidate in self],
         }
 
@@ -452,6 +476,8 @@ class Selection(list):
         if self.rejected:
             lines += ["", "motors that do not qualify:"]
             lines += [candidate.to_text() for candidate in self.rejected]
+        lines += ["", f"smallest qualifying motor: {self.best.motor.name if self.best else 'none'}",
+                  f"recommended: {self.recommendation()}"]
         return "\n".join(lines)
 
 

@@ -994,8 +994,9 @@ def _recommended(data: Mapping) -> Mapping | None:
 
 def _motor_choice(data: Mapping) -> list:
     choice = _recommended(data)
-    return [("smallest suitable motor", choice["motor"]["name"] if choice is not None else "none in the catalogue",
-             None)]
+    return [("smallest qualifying motor", data.get("best") or "none in the catalogue", None),
+            ("recommended motor", choice["motor"]["name"] if choice is not None else "none in the catalogue", None),
+            ("why", data.get("recommendation") or "", None)]
 
 
 def _candidates_table(data: Mapping, catalogue) -> Table:
