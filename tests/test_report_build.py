@@ -112,6 +112,7 @@ def test_flagship_report():
     assert "RMS torque" in motors and "SV-200" in motors and "Choice: SV-200" in motors
     top = header + html[:html.index('<section id="bond-graph">')]
     assert "smallest qualifying motor" in top and "recommended motor" in top
+    assert "torque against speed over the motors" in motors and "operating points" in motors
     assert len(html) < 3_000_000
 
 

@@ -437,6 +437,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         power_tables=power_tables,
         motor_requirements=motor_requirements,
         motor_candidates=motor_candidates,
+        motor_plot=_motor_plot(run, motors) if motor_candidates is not None else None,
         validation=validation,
         warnings=warnings,
         incomplete=incomplete,
@@ -923,6 +924,50 @@ def _energy_sections(run: PipelineRun) -> tuple[list[Plot], list[Table], list, l
 
 #: The signals the motor analysis reads: the motor torque and the motor speed (an output or an input).
 MOTOR_TORQUE, MOTOR_SPEED = "torque", "omega"
+
+
+def _motor_plot(run: PipelineRun, motors):
+    """The cycle's operating points (|speed| in rpm, torque) and RMS torque over each catalogue motor's
+    continuous and peak envelopes."""
+    import hashlib
+    import math
+
+    import matplotlib
+    from matplotlib.figure import Figure
+
+    from bondc.analysis.motor_report import cycle_window, find_signal
+    from bondc.analysis.motors import load_catalogue, requirements
+    from bondc.report.render import PLOT_STYLE, figure_svg
+
+    result = run.result
+    _, _, torque = find_signal(result, (MOTOR_TORQUE,), "torque")
+    _, _, speed = find_signal(result, (MOTOR_SPEED,), "speed")
+    window = cycle_window(result, run.graph)
+    need = requirements(result.t, torque, speed, cycle=window)
+    inside = (result.t >= window[0]) & (result.t <= window[1])
+    title = "torque against speed over the motors' envelopes"
+    key = hashlib.sha256((title + run.graph.name).encode()).hexdigest()
+    with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key}):
+        figure = Figure(figsize=(6.4, 3.6), layout="constrained")
+        axes = figure.add_subplot()
+        rpm = np.abs(np.asarray(speed)[inside]) * 60 / (2 * math.pi)
+        axes.plot(rpm, np.abs(np.asarray(torque)[inside]), ".", markersize=2, color="#cf222e",
+                  label="operating points |τ|")
+        axes.plot([need.peak_speed * 60 / (2 * math.pi)], [need.rms_torque], "o", color="#0969da",
+                  label="RMS torque at peak speed")
+        for number, motor in enumerate(load_catalogue(motors)):
+            rated = motor.rated_speed                    # rpm, as the catalogue gives it
+            color = f"C{number % 10}"
+            axes.plot([0, rated, rated], [motor.rated_torque, motor.rated_torque, 0], color=color, linewidth=1.0,
+                      label=motor.name)
+            axes.plot([0, rated], [motor.peak_torque, motor.peak_torque], color=color, linewidth=1.0,
+                      linestyle="--")
+        axes.set_xlabel("speed [rpm]")
+        axes.set_ylabel("torque [N*m]")
+        axes.set_xlim(left=0)
+        axes.set_ylim(bottom=0)
+        axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+        return figure_svg(figure, title, key)
 
 
 def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | None, list]:

@@ -183,7 +183,7 @@ class ValidationSection:
     junit_file: str | None = None
 
 
-_TRUSTED = ("source_html", "diagram_svg", "diagram_expanded_svg")
+_TRUSTED = ("source_html", "diagram_svg", "diagram_expanded_svg", "motor_plot")
 
 #: SI units of the experiment settings that have one (the model stores them in SI).
 SETTING_UNITS: Mapping[str, str] = {"t_end": "s", "max_step": "s", "cycle": "s", "first_step": "s", "dt": "s"}
@@ -205,6 +205,7 @@ class ReportContext:
     power_tables: Sequence[Table] = ()
     motor_requirements: Table | None = None
     motor_candidates: Table | None = None
+    motor_plot: Markup | None = None            # the torque-speed operating points against the motors' envelopes
     validation: ValidationSection | None = None
     warnings: Sequence[str] = ()                # diagnostics worth a reader's attention
     incomplete: str | None = None               # the diagnostic of a simulation that stopped early

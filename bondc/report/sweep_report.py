@@ -177,7 +177,7 @@ def motor_plot(study: Study, catalogue) -> Markup | None:
     axes.plot(speed, [r["metrics"]["motor.rms_torque"] for r in study.ran], "o", color="#0969da",
               label="RMS torque", markersize=4)
     for number, motor in enumerate(catalogue):
-        rated_rpm = motor.rated_speed * 60 / (2 * math.pi)
+        rated_rpm = motor.rated_speed                    # rpm, as the catalogue gives it
         color = f"C{number % 10}"
         axes.plot([0, rated_rpm, rated_rpm], [motor.rated_torque, motor.rated_torque, 0], color=color,
                   linewidth=1.0, label=f"{motor.name} continuous")
