@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import traceback
 from pathlib import Path
@@ -467,7 +468,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "energy.relative_residual, motor.* (default: all but the means; repeatable)")
     sweep.add_argument("--t-end", type=float, help="end time, s (overrides the experiment's t_end)")
     sweep.add_argument("--dt", type=float, help="output sampling interval, s")
-    sweep.add_argument("-j", "--jobs", type=int, default=1, help="points run in parallel (default 1)")
+    sweep.add_argument("-j", "--jobs", type=int, default=max(1, os.cpu_count() or 1),
+                       help="points run in parallel (default: one per core)")
     sweep.add_argument("--rederive", action="store_true",
                        help="derive and compile the model again for every point (slower; for laws whose "
                             "inversion depends on parameter values)")

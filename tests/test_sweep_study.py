@@ -292,3 +292,17 @@ def test_points_with_an_algebraic_loop_do_not_depend_on_the_points_run_before():
     assert [p.metrics for p in forward.points] == [p.metrics for p in reversed(backward.points)]
     alone = run_sweep(loop, vary=["V=10"], **request)
     assert alone.points[0].metrics == forward.points[1].metrics
+
+
+def test_every_power_output_gets_its_per_cycle_peak_rms_and_energies():
+    from bondc.analysis.stats import power_statistics
+
+    study = run_sweep(MOTOR_MODEL, vary=["U_s=12,24"], metrics=["power_el.*"], point_timeout=0)
+    names = [m.name for m in study.metrics]
+    assert "power_el.cycle_peak" in names and "power_el.cycle_energy" in names
+    for point in study.points:
+        single = run(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"])
+        (first, *_) = power_statistics(single, ["power_el"], None)["power_el"]
+        assert point.metrics["power_el.cycle_peak"] == pytest.approx(first["peak"], rel=1e-9)
+        assert point.metrics["power_el.cycle_rms"] == pytest.approx(first["rms"], rel=1e-9)
+        assert point.metrics["power_el.cycle_energy"] == pytest.approx(first["net_energy"], rel=1e-9)

@@ -31,6 +31,10 @@ the text table shows the outputs' declared units):
 
 * for every output: ``NAME.min``, ``NAME.max``, ``NAME.rms``, ``NAME.final``
   (and ``NAME.mean`` on request), from :func:`~bondc.analysis.stats.output_statistics`;
+* for every output declared in a unit of power, over the experiment's first
+  cycle: ``NAME.cycle_peak``, ``NAME.cycle_rms`` [W], ``NAME.cycle_energy``
+  (net), ``NAME.cycle_energy_positive``, ``NAME.cycle_energy_negative`` [J]
+  (:func:`~bondc.analysis.stats.power_statistics`);
 * ``energy.residual``: the energy balance residual summed over the cycles
   [J], and ``energy.relative_residual``: its largest share of a cycle's
   throughput (:func:`~bondc.analysis.energy.energy_account`);
@@ -130,6 +134,11 @@ STATUSES = ("ok", "failed", "timed out", "incomplete")
 OUTPUT_STATISTICS = ("min", "max", "mean", "rms", "final")
 DEFAULT_OUTPUT_STATISTICS = ("min", "max", "rms", "final")
 ENERGY_METRICS = {"energy.residual": "J", "energy.relative_residual": None}
+#: Of every power output, over the experiment's first cycle (stats.power_statistics): SI units.
+CYCLE_STATISTICS = {"cycle_peak": "W", "cycle_rms": "W", "cycle_energy": "J", "cycle_energy_positive": "J",
+                    "cycle_energy_negative": "J"}
+_CYCLE_KEYS = {"cycle_peak": "peak", "cycle_rms": "rms", "cycle_energy": "net_energy",
+               "cycle_energy_positive": "positive_energy", "cycle_energy_negative": "negative_energy"}
 MOTOR_METRICS = {"motor.peak_torque": "N*m", "motor.rms_torque": "N*m", "motor.peak_speed": "rad/s",
                  "motor.peak_power": "W", "motor.energy": "J"}
 _MOTOR_FIELDS = {"motor.peak_torque": "peak_torque", "motor.rms_torque": "rms_torque",
@@ -263,6 +272,13 @@ def _available_metrics(graph, motor: bool) -> dict[str, Metric]:
         for statistic in OUTPUT_STATISTICS:
             found[f"{name}.{statistic}"] = Metric(f"{name}.{statistic}", _si_unit_text(output.unit_text),
                                                   output.unit_text, output.display_factor or 1.0)
+    from bondc.analysis.stats import power_outputs
+
+    for name in power_outputs(graph):          # per cycle (the experiment's first): peak, RMS, energies
+        for statistic, unit in CYCLE_STATISTICS.items():
+            shown = graph.outputs[name].unit_text if unit == "W" else "J"
+            factor = (graph.outputs[name].display_factor or 1.0) if unit == "W" else 1.0
+            found[f"{name}.{statistic}"] = Metric(f"{name}.{statistic}", unit, shown, factor)
     for name, unit in ENERGY_METRICS.items():
         found[name] = Metric(name, unit, unit)
     if motor:
@@ -307,7 +323,8 @@ def select_metrics(graph, metrics: Sequence[str] | None) -> tuple[Metric, ...]:
 
 def _default(name: str) -> bool:
     """Whether a metric is a column when none are asked for (every one but the means)."""
-    return name in ENERGY_METRICS or name in MOTOR_METRICS or name.rpartition(".")[2] in DEFAULT_OUTPUT_STATISTICS
+    return (name in ENERGY_METRICS or name in MOTOR_METRICS
+            or name.rpartition(".")[2] in DEFAULT_OUTPUT_STATISTICS or name.rpartition(".")[2] in CYCLE_STATISTICS)
 
 
 def _unknown_metric(text: str, available: dict, graph, motor: bool) -> UsageError:
@@ -827,6 +844,17 @@ def _measure(setup: _Setup, state_space, graph, experiment, result, warnings: li
         output, _, statistic = name.rpartition(".")
         if output in statistics and statistic in OUTPUT_STATISTICS:
             metrics[name] = float(statistics[output][statistic])
+    cycled = [name for name in wanted if name.rpartition(".")[2] in CYCLE_STATISTICS]
+    if cycled and result.t.size > 1:
+        from bondc.analysis.stats import power_statistics
+
+        outputs = sorted({name.rpartition(".")[0] for name in cycled})
+        per_cycle = power_statistics(result, outputs, getattr(experiment, "cycle", None))
+        for name in cycled:
+            output, _, statistic = name.rpartition(".")
+            first = (per_cycle.get(output) or [None])[0]
+            if first is not None:
+                metrics[name] = float(first[_CYCLE_KEYS[statistic]])
     if any(name in ENERGY_METRICS for name in wanted):
         metrics.update(_energy_metrics(state_space, result, experiment, warnings))
     if any(name in MOTOR_METRICS for name in wanted):

@@ -28,7 +28,8 @@ from markupsafe import Markup
 from bondc.errors import DataError, Diagnostic
 from bondc.report.render import PLOT_STYLE, environment, figure_svg
 
-STATISTICS = ("min", "max", "mean", "rms", "final")
+STATISTICS = ("min", "max", "mean", "rms", "final", "cycle_peak", "cycle_rms", "cycle_energy",
+              "cycle_energy_positive", "cycle_energy_negative")
 ENDINGS = ("status", "message", "wall_time", "motors")
 
 
