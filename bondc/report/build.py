@@ -937,7 +937,7 @@ def _motor_plot(run: PipelineRun, motors):
 
     from bondc.analysis.motor_report import cycle_window, find_signal
     from bondc.analysis.motors import load_catalogue, requirements
-    from bondc.report.render import PLOT_STYLE, figure_svg
+    from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, figure_svg
 
     result = run.result
     _, _, torque = find_signal(result, (MOTOR_TORQUE,), "torque")
@@ -955,18 +955,7 @@ def _motor_plot(run: PipelineRun, motors):
                   label="operating points |τ|")
         axes.plot([need.peak_speed * 60 / (2 * math.pi)], [need.rms_torque], "o", color="#0969da",
                   label="RMS torque at peak speed")
-        for number, motor in enumerate(load_catalogue(motors)):
-            rated = motor.rated_speed                    # rpm, as the catalogue gives it
-            color = f"C{number % 10}"
-            axes.plot([0, rated, rated], [motor.rated_torque, motor.rated_torque, 0], color=color, linewidth=1.0,
-                      label=motor.name)
-            axes.plot([0, rated], [motor.peak_torque, motor.peak_torque], color=color, linewidth=1.0,
-                      linestyle="--")
-        axes.set_xlabel("speed [rpm]")
-        axes.set_ylabel("torque [N*m]")
-        axes.set_xlim(left=0)
-        axes.set_ylim(bottom=0)
-        axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+        draw_motor_envelopes(axes, load_catalogue(motors))
         return figure_svg(figure, title, key)
 
 

@@ -482,6 +482,23 @@ PLOT_STYLE = {"svg.fonttype": "none", "text.parse_math": False, "axes.spines.top
               "font.size": 9, "axes.titlesize": 10, "legend.frameon": False, "lines.linewidth": 1.4}
 
 
+def draw_motor_envelopes(axes, catalogue, speed_label: str = "speed [rpm]") -> None:
+    """Each catalogue motor's continuous envelope (its rated torque up to its rated speed, solid,
+    labelled "NAME continuous") and peak envelope (its peak torque, dashed), on torque-speed axes
+    in N*m and rpm (as catalogues give speeds), which start at 0."""
+    for number, motor in enumerate(catalogue):
+        rated = motor.rated_speed
+        color = f"C{number % 10}"
+        axes.plot([0, rated, rated], [motor.rated_torque, motor.rated_torque, 0], color=color, linewidth=1.0,
+                  label=f"{motor.name} continuous")
+        axes.plot([0, rated], [motor.peak_torque, motor.peak_torque], color=color, linewidth=1.0, linestyle="--")
+    axes.set_xlabel(speed_label)
+    axes.set_ylabel("torque [N*m]")
+    axes.set_xlim(left=0)
+    axes.set_ylim(bottom=0)
+    axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+
+
 def figure_svg(figure, title: str, key: str) -> Markup:
     """A matplotlib ``Figure`` as an inline SVG element, as :func:`plot_svg` makes them: text as
     text, ids deterministic (from ``key``) and unique, no prolog, metadata or external reference,

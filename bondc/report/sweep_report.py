@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,7 +27,7 @@ import numpy as np
 from markupsafe import Markup
 
 from bondc.errors import DataError, Diagnostic
-from bondc.report.render import PLOT_STYLE, environment, figure_svg
+from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, environment, figure_svg
 
 STATISTICS = ("min", "max", "mean", "rms", "final", "cycle_peak", "cycle_rms", "cycle_energy",
               "cycle_energy_positive", "cycle_energy_negative")
@@ -94,42 +95,36 @@ def _label(name: str, unit: str | None) -> str:
     return f"{name} [{unit}]" if unit and unit != "1" else name
 
 
+@contextmanager
 def _figure(title: str):
+    """A figure drawn in the reports' style; yields (figure, key for :func:`figure_svg`)."""
     import matplotlib
     from matplotlib.figure import Figure
 
     key = hashlib.sha256(title.encode()).hexdigest()
-    context = matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key})
-    context.__enter__()
-    return Figure(figsize=(6.4, 3.4), layout="constrained"), key, context
-
-
-def _done(figure, title, key, context) -> Markup:
-    try:
-        return figure_svg(figure, title, key)
-    finally:
-        context.__exit__(None, None, None)
+    with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key}):
+        yield Figure(figsize=(6.4, 3.4), layout="constrained"), key
 
 
 def metric_plot(study: Study, metric: tuple[str, str | None]) -> Markup:
     """A metric against the first varied parameter; points that did not run marked on the axis."""
     (x_name, x_unit), (name, unit) = study.parameters[0], metric
     title = f"{name} against {x_name}"
-    figure, key, context = _figure(title)
-    axes = figure.add_subplot()
     ran = sorted((r["params"][x_name], r["metrics"][name]) for r in study.ran if math.isfinite(r["metrics"][name]))
-    if ran:
-        xs, ys = zip(*ran)
-        axes.plot(xs, ys, marker="o", markersize=3.5, linestyle="-" if len(study.parameters) == 1 else "none",
-                  label="ran")
     bad = [r["params"][x_name] for r in study.rows if r not in study.ran]
-    if bad:
-        axes.plot(bad, [min(ys) if ran else 0.0] * len(bad), marker="x", color="#cf222e", linestyle="none",
-                  markersize=7, label="failed or timed out")
-        axes.legend(loc="best")
-    axes.set_xlabel(_label(x_name, x_unit))
-    axes.set_ylabel(_label(name, unit))
-    return _done(figure, title, key, context)
+    with _figure(title) as (figure, key):
+        axes = figure.add_subplot()
+        if ran:
+            xs, ys = zip(*ran)
+            axes.plot(xs, ys, marker="o", markersize=3.5, linestyle="-" if len(study.parameters) == 1 else "none",
+                      label="ran")
+        if bad:
+            axes.plot(bad, [min(ys) if ran else 0.0] * len(bad), marker="x", color="#cf222e", linestyle="none",
+                      markersize=7, label="failed or timed out")
+            axes.legend(loc="best")
+        axes.set_xlabel(_label(x_name, x_unit))
+        axes.set_ylabel(_label(name, unit))
+        return figure_svg(figure, title, key)
 
 
 def heat_map(study: Study, metric: tuple[str, str | None]) -> Markup | None:
@@ -144,22 +139,23 @@ def heat_map(study: Study, metric: tuple[str, str | None]) -> Markup | None:
     for row in study.ran:
         grid[ys.index(row["params"][b]), xs.index(row["params"][a])] = row["metrics"][name]
     title = f"{name} over {a} and {b}"
-    figure, key, context = _figure(title)
-    axes = figure.add_subplot()
-    mesh = axes.pcolormesh(np.arange(len(xs) + 1), np.arange(len(ys) + 1), grid, cmap="viridis", shading="flat")
-    bar = figure.colorbar(mesh, ax=axes, label=_label(name, unit))
-    bar.solids.set_rasterized(False)        # vector shapes: no embedded image in the page
-    for row in study.rows:
-        if row not in study.ran:
-            i, j = xs.index(row["params"][a]), ys.index(row["params"][b])
-            axes.plot([i + 0.15, i + 0.85], [j + 0.15, j + 0.85], color="#cf222e", linewidth=2)
-            axes.plot([i + 0.15, i + 0.85], [j + 0.85, j + 0.15], color="#cf222e", linewidth=2)
-    axes.set_xticks(np.arange(len(xs)) + 0.5, [f"{x:.4g}" for x in xs])
-    axes.set_yticks(np.arange(len(ys)) + 0.5, [f"{y:.4g}" for y in ys])
-    axes.set_xlabel(_label(a, a_unit))
-    axes.set_ylabel(_label(b, b_unit))
-    axes.grid(False)
-    return _done(figure, title, key, context)
+    with _figure(title) as (figure, key):
+        axes = figure.add_subplot()
+        mesh = axes.pcolormesh(np.arange(len(xs) + 1), np.arange(len(ys) + 1), grid, cmap="viridis",
+                               shading="flat")
+        bar = figure.colorbar(mesh, ax=axes, label=_label(name, unit))
+        bar.solids.set_rasterized(False)        # vector shapes: no embedded image in the page
+        for row in study.rows:
+            if row not in study.ran:
+                i, j = xs.index(row["params"][a]), ys.index(row["params"][b])
+                axes.plot([i + 0.15, i + 0.85], [j + 0.15, j + 0.85], color="#cf222e", linewidth=2)
+                axes.plot([i + 0.15, i + 0.85], [j + 0.85, j + 0.15], color="#cf222e", linewidth=2)
+        axes.set_xticks(np.arange(len(xs)) + 0.5, [f"{x:.4g}" for x in xs])
+        axes.set_yticks(np.arange(len(ys)) + 0.5, [f"{y:.4g}" for y in ys])
+        axes.set_xlabel(_label(a, a_unit))
+        axes.set_ylabel(_label(b, b_unit))
+        axes.grid(False)
+        return figure_svg(figure, title, key)
 
 
 def motor_plot(study: Study, catalogue) -> Markup | None:
@@ -170,26 +166,15 @@ def motor_plot(study: Study, catalogue) -> Markup | None:
     if not all(n in names for n in needed):
         return None
     title = "operating points of the study against the motors' envelopes"
-    figure, key, context = _figure(title)
-    axes = figure.add_subplot()
     speed = np.array([r["metrics"]["motor.peak_speed"] for r in study.ran]) * 60 / (2 * math.pi)
-    axes.plot(speed, [r["metrics"]["motor.peak_torque"] for r in study.ran], "^", color="#cf222e",
-              label="peak torque", markersize=4)
-    axes.plot(speed, [r["metrics"]["motor.rms_torque"] for r in study.ran], "o", color="#0969da",
-              label="RMS torque", markersize=4)
-    for number, motor in enumerate(catalogue):
-        rated_rpm = motor.rated_speed                    # rpm, as the catalogue gives it
-        color = f"C{number % 10}"
-        axes.plot([0, rated_rpm, rated_rpm], [motor.rated_torque, motor.rated_torque, 0], color=color,
-                  linewidth=1.0, label=f"{motor.name} continuous")
-        axes.plot([0, rated_rpm], [motor.peak_torque, motor.peak_torque], color=color, linewidth=1.0,
-                  linestyle="--")
-    axes.set_xlabel("peak speed [rpm]")
-    axes.set_ylabel("torque [N*m]")
-    axes.set_xlim(left=0)
-    axes.set_ylim(bottom=0)
-    axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
-    return _done(figure, title, key, context)
+    with _figure(title) as (figure, key):
+        axes = figure.add_subplot()
+        axes.plot(speed, [r["metrics"]["motor.peak_torque"] for r in study.ran], "^", color="#cf222e",
+                  label="peak torque", markersize=4)
+        axes.plot(speed, [r["metrics"]["motor.rms_torque"] for r in study.ran], "o", color="#0969da",
+                  label="RMS torque", markersize=4)
+        draw_motor_envelopes(axes, catalogue, "peak speed [rpm]")
+        return figure_svg(figure, title, key)
 
 
 _TEMPLATE = """<!DOCTYPE html>
