@@ -1163,7 +1163,7 @@ def _run_dask(setup: _Setup, tasks: list, jobs: int, report, point_timeout: floa
     cluster = None
     try:
         if scheduler:
-            client = Client(scheduler, timeout="30s")
+            client = Client(scheduler, timeout="10s")
         else:
             cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
                                    silence_logs=logging.ERROR)
