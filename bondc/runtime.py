@@ -1373,8 +1373,8 @@ class _Run:
         """The native CVODE driver for a segment watching ``index`` in modes ``signs``, or None.
 
         It serves CVODE runs that report every step (no ``t_eval``) of models whose C code
-        carries the driver, when every watched switch is a sign switch in mode +-1 (floor
-        switches and sliding segments keep the step-by-step loop)."""
+        carries the driver, when every watched switch is a sign switch (floor switches and
+        sliding segments keep the step-by-step loop)."""
         if self._driver is False:
             return None
         if self._driver is None:
@@ -1387,7 +1387,7 @@ class _Run:
             if driver is None:
                 return None
             self._driver = driver
-        if index.size and (self.model.floor_switches[index].any() or not signs.all()):
+        if index.size and self.model.floor_switches[index].any():
             return None
         return self._driver
 
@@ -2327,7 +2327,8 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 
 /* Up to `capacity` internal steps, each stored in ts/ys. After each step the watched switching
    functions are compared with their values at the step before (g_old, updated in place): a
-   switch in mode `signs[j]` (+1/-1) may have crossed when signs[j]*g + band[j] < 0.
+   switch in mode `signs[j]` (+1/-1) may have crossed when signs[j]*g + band[j] < 0, one in mode 0 when
+   |g| > band[j] (the step loop's own test then decides).
    Returns 0: capacity reached; 1: a possible crossing in the last stored step (g_old still holds
    the values before it); 2: t_stop reached; 3: a law was not finite at a trial point (nothing
    of the failed attempt is stored); 4: the state is not finite; < 0: CVODE's error flag. */
@@ -2348,6 +2349,10 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
             int crossed = 0;
             bondc_switches(t, y, d->p, d->m, d->g);
             for (int j = 0; j < watched; j++) {
+                if (signs[j] == 0) {        /* mode 0 (g was 0): a possible crossing once |g| leaves its band */
+                    if (fabs(d->g[watch[j]]) > band[j]) crossed = 1;
+                    continue;
+                }
                 double before = signs[j] * g_old[j] + band[j], after = signs[j] * d->g[watch[j]] + band[j];
                 if (after < 0 || (after == 0 && before > 0)) crossed = 1;
             }
