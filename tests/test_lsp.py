@@ -112,8 +112,14 @@ def test_diagnostics_as_you_type_with_codes_and_ranges(client, tmp_path):
     worse = text.replace("e = k*q", "e = k + q").replace("s -> c", "s -> c\n  s -> nowhere")
     client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 3},
                                               "contentChanges": [{"text": worse}]})
-    codes = sorted(d["code"] for d in client.diagnostics(uri))
-    assert "E404" in codes
+    problems = client.diagnostics(uri)
+    assert "E404" in [d["code"] for d in problems]
+    (unknown,) = [d for d in problems if d["code"] == "E404"]
+    assert unknown["range"]["start"] == {"line": 5, "character": 7}        # 'nowhere' in 's -> nowhere'
+    # edited clean again: the diagnostics are cleared
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 4},
+                                              "contentChanges": [{"text": text}]})
+    assert client.diagnostics(uri) == []
 
 
 def test_the_flagship_is_checked_quickly_after_an_edit(client):
@@ -143,6 +149,15 @@ def test_hover_definition_references_in_a_model(client):
     element = _position(text, "C  coupling", 4)
     hover = client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": element})
     assert "capacitor" in hover["contents"]["value"] and "e = K*q" in hover["contents"]["value"]
+    # completion after a dot on the flagship: a two-port's port variables
+    line = text[:text.index("output F_nut")].count("\n")
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": {"line": line, "character": 0}})
+    assert {"M", "mass", "TF", "table"} <= {item["label"] for item in items["items"]}
+    # formatting the flagship: it is formatted already, so nothing to change
+    edits = client.request("textDocument/formatting", {"textDocument": {"uri": uri},
+                                                       "options": {"tabSize": 2, "insertSpaces": True}})
+    assert edits == []
 
 
 def test_components_definitions_across_files_and_dotted_completion(client):
