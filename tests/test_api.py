@@ -32,6 +32,7 @@ def test_every_exported_name_is_there():
     assert callable(bondc.simulate) and callable(bondc.equations)     # modules of the pipeline, callable
 
 
+@pytest.mark.slow
 def test_simulation_results_convert_to_a_plot_a_table_and_a_dataframe():
     sim = bondc.simulate(ROOT / "models" / "electro_pneumatic_hybrid.bg", dt=0.1, t_end=0.5)
     figure = sim.plot(["P_kPa", "x"])

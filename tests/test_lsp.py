@@ -8,6 +8,9 @@ from pathlib import Path
 
 import pytest
 
+# a server process and the flagship: with the slow tests (CI runs them all)
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parent.parent
 FLAGSHIP = ROOT / "models" / "electro_pneumatic_hybrid.bg"
 COMPONENTS = ROOT / "tests" / "fixtures" / "components" / "circuit.bg"

@@ -83,6 +83,7 @@ def test_state_columns_of_storage_elements_get_their_si_unit(tmp_path):
     assert header == ["t [s]", "mass.p [kg*m/s]", "spring.q [m]"]
 
 
+@pytest.mark.slow
 def test_the_round_trip_through_engineering_units_validates(model, tmp_path):
     out = tmp_path / "sim.csv"
     run(model, dt=0.001, output=out)
@@ -94,6 +95,7 @@ def test_the_round_trip_through_engineering_units_validates(model, tmp_path):
     assert "W954" not in errors.getvalue()
 
 
+@pytest.mark.slow
 def test_a_column_without_a_unit_is_si_and_the_warning_says_which_unit_was_assumed(model, tmp_path):
     result = run(model, dt=0.01)
     data = tmp_path / "bench.csv"
@@ -135,6 +137,7 @@ def test_a_measured_input_signal_is_read_in_the_units_of_its_header(tmp_path):
     assert main(["check", str(path)]) == 1
 
 
+@pytest.mark.slow
 def test_json_statistics_give_each_output_in_its_unit(model, capsys):
     assert main(["simulate", str(model), "--json"]) == 0
     stats = json.loads(capsys.readouterr().out)["statistics"]

@@ -27,6 +27,7 @@ MOTOR_MODEL = ROOT / "models" / "dc_motor_gear.bg"
 CATALOGUE = ROOT / "models" / "data" / "motors.csv"
 
 
+@pytest.mark.slow
 def test_a_3x3_grid_equals_nine_single_runs():
     study = run_sweep(MSD, vary=["k=400,800,1600", "b=6,12,24"], metrics=["x.max", "x.rms", "v.min"], t_end=2.0)
     assert [p.status for p in study.points] == ["ok"] * 9
@@ -141,6 +142,7 @@ def test_resuming_skips_the_points_already_in_the_file(tmp_path):
     assert caught.value.diagnostics[0].code == "E970"
 
 
+@pytest.mark.slow
 def test_each_point_lists_the_motors_that_qualify():
     catalogue = load_catalogue(CATALOGUE)
     study = run_sweep(MOTOR_MODEL, vary=["U_s=12,48"], metrics=["torque.max"], motors=CATALOGUE, point_timeout=0)
@@ -230,6 +232,7 @@ def test_a_sweep_on_a_dask_scheduler_with_two_workers_started_from_the_command_l
                 process.kill()
 
 
+@pytest.mark.slow
 def test_the_motors_that_cover_the_whole_study():
     study = run_sweep(MOTOR_MODEL, vary=["U_s=12,24,48"], metrics=["torque.max"], motors=CATALOGUE, point_timeout=0)
     common = study.motors_for_all()
@@ -245,6 +248,7 @@ def load_catalogue_names():
     return [motor.name for motor in load_catalogue(CATALOGUE)]
 
 
+@pytest.mark.slow
 def test_the_report_of_a_study_shows_its_metrics_heat_maps_failures_and_motors(tmp_path):
     import re
 
@@ -283,6 +287,7 @@ def test_report_sweep_from_the_command_line(tmp_path):
     assert main(["report", "--sweep", str(tmp_path / "bad.csv"), "-o", str(tmp_path / "b.html")]) == 1
 
 
+@pytest.mark.slow
 def test_points_with_an_algebraic_loop_do_not_depend_on_the_points_run_before():
     # a nonlinear loop is solved from a warm start within a run; a run never starts from another's
     loop = ROOT / "tests" / "fixtures" / "sim" / "nonlinear_loop.bg"
@@ -294,6 +299,7 @@ def test_points_with_an_algebraic_loop_do_not_depend_on_the_points_run_before():
     assert alone.points[0].metrics == forward.points[1].metrics
 
 
+@pytest.mark.slow
 def test_every_power_output_gets_its_per_cycle_peak_rms_and_energies():
     from bondc.analysis.stats import power_statistics
 
