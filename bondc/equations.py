@@ -131,12 +131,23 @@ class _Deriver:
             for state in owner.states:
                 local.setdefault(state.name, self.state_symbols[state.qualified])
 
+        scope = getattr(graph, "scope", None)
+
         def resolve_name(name, node):
             if name in local:
                 return local[name]
             if name == "t":
                 return self.t
-            if name in self.parameters:
+            category = scope.category(name) if scope is not None else None
+            if category == "parameter":
+                return self.parameters[name]
+            if category == "input":
+                return self.input_symbols[name]
+            if category == "output":
+                return self.output_symbols[name]
+            if category in ("state", "discrete"):
+                return self.state_symbols[name]
+            if name in self.parameters:         # a graph built without a scope (by hand, in tests)
                 return self.parameters[name]
             if name in self.input_symbols:
                 return self.input_symbols[name]

@@ -356,14 +356,38 @@ def _location(symbol: Symbol) -> lsp.Location | None:
     return lsp.Location(path.as_uri(), _range(symbol.span))
 
 
+def _scoped(ls: BondcServer, uri: str, position: lsp.Position):
+    """The declaration at the cursor from the checked model's own scope (bondc.scope), or None."""
+    document = ls.documents.get(uri)
+    scope = getattr(document.graph, "scope", None) if document is not None else None
+    if scope is None:
+        return None, None
+    return scope, scope.at(str(document.path), position.line + 1, position.character + 1)
+
+
+def _span_location(span) -> lsp.Location:
+    if span.file.startswith("std:"):
+        from bondc.std import path_of as std_path
+
+        return lsp.Location(Path(str(std_path(span.file[4:]))).as_uri(), _range(span))
+    return lsp.Location(Path(span.file).resolve().as_uri(), _range(span))
+
+
 @server.feature(lsp.TEXT_DOCUMENT_DEFINITION)
 def definition(ls: BondcServer, params: lsp.DefinitionParams):
+    _, declaration = _scoped(ls, params.text_document.uri, params.position)
+    if declaration is not None:
+        return _span_location(declaration.span)
     symbol = _symbol_at(ls, params.text_document.uri, params.position)
     return _location(symbol) if symbol is not None else None
 
 
 @server.feature(lsp.TEXT_DOCUMENT_REFERENCES)
 def references(ls: BondcServer, params: lsp.ReferenceParams):
+    scope, declaration = _scoped(ls, params.text_document.uri, params.position)
+    if declaration is not None:
+        found = [_span_location(declaration.span)] if params.context.include_declaration else []
+        return found + [_span_location(use.span) for use in scope.uses_of(declaration.name)]
     document = ls.documents.get(params.text_document.uri)
     symbol = _symbol_at(ls, params.text_document.uri, params.position)
     if document is None or symbol is None:

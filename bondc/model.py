@@ -217,6 +217,8 @@ class BondGraph:
     si_units: Mapping[str, str] = field(default_factory=dict, compare=False)
     # submodel instances (flatten.Instance: path, model, description, ports), outermost first
     instances: tuple = field(default=(), compare=False)
+    # every declaration and use of a name, with its span (bondc.scope.Scope)
+    scope: object = field(default=None, compare=False)
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]

@@ -1947,7 +1947,10 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     dimension_errors, si_units = check_dimensions(m, graph, chosen_values)
     if dimension_errors:
         return None, _unique(diagnostics + dimension_errors)
-    return dataclasses.replace(graph, si_units=si_units, instances=tuple(m.instances)), diagnostics
+    from bondc.scope import build_scope
+
+    return dataclasses.replace(graph, si_units=si_units, instances=tuple(m.instances),
+                               scope=build_scope(m.model, m.all_decls)), diagnostics
 
 
 def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -> tuple[list[Diagnostic], dict]:

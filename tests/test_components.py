@@ -329,3 +329,18 @@ def test_an_unsaved_buffer_is_checked_with_its_imports_from_disk(tmp_path):
         load(path, text=buffer.replace("valve.b -> n", "valve.c -> n"))
     (error,) = [d for d in caught.value.diagnostics if d.code == "E341"]
     assert error.span.file == str(path) and error.span.line == 12
+
+
+def test_the_checked_model_keeps_every_declaration_and_use_of_its_names():
+    # one scope, on the flat model: the equations resolve through it and editors look up names in it
+    graph, _ = load(FIXTURES / "circuit.bg")
+    scope = graph.scope
+    area = scope.declarations["valve.A"]
+    assert area.category == "parameter" and area.span.file.endswith("hydraulics.bg") and area.span.instance == "valve"
+    assert [u.span.line for u in scope.uses_of("valve.A")] == [6]          # in the orifice law, its own file
+    assert scope.category("valve.Q") == "output" and scope.category("p_s") == "parameter"
+    circuit = (FIXTURES / "circuit.bg").read_text().splitlines()
+    line = next(n for n, text in enumerate(circuit, 1) if "output Q" in text)
+    column = circuit[line - 1].index("valve.Q") + 1
+    assert scope.at(str(FIXTURES / "circuit.bg"), line, column + 6).name == "valve.Q"
+    assert {u.span.line for u in scope.uses_of("p_s")} == {7}              # Se supply : e = p_s
