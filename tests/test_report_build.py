@@ -332,3 +332,11 @@ def test_a_component_is_drawn_as_a_box_whose_contents_expand(tmp_path):
     assert "valve.loss" not in collapsed and collapsed.count('class="bond"') == 3
     # expanded: every element of the flat graph, under its dotted name, every bond
     assert "<details" in html and "R:valve.loss" in expanded and expanded.count('class="bond"') == 4
+
+
+def test_the_states_of_a_component_model_are_described_by_their_own_element():
+    model = Path(__file__).parent.parent / "models" / "electro_pneumatic_hybrid_components.bg"
+    run = run_pipeline(model, t_end=0.01)
+    _, _, states = state_equations(run.state_space)
+    text = " ".join(str(cell) for row in states.rows for cell in row)
+    assert "generalised momentum of I mass.body" in text and "state of C cylinder.chamber" in text

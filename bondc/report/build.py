@@ -497,11 +497,11 @@ def _display_names(ss) -> dict[sympy.Symbol, sympy.Symbol]:
 
     for state in ss.states:
         if state.element is not None and "." in state.name:
-            owner, local = state.name.split(".", 1)
+            owner, local = state.name.rsplit(".", 1)      # valve.chamber.p: p of valve.chamber
             rename(state.symbol, f"{local}_{owner}")
     for name, symbol in ss.eliminated.items():
         if "." in symbol.name:
-            owner, local = symbol.name.split(".", 1)
+            owner, local = symbol.name.rsplit(".", 1)
             rename(symbol, f"{local}_{owner}")
     for number, (effort, flow) in ss.bond_symbols.items():
         bond = graph.bond(number)
@@ -670,8 +670,10 @@ def _state_description(graph: BondGraph, state) -> str:
     if state.element is None or state.element not in graph.elements:
         return ""
     element = graph.elements[state.element]
-    local = state.name.split(".", 1)[-1]
-    what = {"q": "generalised displacement", "p": "generalised momentum"}.get(local, "state")
+    local = state.name.rsplit(".", 1)[-1]
+    own = next((s for s in element.states if s.qualified == state.name), None)
+    default = own is not None and own.rate is None          # q of a C, p of an I (not a custom state)
+    what = {"q": "generalised displacement", "p": "generalised momentum"}.get(local, "state") if default else "state"
     return f"{what} of {element.kind} {element.name}"
 
 
