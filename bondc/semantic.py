@@ -1558,6 +1558,44 @@ def check_constants(m: _Model, values: Mapping[str, float]) -> None:
                 _check_breakpoints(m, node.args[1], values)
 
 
+def check_divisors(m: _Model, values: Mapping[str, float]) -> None:
+    """E311: a law, output, input or rate that divides by parameters whose value is 0 (``p/m`` with
+    ``m = 0``): every evaluation of it would be inf or nan."""
+    exprs = [i.value for i in m.inputs] + [o.value for o in m.outputs]
+    for element in m.elements:
+        exprs += [law.value for law in element.laws if isinstance(law, (ast.LawAssign, ast.LawCall))]
+    for state in m.statements(ast.StateDecl):
+        exprs += [law.value for law in state.laws if isinstance(law, (ast.LawAssign, ast.LawCall))]
+    def unguarded(node):
+        """The sub-expressions outside every if-branch (a guarded division may well be by 0)."""
+        yield node
+        if isinstance(node, ast.If):
+            return
+        for child in (getattr(node, "args", None) or getattr(node, "items", None) or
+                      [getattr(node, k) for k in ("operand", "left", "right") if hasattr(node, k)]):
+            yield from unguarded(child)
+
+    for expr in exprs:
+        if not m.expr_ok.get(id(expr), False):
+            continue
+        for node in unguarded(expr):
+            if not (isinstance(node, ast.Binary) and node.op == "/"):
+                continue
+            divisor = node.right
+            names = [n for n in ast.walk(divisor) if isinstance(n, (ast.Name, ast.Ref, ast.Call))]
+            if not names or not all(isinstance(n, ast.Name) and n.name in values for n in names):
+                continue
+            try:
+                value = evaluate(divisor, values, {})
+            except EvaluationError:
+                continue
+            if value == 0:
+                used = ", ".join(f"{n.name} = {values[n.name]:g}" for n in names)
+                m.report(_error("E311", f"a division by zero: the divisor is 0 with {used}", divisor.span,
+                                hint="a parameter that divides must not be 0; check its value and the "
+                                     "experiment's and --set overrides"))
+
+
 def _try_evaluate(m: _Model, expr: ast.Expr, values: Mapping[str, float], checked: bool = False) -> float | None:
     """The value of a checked constant expression, or None (with E311 reported if it has none)."""
     if not (checked or m.expr_ok.get(id(expr), False)) or _function_closure(m, _calls(expr)) & m.bad_functions:
@@ -1933,6 +1971,7 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     check_constants(m, base_values)
     experiment_defs, chosen = check_experiment_values(m, plans, good_sets, base_values, selected)
     chosen_definitions, chosen_values = chosen or (base, base_values)
+    check_divisors(m, chosen_values)
     check_passive_orientation(m)
     check_label_names(m)
     check_unused(m)

@@ -127,3 +127,24 @@ def test_check_reports_a_law_that_divides_by_zero_at_its_position(tmp_path, caps
     assert main(["check", str(path)]) == 1
     err = capsys.readouterr().err
     assert "z.bg:3:" in err and message in err
+
+
+@pytest.mark.parametrize("law, error", [("f = p/m", True), ("f = p/(2*m)", True), ("f = p/(m + 1)", False),
+                                        ("f = if m > 0 then p/m else 0", False)])
+def test_a_law_dividing_by_a_parameter_that_is_zero_is_an_error_unless_guarded(tmp_path, law, error):
+    path = tmp_path / "m.bg"
+    path.write_text(f"model M\n  param m = 0 [kg]\n  Se s : e = 1\n  I mass : {law}\n  s -> mass\nend\n")
+    if not error:
+        load(path)
+        return
+    with pytest.raises(ModelError) as caught:
+        load(path)
+    (problem,) = caught.value.diagnostics
+    assert problem.code == "E311" and problem.span.line == 4 and "m = 0" in problem.message
+    # and a --set that makes it zero, in a model that is fine as written
+    path.write_text(path.read_text().replace("param m = 0", "param m = 2"))
+    load(path)
+    from bondc.pipeline import parse_sets
+
+    with pytest.raises(ModelError):
+        load(path, sets=parse_sets(["m=0"]))

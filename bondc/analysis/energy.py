@@ -753,6 +753,8 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
         expr = (ss.energy or {}).get(element.name)
         if expr is not None:
             expr = as_sympy(expr).xreplace(numbers)
+            if expr.has(sympy.zoo, sympy.nan, sympy.oo, -sympy.oo):
+                continue        # a parameter of 0 where it divides (m = 0): count the work in instead
             free = list(expr.free_symbols)
             if len(free) == 1:
                 found[element.name] = _StoredEnergy("analytic", free[0].name, function=_lambdify(free[0], expr))
@@ -770,7 +772,7 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
             continue
         effort, flow = ss.bond_symbols[element.bond]
         law = ss.substituted(effort if kind.storage == "C" else flow).xreplace(numbers)
-        if not law.free_symbols <= {state_symbol}:
+        if not law.free_symbols <= {state_symbol} or law.has(sympy.zoo, sympy.nan):
             continue
         if state.name == kind.state and state.rate is None:
             density = law                       # dH/dq = e(q), dH/dp = f(p)
