@@ -604,6 +604,7 @@ class _Deriver:
             value = self.by_target[symbol].rhs.xreplace(input_values)
             input_values[symbol] = value
             inputs[name] = (symbol, value)
+        states = self._initials_at_start(states, input_values)
         derivatives = {s.name: self.rates[s.name] for s in states}
         outputs = {name: self.by_target[symbol].rhs for name, symbol in self.output_symbols.items()}
         found: list = []
@@ -621,8 +622,42 @@ class _Deriver:
             energy=self._energy(), eliminated=eliminated, symbols=dict(self.symbols),
             bond_symbols=dict(self.bond_symbols), diagnostics=tuple(self.diagnostics), events=self._events())
 
+    def _initials_at_start(self, states: list, input_values: Mapping) -> list:
+        """Initial values in parameters only: a discrete variable's may use inputs and other states'
+        initial values at t = 0 (the language reference, section 12), substituted here."""
+        start = {self.t: sympy.Integer(0)}
+        inputs = {symbol: as_sympy(value).xreplace(start) for symbol, value in input_values.items()}
+        initial = {s.symbol: as_sympy(s.initial) for s in states}
+        for _ in range(len(states) + 1):       # initial values that use other initial values, in order
+            changed = False
+            for symbol, expr in initial.items():
+                new = expr.xreplace(start).xreplace(inputs).xreplace(
+                    {other: value for other, value in initial.items() if other is not symbol})
+                if new != expr:
+                    initial[symbol], changed = new, True
+            if not changed:
+                break
+        for s in states:
+            left = initial[s.symbol].free_symbols & (set(initial) | set(inputs) | {self.t})
+            if left:
+                raise _error("E701", f"the initial value of '{s.name}' depends on itself through "
+                                     f"{', '.join(sorted(str(x) for x in left))}")
+        return [dataclasses.replace(s, initial=initial[s.symbol]) if initial[s.symbol] is not s.initial else s
+                for s in states]
+
     def _events(self) -> tuple:
-        """The when clauses: condition and (state, value) pairs, in sympy."""
+        """The when clauses: condition and (state, value) pairs, in sympy (an output they use is
+        replaced by its expression: the event functions compute the graph's variables, not outputs)."""
+        outputs = {symbol: self.by_target[symbol].rhs for symbol in self.output_symbols.values()}
+
+        def expand(expr):
+            for _ in range(len(outputs) + 1):
+                new = as_sympy(expr).xreplace(outputs)
+                if new == expr:
+                    break
+                expr = new
+            return expr
+
         events = []
         for when in getattr(self.graph, "whens", ()):
             actions = []
@@ -634,8 +669,8 @@ class _Deriver:
                     if found is None or found[0] != "state":
                         raise _error("E701", f"'{target.dotted}' is not a state", target.span)
                     name = found[1]
-                actions.append((name, self.translate(value)))
-            events.append((when.text, self.translate(when.condition), tuple(actions)))
+                actions.append((name, expand(self.translate(value))))
+            events.append((when.text, expand(self.translate(when.condition)), tuple(actions)))
         return tuple(events)
 
     def _energy(self) -> dict:

@@ -660,6 +660,9 @@ def check_model_states(m: _Model) -> None:
 # ================================================================ expressions
 
 GENERAL = frozenset({"parameter", "input", "output", "state", "discrete", "graph", "time", "csv"})
+DISCRETE_START = frozenset({"parameter", "input", "state", "discrete", "graph"})
+_DISCRETE_RULE = ("a discrete variable's initial value is an expression of parameters, and of inputs and initial "
+                  "states at t = 0")
 SIGNAL = frozenset({"parameter", "input", "time", "csv"})
 CONSTANT = frozenset({"parameter"})
 
@@ -1152,9 +1155,9 @@ def check_expressions(m: _Model) -> None:
         if laws.initial is not None:
             _check_expr(m, laws.initial.value, _scope(m, "an initial value", CONSTANT,
                                                       _CONSTANT_RULE.format("an initial value")))
-    for discrete in m.statements(ast.Discrete):
+    for discrete in m.statements(ast.Discrete):     # parameters, and inputs and initial states at t = 0
         _check_expr(m, discrete.value, _scope(m, f"the initial value of discrete variable '{discrete.name}'",
-                                              CONSTANT, _CONSTANT_RULE.format("an initial value")))
+                                              DISCRETE_START, _DISCRETE_RULE))
     for when in m.statements(ast.When):
         _check_when(m, when)
 

@@ -1,6 +1,7 @@
 """Version 2 details (issue 11, item 7): functions using a model's parameters, what ``check``
 reports, equations printed in ``.bg`` syntax, LaTeX that keeps what the model says."""
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -148,3 +149,45 @@ def test_a_law_dividing_by_a_parameter_that_is_zero_is_an_error_unless_guarded(t
 
     with pytest.raises(ModelError):
         load(path, sets=parse_sets(["m=0"]))
+
+
+def test_the_section_12_example_simulates_its_relay_and_its_bouncing_ball():
+    result = run(ROOT / "tests" / "fixtures" / "language" / "s12_discrete_events.bg", t_end=3.0)
+    assert result.complete
+    whens = [(time, label) for time, label in result.events if label.startswith("when")]
+    impacts = [time for time, label in whens if "h_ball" in label]
+    first = (2 * 1 / 9.81) ** 0.5                       # dropped from 1 m
+    assert impacts[:2] == pytest.approx([first, first + 2 * 0.8 * first], rel=1e-6)   # restitution 0.8
+
+
+RELAY = """model Relay
+  param T0 = 15 [K]
+  param T_on = 19 [K]
+  input T_set [K] = 18 + step(t, 10)
+  Se heat : e = 1000*heater
+  C room : e = q/1e4, q(0) = T0*1e4
+  R loss : e = 100*f
+  1 j
+  heat -> j
+  j -> room
+  j -> loss
+  output T_room [K] = room.e
+  discrete heater [1] = if room.q/1e4 < T_set then 1 else 0
+  discrete level [1] = heater + 1
+  when T_room > T_on then heater = 0 end
+end
+"""
+
+
+@pytest.mark.parametrize("start, heater", [(15, 1.0), (20, 0.0)])
+def test_a_discrete_initial_value_uses_inputs_and_initial_states_at_t_0(tmp_path, start, heater):
+    path = tmp_path / "relay.bg"
+    path.write_text(RELAY)
+    result = run(path, t_end=5000.0, sets=[f"T0={start}"])
+    assert result.states["heater"][0] == heater and result.states["level"][0] == heater + 1
+    if heater:
+        # heated from 15 K: T = 1000 - 985*exp(-t/1e6) reaches T_on = 19 K at t = 1e6*ln(985/981),
+        # where the when clause (a condition on an output) switches the heater off
+        (switch,) = [time for time, label in result.events if label == "when T_room > T_on"]
+        assert switch == pytest.approx(1e6 * math.log(985 / 981), rel=5e-5)     # default rtol 1e-6
+        assert result.states["heater"][-1] == 0.0
