@@ -527,6 +527,8 @@ _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
 _UNFROZEN_STEPS = 3000   # steps in one short unfrozen interval: the solver is fighting a discontinuity
 _MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippov combination)
 _EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant
+_ZENO_FIRINGS = 16       # a when clause firing this often with ever shorter intervals ...
+_ZENO_INTERVAL = 1e-4    # ... the last shorter than this fraction of the run, accumulates (Zeno)
 
 
 def _all_finite(values) -> bool:
@@ -913,6 +915,7 @@ class _Run:
         self.sliding_now = []          # the switches of the last sliding segment
         self.vertex_override = {}      # coulomb switches held between their sliding forces
         self.jumps = []                # (t, state before, state after) of every when clause that fired
+        self.when_times = {}           # when clause -> its last firing times (Zeno detection)
         self.extended = None           # modes of the last right-hand side taken beyond a switch
         self._dense = None
         self._driver = None            # the native CVODE driver: None (not tried yet), False (none)
@@ -1303,6 +1306,7 @@ class _Run:
                     new[index] = float(value)
                 self.note_event(t, model.WHEN_LABELS[k])
                 self.stats["when_fired"] = self.stats.get("when_fired", 0) + 1
+                self.check_zeno(k, t)
             if not np.all(np.isfinite(new)):
                 raise _Stop(self.diagnose(t, new, modes, f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
             self.jumps.append((float(t), np.array(y, dtype=float), new.copy()))
@@ -1316,6 +1320,35 @@ class _Run:
                      "cause": "the statements of a when clause make another (or its own) condition true again",
                      "hint": "make the conditions exclusive (a hysteresis band), or the statements move the state "
                              "out of the condition"})
+
+    def check_zeno(self, k, t):
+        """Stop the run where the firings of when clause ``k`` accumulate (Zeno behaviour, a bouncing
+        ball coming to rest): the model says nothing about what follows the accumulation point, and
+        past it the events can no longer be told apart at the solver's precision (the ball would fall
+        through the floor). Detected when the clause fired ``_ZENO_FIRINGS`` times, each interval
+        shorter than the one before, the last shorter than ``_ZENO_INTERVAL`` of the run, with the
+        geometric limit of the intervals before the end of the run."""
+        times = self.when_times.setdefault(k, [])
+        times.append(float(t))
+        del times[:-_ZENO_FIRINGS]
+        if len(times) < _ZENO_FIRINGS:
+            return
+        gaps = np.diff(times)
+        if not (np.all(gaps > 0) and np.all(gaps[1:] < gaps[:-1])) or gaps[-1] > _ZENO_INTERVAL * self.span:
+            return
+        ratio = (gaps[-1] / gaps[0]) ** (1.0 / (len(gaps) - 1))
+        limit = t + gaps[-1] * ratio / (1.0 - ratio)
+        if limit >= self.t_end:
+            return
+        label = self.model.WHEN_LABELS[k]
+        raise _Stop({"message": f"the events of '{label}' accumulate at t={limit:.6g} (Zeno behaviour): "
+                                f"{len(times)} firings, each interval about {ratio:.3g} times the one before, "
+                                f"the last {gaps[-1]:.3g} s",
+                     "time": float(t), "variable": None, "law": None, "kind": "events", "when": label,
+                     "cause": "infinitely many events before a finite time, as a bouncing ball coming to rest; "
+                              "the model does not say what happens after that time",
+                     "hint": "give the model a law for what follows: e.g. a discrete variable that a when clause "
+                             "sets when the rebound is too small to matter, and that switches the motion off"})
 
     def hold_at_stall(self, stalled, t_stop):
         """After the unfrozen law stalled at (t, y): slide on every switch close to its surface

@@ -323,7 +323,7 @@ def _failure_diagnostic(graph, failure, raw) -> Diagnostic:
         message += f". Likely cause: {failure['cause']}"
     from bondc.source import NO_SPAN
 
-    span = _span_of(graph, failure.get("variable")) or NO_SPAN
+    span = _span_of(graph, failure.get("variable")) or _when_span(graph, failure.get("when")) or NO_SPAN
     return Diagnostic("error", _CODES.get(failure.get("kind"), "E811"), message, span, hint=failure.get("hint"))
 
 
@@ -343,6 +343,14 @@ def _alias(graph, variable: str | None) -> str | None:
                     if which in graph.elements[end].laws:
                         computing.append(names[-1])
             return ", ".join(computing or names) or None
+    return None
+
+
+def _when_span(graph, label: str | None):
+    """The span of the when clause whose condition reads ``label``."""
+    for when in getattr(graph, "whens", ()) if label else ():
+        if when.text == label:
+            return when.span
     return None
 
 

@@ -387,6 +387,30 @@ def test_bouncing_ball_impacts_and_apex_heights_follow_the_restitution():
     assert height.min() > -1e-9
 
 
+def test_a_ball_bouncing_to_rest_stops_at_the_zeno_time_with_its_when_clause(tmp_path):
+    """Past t_inf = t1 + (2*v1/g)*e/(1 - e) the impacts accumulate: the run must stop there with
+    E812 at the when clause and keep the bounces before it, never let the ball fall through the floor."""
+    model = tmp_path / "ball.bg"
+    model.write_text((ENGINE / "bouncing_ball.bg").read_text().replace("t_end = 3 [s]", "t_end = 6 [s]"))
+    from bondc.errors import SimulationError
+
+    with pytest.raises(SimulationError) as stopped:
+        run(model)
+    result = stopped.value.result
+    g, e, h0 = 9.81, 0.8, 1.0
+    t1, v1 = np.sqrt(2 * h0 / g), np.sqrt(2 * g * h0)
+    zeno = t1 + 2 * v1 / g * e / (1 - e)                                # 4.06371 s
+    assert not result.complete
+    diagnostic = result.diagnostics[0]
+    assert diagnostic.code == "E812" and diagnostic.span.line == 16
+    stated = float(diagnostic.message.split("accumulate at t=")[1].split()[0])
+    assert stated == pytest.approx(zeno, rel=1e-5)
+    assert zeno - 0.01 < result.t[-1] < zeno
+    assert result.outputs["height"].min() > -1e-9                      # nothing fell through
+    fired = [time for time, label in result.events if label.startswith("when ")]
+    assert len(fired) > 20 and fired[-1] < zeno
+
+
 def test_when_clause_statements_are_checked(tmp_path):
     from bondc.errors import BondcError
 

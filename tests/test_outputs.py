@@ -184,3 +184,25 @@ def test_sigterm_to_a_parallel_sweep_ends_its_workers_too(tmp_path):
     alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()
              and "Z" not in Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]]
     assert not alive, f"worker processes still running: {alive}"
+
+
+def test_sigterm_while_the_report_is_built_keeps_the_simulation(tmp_path, monkeypatch, capsys):
+    """SIGTERM after the simulation, during the report's post-processing: exit 143, the report is not
+    written, and the simulated results are kept beside it exactly as ``bondc simulate`` writes them."""
+    from bondc import cli
+    from bondc.report import build
+
+    model = ROOT / "tests/fixtures/sim/rc.bg"
+    assert cli.main(["simulate", str(model), "-o", str(tmp_path / "simulated.csv")]) == 0
+
+    def terminated(*args, **kwargs):
+        cli._terminate(15, None)            # the signal arrives while the energy account is computed
+
+    monkeypatch.setattr(build, "report_context", terminated)
+    capsys.readouterr()
+    assert cli.main(["report", str(model), "-o", str(tmp_path / "rc.html")]) == 143
+    err = capsys.readouterr().err
+    kept = tmp_path / "rc.interrupted.csv"
+    assert not (tmp_path / "rc.html").exists()
+    assert kept.read_text() == (tmp_path / "simulated.csv").read_text()
+    assert f"kept in {kept}" in err and "terminated" in err and "Traceback" not in err

@@ -179,13 +179,36 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
            progress) -> tuple[Path, PipelineRun]:
     specs, measured = _measured(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
-    validation = None
-    if specs:
-        results = compare_run(run, measured, specs)
-        validation = validation_section(run, results, data)
     target = Path(output) if output is not None else default_output(path, run)
-    write_report(report_context(run, validation=validation, motors=motors, date=date), target)
+    try:
+        validation = None
+        if specs:
+            results = compare_run(run, measured, specs)
+            validation = validation_section(run, results, data)
+        write_report(report_context(run, validation=validation, motors=motors, date=date), target)
+    except KeyboardInterrupt as interrupt:
+        _keep_simulation(run, target, interrupt)
+        raise
     return target, run
+
+
+def _keep_simulation(run: PipelineRun, target: Path, interrupt: KeyboardInterrupt) -> None:
+    """Ctrl-C or SIGTERM after the simulation, while the report was being built: write the simulated
+    results next to the report (``<report stem>.interrupted.csv``, as ``bondc simulate`` writes them)
+    and say so, so that the run is not lost; the report itself is left as it was."""
+    from bondc.simulate import write_csv
+
+    if run.result is None or not len(run.result.t):
+        return
+    kept = target.with_name(target.stem + ".interrupted.csv")
+    try:
+        write_csv(run.result, kept)
+    except (OSError, UsageError):
+        return
+    state = "complete" if run.result.complete else "incomplete"
+    setattr(interrupt, "kept", kept)
+    print(f"report: interrupted while building the report; the simulation ({len(run.result.t)} points to "
+          f"t = {float(run.result.t[-1]):.6g} s, {state}) is kept in {kept}", file=sys.stderr)
 
 
 def run_report(path: str | Path, *, model: str | None = None, experiment: str | None = None,
@@ -371,7 +394,11 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
         write_junit(results, suite, junit)
     if output is not None:
         section = validation_section(run, results, data, junit)
-        write_report(report_context(run, validation=section, motors=motors, date=date), Path(output))
+        try:
+            write_report(report_context(run, validation=section, motors=motors, date=date), Path(output))
+        except KeyboardInterrupt as interrupt:
+            _keep_simulation(run, Path(output), interrupt)
+            raise
     passed = all(result.passed for result in results) and run.complete
     return results, 0 if passed else 1
 
