@@ -411,6 +411,21 @@ def test_a_ball_bouncing_to_rest_stops_at_the_zeno_time_with_its_when_clause(tmp
     assert len(fired) > 20 and fired[-1] < zeno
 
 
+def test_the_remedy_for_zeno_holds_the_ball_on_the_floor_from_the_right_impact():
+    result = run(ENGINE / "ball_at_rest.bg")
+    assert result.complete, result.message
+    g, e, v_rest = 9.81, 0.8, 0.01
+    t, u = np.sqrt(2 / g), np.sqrt(2 * g)                  # first impact, its incoming speed
+    while e * u >= v_rest:                                  # bounce while the rebound is not negligible
+        t += 2 * e * u / g
+        u *= e
+    fired = [time for time, label in result.events if label.startswith("when ")]
+    assert fired[-1] == pytest.approx(t, rel=1e-8)
+    rest = result.t >= t
+    assert np.all(np.abs(result.outputs["height"][rest]) < 1e-12)
+    assert result.outputs["height"].min() > -1e-9 and result.t[-1] == 6.0
+
+
 def test_when_clause_statements_are_checked(tmp_path):
     from bondc.errors import BondcError
 
