@@ -219,6 +219,8 @@ class BondGraph:
     instances: tuple = field(default=(), compare=False)
     # every declaration and use of a name, with its span (bondc.scope.Scope)
     scope: object = field(default=None, compare=False)
+    # every division by parameters alone, as (divisor expression, parameter names): E311 for bound values
+    divisors: tuple = field(default=(), compare=False)
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]

@@ -1563,7 +1563,9 @@ def check_constants(m: _Model, values: Mapping[str, float]) -> None:
 
 def check_divisors(m: _Model, values: Mapping[str, float]) -> None:
     """E311: a law, output, input or rate that divides by parameters whose value is 0 (``p/m`` with
-    ``m = 0``): every evaluation of it would be inf or nan."""
+    ``m = 0``): every evaluation of it would be inf or nan. The divisions are kept on the graph
+    (``BondGraph.divisors``) so that values bound later (a sweep's points) are checked the same way
+    (:func:`zero_divisors`)."""
     exprs = [i.value for i in m.inputs] + [o.value for o in m.outputs]
     for element in m.elements:
         exprs += [law.value for law in element.laws if isinstance(law, (ast.LawAssign, ast.LawCall))]
@@ -1578,25 +1580,38 @@ def check_divisors(m: _Model, values: Mapping[str, float]) -> None:
                       [getattr(node, k) for k in ("operand", "left", "right") if hasattr(node, k)]):
             yield from unguarded(child)
 
+    divisors = []
     for expr in exprs:
         if not m.expr_ok.get(id(expr), False):
             continue
         for node in unguarded(expr):
             if not (isinstance(node, ast.Binary) and node.op == "/"):
                 continue
-            divisor = node.right
-            names = [n for n in ast.walk(divisor) if isinstance(n, (ast.Name, ast.Ref, ast.Call))]
-            if not names or not all(isinstance(n, ast.Name) and n.name in values for n in names):
-                continue
-            try:
-                value = evaluate(divisor, values, {})
-            except EvaluationError:
-                continue
-            if value == 0:
-                used = ", ".join(f"{n.name} = {values[n.name]:g}" for n in names)
-                m.report(_error("E311", f"a division by zero: the divisor is 0 with {used}", divisor.span,
+            names = [n for n in ast.walk(node.right) if isinstance(n, (ast.Name, ast.Ref, ast.Call))]
+            if names and all(isinstance(n, ast.Name) and n.name in values for n in names):
+                divisors.append((node.right, tuple(dict.fromkeys(n.name for n in names))))
+    m.divisors = tuple(divisors)
+    for diagnostic in zero_divisors(m.divisors, values):
+        m.report(diagnostic)
+
+
+def zero_divisors(divisors, values: Mapping[str, float]) -> list[Diagnostic]:
+    """E311 for each division of ``divisors`` (``BondGraph.divisors``: divisor and the parameters it
+    uses) whose divisor is 0 with the parameter values ``values`` (name -> SI value)."""
+    found = []
+    for divisor, names in divisors:
+        if not all(name in values for name in names):
+            continue
+        try:
+            value = evaluate(divisor, values, {})
+        except EvaluationError:
+            continue
+        if value == 0:
+            used = ", ".join(f"{name} = {values[name]:g}" for name in names)
+            found.append(_error("E311", f"a division by zero: the divisor is 0 with {used}", divisor.span,
                                 hint="a parameter that divides must not be 0; check its value and the "
                                      "experiment's and --set overrides"))
+    return found
 
 
 def _try_evaluate(m: _Model, expr: ast.Expr, values: Mapping[str, float], checked: bool = False) -> float | None:
@@ -2129,7 +2144,8 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
                                          resolved.factor if resolved is not None else 1.0)
     return BondGraph(m.model.name, m.model.description, m.file.path, parameters, functions, inputs, outputs,
                      elements, junctions, tuple(bonds), tuple(model_states), experiments,
-                     sources=dict(m.sources), span=m.model.span, discrete=tuple(discrete), whens=tuple(whens))
+                     sources=dict(m.sources), span=m.model.span, discrete=tuple(discrete), whens=tuple(whens),
+                     divisors=getattr(m, "divisors", ()))
 
 
 def _when_text(m: _Model, when: ast.When) -> str:

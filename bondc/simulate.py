@@ -205,6 +205,22 @@ def _check_overrides(ss, overrides) -> dict:
     return {name: float(value) for name, value in overrides.items()}
 
 
+def _check_bound_divisors(ss, namespace, overrides: Mapping[str, float]) -> None:
+    """E311 (raised as a ModelError) when parameter values given after the check (a sweep's point)
+    make a divisor 0, as the check says for the same values given with ``--set``."""
+    from bondc.errors import ModelError
+    from bondc.semantic import zero_divisors
+
+    divisors = getattr(getattr(ss, "graph", None), "divisors", ())
+    if not divisors:
+        return
+    names = tuple(namespace["PARAMETERS"])
+    values = namespace["param_array"](namespace["PARAMETERS"], dict(overrides), namespace["_derive_parameters"])
+    found = zero_divisors(divisors, dict(zip(names, (float(v) for v in values))))
+    if found:
+        raise ModelError(found, getattr(ss.graph, "sources", None))
+
+
 def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | None = None,
              overrides: Mapping[str, float] | None = None, progress: bool = False, t_eval=None,
              method: str | None = None, rtol: float | None = None, atol: float | None = None,
@@ -224,6 +240,8 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
                                     hint="give --t-end, or set t_end in the experiment"))
     p = _check_overrides(ss, overrides)
     namespace = compile_model(ss)
+    if p:
+        _check_bound_divisors(ss, namespace, p)
     bar = ProgressBar(0.0, float(settings["t_end"])) if progress else None
     try:
         raw = namespace["simulate_model"](

@@ -109,23 +109,26 @@ def test_csv_and_json_files(tmp_path):
 
 
 def test_a_failed_point_is_reported_and_the_others_computed():
-    # m = 0: the mass law f = p/m gives 0/0 at the start
+    # m = 0: the mass law f = p/m divides by zero, E311 at the divisor as `check --set m=0` says,
+    # whether the point is first (the file is checked with its values) or later (bound late)
+    for order, failing in ((["m=2,0,1"], 1), (["m=0,2,1"], 0)):
+        result = run_sweep(MSD, vary=order, metrics=["x.final"], t_end=5.0)
+        assert [point.status == "ok" for point in result.points] == [k != failing for k in range(3)]
+        failed = result.points[failing]
+        assert failed.message == "E311: a division by zero: the divisor is 0 with m = 0"
+        assert failed.metrics == {} and failed.parameters == {"m": 0.0}
     result = run_sweep(MSD, vary=["m=2,0,1"], metrics=["x.final"], t_end=5.0)
-    assert [point.status for point in result.points] == ["ok", "failed", "ok"]
-    failed = result.points[1]
-    assert failed.message.startswith("E810: simulation stopped") and "mass.p/m" in failed.message
-    assert failed.metrics == {} and failed.parameters == {"m": 0.0}
     for point in (result.points[0], result.points[2]):
         assert point.metrics["x.final"] == pytest.approx(F0 / 800, rel=1e-5)
     assert result.exit_code == 1
     [diagnostic] = result.diagnostics()
-    assert diagnostic.code == "E810" and diagnostic.message.startswith("point 1 (m=0 kg): simulation stopped")
-    assert diagnostic.span.line == 29            # the law f = p/m
+    assert diagnostic.code == "E311" and diagnostic.message.startswith("point 1 (m=0 kg): a division by zero")
+    assert (diagnostic.span.line, diagnostic.span.column) == (29, 74)          # the m of f = p/m
     text = result.to_text()
-    assert "3 runs, 2 ok, 1 failed" in text and "point 1 (m=0 kg) failed: E810" in text
+    assert "3 runs, 2 ok, 1 failed" in text and "point 1 (m=0 kg) failed: E311" in text
     data = result.to_json()
     assert data["failed"] == 1 and data["points"][1]["status"] == "failed"
-    assert data["points"][1]["diagnostics"][0]["code"] == "E810"
+    assert data["points"][1]["diagnostics"][0]["code"] == "E311"
     assert data["points"][0]["metrics"]["x.final"] == pytest.approx(F0 / 800, rel=1e-5)
 
 
