@@ -2087,7 +2087,7 @@ class _Run:
             return rows
         for _ in range(self.switch_count + 1):
             changed = False
-            unique, inverse = np.unique(rows, axis=0, return_inverse=True)
+            unique, inverse = _unique_rows(rows)
             for r, row in enumerate(unique):
                 columns = np.flatnonzero(inverse.ravel() == r)
                 new = mode_values(self.switch_columns(t[columns], x[:, columns], row)[free],
@@ -2147,7 +2147,7 @@ class _Run:
                 columns = np.concatenate(parts)
                 tt, xx = t[columns], x[:, columns]
                 per_point = self.point_modes(tt, xx, modes_by_id[int(mode)], relevant)
-                unique, inverse = np.unique(per_point, axis=0, return_inverse=True)
+                unique, inverse = _unique_rows(per_point)
                 for r, row in enumerate(unique):
                     chosen = np.flatnonzero(inverse.ravel() == r)
                     cols = columns[chosen]
@@ -2180,6 +2180,22 @@ class _Run:
             jumps=[(time, dict(zip(model.STATE_NAMES, before)), dict(zip(model.STATE_NAMES, after)))
                    for time, before, after in self.jumps],
         )
+
+
+def _unique_rows(rows):
+    """``np.unique(rows, axis=0, return_inverse=True)``, at once for the common case of a segment
+    whose points are all in one mode (numpy sorts the rows as bytes, slow for long segments)."""
+    if len(rows) and (rows == rows[0]).all():
+        return rows[:1], np.zeros(len(rows), dtype=np.intp)
+    if rows.ndim == 2 and rows.size and np.isfinite(rows).all() and (rows == np.round(rows)).all():
+        low = rows.min(axis=0)
+        base = rows.max(axis=0) - low + 1
+        if np.sum(np.log2(base)) < 52:         # each row as one exact integer: a 1-d unique
+            weights = np.concatenate(([1.0], np.cumprod(base[:-1])))
+            keys = (rows - low) @ weights
+            _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+            return rows[first], inverse.ravel()
+    return np.unique(rows, axis=0, return_inverse=True)
 
 
 def output_grid(t_start, t_end, dt):

@@ -182,3 +182,19 @@ def test_write_csv_round_trips_exactly():
     data = np.loadtxt(io.StringIO(buffer.getvalue()), delimiter=",", skiprows=1)
     np.testing.assert_array_equal(data[:, 0], result.t)
     np.testing.assert_array_equal(data[:, 2], result.states["x"])
+
+
+def test_the_rows_of_modes_are_grouped_as_numpy_unique_groups_them():
+    from bondc.runtime import _unique_rows
+
+    rng = np.random.default_rng(7)
+    cases = [np.ones((5, 3)), np.array([[0.0, 1.0], [0.0, -1.0], [0.0, 1.0]]), np.array([[0.5, 1.0], [0.5, 2.0]])]
+    for _ in range(200):
+        rows = rng.integers(-2, 3, size=(int(rng.integers(1, 40)), int(rng.integers(1, 8)))).astype(float)
+        rows[:, 0] *= 10.0 ** int(rng.integers(0, 12))          # floor modes can be large integers
+        cases.append(rows)
+    for rows in cases:
+        unique, inverse = _unique_rows(rows)
+        expected, _ = np.unique(rows, axis=0, return_inverse=True)
+        assert np.array_equal(unique[inverse], rows)
+        assert sorted(map(tuple, unique)) == sorted(map(tuple, expected))
