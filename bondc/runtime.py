@@ -357,6 +357,8 @@ class _Model:
         self.WHEN_SWITCHES = optional("WHEN_SWITCHES", tuple, ())
         self.WHEN_ACTIONS = optional("WHEN_ACTIONS", tuple, ())
         self.when_conditions = optional("_when_conditions", lambda f: f, None)
+        self.dae = optional("_dae", lambda f: f, None)
+        self.loop_values = optional("_loop_values", lambda f: f, None)
         self.NATIVE_SOURCE = optional("NATIVE_SOURCE", lambda text: "".join(text), "")
         self.NATIVE_UNAVAILABLE = optional("NATIVE_UNAVAILABLE", str, "")
         self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
@@ -518,7 +520,7 @@ def write_csv(result, path, variables=False):
 
 _METHODS = {"rk45": "RK45", "rk23": "RK23", "dop853": "DOP853", "radau": "Radau", "bdf": "BDF",
             "lsoda": "LSODA"}
-_IMPLICIT = ("Radau", "BDF", "LSODA", "CVODE")
+_IMPLICIT = ("Radau", "BDF", "LSODA", "CVODE", "IDA")
 _EPS = np.finfo(float).eps
 _CREEP = 1e-12          # a step this small relative to t does not advance the solution ...
 _CREEP_STEPS = 200      # ... and this many of them in a row mean the run is stuck
@@ -545,7 +547,7 @@ def _creeping(solver, count: int) -> int:
 
 _CVODE_METHODS = {"cvode": "BDF", "cvode-bdf": "BDF", "cvode-adams": "Adams"}
 #: Every solver name an experiment may give: SUNDIALS CVODE, then scipy's ``solve_ivp`` methods.
-SOLVER_NAMES = ("CVODE", "CVODE-BDF", "CVODE-Adams") + tuple(_METHODS.values())
+SOLVER_NAMES = ("CVODE", "CVODE-BDF", "CVODE-Adams", "IDA") + tuple(_METHODS.values())
 DEFAULT_SOLVER = "CVODE"
 
 
@@ -808,11 +810,134 @@ class CVODE_Adams(CvodeSolver):  # noqa: N801  (named like the solver name users
     variant = "Adams"
 
 
+class IDA:
+    """SUNDIALS IDA (through scikit-sundae) behind the same stepping interface as :class:`CvodeSolver`.
+
+    Given ``dae`` (the model's ``_dae`` with the modes frozen: (t, x, z) -> (dx/dt, loop residuals))
+    and ``loops`` ((t, x) -> z, the loops solved), it integrates the DAE form: the unknowns of the
+    algebraic loops are IDA's algebraic variables, solved together with the states at every step
+    instead of by a Newton iteration of their own inside every right-hand side evaluation. Without
+    them (a model with no loop, a sliding or unfrozen interval, whose right-hand side is a
+    combination) it integrates ``dx/dt = fun(t, x)`` as the implicit ODE ``x' - fun(t, x) = 0``.
+    ``y`` and ``dense_output`` are the states alone.
+
+    >>> solver = IDA(lambda t, y: -y, 0.0, np.array([1.0]), 1.0, rtol=1e-10, atol=1e-12)
+    >>> while solver.status == "running":
+    ...     _ = solver.step()
+    >>> round(float(solver.y[0]), 8), solver.t
+    (0.36787944, 1.0)
+    """
+
+    variant = "IDA"
+
+    def __init__(self, fun, t0, y0, t_bound, *, rtol=1e-6, atol=1e-9, max_step=np.inf, first_step=None,
+                 jac=None, pattern=None, dae=None, loops=None):
+        os.environ.setdefault("SUNLOGGER_WARNING_FILENAME", os.devnull)
+        os.environ.setdefault("SUNLOGGER_ERROR_FILENAME", os.devnull)
+        try:
+            from sksundae.ida import IDA as SundialsIda
+        except ImportError as error:
+            raise ValueError(f"SUNDIALS (scikit-sundae) cannot be imported: {error}; reinstall scikit-sundae "
+                             f"or choose a scipy solver (solver = \"Radau\")") from None
+        self.fun, self.jac_function = fun, jac
+        self.t_bound = float(t_bound)
+        self.t, self.t_old = float(t0), None
+        x0 = np.array(y0, dtype=float)
+        self.n = x0.size
+        self.nfev = self.njev = self.nlu = 0
+        self.jacobian_fallbacks, self.first_fallback = 0, None
+        self.linear_solver = "dense"
+        z0 = np.zeros(0)
+        if dae is not None:
+            with np.errstate(all="ignore"):
+                z0 = np.asarray(loops(t0, x0), dtype=float)
+            if not np.all(np.isfinite(z0)):
+                dae, z0 = None, np.zeros(0)         # no consistent start: the loops solved per evaluation
+        self.dae, self.size = dae, self.n + z0.size
+        with np.errstate(all="ignore"):
+            rate = np.asarray(dae(t0, x0, z0)[0] if dae is not None else fun(t0, x0), dtype=float)
+            # the loops' unknowns change too (an algebraic variable follows the inputs and states):
+            # IDA's first error test needs their rates, which the residual does not give; central
+            # differences of the solved loops along the states' rates
+            z_rate = np.zeros(z0.size)
+            if z0.size:
+                h = 1e-6 * max(abs(self.t_bound - float(t0)), 1e-300)
+                ahead = np.asarray(loops(t0 + h, x0 + h * rate), dtype=float)
+                behind = np.asarray(loops(t0 - h, x0 - h * rate), dtype=float)
+                z_rate = np.where(np.isfinite(ahead - behind), (ahead - behind) / (2 * h), 0.0)
+        self.y = x0
+        self.status = "running" if self.t < self.t_bound else "finished"
+        options = {"rtol": float(rtol), "atol": float(atol),
+                   "max_step": 0.0 if not np.isfinite(max_step) else float(max_step),
+                   "first_step": float(first_step or 0.0), "max_num_steps": 100000}
+        if z0.size:
+            options["algebraic_idx"] = np.arange(self.n, self.size)
+            # the loops' unknowns made consistent to IDA's own Newton tolerance first (IDACalcIC)
+            options.update(calc_initcond="yp0", calc_init_dt=1e-3 * (self.t_bound - self.t))
+        elif jac is not None:
+            options["jacfn"] = self._jacobian
+        self._ida = SundialsIda(self._residual, **options)
+        self._ida.init_step(self.t, np.concatenate([x0, z0]),
+                            np.concatenate([rate, z_rate]))
+
+    def _residual(self, t, y, yp, res):
+        self.nfev += 1
+        if self.dae is not None:
+            rate, loops = self.dae(t, y[:self.n], y[self.n:])
+            res[:self.n] = yp[:self.n] - rate
+            res[self.n:] = loops
+        else:
+            res[:] = yp - self.fun(t, y)
+
+    def _jacobian(self, t, y, yp, res, cj, JJ):
+        """dF/dy + cj dF/dy' = cj I - d fun/dx (the ODE form); finite differences where not finite."""
+        self.njev += 1
+        matrix = np.asarray(self.jac_function(t, y), dtype=float)
+        if not np.all(np.isfinite(matrix)):
+            matrix = CvodeSolver.difference_jacobian(self, t, np.array(y), np.asarray(self.fun(t, y)))
+            if not self.jacobian_fallbacks:
+                self.first_fallback = float(t)
+            self.jacobian_fallbacks += 1
+        JJ[:, :] = cj * np.eye(self.n) - matrix
+
+    def step(self):
+        """One internal step towards ``t_bound``; None, or the solver's message when it failed."""
+        if self.status != "running":
+            raise RuntimeError("the solver is not running")
+        for _ in range(2):      # after an interpolation IDA first returns the step it had already taken
+            result = self._ida.step(self.t_bound, "onestep", self.t_bound)
+            if not result.success:
+                self.status = "failed"
+                return f"IDA: {result.message}"
+            if result.t != self.t:
+                break
+        self.t_old, self.t = self.t, float(result.t)
+        self.y = np.array(result.y[:self.n], dtype=float)
+        if self.t >= self.t_bound:
+            self.status = "finished"
+        return None
+
+    def dense_output(self):
+        """``x(t)`` for ``t`` inside the last step, from IDA's interpolating polynomial."""
+        t_old, t_new, y_new = self.t_old, self.t, self.y.copy()
+
+        def interpolate(tt):
+            tt = float(tt)
+            if tt == t_new:
+                return y_new.copy()
+            tt = min(max(tt, t_old), t_new)
+            return np.array(self._ida.step(tt, "normal").y[:self.n], dtype=float)
+
+        return interpolate
+
+
 def solver_class(method):
-    """The ``OdeSolver``-like class for a solver name (any case): CVODE, or a ``solve_ivp`` method."""
+    """The ``OdeSolver``-like class for a solver name (any case): CVODE, IDA, or a ``solve_ivp`` method."""
     if isinstance(method, type):
         return method
     lowered = str(method).lower()
+    if lowered == "ida":
+        return IDA
     if lowered in _CVODE_METHODS:
         return CVODE_Adams if _CVODE_METHODS[lowered] == "Adams" else CVODE
     name = _METHODS.get(lowered)
@@ -1392,10 +1517,17 @@ class _Run:
         self.recent_events = [te for te in self.recent_events if te > t - window]
         return len(self.recent_events) > self.max_event_rate
 
-    def new_solver(self, fun, jac, t, y, t_stop):
+    def new_solver(self, fun, jac, t, y, t_stop, modes=None):
+        """The solver for one segment; with IDA and ``modes`` (a frozen segment) of a model with
+        algebraic loops, the DAE form (:class:`IDA`)."""
         options = dict(self.options)
         if self.implicit:
             options["jac"] = jac
+        if self.method is IDA and modes is not None and self.model.dae is not None:
+            frozen = np.array(modes)
+            options["dae"] = lambda tt, xx, zz: self.model.dae(tt, xx, zz, self.p, frozen)
+            options["loops"] = lambda tt, xx: self.model.loop_values(tt, xx, self.p, frozen)
+            self.stats["dae"] = True
         if issubclass(self.method, CvodeSolver) and self.model.JACOBIAN_PATTERN is not None:
             options["pattern"] = self.model.JACOBIAN_PATTERN
         if "first_step" in options and options["first_step"] > t_stop - t:
@@ -1522,7 +1654,7 @@ class _Run:
             # failure to diagnose): go on from its last accepted step, one step at a time
             _, t, y = outcome
             values_old = self.switches_at(t, y, modes, index)
-        solver = self.new_solver(fun, jac, t, y, t_stop)
+        solver = self.new_solver(fun, jac, t, y, t_stop, modes)
         creeping = 0
         while True:
             message = solver.step()

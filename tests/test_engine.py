@@ -297,6 +297,23 @@ def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     assert len(switching) >= 8 and len(switching) % 2 == 0
 
 
+def test_ida_integrates_the_diode_bridge_as_a_dae_to_the_same_answer(tmp_path):
+    """solver = "IDA": the loop's seven unknowns are IDA's algebraic variables (no Newton iteration
+    inside the right-hand side); the answer is the nodal analysis's, switching in pairs as with CVODE."""
+    model = tmp_path / "bridge.bg"
+    model.write_text((ENGINE / "diode_bridge.bg").read_text().replace('    rtol  = 1e-8', '    solver = "IDA"\n    rtol  = 1e-8'))
+    result = run(model)
+    assert result.complete, result.message
+    assert result.stats.get("dae") is True and result.stats.get("code") != "native"
+    V, fs, Cf = 10.0, 50.0, 200e-6
+    reference = solve_ivp(lambda t, y: [_bridge_network(V * np.sin(2 * np.pi * fs * t), y[0]) / Cf],
+                          (0.0, 0.06), [0.0], method="DOP853", rtol=1e-11, atol=1e-12, dense_output=True)
+    np.testing.assert_allclose(result.outputs["vout"], reference.sol(result.t)[0], rtol=0, atol=1e-5 * V)
+    cvode = run(ENGINE / "diode_bridge.bg")
+    switching = [time for time, label in result.events if label.startswith("if ")]
+    assert switching == pytest.approx([time for time, label in cvode.events if label.startswith("if ")], abs=1e-9)
+
+
 def test_nozzle_fills_choked_then_subsonic_to_the_supply_pressure_and_stays():
     # ISO 6358 nozzle, isothermal tank: dP/dt = k*psi with k = Rg*T0*Cs*Ps/V. Choked (psi = 1) while
     # P <= b*Ps: P = P0 + k*t until t_b. Subsonic: u = (P/Ps - b)/(1 - b) = sin(c*(t - t_b)) with

@@ -72,7 +72,7 @@ MODULE_NAMES = (
     "_when_conditions", "DEFAULTS",
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
-    "_time_breaks", "_MODEL",
+    "_time_breaks", "_MODEL", "_dae", "_loop_values", "_za", "_ra", "DAE_SIZE",
 )
 _INDENT = "    "
 _LAW_LIMIT = 200
@@ -382,6 +382,7 @@ class _Emitter:
     def __init__(self, plan: _Plan, source: str, experiment, module_dir, standalone=True):
         self.standalone = standalone
         self.plan = plan
+        self.dae_offsets = None         # block number -> offset in _dae's unknowns, while _dae is printed
         self.source = source
         self.experiment = experiment
         ss = plan.ss
@@ -526,10 +527,14 @@ class _Emitter:
             raw = self.printer()
             residuals = ", ".join(raw.doprint(r) for r in statement.data["residuals"])
             guesses = ", ".join(raw.doprint(g) for g in statement.data["guesses"])
-            return [f"def _residual{number}(_z):",
-                    f"{_INDENT}{unknowns} = _z",
-                    f"{_INDENT}return ({residuals},)",
-                    f"{unknowns} = solve_block(_residual{number}, {number}, ({guesses},))"]
+            lines = [f"def _residual{number}(_z):",
+                     f"{_INDENT}{unknowns} = _z",
+                     f"{_INDENT}return ({residuals},)"]
+            if self.dae_offsets is not None:        # _dae: the unknowns are the DAE's algebraic variables
+                start, size = self.dae_offsets[number], len(statement.defines)
+                return lines + [f"{unknowns} = _za[{start}:{start + size}]",
+                                f"_ra.extend(_residual{number}(({unknowns})))"]
+            return lines + [f"{unknowns} = solve_block(_residual{number}, {number}, ({guesses},))"]
         # block_jac
         number, size, columns = statement.data["number"], statement.data["size"], statement.data["states"]
         rz = exprs[: size * size]
@@ -586,6 +591,7 @@ class _Emitter:
             "def _rhs(t, x, p, m):", "State derivatives with the modes m frozen.",
             statements, plan.derivatives,
             lambda texts: ["return np.array([" + ", ".join(texts) + "], dtype=float)"]))
+        parts += self.dae_functions()
         entries = plan.jacobian_entries
         keys = sorted(entries, key=lambda key: (key[1], key[0]))     # JACOBIAN_PATTERN's order, as in C
 
@@ -613,6 +619,38 @@ class _Emitter:
         parts.append(self.when_functions())
         parts.append(_WRAPPERS)
         return "\n\n\n".join(parts) + "\n"
+
+    def dae_functions(self) -> list[str]:
+        """For a model whose derivatives go through algebraic loops: the same equations as a DAE
+        for IDA, ``_dae(t, x, _za, p, m)`` -> (derivatives, loop residuals) with the loops'
+        unknowns given (``_za``, in block order) instead of solved, and ``_loop_values(t, x, p, m)``
+        (the unknowns solved, for consistent initial values). None of this without a loop."""
+        plan = self.plan
+        kept = self.reduced.get((id(plan.statements), tuple(plan.derivatives)), ([],))[0]
+        blocks = [statement for statement in kept if statement.kind == "block"]
+        if not blocks:
+            return []
+        self.dae_offsets, start = {}, 0
+        for statement in blocks:
+            self.dae_offsets[statement.data["number"]] = start
+            start += len(statement.defines)
+        try:
+            dae = self.function(
+                "def _dae(t, x, _za, p, m):",
+                "The state equations as a DAE: (derivatives, residuals of the algebraic loops) with the "
+                "loops' unknowns _za.",
+                plan.statements, plan.derivatives,
+                lambda texts: ["return np.array([" + ", ".join(texts) + "], dtype=float), np.array(_ra, "
+                               "dtype=float)"],
+                prologue=["_ra = []"])
+        finally:
+            self.dae_offsets = None
+        unknowns = [symbol for statement in blocks for symbol in statement.defines]
+        values = self.function(
+            "def _loop_values(t, x, p, m):", "The unknowns of the algebraic loops (_dae's _za), solved.",
+            plan.statements, unknowns,
+            lambda texts: ["return np.array([" + ", ".join(texts) + "], dtype=float)"])
+        return [dae, values, f"DAE_SIZE = {start}"]
 
     def when_functions(self) -> str:
         """``_when_conditions`` (each clause's condition with the modes m) and one function per

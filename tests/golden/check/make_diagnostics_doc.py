@@ -80,7 +80,7 @@ d("E313", "string or list where a number is expected (or the reverse)", "A strin
 d("E314", "unknown experiment setting", "A setting inside `experiment ... end` is not one of `t_end solver rtol atol max_step cycle outputs first_step dt`.", "Use the suggested setting.")
 d("E315", "reserved name", "`t` (time) and `pi` cannot be defined as names, and a function cannot take the name of a built-in.", "Choose another name.")
 d("E316", "name not allowed here", "A name that exists but cannot be used where it is written: a parameter (a constant) using an input, `t` or a graph variable; an input (a signal of `t` and parameters) using a graph variable, output or state; a function body using anything but its arguments; `csv(...)` outside an input or law; an element or function used as a value. The hint says what the place may use.", "Pass the value as a function argument, move the expression into an output or element law, or use the element's variables (`X.e`, `X.f`).")
-d("E317", "invalid setting value", "A setting has a value outside its range: an unknown solver (solvers are SUNDIALS `CVODE` (BDF, the default), `CVODE-BDF`, `CVODE-Adams` and the `scipy.integrate.solve_ivp` methods `RK45 RK23 DOP853 Radau BDF LSODA`), or a time or tolerance that is not positive.", "Use one of the listed solvers, or a positive value.")
+d("E317", "invalid setting value", "A setting has a value outside its range: an unknown solver (solvers are SUNDIALS `CVODE` (BDF, the default), `CVODE-BDF`, `CVODE-Adams`, `IDA` and the `scipy.integrate.solve_ivp` methods `RK45 RK23 DOP853 Radau BDF LSODA`), or a time or tolerance that is not positive.", "Use one of the listed solvers, or a positive value.")
 d("E318", "unknown experiment", "`--experiment NAME` names an experiment the model does not have.", "Use one of the listed experiments.")
 d("E330", "unknown library model", "An instance's kind is qualified with a library (`hydraulics.Orifice`) that has no such model, or no imported file has that library name. A library's name is its file name without `.bg`, or `NAME` for `import \"std:NAME\"`.", "Import the library at file level, or fix the model's name.")
 d("E331", "ambiguous model name", "Two imported files define a model of the same name and an instance uses it unqualified.", "Qualify the name with its library: `hydraulics.Cylinder`.")
@@ -230,9 +230,13 @@ d("E812", "too many events",
   "A switch (`if`, `sign`, `step`, a `table` corner) changed mode more than 100000 times: the run stops "
   "instead of creeping on. Chattering that the sliding-mode and chattering guards absorb does not count "
   "(W820). Reaching the limit takes a long run; the example lowers it through the runtime's `max_events` "
-  "argument to show the message.",
+  "argument to show the message. E812 also stops a run whose `when` clause fires ever faster towards an "
+  "instant (Zeno behaviour: a bouncing ball coming to rest): the message gives the instant the firings "
+  "accumulate at, the diagnostic points at the clause, and the bounces before it are kept.",
   "Smooth the law near its switching surface (a narrow linear band around zero speed instead of "
-  "`sign(v)`), or simulate a shorter time.")
+  "`sign(v)`), or simulate a shorter time. For Zeno behaviour, say in the model what happens after the "
+  "accumulation instant: a discrete variable that a `when` clause sets once the rebound is negligible and "
+  "that holds the ball on the floor.")
 d("E813", "interrupted",
   "The run was interrupted (Ctrl-C). It cannot be triggered from a model. What was computed is kept and "
   "written with `-o`; the command exits with status 1. The example interrupts a run from its progress "
