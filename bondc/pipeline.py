@@ -81,9 +81,56 @@ def derive_file(path, *, model: str | None = None, experiment: str | None = None
     graph, warnings = semantic.load(Path(path), model=model,
                                     experiment=experiment if experiment is not None else semantic.FIRST,
                                     sets=parsed)
+    if parsed and use_cache:
+        bound = _bind_to_base(path, model, experiment, graph, warnings, parsed)
+        if bound is not None:
+            return bound
     causal = assign_causality(graph)
     derived = Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment),
                       tuple(parsed))
     if entry is not None:
         entry.store(derived)
     return derived
+
+
+def structure(graph) -> tuple:
+    """What a model's derivation and compiled module are built from besides parameter values: the
+    parameters' names, the inputs (the experiments' too). Two checks of one file with the same
+    structure differ only in values, which the compiled module takes as its parameter vector."""
+    experiment_inputs = tuple(sorted((name, repr(signal)) for experiment in graph.experiments.values()
+                                     for name, signal in experiment.inputs.items()))
+    return (tuple(graph.parameters), tuple((name, repr(signal)) for name, signal in graph.inputs.items()),
+            experiment_inputs)
+
+
+def _bind_to_base(path, model, experiment, graph, warnings, parsed) -> Derived | None:
+    """``--set`` values bound late: the model derived and compiled without them (from the compile
+    cache, or derived now and stored there) with ``graph``'s values (checked with them) as its
+    parameters. None when the base model does not check or differs in structure."""
+    from bondc.errors import BondcError
+
+    try:
+        base = derive_file(path, model=model, experiment=experiment, sets=(), cache=True)
+    except BondcError:
+        return None
+    if structure(base.graph) != structure(graph) or _texts(base.graph) != _texts(graph):
+        return None
+    return Derived(graph, tuple(warnings), base.causal, rebind(base.state_space, graph),
+                   chosen_experiment(graph, experiment), tuple(parsed))
+
+
+def _texts(graph) -> tuple:
+    """The text of every file a checked model read (not the --set texts)."""
+    return tuple(sorted((name, source.text) for name, source in graph.sources.items() if source.path is not None))
+
+
+def rebind(state_space, graph):
+    """``state_space`` with ``graph``'s parameter values (and ``graph``); its compiled module is
+    ``state_space``'s, given every parameter value (``bound_base``, used by ``simulate``)."""
+    import dataclasses
+
+    values = {name: (symbol, float(graph.parameters[name].value) if name in graph.parameters else value)
+              for name, (symbol, value) in state_space.parameters.items()}
+    bound = dataclasses.replace(state_space, parameters=values, graph=graph)
+    object.__setattr__(bound, "bound_base", getattr(state_space, "bound_base", None) or state_space)
+    return bound

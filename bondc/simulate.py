@@ -239,7 +239,10 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))
     p = _check_overrides(ss, overrides)
-    namespace = compile_model(ss)
+    base = getattr(ss, "bound_base", None)         # values bound late (--set): the base's module
+    namespace = compile_model(base if base is not None else ss)
+    if base is not None:
+        p = {**{name: value for name, (_, value) in ss.parameters.items()}, **p}
     if p:
         _check_bound_divisors(ss, namespace, p)
     bar = ProgressBar(0.0, float(settings["t_end"])) if progress else None

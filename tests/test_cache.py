@@ -84,15 +84,42 @@ def test_an_edit_options_or_no_cache_are_misses(tmp_path, isolated):
     _, loads = isolated
     path = _write(tmp_path / "drive.bg")
     derive_file(path)
-    derive_file(path, sets=["k=400"])                  # other overrides: another entry
+    derive_file(path, sets=["k=400"])                  # other values: checked with them (bound late)
     assert len(loads) == 2
     assert derive_file(path, sets=["k=400"]).graph.parameters["k"].value == 400.0
-    assert len(loads) == 2
+    assert len(loads) == 3
     _write(path, b=30)                                 # the file changed
     assert derive_file(path).graph.parameters["b"].value == 30.0
-    assert len(loads) == 3
-    derive_file(path, cache=False)
     assert len(loads) == 4
+    derive_file(path, cache=False)
+    assert len(loads) == 5
+
+
+def test_set_values_are_bound_late_to_the_cached_model_with_the_same_results(tmp_path, isolated, monkeypatch):
+    """--set k=400 on a cached model: checked with the value, not derived or generated again; the run
+    equals a derivation from scratch with the value (no cache), point for point."""
+    path = _write(tmp_path / "drive.bg")
+    base = derive_file(path)
+    simulate(base.state_space, base.experiment)          # its module is in the cache now
+    scratch = derive_file(path, sets=["k=400", "b=20 [N*s/m]"], cache=False)
+    expected = simulate(scratch.state_space, scratch.experiment)
+
+    def no_derivation(*args, **kwargs):
+        raise AssertionError("the equations should not be derived again")
+
+    monkeypatch.setattr("bondc.equations.derive", no_derivation)
+    monkeypatch.setattr("bondc.codegen.emit", no_derivation)
+    bound = derive_file(path, sets=["k=400", "b=20 [N*s/m]"])
+    assert bound.state_space.parameters["k"][1] == 400.0 and bound.graph.parameters["b"].value == 20.0
+    result = simulate(bound.state_space, bound.experiment)
+    np.testing.assert_array_equal(result.t, expected.t)
+    np.testing.assert_array_equal(result.outputs["x"], expected.outputs["x"])
+    # the step response of m x'' + b x' + k x = 10 N from t = 0.1 s, with the bound values
+    m, b, k, tau = 2.0, 20.0, 400.0, 1.0 - 0.1
+    wn, zeta = np.sqrt(k / m), b / (2 * np.sqrt(k * m))
+    wd = wn * np.sqrt(1 - zeta ** 2)
+    x = 10 / k * (1 - np.exp(-zeta * wn * tau) * (np.cos(wd * tau) + zeta / np.sqrt(1 - zeta ** 2) * np.sin(wd * tau)))
+    assert result.outputs["x"][-1] == pytest.approx(x, rel=1e-4)
 
 
 def test_a_changed_import_is_a_miss(tmp_path, isolated):

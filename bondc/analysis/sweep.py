@@ -662,11 +662,9 @@ def _experiment_selector(setup: _Setup):
 
 
 def _structure(graph) -> tuple:
-    """What the compiled module is built from besides parameter values: their names, the inputs."""
-    experiment_inputs = tuple(sorted((name, repr(signal)) for experiment in graph.experiments.values()
-                                     for name, signal in experiment.inputs.items()))
-    return (tuple(graph.parameters), tuple((name, repr(signal)) for name, signal in graph.inputs.items()),
-            experiment_inputs)
+    from bondc.pipeline import structure
+
+    return structure(graph)
 
 
 def _derive(graph):
