@@ -1914,6 +1914,11 @@ class _Run:
         """
         count = sides.shape[1]
         alpha = np.full(count, 0.5) if guess is None else np.clip(np.array(guess, dtype=float), 0.0, 1.0)
+        if count == 1:      # one switch: the rate is linear in alpha, alpha*r+ + (1 - alpha)*r- = 0
+            plus, minus = rates[sides[:, 0] > 0, 0][0], rates[sides[:, 0] < 0, 0][0]
+            if not (math.isfinite(plus) and math.isfinite(minus)):
+                return np.full(1, np.nan)
+            return alpha if minus == plus else np.array([minus / (minus - plus)])
         for _ in range(20):
             weights = self.corner_weights(alpha, sides)
             residual = weights @ rates
