@@ -522,14 +522,15 @@ def _display_names(ss) -> dict[sympy.Symbol, sympy.Symbol]:
             taken.add(name)
             renamed[symbol] = sympy.Symbol(name, real=True)
 
+    owned = {s.qualified: s for s in graph.states if s.owner is not None}     # the graph says whose
     for state in ss.states:
-        if state.element is not None and "." in state.name:
-            owner, local = state.name.rsplit(".", 1)      # valve.chamber.p: p of valve.chamber
-            rename(state.symbol, f"{local}_{owner}")
+        own = owned.get(state.name)
+        if own is not None:                               # valve.chamber.p: p of valve.chamber
+            rename(state.symbol, f"{own.name}_{own.owner}")
     for name, symbol in ss.eliminated.items():
-        if "." in symbol.name:
-            owner, local = symbol.name.rsplit(".", 1)
-            rename(symbol, f"{local}_{owner}")
+        own = owned.get(name)
+        if own is not None:
+            rename(symbol, f"{own.name}_{own.owner}")
     for number, (effort, flow) in ss.bond_symbols.items():
         bond = graph.bond(number)
         for which, symbol in (("e", effort), ("f", flow)):
@@ -697,10 +698,9 @@ def _state_description(graph: BondGraph, state) -> str:
     if state.element is None or state.element not in graph.elements:
         return ""
     element = graph.elements[state.element]
-    local = state.name.rsplit(".", 1)[-1]
     own = next((s for s in element.states if s.qualified == state.name), None)
     default = own is not None and own.rate is None          # q of a C, p of an I (not a custom state)
-    what = {"q": "generalised displacement", "p": "generalised momentum"}.get(local, "state") if default else "state"
+    what = {"q": "generalised displacement", "p": "generalised momentum"}.get(own.name, "state") if default else "state"
     return f"{what} of {element.kind} {element.name}"
 
 
