@@ -2286,8 +2286,13 @@ class _Run:
                 per_point = self.point_modes(tt, xx, modes_by_id[int(mode)], relevant)
                 unique, inverse = _unique_rows(per_point)
                 for r, row in enumerate(unique):
-                    chosen = np.flatnonzero(inverse.ravel() == r)
-                    cols = columns[chosen]
+                    if len(unique) == 1:
+                        chosen, cols = slice(None), columns
+                    else:
+                        chosen = np.flatnonzero(inverse.ravel() == r)
+                        cols = columns[chosen]
+                    if cols.size and cols[-1] - cols[0] + 1 == cols.size:     # contiguous: a view, no scatter
+                        cols = slice(int(cols[0]), int(cols[-1]) + 1)
                     outputs[:, cols] = self.evaluate_columns(model.outputs, tt[chosen], xx[:, chosen], row, n_out)
                     variables[:, cols] = self.evaluate_columns(model.variables, tt[chosen], xx[:, chosen], row,
                                                                n_var)

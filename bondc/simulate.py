@@ -46,6 +46,7 @@ temporary file in the target's directory and rename it over the target.
 from __future__ import annotations
 
 import difflib
+import math
 import io
 import sys
 import time
@@ -283,6 +284,18 @@ def result_units(graph) -> dict:
     return units
 
 
+def _all_finite(series) -> bool:
+    """Whether every value of every series is finite, checked per matrix the series are rows of
+    (the runtime's results are rows of one matrix: one sum instead of thousands). False when unsure."""
+    bases = {}
+    for values in series:
+        base = values.base if isinstance(values, np.ndarray) else None
+        if base is None or getattr(base, "ndim", 0) != 2:
+            return False
+        bases[id(base)] = base
+    return all(math.isfinite(np.sum(base)) for base in bases.values())
+
+
 def _result(ss, experiment, namespace, raw, settings) -> SimResult:
     bond_names = namespace["BOND_VARIABLES"]
     graph = getattr(ss, "graph", None)
@@ -298,7 +311,11 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
     if raw.failure is not None:
         result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw))
     for group, values in (("output", result.outputs), ("bond variable", result.bonds)):
+        if _all_finite(values.values()):
+            continue
         for name, series in values.items():
+            if math.isfinite(np.sum(series)):     # the common case, at once (a sum is nan/inf when any is)
+                continue
             bad = np.flatnonzero(~np.isfinite(series))
             if bad.size:
                 alias = _alias(graph, name) if group == "bond variable" else None
