@@ -27,6 +27,7 @@ then known and differ is an error (E210) naming both dimensions.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import functools
 from fractions import Fraction
 from typing import Callable, Mapping
 
@@ -63,9 +64,8 @@ class Form:
     def plus(self, other: "Form", sign: int = 1) -> "Form":
         terms = dict(self.terms)
         for index, coefficient in other.terms:
-            terms[index] = terms.get(index, Fraction(0)) + sign * coefficient
-        const = tuple(a + sign * b for a, b in zip(self.const, other.const))
-        return Form(const, tuple(sorted((i, c) for i, c in terms.items() if c != 0)))
+            terms[index] = terms.get(index, 0) + (coefficient if sign == 1 else -coefficient)
+        return Form(_add(self.const, other.const, sign), tuple(sorted((i, c) for i, c in terms.items() if c != 0)))
 
     def times(self, factor: Fraction) -> "Form":
         return Form(tuple(a * factor for a in self.const), tuple((i, c * factor) for i, c in self.terms if c * factor))
@@ -74,8 +74,25 @@ class Form:
 Dim = object     # Form | FREE | UNKNOWN
 
 
+def _add(a: tuple, b: tuple, factor=1) -> tuple:
+    """a + factor*b for exponent vectors (Fractions are slow: nothing is computed for a zero b,
+    the common dimensionless or already-substituted case)."""
+    if b == _ZERO:
+        return a
+    if factor == 1:
+        return tuple(x + y for x, y in zip(a, b))
+    if factor == -1:
+        return tuple(x - y for x, y in zip(a, b))
+    return tuple(x + factor * y for x, y in zip(a, b))
+
+
+@functools.lru_cache(maxsize=4096)
+def _text(vector: tuple) -> str:
+    return SIUnit(1.0, vector + (Fraction(0),), "").dimension_text()
+
+
 def text(vector) -> str:
-    return SIUnit(1.0, tuple(vector) + (Fraction(0),), "").dimension_text()
+    return _text(tuple(vector))
 
 
 def _mul(a, b, sign: int = 1):
@@ -308,32 +325,48 @@ class _Checker:
 
 
 def _substitute(form: Form, known: Mapping[int, tuple]) -> Form:
-    const = list(form.const)
+    const = form.const
     terms = []
     for index, coefficient in form.terms:
         if index in known:
-            const = [a + coefficient * b for a, b in zip(const, known[index])]
+            const = _add(const, known[index], coefficient)
         else:
             terms.append((index, coefficient))
-    return Form(tuple(const), tuple(terms))
+    return Form(const, tuple(terms))
 
 
 def _solve(equations: list[_Equation], source: dict[int, _Equation] | None = None) -> dict[int, tuple]:
-    """Fix every unknown that some equation determines, tier by tier (``source``: which one)."""
+    """Fix every unknown that some equation determines, tier by tier (``source``: which one).
+
+    Passes over the equations in order, as often as one fixes an unknown; each equation's
+    difference ``left - right`` is kept with the known unknowns substituted, updated only when one
+    of its own unknowns became known, and left out once it has none (it cannot change again)."""
     known: dict[int, tuple] = {}
     source = {} if source is None else source
+    forms: dict[int, Form] = {}         # id(equation) -> its difference, known unknowns substituted
+    settled: set[int] = set()           # equations without unknowns
     for tier in sorted({e.tier for e in equations}):
         active = [e for e in equations if e.tier <= tier]
         changed = True
         while changed:
             changed = False
             for equation in active:
-                difference = _substitute(equation.left.plus(equation.right, -1), known)
+                key = id(equation)
+                if key in settled:
+                    continue
+                difference = forms.get(key)
+                if difference is None:
+                    difference = _substitute(equation.left.plus(equation.right, -1), known)
+                elif any(index in known for index, _ in difference.terms):
+                    difference = _substitute(difference, known)
+                forms[key] = difference
                 if len(difference.terms) == 1:
                     index, coefficient = difference.terms[0]
                     known[index] = tuple(-c / coefficient for c in difference.const)
                     source[index] = equation
                     changed = True
+                elif not difference.terms:
+                    settled.add(key)
     return known
 
 
