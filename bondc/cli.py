@@ -479,6 +479,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.set_defaults(run=_cmd_sweep)
 
     lsp_ = commands.add_parser("lsp", help="the language server for editors (Language Server Protocol on stdio)")
+    lsp_.add_argument("--stdio", action="store_true",
+                      help="talk over stdin/stdout (the only transport; accepted because editors' clients pass it)")
     lsp_.set_defaults(run=_cmd_lsp)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "

@@ -531,6 +531,7 @@ _MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippo
 _EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant
 _ZENO_FIRINGS = 16       # a when clause firing this often with ever shorter intervals ...
 _ZENO_INTERVAL = 1e-4    # ... the last shorter than this fraction of the run, accumulates (Zeno)
+_ZENO_RATIO = 0.98       # ... each at most this times the one before (a frequency sweep's shrink slower)
 
 
 def _all_finite(values) -> bool:
@@ -1450,16 +1451,18 @@ class _Run:
         """Stop the run where the firings of when clause ``k`` accumulate (Zeno behaviour, a bouncing
         ball coming to rest): the model says nothing about what follows the accumulation point, and
         past it the events can no longer be told apart at the solver's precision (the ball would fall
-        through the floor). Detected when the clause fired ``_ZENO_FIRINGS`` times, each interval
-        shorter than the one before, the last shorter than ``_ZENO_INTERVAL`` of the run, with the
-        geometric limit of the intervals before the end of the run."""
+        through the floor). Detected when the clause fired ``_ZENO_FIRINGS`` times, each interval at
+        most ``_ZENO_RATIO`` times the one before (geometric: the cycles of a frequency sweep shorten
+        far more slowly), the last shorter than ``_ZENO_INTERVAL`` of the run, with the geometric
+        limit of the intervals before the end of the run."""
         times = self.when_times.setdefault(k, [])
         times.append(float(t))
         del times[:-_ZENO_FIRINGS]
         if len(times) < _ZENO_FIRINGS:
             return
         gaps = np.diff(times)
-        if not (np.all(gaps > 0) and np.all(gaps[1:] < gaps[:-1])) or gaps[-1] > _ZENO_INTERVAL * self.span:
+        if not (np.all(gaps > 0) and np.all(gaps[1:] <= _ZENO_RATIO * gaps[:-1])) \
+                or gaps[-1] > _ZENO_INTERVAL * self.span:
             return
         ratio = (gaps[-1] / gaps[0]) ** (1.0 / (len(gaps) - 1))
         limit = t + gaps[-1] * ratio / (1.0 - ratio)

@@ -64,7 +64,7 @@ def test_the_grammar_agrees_with_the_parser(tokens, path):
                 assert "keyword.other.bondgraph" in _scopes_at(lines, *where)
                 if statement.unit is not None:
                     unit = statement.unit.span
-                    assert "constant.other.unit.bondgraph" in _scopes_at(lines, unit.line, unit.column)
+                    assert "keyword.other.unit.bondgraph" in _scopes_at(lines, unit.line, unit.column)
                 checked += 1
             elif isinstance(statement, ast.Element) and len(statement.kind) <= 3:
                 kind = statement.kind_span

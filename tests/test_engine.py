@@ -428,6 +428,49 @@ def test_a_ball_bouncing_to_rest_stops_at_the_zeno_time_with_its_when_clause(tmp
     assert len(fired) > 20 and fired[-1] < zeno
 
 
+def test_a_frequency_sweep_counted_by_a_when_clause_is_no_zeno_accumulation():
+    # u = sin(2*pi*(t + 1999 t^2)) rises through 0 at t_n + 1999 t_n^2 = n, n = 1 .. 1999
+    result = run(ENGINE / "chirp_count.bg")
+    assert result.complete, result.message
+    n = np.arange(1, 2000)
+    expected = (-1 + np.sqrt(1 + 4 * 1999 * n)) / (2 * 1999)
+    fired = [time for time, label in result.events if label.startswith("when ")]
+    np.testing.assert_allclose(fired, expected, rtol=1e-9, atol=1e-12)
+    assert result.outputs["cycles"][-1] == 1999
+
+
+def test_the_zeno_detector_stops_geometric_firings_and_not_a_sweep(monkeypatch):
+    """The detector alone, on firing times in closed form: a ball's impacts (intervals x 0.8) stop
+    at their limit; a fast sweep's cycles (19 kHz rising at 2 MHz/s: intervals x 0.995, each
+    5e-5 of the run, whose geometric limit would fall inside the run) do not."""
+    from types import SimpleNamespace
+
+    from bondc import runtime
+    from bondc.runtime import _Run, _Stop
+
+    def detector():
+        return SimpleNamespace(when_times={}, span=1.0, t_end=1.0, model=SimpleNamespace(WHEN_LABELS=("when h < 0",)))
+
+    run_ = detector()
+    limit = 0.5
+    with pytest.raises(_Stop) as stopped:
+        for k in range(40):
+            _Run.check_zeno(run_, 0, limit - 0.05 * 0.8 ** k)
+    assert k < 39 and "accumulate at t=0.5 " in stopped.value.failure["message"]
+    assert stopped.value.failure["when"] == "when h < 0"
+    f0, rate = 19000.0, 2e6              # f = f0 + rate*t: cycle n starts where f0 t + rate t^2/2 = n
+    n = np.arange(1, 200)
+    sweep = (-f0 + np.sqrt(f0 ** 2 + 2 * rate * n)) / rate
+    run_ = detector()
+    for time in sweep:
+        _Run.check_zeno(run_, 0, float(time))
+    monkeypatch.setattr(runtime, "_ZENO_RATIO", 1.0)   # without the ratio bound it would be taken for Zeno
+    run_ = detector()
+    with pytest.raises(_Stop):
+        for time in sweep:
+            _Run.check_zeno(run_, 0, float(time))
+
+
 def test_the_remedy_for_zeno_holds_the_ball_on_the_floor_from_the_right_impact():
     result = run(ENGINE / "ball_at_rest.bg")
     assert result.complete, result.message

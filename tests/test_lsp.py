@@ -19,8 +19,8 @@ COMPONENTS = ROOT / "tests" / "fixtures" / "components" / "circuit.bg"
 class Client:
     """A minimal LSP client: requests and notifications with Content-Length framing."""
 
-    def __init__(self):
-        self.process = subprocess.Popen([sys.executable, "-m", "bondc", "lsp"], stdin=subprocess.PIPE,
+    def __init__(self, *arguments):
+        self.process = subprocess.Popen([sys.executable, "-m", "bondc", "lsp", *arguments], stdin=subprocess.PIPE,
                                         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         self.next_id = 0
         self.notifications = []
@@ -91,6 +91,18 @@ def client():
     c.notify("initialized", {})
     yield c
     c.close()
+
+
+def test_the_server_accepts_the_stdio_flag_editor_clients_pass():
+    """VS Code's language client (TransportKind.stdio), vim-lsp and others start servers with
+    --stdio: bondc lsp --stdio must answer initialize (it exited with E001, found by opening the
+    flagship in VS Code's workbench)."""
+    c = Client("--stdio")
+    try:
+        result = c.request("initialize", {"processId": None, "rootUri": ROOT.as_uri(), "capabilities": {}})
+        assert result["serverInfo"]["name"] == "bondc" and result["capabilities"]["hoverProvider"]
+    finally:
+        c.close()
 
 
 def _position(text, needle, offset=0):
