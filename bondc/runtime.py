@@ -583,6 +583,7 @@ class CvodeSolver:
     """
 
     variant = "BDF"
+    label = "CVODE"
 
     #: From this many states on, a model with a known Jacobian pattern uses a structured linear
     #: solver: banded where the pattern's band is narrow (a chain), else from SPARSE_FROM states
@@ -633,8 +634,8 @@ class CvodeSolver:
         with warnings.catch_warnings():
             # with a sparsity pattern and our own Jacobian, scikit-sundae says it will not approximate one
             warnings.filterwarnings("ignore", message="Custom sparse Jacobian approximation")
-            self._cvode = SundialsCvode(self._rhs, **options)
-        self._cvode.init_step(self.t, self.y)
+            self._sundials = SundialsCvode(self._rhs, **options)
+        self._sundials.init_step(self.t, self.y)
 
     @classmethod
     def linear_solver_for(cls, n, pattern) -> tuple:
@@ -683,21 +684,21 @@ class CvodeSolver:
         """One internal step towards ``t_bound``; None, or the solver's message when it failed."""
         if self.status != "running":
             raise RuntimeError("the solver is not running")
-        for _ in range(2):      # after an interpolation CVODE first returns the step it had already taken
-            result = self._cvode.step(self.t_bound, "onestep", self.t_bound)
+        for _ in range(2):      # after an interpolation SUNDIALS first returns the step it had already taken
+            result = self._sundials.step(self.t_bound, "onestep", self.t_bound)
             if not result.success:
                 self.status = "failed"
-                return f"CVODE: {result.message}"
+                return f"{self.label}: {result.message}"
             if result.t != self.t:
                 break
         self.t_old, self.t = self.t, float(result.t)
-        self.y = np.array(result.y, dtype=float)
+        self.y = np.array(result.y[:self.n], dtype=float)
         if self.t >= self.t_bound:
             self.status = "finished"
         return None
 
     def dense_output(self):
-        """``y(t)`` for ``t`` inside the last step, from CVODE's interpolating polynomial."""
+        """``y(t)`` (the states) for ``t`` inside the last step, from the solver's interpolating polynomial."""
         t_old, t_new, y_new = self.t_old, self.t, self.y.copy()
 
         def interpolate(tt):
@@ -705,7 +706,7 @@ class CvodeSolver:
             if tt == t_new:
                 return y_new.copy()
             tt = min(max(tt, t_old), t_new)
-            return np.array(self._cvode.step(tt, "normal").y, dtype=float)
+            return np.array(self._sundials.step(tt, "normal").y[:self.n], dtype=float)
 
         return interpolate
 
@@ -812,7 +813,8 @@ class CVODE_Adams(CvodeSolver):  # noqa: N801  (named like the solver name users
 
 
 class IDA:
-    """SUNDIALS IDA (through scikit-sundae) behind the same stepping interface as :class:`CvodeSolver`.
+    """SUNDIALS IDA (through scikit-sundae) behind the same stepping interface as :class:`CvodeSolver`
+    (whose ``step`` and ``dense_output`` it shares).
 
     Given ``dae`` (the model's ``_dae`` with the modes frozen: (t, x, z) -> (dx/dt, loop residuals))
     and ``loops`` ((t, x) -> z, the loops solved), it integrates the DAE form: the unknowns of the
@@ -829,7 +831,9 @@ class IDA:
     (0.36787944, 1.0)
     """
 
-    variant = "IDA"
+    variant = label = "IDA"
+    step = CvodeSolver.step
+    dense_output = CvodeSolver.dense_output
 
     def __init__(self, fun, t0, y0, t_bound, *, rtol=1e-6, atol=1e-9, max_step=np.inf, first_step=None,
                  jac=None, pattern=None, dae=None, loops=None):
@@ -877,8 +881,8 @@ class IDA:
             options.update(calc_initcond="yp0", calc_init_dt=1e-3 * (self.t_bound - self.t))
         elif jac is not None:
             options["jacfn"] = self._jacobian
-        self._ida = SundialsIda(self._residual, **options)
-        self._ida.init_step(self.t, np.concatenate([x0, z0]),
+        self._sundials = SundialsIda(self._residual, **options)
+        self._sundials.init_step(self.t, np.concatenate([x0, z0]),
                             np.concatenate([rate, z_rate]))
 
     def _residual(self, t, y, yp, res):
@@ -900,36 +904,6 @@ class IDA:
                 self.first_fallback = float(t)
             self.jacobian_fallbacks += 1
         JJ[:, :] = cj * np.eye(self.n) - matrix
-
-    def step(self):
-        """One internal step towards ``t_bound``; None, or the solver's message when it failed."""
-        if self.status != "running":
-            raise RuntimeError("the solver is not running")
-        for _ in range(2):      # after an interpolation IDA first returns the step it had already taken
-            result = self._ida.step(self.t_bound, "onestep", self.t_bound)
-            if not result.success:
-                self.status = "failed"
-                return f"IDA: {result.message}"
-            if result.t != self.t:
-                break
-        self.t_old, self.t = self.t, float(result.t)
-        self.y = np.array(result.y[:self.n], dtype=float)
-        if self.t >= self.t_bound:
-            self.status = "finished"
-        return None
-
-    def dense_output(self):
-        """``x(t)`` for ``t`` inside the last step, from IDA's interpolating polynomial."""
-        t_old, t_new, y_new = self.t_old, self.t, self.y.copy()
-
-        def interpolate(tt):
-            tt = float(tt)
-            if tt == t_new:
-                return y_new.copy()
-            tt = min(max(tt, t_old), t_new)
-            return np.array(self._ida.step(tt, "normal").y[:self.n], dtype=float)
-
-        return interpolate
 
 
 def solver_class(method):
