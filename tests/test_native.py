@@ -148,10 +148,21 @@ def test_compiled_and_numpy_code_give_the_same_run(path):
     assert native_run.complete == numpy_run.complete
     assert native_run.t[-1] == pytest.approx(numpy_run.t[-1], rel=1e-9, abs=1e-12)
     rtol = max(float(settings.get("rtol") or 1e-6), 1e-9)
+    # C's and numpy's sin may differ in the last bit: an event may then be an ulp apart, and a
+    # state that jumps there (a counter) differs at that one instant; such points are left out
+    events = np.array(sorted({time for time, _ in numpy_run.events + native_run.events}))
+    t = numpy_run.t
+    nearest = np.full(t.size, np.inf)
+    if events.size:
+        after = np.clip(np.searchsorted(events, t), 0, events.size - 1)
+        before = np.clip(after - 1, 0, events.size - 1)
+        nearest = np.minimum(np.abs(t - events[after]), np.abs(t - events[before]))
+    away = nearest > 8 * np.finfo(float).eps * np.maximum(np.abs(t), 1.0)
+    assert np.count_nonzero(~away) <= 2 * events.size
     for name, values in numpy_run.states.items():
         other = np.interp(numpy_run.t, native_run.t, native_run.states[name])
         scale = max(float(np.max(np.abs(values))), 1e-12)
-        difference = float(np.max(np.abs(other - values))) / scale
+        difference = float(np.max(np.abs(other - values)[away], initial=0.0)) / scale
         assert difference <= 100 * rtol, (name, difference)
 
 
