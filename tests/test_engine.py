@@ -297,6 +297,7 @@ def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     assert len(switching) >= 8 and len(switching) % 2 == 0
 
 
+@pytest.mark.slow
 def test_ida_integrates_the_diode_bridge_as_a_dae_to_the_same_answer(tmp_path):
     """solver = "IDA": the loop's seven unknowns are IDA's algebraic variables (no Newton iteration
     inside the right-hand side); the answer is the nodal analysis's, switching in pairs as with CVODE."""
