@@ -429,6 +429,7 @@ def test_a_ball_bouncing_to_rest_stops_at_the_zeno_time_with_its_when_clause(tmp
     assert len(fired) > 20 and fired[-1] < zeno
 
 
+@pytest.mark.slow
 def test_a_frequency_sweep_counted_by_a_when_clause_is_no_zeno_accumulation():
     # u = sin(2*pi*(t + 1999 t^2)) rises through 0 at t_n + 1999 t_n^2 = n, n = 1 .. 1999
     result = run(ENGINE / "chirp_count.bg")

@@ -29,6 +29,7 @@ def test_functions_that_call_earlier_functions_twice_are_translated_once_per_lev
     assert sympy.expand(effort - 2 ** 24 * (a + 1)) == 0
 
 
+@pytest.mark.slow
 def test_a_sum_of_thousands_of_terms_is_checked_and_derived(tmp_path):
     path = tmp_path / "long.bg"
     path.write_text(CHAIN_MODEL.format(value="+".join(["1"] * 3000)))

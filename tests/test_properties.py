@@ -17,6 +17,7 @@ from __future__ import annotations
 import importlib
 import os
 
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -314,6 +315,7 @@ def commented(draw) -> str:
     return "\n".join(out) + "\n"
 
 
+@pytest.mark.slow
 @given(commented())
 @FAST
 def test_comments_anywhere_are_kept_in_order_and_format_stably(text):

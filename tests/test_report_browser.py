@@ -219,6 +219,7 @@ def browser():
         devtools.close()
 
 
+@pytest.mark.slow
 def test_flagship_report_in_chromium(browser):
     report = flagship_report()
     url = report.resolve().as_uri()
