@@ -172,6 +172,7 @@ def test_module_constants():
     np.testing.assert_array_equal(module["x0"](), [0.0, 0.0])
 
 
+@pytest.mark.slow
 def test_emit_is_byte_identical_across_hash_seeds(tmp_path):
     script = tmp_path / "emit.py"
     script.write_text(textwrap.dedent(f"""

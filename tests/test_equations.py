@@ -559,6 +559,7 @@ def test_golden_equations(name, update_golden):
     assert text == golden.read_text()
 
 
+@pytest.mark.slow
 def test_output_is_identical_under_another_hash_seed():
     script = (
         "import sys; from pathlib import Path\n"

@@ -249,6 +249,7 @@ files = st.builds(ast.File, st.lists(st.one_of(
 ), max_size=3).map(tuple))
 
 
+@pytest.mark.slow
 @given(files)
 @settings(max_examples=max(EXAMPLES // 2, 1), deadline=2000,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])

@@ -116,6 +116,7 @@ def test_flagship_report():
     assert len(html) < 3_000_000
 
 
+@pytest.mark.slow
 def test_flagship_numbers_match_the_reference():
     """The key results agree with models/README.md (independent scipy reference, about 1 %)."""
     html = flagship_report().read_text(encoding="utf-8")
