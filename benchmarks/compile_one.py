@@ -3,7 +3,8 @@
 Writes the N-section chain (benchmarks/chain.py) to a temporary folder and takes
 it from source to a loaded, compiled module, timing each stage; prints one JSON
 object: the stage times in seconds, the total, and the process's peak resident
-memory in MB. Run in its own process so that the peak memory and sympy's caches
+memory in MB. The garbage collector runs as under the command line
+(``pipeline.fewer_collections``). Run in its own process so that the peak memory and sympy's caches
 belong to this model alone; the compile cache is off and the C library is built
 into an empty cache folder.
 """
@@ -33,7 +34,11 @@ def measure(n: int) -> dict:
     from bondc.causality import assign_causality
     from bondc.codegen import emit
     from bondc.equations import derive
+    from bondc.pipeline import fewer_collections
     from bondc.runtime import load_native
+
+    context = fewer_collections()         # as the command line runs
+    context.__enter__()
 
     stages["import"] = time.perf_counter() - start
     mark = time.perf_counter()

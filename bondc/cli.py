@@ -518,8 +518,11 @@ def main(argv: list[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _terminate)
     else:       # (signal handlers can only be set in the main thread)
         previous = None
+    from bondc.pipeline import fewer_collections
+
     try:
-        return _main(argv, debug)
+        with fewer_collections():
+            return _main(argv, debug)
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)

@@ -628,20 +628,28 @@ class _Deriver:
         start = {self.t: sympy.Integer(0)}
         inputs = {symbol: as_sympy(value).xreplace(start) for symbol, value in input_values.items()}
         initial = {s.symbol: as_sympy(s.initial) for s in states}
-        for _ in range(len(states) + 1):       # initial values that use other initial values, in order
+        keys = set(initial) | set(inputs) | {self.t}
+        # only the values that use time, an input or another state are substituted (a 20000-state
+        # chain has none: a map of the others per state made this quadratic)
+        pending = [symbol for symbol, expr in initial.items() if expr.free_symbols & keys]
+        for _ in range(len(pending) + 1):      # initial values that use other initial values, in order
             changed = False
-            for symbol, expr in initial.items():
-                new = expr.xreplace(start).xreplace(inputs).xreplace(
-                    {other: value for other, value in initial.items() if other is not symbol})
+            for symbol in pending:
+                expr = initial.pop(symbol)     # a value never replaces its own symbol
+                new = expr.xreplace(start).xreplace(inputs).xreplace(initial)
+                initial[symbol] = new
                 if new != expr:
-                    initial[symbol], changed = new, True
+                    changed = True
             if not changed:
                 break
         for s in states:
-            left = initial[s.symbol].free_symbols & (set(initial) | set(inputs) | {self.t})
+            left = initial[s.symbol].free_symbols & keys
             if left:
+                declared = next((v.span for v in self.graph.states if v.qualified == s.name), NO_SPAN)
                 raise _error("E701", f"the initial value of '{s.name}' depends on itself through "
-                                     f"{', '.join(sorted(str(x) for x in left))}")
+                                     f"{', '.join(sorted(str(x) for x in left))}", declared,
+                             hint="give one of the initial values in this cycle a value that uses "
+                                  "parameters and inputs only")
         return [dataclasses.replace(s, initial=initial[s.symbol]) if initial[s.symbol] is not s.initial else s
                 for s in states]
 

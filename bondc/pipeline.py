@@ -14,12 +14,32 @@ picks the experiment to run. ``simulate``, ``compile``, ``report``,
 
 from __future__ import annotations
 
+import contextlib
+import gc
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
 from bondc import ast
 from bondc.errors import Diagnostic
+
+
+@contextlib.contextmanager
+def fewer_collections():
+    """Run the garbage collector's youngest generation every 100 000 allocations, not every 700.
+
+    A compile allocates millions of parse-tree and sympy nodes and frees few of them, so the
+    default thresholds spend a third of a 6000-state check in the collector, and more the larger
+    the model (measured: chain N = 3000 compile 35.9 s -> 28.7 s, peak memory +7 %). mypy's
+    command line does the same. The command line wraps a whole run in this; the thresholds are
+    restored afterwards.
+    """
+    previous = gc.get_threshold()
+    gc.set_threshold(100_000, 50, 100)
+    try:
+        yield
+    finally:
+        gc.set_threshold(*previous)
 
 
 def parse_sets(sets: Sequence) -> list[ast.SetValue]:

@@ -10,7 +10,7 @@ import sympy
 
 from bondc.cli import main
 from bondc.equations import format_equations
-from bondc.errors import ModelError
+from bondc.errors import BondcError, ModelError
 from bondc.parse import parse_set_value
 from bondc.pipeline import derive_file
 from bondc.semantic import load
@@ -177,6 +177,40 @@ RELAY = """model Relay
   when T_room > T_on then heater = 0 end
 end
 """
+
+
+CHAINED = """
+model Chained
+  param x0 = 3 [1]
+  param tau = 1 [s]
+  discrete a [1] = b + c
+  discrete b [1] = 2*c
+  discrete c [1] = x0 + 1
+  state x [1] : der(x) = (a - x)/tau, x(0) = x0
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+def test_initial_values_that_use_later_ones_are_resolved_in_dependency_order(tmp_path):
+    path = tmp_path / "chained.bg"
+    path.write_text(CHAINED)
+    result = run(path)
+    # by hand: c = x0 + 1 = 4, b = 2c = 8, a = b + c = 12; x relaxes from 3 towards 12
+    assert [result.states[name][0] for name in ("c", "b", "a")] == [4.0, 8.0, 12.0]
+    assert result.states["x"][-1] == pytest.approx(12 - 9 * math.exp(-1.0), rel=1e-5)
+
+
+def test_initial_values_in_a_cycle_are_reported_at_the_declaration(tmp_path):
+    path = tmp_path / "cycle.bg"
+    path.write_text(CHAINED.replace("discrete b [1] = 2*c", "discrete b [1] = 2*a"))
+    with pytest.raises(BondcError) as caught:
+        derive_file(path, cache=False)
+    (diagnostic,) = caught.value.diagnostics
+    assert diagnostic.code == "E701" and "'a' depends on itself" in diagnostic.message
+    assert diagnostic.span.line == 5 and diagnostic.hint
 
 
 @pytest.mark.parametrize("start, heater", [(15, 1.0), (20, 0.0)])
