@@ -11,7 +11,10 @@ model's folder). The key is a SHA-256 of
 - the ``--model``, ``--experiment`` and ``--set`` values (overrides can change structure).
 
 The entry holds ``derived.pickle`` (the checked graph, causality and state
-equations), ``module.py`` once a simulation generated its module, and
+equations), ``module.py`` once a simulation generated its module,
+``light.pickle`` once ``bondc simulate`` ran it (the graph, the parameter values
+and the stored-energy functions as printed recipes: a :class:`LightStateSpace`,
+so that the next ``bondc simulate`` imports neither sympy nor lark), and
 ``depends.json``: the SHA-256 of every other file the model read (imports).
 An entry whose imports changed is a miss. The compiled C library is cached
 separately, by the hash of its text (``bondc.runtime.load_native``).
@@ -115,19 +118,54 @@ class Entry:
 
     # -- derived model
 
-    def load(self):
-        """The cached ``Derived``, or None (a miss: absent, stale imports or unreadable)."""
+    def _current(self) -> bool:
+        """Whether the files the model imports are unchanged (False when unreadable)."""
         try:
             depends = json.loads((self.folder / "depends.json").read_text(encoding="utf-8"))
-            for name, digest in depends.items():
-                if _file_hash(Path(name)) != digest:
-                    return None
+        except Exception:       # absent or partial: a miss
+            return False
+        return all(_file_hash(Path(name)) == digest for name, digest in depends.items())
+
+    def load(self):
+        """The cached ``Derived``, or None (a miss: absent, stale imports or unreadable)."""
+        if not self._current():
+            return None
+        try:
             with open(self.folder / "derived.pickle", "rb") as stream:
                 derived = pickle.load(stream)  # noqa: S301  (the user's own cache folder, written by bondc)
         except Exception:       # absent, partial or from an incompatible bondc: a miss
             return None
         self.remember(derived.state_space)
         return derived
+
+    def load_light(self):
+        """The cached ``Derived`` with a :class:`LightStateSpace` (no sympy), or None when the entry
+        has none yet (it is written after the first full simulation) or is a miss."""
+        if not self._current() or not (self.folder / "module.py").is_file():
+            return None
+        try:
+            with open(self.folder / "light.pickle", "rb") as stream:
+                derived = pickle.load(stream)  # noqa: S301  (the user's own cache folder, written by bondc)
+        except Exception:       # absent, partial or from an incompatible bondc: a miss
+            return None
+        derived.state_space.entry = self
+        self.remember(derived.state_space)
+        return derived
+
+    def store_light(self, derived, recipes: dict) -> None:
+        """Write the light form of ``derived`` (see :class:`LightStateSpace`); a failure only means
+        that the next run reads the full entry."""
+        import dataclasses
+
+        ss = derived.state_space
+        light = LightStateSpace(
+            graph=ss.graph, diagnostics=tuple(ss.diagnostics), state_names=tuple(ss.state_names),
+            values={name: float(value) for name, (_, value) in ss.parameters.items()}, recipes=recipes)
+        try:
+            data = pickle.dumps(dataclasses.replace(derived, state_space=light), protocol=pickle.HIGHEST_PROTOCOL)
+            _atomic_write(self.folder / "light.pickle", data)
+        except Exception:       # noqa: BLE001  (a cache must never fail the run)
+            return
 
     def store(self, derived) -> None:
         """Write the entry; a failure (read-only cache, unpicklable value) only means no cache."""
@@ -170,6 +208,64 @@ class Entry:
             _atomic_write(self.folder / "module.py", source.encode("utf-8"))
         except OSError:
             pass
+
+
+class LightStateSpace:
+    """What a cached ``bondc simulate`` needs of a state space, without sympy.
+
+    The generated module (``module.py``) runs the simulation; this holds the graph, the
+    parameters' values, the state names, the diagnostics, and the stored-energy functions as
+    recipes (:func:`bondc.analysis.energy.energy_from_recipe`), so that a cached run imports
+    neither sympy nor lark. Anything else is read from the full state space, loaded (with
+    sympy) on first use.
+    """
+
+    def __init__(self, graph, diagnostics, state_names, values, recipes):
+        self.graph = graph
+        self.diagnostics = diagnostics
+        self.state_names = state_names
+        self.values = values                        # parameter name -> SI value
+        self.recipes = recipes                      # element -> (kind, state name, recipe)
+        self.bound_base = None
+        self.entry = None                           # set when read from the cache
+        self._full = None
+
+    @property
+    def parameters(self) -> dict:
+        """name -> (None, value): the names and values (the sympy symbols are in the full one)."""
+        return {name: (None, value) for name, value in self.values.items()}
+
+    def full(self):
+        """The full state space of the same entry (imports sympy)."""
+        if self._full is None:
+            derived = self.entry.load() if self.entry is not None else None
+            if derived is None:
+                raise RuntimeError("the compile cache entry of this model is gone; run again")
+            self._full = derived.state_space
+        return self._full
+
+    def light_energy(self, parameters) -> dict | None:
+        """The stored-energy functions for these parameter values, or None when they are not the
+        values the recipes were printed with (their numbers are the parameters')."""
+        if any(float(parameters.get(name, value)) != value for name, value in self.values.items()):
+            return None
+        from bondc.analysis.energy import energy_from_recipe
+
+        return {name: energy_from_recipe(kind, state, recipe) for name, (kind, state, recipe) in self.recipes.items()}
+
+    def __getattr__(self, name):
+        if name.startswith("__") or name in ("_full", "entry"):
+            raise AttributeError(name)
+        return getattr(self.full(), name)
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_full"] = None
+        state["entry"] = None
+        return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
 
 
 def entry_of(state_space) -> Entry | None:

@@ -45,18 +45,24 @@ def _parse_sets(values) -> list:
     return parse_sets(values)
 
 
-def _derive(args):
+def _derive(args, light: bool = False):
     """parse -> build -> causality -> equations, with the experiment's overrides applied.
 
-    Warnings (derivative causality, unused parameters, ...) go to stderr.
+    Warnings (derivative causality, unused parameters, ...) go to stderr. ``light``: see
+    ``pipeline.derive_file`` (``simulate`` takes it: a cached run then needs no sympy).
     """
+    return _derived(args, light)[:4]
+
+
+def _derived(args, light: bool = False) -> tuple:
+    """:func:`_derive`'s four values and the ``Derived`` itself."""
     from bondc.pipeline import derive_file
 
     derived = derive_file(Path(args.file), model=getattr(args, "model", None),
                           experiment=getattr(args, "experiment", None), sets=getattr(args, "set", None) or (),
-                          cache=False if getattr(args, "no_cache", False) else None)
+                          cache=False if getattr(args, "no_cache", False) else None, light=light)
     _print_diagnostics(derived.notes, derived.graph.sources)
-    return derived.graph, derived.causal, derived.state_space, derived.experiment
+    return derived.graph, derived.causal, derived.state_space, derived.experiment, derived
 
 
 # ------------------------------------------------------------------ commands
@@ -203,6 +209,16 @@ def _cmd_linearize(args) -> int:
     return EXIT_OK
 
 
+def _keep_light(derived, account) -> None:
+    """After a full run from the compile cache, write the entry's light form for the next one."""
+    from bondc.cache import entry_of
+
+    entry = entry_of(derived.state_space)
+    if (entry is not None and account.energy_recipes is not None and not derived.sets
+            and not hasattr(derived.state_space, "light_energy")):
+        entry.store_light(derived, account.energy_recipes)
+
+
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
@@ -211,7 +227,7 @@ def _cmd_simulate(args) -> int:
 
     if args.output:
         check_output(args.output)       # before any work
-    graph, _, state_space, experiment = _derive(args)
+    graph, _, state_space, experiment, derived = _derived(args, light=True)
     result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:
@@ -230,6 +246,7 @@ def _cmd_simulate(args) -> int:
         try:
             account = energy_account(state_space, result, cycle=cycle)
             summary["energy"] = account.to_json()
+            _keep_light(derived, account)
         except BondcError as problem:
             _print_diagnostics(problem.diagnostics, graph.sources)
     motors_text = None

@@ -77,17 +77,23 @@ class Derived:
 
 
 def derive_file(path, *, model: str | None = None, experiment: str | None = None,
-                sets: Sequence = (), cache: bool | None = None) -> Derived:
+                sets: Sequence = (), cache: bool | None = None, light: bool = False) -> Derived:
     """Load ``path`` with ``experiment``'s overrides (default: the first experiment) and ``sets``,
     assign causality and derive the state equations. Raises the stages' errors.
 
     ``cache`` (default: on unless ``BONDC_CACHE=0``): reuse the result of an earlier run on the
     same files with the same model, experiment and ``--set`` values (see :mod:`bondc.cache`).
+    ``light``: a cached entry may give a :class:`bondc.cache.LightStateSpace` (what a simulation
+    and its energy account need, without sympy); anything else it is asked for loads the rest.
     """
     from bondc import cache as compile_cache
 
     use_cache = compile_cache.enabled() if cache is None else cache
     entry = compile_cache.Entry.for_model(path, model, experiment, sets) if use_cache else None
+    if entry is not None and light and not sets:
+        derived = entry.load_light()
+        if derived is not None:
+            return derived
     if entry is not None:
         derived = entry.load()
         if derived is not None:

@@ -234,7 +234,7 @@ def load_csv(path, column):
     the column named ``t`` or ``time`` (any case), else the first column;
     rows as :func:`csv_rows` gives them. Times must not decrease. Columns are
     matched by name; a unit in the header (``omega [rpm]``) is not applied
-    here: the compiler scales the signal (see :func:`bondc.symbolic.csv_scales`).
+    here: the compiler scales the signal (see :func:`bondc.numeric.csv_scales`).
     """
     path = os.path.abspath(path)
     key = (path, column)

@@ -1032,7 +1032,7 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
         report(_error("E310", f"CSV file '{path_arg.value}' needs a time column and a value column",
                       path_arg.span, hint="the first column (or the column t or time) is time"))
     else:
-        from bondc.symbolic import csv_scales
+        from bondc.numeric import csv_scales
 
         try:
             csv_scales(str(path), column_arg.value)

@@ -197,7 +197,7 @@ class NumericModel:
         import numpy
         from sympy.printing.numpy import NumPyPrinter
 
-        from bondc.symbolic import NUMERIC_FUNCTIONS
+        from bondc.numeric import NUMERIC_FUNCTIONS
 
         self.ss = ss
         values = ss.parameter_values(parameters)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import stat
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -199,3 +200,85 @@ def test_the_cli_option(tmp_path, isolated, capsys):
     assert main(["equations", str(path), "--no-cache"]) == 0
     assert len(loads) == 2
     assert "der(mass.p)" in capsys.readouterr().out
+
+
+# -- the light entry: a cached simulate without sympy or lark
+
+def _energy_models():
+    root = Path(__file__).resolve().parent.parent
+    return sorted([*root.glob("models/*.bg"), *(root / "tests" / "fixtures" / "engine").glob("*.bg")])
+
+
+@pytest.mark.parametrize("path", _energy_models(), ids=lambda p: p.stem)
+def test_every_stored_energy_function_is_rebuilt_from_its_recipe_to_the_same_numbers(path):
+    from bondc.analysis.energy import energy_from_recipe, energy_recipes, stored_energy_functions
+
+    try:
+        derived = derive_file(path, cache=False)
+    except Exception:       # noqa: BLE001  (models for other tests: not every one derives)
+        pytest.skip("does not derive")
+    functions = stored_energy_functions(derived.state_space, {})
+    recipes = energy_recipes(functions)
+    assert recipes is not None and set(recipes) == set(functions)
+    for name, (kind, state, recipe) in recipes.items():
+        rebuilt = energy_from_recipe(kind, state, recipe)
+        original = functions[name]
+        assert (rebuilt.kind, rebuilt.state_name) == (original.kind, original.state_name)
+        for x in (-2.5e-3, -0.7, 0.0, 0.3, 4.0e2):        # negative, zero and positive states
+            with np.errstate(all="ignore"):
+                a = original.function(x) if original.kind == "analytic" else original.law(x)
+                b = rebuilt.function(x) if rebuilt.kind == "analytic" else rebuilt.law(x)
+            assert float(a) == float(b) or (np.isnan(float(a)) and np.isnan(float(b))), (name, x)
+
+
+_IMPORTED = ("import sys\nfrom bondc.cli import main\ncode = main(sys.argv[1:])\n"
+             "print('IMPORTED', sorted(m for m in ('sympy', 'lark', 'bondc.statespace') if m in sys.modules))\n"
+             "sys.exit(code)\n")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/hydraulic_chamber.bg"])
+def test_a_cached_simulate_imports_no_sympy_or_lark_and_writes_the_same_results(tmp_path, name):
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent
+    env = {**os.environ, "BONDC_CACHE_DIR": str(tmp_path / "cache")}
+    env.pop("BONDC_CACHE", None)
+    runs = []
+    for index in range(3):      # compiled (and the light entry written); light; light again
+        out = tmp_path / f"run{index}.csv"
+        done = subprocess.run([sys.executable, "-c", _IMPORTED, "simulate", str(root / name), "-o", str(out)],
+                              capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+        assert done.returncode == 0, done.stderr
+        text = done.stdout.replace(str(out), "OUT")
+        runs.append((out.read_bytes(), text.split("IMPORTED")[0], text.split("IMPORTED")[1].strip()))
+    assert runs[0][0] == runs[1][0] == runs[2][0]       # byte-identical results
+    assert runs[0][1] == runs[1][1] == runs[2][1]       # and the same summary and energy tables
+    assert "Energy account" in runs[2][1]
+    assert runs[0][2] == "['bondc.statespace', 'lark', 'sympy']"
+    assert runs[1][2] == runs[2][2] == "[]"
+
+
+def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(tmp_path, isolated):
+    from bondc.analysis.energy import energy_account
+
+    path = _write(tmp_path / "drive.bg")
+    full = derive_file(path)
+    result = simulate(full.state_space, full.experiment)
+    account = energy_account(full.state_space, result)
+    entry = cache.entry_of(full.state_space)
+    assert account.energy_recipes is not None and entry is not None
+    entry.write_module(__import__("bondc.simulate", fromlist=["compile_model"]).compile_model(
+        full.state_space)["__bondc_source__"])
+    entry.store_light(full, account.energy_recipes)
+    light = derive_file(path, light=True)
+    assert isinstance(light.state_space, cache.LightStateSpace)
+    same = light.state_space.light_energy({})
+    assert set(same) == {"mass", "spring"} and same["spring"].function(0.01) == pytest.approx(800 * 0.01 ** 2 / 2)
+    assert light.state_space.light_energy({"k": 900.0}) is None       # numbers printed for k = 800
+    rerun = simulate(light.state_space, light.experiment, overrides={"k": 900.0})
+    other = energy_account(light.state_space, rerun)                   # from the full state space
+    direct = energy_account(full.state_space, simulate(full.state_space, full.experiment, overrides={"k": 900.0}))
+    assert other.to_json() == direct.to_json()
+    assert light.state_space.full() is not None and light.state_space.derivatives.keys() == \
+        full.state_space.derivatives.keys()

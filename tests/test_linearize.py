@@ -258,7 +258,7 @@ def test_check_equations_and_simulation_read_a_csv_file_alike(tmp_path):
     # quoted header cells, a comment row and a blank line: one reader for every stage
     from bondc.runtime import load_csv
     from bondc.simulate import run
-    from bondc.symbolic import read_csv_column
+    from bondc.numeric import read_csv_column
 
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / "push.csv").write_text('# force profile\n"time","force"\n0,0\n\n0.5,10\n# end\n2,10\n')

@@ -76,16 +76,15 @@ True
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
-import sympy
 
 from bondc.errors import AnalysisError, Diagnostic
 from bondc.runtime import mode_values
-from bondc.symbolic import as_sympy
 
 # Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
 _LOBATTO_NODES = np.array([-1.0, -math.sqrt(3.0 / 7.0), 0.0, math.sqrt(3.0 / 7.0), 1.0])
@@ -223,6 +222,8 @@ class EnergyAccount:
     method: str = METHOD
     quadrature: Mapping[str, int] = field(default_factory=dict)   # steps: all, corrected, hermite, sliding
     diagnostics: tuple[Diagnostic, ...] = ()
+    #: the stored-energy functions' recipes (for the compile cache's light entry); None if one has none
+    energy_recipes: Mapping | None = field(default=None, repr=False, compare=False)
 
     @property
     def unit(self) -> str:
@@ -698,13 +699,18 @@ def _integrals(times: np.ndarray, power: np.ndarray):
 
 
 class _StoredEnergy:
-    """A storage element's stored-energy function: analytic (``StateSpace.energy``) or numeric."""
+    """A storage element's stored-energy function: analytic (``StateSpace.energy``) or numeric.
 
-    def __init__(self, kind: str, state_name: str, function=None, law=None):
+    ``recipe``: how to rebuild it without sympy (:func:`energy_from_recipe`): the printed function
+    of one state ``x`` and the global names it reads, or None when it cannot be rebuilt.
+    """
+
+    def __init__(self, kind: str, state_name: str, function=None, law=None, recipe=None):
         self.kind = kind                    # "analytic" or "numeric"
         self.state_name = state_name
         self.function = function            # H(x), analytic
         self.law = law                      # e(q) or f(p): dH/dx, numeric
+        self.recipe = recipe
 
     def change(self, start: float, end: float) -> tuple[float, float, float]:
         """(H at start, H at end, change); a numeric H is the law integrated from a zero state."""
@@ -730,14 +736,68 @@ class _StoredEnergy:
 
 
 def _numbers(ss, parameters: Mapping[str, float]) -> dict:
+    import sympy
+
     return {symbol: sympy.Float(float(parameters.get(name, value)))
             for name, (symbol, value) in ss.parameters.items()}
 
 
-def _lambdify(symbol, expr):
-    from bondc.symbolic import NUMERIC_FUNCTIONS
+def _lambdify(symbol, expr) -> tuple:
+    """(the numpy function of ``symbol``, its recipe). The recipe is the function's text, printed
+    by sympy from ``expr`` with its one symbol renamed ``x`` (so no name from the model is in it,
+    and its numbers are the parameters' values), and where each global name it reads comes from."""
+    import inspect
 
-    return sympy.lambdify(symbol, expr, modules=[dict(NUMERIC_FUNCTIONS), "numpy"])
+    import sympy
+
+    from bondc.numeric import NUMERIC_FUNCTIONS
+
+    x = sympy.Symbol("x", real=True)
+    function = sympy.lambdify(x, expr.xreplace({symbol: x}), modules=[dict(NUMERIC_FUNCTIONS), "numpy"])
+    recipe = None
+    try:
+        text = inspect.getsource(function)
+    except (OSError, TypeError):
+        return function, None
+    names = {}
+    for name in function.__code__.co_names:
+        value = function.__globals__.get(name)
+        if name in NUMERIC_FUNCTIONS and NUMERIC_FUNCTIONS[name] is value:
+            names[name] = ("bondc", name)
+        elif value is np:
+            names[name] = ("numpy", "")
+        elif value is functools.reduce:         # sympy prints Max/Min as reduce(maximum, [...])
+            names[name] = ("functools", "reduce")
+        elif value is not None and getattr(np, name, None) is value:
+            names[name] = ("numpy", name)
+        else:
+            return function, None      # anything else: no recipe (the cache then keeps sympy)
+    recipe = (text, names)
+    return function, recipe
+
+
+def energy_from_recipe(kind: str, state_name: str, recipe) -> _StoredEnergy:
+    """A stored-energy function rebuilt from its recipe (see :func:`_lambdify`), without sympy.
+
+    The text is sympy's printing of the energy law, made by bondc when the model was compiled
+    (as the generated module is): its one argument is ``x`` and its only names are numpy's and
+    bondc's numeric functions, so nothing of the model's text is executed.
+    """
+    from bondc.numeric import NUMERIC_FUNCTIONS
+
+    if kind == "constant":
+        return _StoredEnergy("analytic", state_name, function=lambda x, c=float(recipe): c)
+    text, names = recipe
+    namespace = {"__builtins__": {}}
+    for name, (origin, attribute) in names.items():
+        namespace[name] = (NUMERIC_FUNCTIONS[attribute] if origin == "bondc"
+                           else functools.reduce if origin == "functools"
+                           else getattr(np, attribute) if attribute else np)
+    exec(compile(text, "<bondc energy function>", "exec"), namespace)  # noqa: S102  (bondc's own printing)
+    function = next(value for name, value in namespace.items() if name not in names and callable(value))
+    if kind == "analytic":
+        return _StoredEnergy("analytic", state_name, function=function, recipe=recipe)
+    return _StoredEnergy("numeric", state_name, law=lambda x, f=function: float(f(x)), recipe=recipe)
 
 
 def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -> dict:
@@ -745,7 +805,19 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
 
     Analytic from ``ss.energy``; numeric (``integral of law dx``) for an element
     in integral causality whose law depends on its own default state alone.
+    A state space read from the compile cache without its sympy part
+    (:class:`bondc.cache.LightStateSpace`) gives them from its recipes.
     """
+    light = getattr(ss, "light_energy", None)
+    if light is not None:
+        found = light(parameters or {})
+        if found is not None:
+            return found
+        ss = ss.full()
+    import sympy
+
+    from bondc.symbolic import as_sympy
+
     graph = ss.graph
     numbers = _numbers(ss, parameters or {})
     found = {}
@@ -757,10 +829,12 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
                 continue        # a parameter of 0 where it divides (m = 0): count the work in instead
             free = list(expr.free_symbols)
             if len(free) == 1:
-                found[element.name] = _StoredEnergy("analytic", free[0].name, function=_lambdify(free[0], expr))
+                function, recipe = _lambdify(free[0], expr)
+                found[element.name] = _StoredEnergy("analytic", free[0].name, function=function, recipe=recipe)
             elif not free:
                 constant = float(expr)
-                found[element.name] = _StoredEnergy("analytic", "", function=lambda x, c=constant: c)
+                found[element.name] = _StoredEnergy("analytic", "", function=lambda x, c=constant: c,
+                                                    recipe=constant)
             continue
         kind = element.kind_info
         if element.name in ss.eliminated or len(element.states) != 1:
@@ -786,9 +860,21 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
                     or sympy.simplify(rate - gain * port) != 0):
                 continue
             density = law / gain
-        function = _lambdify(state_symbol, density)
-        found[element.name] = _StoredEnergy("numeric", state_name, law=lambda x, f=function: float(f(x)))
+        function, recipe = _lambdify(state_symbol, density)
+        found[element.name] = _StoredEnergy("numeric", state_name, law=lambda x, f=function: float(f(x)),
+                                            recipe=recipe)
     return found
+
+
+def energy_recipes(functions: Mapping[str, _StoredEnergy]) -> dict | None:
+    """element -> (kind, state name, recipe) of every function, or None if one has no recipe."""
+    recipes = {}
+    for name, energy in functions.items():
+        if energy.recipe is None:
+            return None
+        kind = "constant" if not isinstance(energy.recipe, tuple) else energy.kind
+        recipes[name] = (kind, energy.state_name, energy.recipe)
+    return recipes
 
 
 # ----------------------------------------------------------- the account
@@ -868,7 +954,8 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
         product = values[f"{bond.name}.e"] * values[f"{bond.name}.f"]
         return product if bond.head == element.name else -product
 
-    energies = {name: energy for name, energy in stored_energy_functions(ss, steps.parameters).items()
+    functions = stored_energy_functions(ss, steps.parameters)
+    energies = {name: energy for name, energy in functions.items()
                 if energy.state_name in model.state_names or energy.state_name in values}
     step_start, step_end = trajectory.ta, trajectory.tb
     state_bounds = trajectory.states_at_bounds()
@@ -960,4 +1047,4 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     return EnergyAccount(
         model=getattr(graph, "name", ""), experiment=getattr(result, "experiment", None),
         cycle=cycle, windows=tuple(result_windows), complete=bool(result.complete), resimulated=resimulated,
-        quadrature=quadrature, diagnostics=tuple(diagnostics))
+        quadrature=quadrature, diagnostics=tuple(diagnostics), energy_recipes=energy_recipes(functions))

@@ -49,7 +49,7 @@ from bondc.errors import DataError, Diagnostic
 from bondc.io import atomic_write_text
 from bondc.runtime import CsvError, header_cell, open_data
 from bondc.source import NO_SPAN, Span
-from bondc.symbolic import unit_scale
+from bondc.numeric import unit_scale
 
 __all__ = [
     "TIME_KEY", "METRICS", "DEFAULT_TOLERANCES", "CompareSpec", "Check", "SignalResult",
