@@ -2213,15 +2213,20 @@ class _Run:
                 break
         return rows
 
-    def evaluate_columns(self, function, t, x, modes, rows):
-        """``function(t, x, p, modes)`` over columns: at once when the model is vectorized, else one by one."""
-        out = np.full((rows, t.size), np.nan)
+    def evaluate_columns(self, function, t, x, modes, rows, out=None, columns=slice(None)):
+        """``function(t, x, p, modes)`` over columns: at once when the model is vectorized, else one by one.
+
+        Written into ``out[:, columns]`` when given (no matrix of its own: the result's matrices
+        of every variable at every point are filled in place), else into a new matrix."""
+        if out is None:
+            out = np.full((rows, t.size), np.nan)
         if getattr(self.model, "VECTORIZED", True):
             for row, value in enumerate(function(t, x, self.p, modes)):
-                out[row] = value
+                out[row, columns] = value
         else:
+            indices = np.arange(out.shape[1])[columns]
             for j in range(t.size):
-                out[:, j] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
+                out[:, indices[j]] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
         return out
 
     def result(self, complete, failure):
@@ -2234,8 +2239,9 @@ class _Run:
             x = np.concatenate(self.blocks_x, axis=1)
         else:
             t, x = np.zeros(0), np.zeros((n, 0))
-        outputs = np.full((n_out, t.size), np.nan)
-        variables = np.full((n_var, t.size), np.nan)
+        # every column is written below, by the sliding blend or by its mode's group
+        outputs = np.empty((n_out, t.size))
+        variables = np.empty((n_var, t.size))
         groups = {}             # (mode id, relevant mask) -> column indices
         all_relevant = (True,) * self.switch_count
         start = 0
@@ -2270,9 +2276,9 @@ class _Run:
                         cols = columns[chosen]
                     if cols.size and cols[-1] - cols[0] + 1 == cols.size:     # contiguous: a view, no scatter
                         cols = slice(int(cols[0]), int(cols[-1]) + 1)
-                    outputs[:, cols] = self.evaluate_columns(model.outputs, tt[chosen], xx[:, chosen], row, n_out)
-                    variables[:, cols] = self.evaluate_columns(model.variables, tt[chosen], xx[:, chosen], row,
-                                                               n_var)
+                    points, states = (tt, xx) if len(unique) == 1 else (tt[chosen], xx[:, chosen])
+                    self.evaluate_columns(model.outputs, points, states, row, n_out, outputs, cols)
+                    self.evaluate_columns(model.variables, points, states, row, n_var, variables, cols)
         if t.size:
             # restarts that made no progress (a switch re-decided at the same instant) repeat a point:
             # keep its first record, so the time of the result strictly increases
