@@ -126,16 +126,19 @@ class Entry:
             return False
         return all(_file_hash(Path(name)) == digest for name, digest in depends.items())
 
+    def _read(self, name: str):
+        """The object pickled in ``name``, or None (absent, partial or from an incompatible bondc)."""
+        try:
+            with open(self.folder / name, "rb") as stream:
+                return pickle.load(stream)  # noqa: S301  (the user's own cache folder, written by bondc)
+        except Exception:       # a miss
+            return None
+
     def load(self):
         """The cached ``Derived``, or None (a miss: absent, stale imports or unreadable)."""
-        if not self._current():
-            return None
-        try:
-            with open(self.folder / "derived.pickle", "rb") as stream:
-                derived = pickle.load(stream)  # noqa: S301  (the user's own cache folder, written by bondc)
-        except Exception:       # absent, partial or from an incompatible bondc: a miss
-            return None
-        self.remember(derived.state_space)
+        derived = self._read("derived.pickle") if self._current() else None
+        if derived is not None:
+            self.remember(derived.state_space)
         return derived
 
     def load_light(self):
@@ -143,13 +146,10 @@ class Entry:
         has none yet (it is written after the first full simulation) or is a miss."""
         if not self._current() or not (self.folder / "module.py").is_file():
             return None
-        try:
-            with open(self.folder / "light.pickle", "rb") as stream:
-                derived = pickle.load(stream)  # noqa: S301  (the user's own cache folder, written by bondc)
-        except Exception:       # absent, partial or from an incompatible bondc: a miss
-            return None
-        derived.state_space.entry = self
-        self.remember(derived.state_space)
+        derived = self._read("light.pickle")
+        if derived is not None:
+            derived.state_space.entry = self
+            self.remember(derived.state_space)
         return derived
 
     def store_light(self, derived, recipes: dict) -> None:
