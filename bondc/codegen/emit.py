@@ -515,7 +515,10 @@ class _Emitter:
         key = (type(printer), getattr(printer, "mode_symbols", None), expr)
         text = self.printed.get(key)
         if text is None:
-            text = self.printed[key] = printer.doprint(expr)
+            # a name is printed by the name table alone (most statements of a large graph alias a
+            # bond variable to another: b3_f = b2_f), without the printer's per-call setup
+            name = printer.names.get(expr) if isinstance(expr, sympy.Symbol) else None
+            text = self.printed[key] = name if name is not None else printer.doprint(expr)
         return text
 
     def statement_lines(self, statement, exprs, printer):
