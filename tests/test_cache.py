@@ -258,6 +258,7 @@ def test_a_cached_simulate_imports_no_sympy_or_lark_and_writes_the_same_results(
 
 def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(tmp_path, isolated):
     from bondc.analysis.energy import energy_account
+    from bondc.simulate import compile_model
 
     path = _write(tmp_path / "drive.bg")
     full = derive_file(path)
@@ -265,8 +266,7 @@ def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(t
     account = energy_account(full.state_space, result)
     entry = cache.entry_of(full.state_space)
     assert account.energy_recipes is not None and entry is not None
-    entry.write_module(__import__("bondc.simulate", fromlist=["compile_model"]).compile_model(
-        full.state_space)["__bondc_source__"])
+    entry.write_module(compile_model(full.state_space)["__bondc_source__"])
     entry.store_light(full, account.energy_recipes)
     light = derive_file(path, light=True)
     assert isinstance(light.state_space, cache.LightStateSpace)
@@ -279,3 +279,21 @@ def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(t
     assert other.to_json() == direct.to_json()
     assert light.state_space.full() is not None and light.state_space.derivatives.keys() == \
         full.state_space.derivatives.keys()
+
+
+def test_a_corrupt_light_entry_is_a_miss_and_the_full_entry_is_read(tmp_path, isolated):
+    from bondc.analysis.energy import energy_account
+    from bondc.simulate import compile_model
+
+    path = _write(tmp_path / "drive.bg")
+    full = derive_file(path)
+    account = energy_account(full.state_space, simulate(full.state_space, full.experiment))
+    entry = cache.entry_of(full.state_space)
+    entry.write_module(compile_model(full.state_space)["__bondc_source__"])
+    entry.store_light(full, account.energy_recipes)
+    assert isinstance(derive_file(path, light=True).state_space, cache.LightStateSpace)
+    light = entry.folder / "light.pickle"
+    light.write_bytes(light.read_bytes()[:40])          # a partial write
+    again = derive_file(path, light=True)
+    assert not isinstance(again.state_space, cache.LightStateSpace)
+    assert again.state_space.state_names == full.state_space.state_names
