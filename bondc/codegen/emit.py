@@ -325,8 +325,11 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
             partial = partial_derivative(expr, symbol)
             if partial == 0:
                 continue
+            one = partial == 1
             for j, dsj in ds.items():
-                accumulated[j] = accumulated.get(j, sympy.Integer(0)) + partial * dsj
+                # (sympy's 0 + x and 1*x are x: skip building them, most partials of a graph are 1)
+                term = dsj if one else partial if dsj == 1 else partial * dsj
+                accumulated[j] = accumulated[j] + term if j in accumulated else term
         return {j: v for j, v in sorted(accumulated.items()) if v != 0}
 
     def name_entries(entries):
@@ -345,7 +348,10 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
         statements.append(statement)
         if statement.kind == "assign":
             (symbol,), (expr,) = statement.defines, statement.exprs
-            rows[symbol] = name_entries(row_of(expr))
+            if isinstance(expr, sympy.Symbol):
+                rows[symbol] = sensitivity(expr)        # a copy has its source's row (the same entries)
+            else:
+                rows[symbol] = name_entries(row_of(expr))
         else:   # an algebraic block: dz/dx = -(dR/dz)^-1 dR/dx
             number = statement.data["number"]
             unknowns = statement.defines
