@@ -37,13 +37,22 @@ from bondc.source import Span
 from bondc.units import BASE_DIMENSIONS, SIUnit
 
 _N = len(BASE_DIMENSIONS) - 1          # the angle pseudo-dimension is dropped: angles are dimensionless
-_ZERO = (Fraction(0),) * _N
-_SECOND = tuple(Fraction(1 if name == "s" else 0) for name in BASE_DIMENSIONS[:_N])
 FREE, UNKNOWN = "free", "unknown"
 
 
-def _vec(dims) -> tuple[Fraction, ...]:
-    return tuple(Fraction(d) for d in dims[:_N])
+def _exponent(value):
+    """An exponent as an int when it is whole (ints add 50 times faster than Fractions, and compare
+    and hash equal to them), else the Fraction."""
+    value = Fraction(value)
+    return int(value) if value.denominator == 1 else value
+
+
+def _vec(dims) -> tuple:
+    return tuple(_exponent(d) for d in dims[:_N])
+
+
+_ZERO = (0,) * _N
+_SECOND = tuple(1 if name == "s" else 0 for name in BASE_DIMENSIONS[:_N])
 
 
 @dataclass(frozen=True)
@@ -59,7 +68,7 @@ class Form:
 
     @staticmethod
     def var(index: int) -> "Form":
-        return Form(_ZERO, ((index, Fraction(1)),))
+        return Form(_ZERO, ((index, 1),))
 
     def plus(self, other: "Form", sign: int = 1) -> "Form":
         terms = dict(self.terms)
@@ -68,7 +77,8 @@ class Form:
         return Form(_add(self.const, other.const, sign), tuple(sorted((i, c) for i, c in terms.items() if c != 0)))
 
     def times(self, factor: Fraction) -> "Form":
-        return Form(tuple(a * factor for a in self.const), tuple((i, c * factor) for i, c in self.terms if c * factor))
+        return Form(tuple(_exponent(a * factor) for a in self.const),
+                    tuple((i, c * factor) for i, c in self.terms if c * factor))
 
 
 Dim = object     # Form | FREE | UNKNOWN
@@ -362,7 +372,7 @@ def _solve(equations: list[_Equation], source: dict[int, _Equation] | None = Non
                 forms[key] = difference
                 if len(difference.terms) == 1:
                     index, coefficient = difference.terms[0]
-                    known[index] = tuple(-c / coefficient for c in difference.const)
+                    known[index] = tuple(_exponent(Fraction(-c) / coefficient) for c in difference.const)
                     source[index] = equation
                     changed = True
                 elif not difference.terms:
