@@ -240,7 +240,11 @@ class LightStateSpace:
         if self._full is None:
             derived = self.entry.load() if self.entry is not None else None
             if derived is None:
-                raise RuntimeError("the compile cache entry of this model is gone; run again")
+                from bondc.errors import Diagnostic, UsageError
+
+                raise UsageError(Diagnostic("error", "E803", "cannot simulate: the compile cache entry of "
+                                                             "this model was removed during the run",
+                                            hint="run the command again"))
             self._full = derived.state_space
         return self._full
 
@@ -254,18 +258,11 @@ class LightStateSpace:
         return {name: energy_from_recipe(kind, state, recipe) for name, (kind, state, recipe) in self.recipes.items()}
 
     def __getattr__(self, name):
+        # (only for names this object lacks: while unpickling, before its own attributes are set,
+        # those and special names must not reach full())
         if name.startswith("__") or name in ("_full", "entry"):
             raise AttributeError(name)
         return getattr(self.full(), name)
-
-    def __getstate__(self):
-        state = dict(self.__dict__)
-        state["_full"] = None
-        state["entry"] = None
-        return state
-
-    def __setstate__(self, state):
-        self.__dict__.update(state)
 
 
 def entry_of(state_space) -> Entry | None:

@@ -45,24 +45,24 @@ def _parse_sets(values) -> list:
     return parse_sets(values)
 
 
-def _derive(args, light: bool = False):
-    """parse -> build -> causality -> equations, with the experiment's overrides applied.
-
-    Warnings (derivative causality, unused parameters, ...) go to stderr. ``light``: see
-    ``pipeline.derive_file`` (``simulate`` takes it: a cached run then needs no sympy).
-    """
-    return _derived(args, light)[:4]
+def _derive(args):
+    """parse -> build -> causality -> equations, with the experiment's overrides applied:
+    (graph, causal, state space, experiment). See :func:`_derived`."""
+    derived = _derived(args)
+    return derived.graph, derived.causal, derived.state_space, derived.experiment
 
 
-def _derived(args, light: bool = False) -> tuple:
-    """:func:`_derive`'s four values and the ``Derived`` itself."""
+def _derived(args, light: bool = False):
+    """The ``pipeline.Derived`` of the command's file and options. Warnings (derivative causality,
+    unused parameters, ...) go to stderr. ``light``: see ``pipeline.derive_file`` (``simulate``
+    takes it: a cached run then needs no sympy)."""
     from bondc.pipeline import derive_file
 
     derived = derive_file(Path(args.file), model=getattr(args, "model", None),
                           experiment=getattr(args, "experiment", None), sets=getattr(args, "set", None) or (),
                           cache=False if getattr(args, "no_cache", False) else None, light=light)
     _print_diagnostics(derived.notes, derived.graph.sources)
-    return derived.graph, derived.causal, derived.state_space, derived.experiment, derived
+    return derived
 
 
 # ------------------------------------------------------------------ commands
@@ -211,11 +211,11 @@ def _cmd_linearize(args) -> int:
 
 def _keep_light(derived, account) -> None:
     """After a full run from the compile cache, write the entry's light form for the next one."""
-    from bondc.cache import entry_of
+    from bondc.cache import LightStateSpace, entry_of
 
     entry = entry_of(derived.state_space)
     if (entry is not None and account.energy_recipes is not None and not derived.sets
-            and not hasattr(derived.state_space, "light_energy")):
+            and not isinstance(derived.state_space, LightStateSpace)):
         entry.store_light(derived, account.energy_recipes)
 
 
@@ -227,7 +227,8 @@ def _cmd_simulate(args) -> int:
 
     if args.output:
         check_output(args.output)       # before any work
-    graph, _, state_space, experiment, derived = _derived(args, light=True)
+    derived = _derived(args, light=True)
+    graph, state_space, experiment = derived.graph, derived.state_space, derived.experiment
     result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:

@@ -203,17 +203,12 @@ class NumericModel:
         values = ss.parameter_values(parameters)
         self.parameter_values = values
         numbers = {symbol: sympy.Float(value) for symbol, value in values.items()}
-        names: dict = {}
+        names: dict = {}        # symbol -> its variable in the code: _v0, _v1, ... and _p0, _p1, ...
 
         def ident(symbol):
             if symbol not in names:
-                names[symbol] = sympy.Symbol(f"_v{len(names)}", real=True)
+                names[symbol] = f"_v{len(names)}"
             return names[symbol]
-
-        # parameters are variables of the code (numpy numbers, bound in its namespace): printing
-        # through a name table instead of substituting numbers into every expression (each
-        # substitution rebuilds the expression: 5 s for a 2000-state model)
-        parameter_names = {symbol: f"_p{index}" for index, symbol in enumerate(values)}
 
         for symbol in ss.state_symbols:
             ident(symbol)
@@ -223,14 +218,15 @@ class NumericModel:
         for block in ss.algebraic_blocks:
             for unknown in block.unknowns:
                 ident(unknown)
-        table = {symbol: str(name) for symbol, name in names.items()}
+        # parameters are variables of the code (numpy numbers, bound in its namespace): printing
+        # through the name table instead of substituting numbers into every expression (each
+        # substitution rebuilds the expression: 5 s for a 2000-state model)
+        parameter_names = {symbol: f"_p{index}" for index, symbol in enumerate(values)}
+        names.update((symbol, name) for symbol, name in parameter_names.items() if symbol not in names)
 
         class _Printer(NumPyPrinter):
             def _print_Symbol(self, symbol):
-                name = table.get(symbol) or parameter_names.get(symbol)
-                if name is None:
-                    raise ValueError(f"unbound symbol {symbol}")
-                return name
+                return names[symbol]
 
             _print_Dummy = _print_Symbol
 
@@ -239,8 +235,8 @@ class NumericModel:
 
         def code(expr):
             expr = as_sympy(expr)
-            if any(s not in table and s not in parameter_names for s in expr.free_symbols):
-                free = [s for s in expr.free_symbols if s not in table and s not in parameter_names]
+            free = [s for s in expr.free_symbols if s not in names]
+            if free:
                 raise ValueError(f"unbound symbols {sorted(str(s) for s in free)} in {expr}")
             return printer.doprint(expr)
 
@@ -255,7 +251,7 @@ class NumericModel:
 
         def emit_blocks(position):
             for number, block in blocks.get(position, ()):
-                unknowns = ", ".join(str(ident(u)) for u in block.unknowns) + ","
+                unknowns = ", ".join(ident(u) for u in block.unknowns) + ","
                 lines.append(f"    def _residual{number}(_z):")
                 lines.append(f"        {unknowns} = _z")
                 lines.append(f"        return [{', '.join(code(r) for r in block.residuals)}]")
@@ -272,7 +268,7 @@ class NumericModel:
         emit_blocks(len(ss.assignments))
         assigned = [ident(symbol) for symbol, _ in ss.assignments] + [
             ident(u) for block in ss.algebraic_blocks for u in block.unknowns]
-        lines.append(f"    _values = [{', '.join(str(a) for a in assigned)}]")
+        lines.append(f"    _values = [{', '.join(assigned)}]")
         lines.append(f"    _der = [{', '.join(code(ss.derivatives[s.name]) for s in ss.states)}]")
         lines.append(f"    _out = [{', '.join(code(expr) for expr in ss.outputs.values())}]")
         lines.append("    return _values, _der, _out")

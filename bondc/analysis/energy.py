@@ -754,7 +754,6 @@ def _lambdify(symbol, expr) -> tuple:
 
     x = sympy.Symbol("x", real=True)
     function = sympy.lambdify(x, expr.xreplace({symbol: x}), modules=[dict(NUMERIC_FUNCTIONS), "numpy"])
-    recipe = None
     try:
         text = inspect.getsource(function)
     except (OSError, TypeError):
@@ -772,8 +771,7 @@ def _lambdify(symbol, expr) -> tuple:
             names[name] = ("numpy", name)
         else:
             return function, None      # anything else: no recipe (the cache then keeps sympy)
-    recipe = (text, names)
-    return function, recipe
+    return function, (text, names)
 
 
 def energy_from_recipe(kind: str, state_name: str, recipe) -> _StoredEnergy:

@@ -139,6 +139,13 @@ def _assign(symbol, expr) -> _Statement:
     return _Statement("assign", (symbol,), [expr])
 
 
+def _copied(statement: _Statement):
+    """The symbol a statement only copies (``b3_f = b2_f``), or None."""
+    if statement.kind == "assign" and isinstance(statement.exprs[0], sympy.Symbol):
+        return statement.exprs[0]
+    return None
+
+
 def _hide_piecewise(expr, pieces: dict):
     """``expr`` with every outermost Piecewise replaced by a placeholder symbol (recorded in ``pieces``)."""
     if isinstance(expr, sympy.Piecewise):
@@ -348,10 +355,9 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
         statements.append(statement)
         if statement.kind == "assign":
             (symbol,), (expr,) = statement.defines, statement.exprs
-            if isinstance(expr, sympy.Symbol):
-                rows[symbol] = sensitivity(expr)        # a copy has its source's row (the same entries)
-            else:
-                rows[symbol] = name_entries(row_of(expr))
+            source = _copied(statement)
+            # a copy has its source's row (the same entries row_of would build)
+            rows[symbol] = sensitivity(source) if source is not None else name_entries(row_of(expr))
         else:   # an algebraic block: dz/dx = -(dR/dz)^-1 dR/dx
             number = statement.data["number"]
             unknowns = statement.defines
@@ -416,10 +422,9 @@ class _Emitter:
         # is not printed; the copy is printed by its source's name (copy propagation, at printing)
         self.aliases: dict = {}
         for statement in plan.statements:
-            if statement.kind == "assign" and isinstance(statement.exprs[0], sympy.Symbol):
-                source = statement.exprs[0]
-                if source in names and source not in self.modes:
-                    self.aliases[statement.defines[0]] = self.aliases.get(source, source)
+            source = _copied(statement)
+            if source is not None and source in names and source not in self.modes:
+                self.aliases[statement.defines[0]] = self.aliases.get(source, source)
         for symbol, source in self.aliases.items():
             names[symbol] = names[source]
         self.parameter_index = {symbol: i for i, (_, symbol, _) in enumerate(plan.parameters)}
