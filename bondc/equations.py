@@ -103,6 +103,7 @@ class _Deriver:
         self.rates: dict[str, sympy.Expr] = {}
         self.dependents: list[_Dependent] = []
         self.diagnostics: list[Diagnostic] = []
+        self.law_memo: dict = {}
         self.base_dir = Path(graph.file).parent if graph.file else None
 
     def _new_symbol(self, name: str) -> sympy.Symbol:
@@ -173,7 +174,12 @@ class _Deriver:
         return translator(expr)
 
     def law(self, element: ElementNode, target: str, local: Mapping | None = None):
-        return self.translate(element.laws[target], element, local)
+        if local:
+            return self.translate(element.laws[target], element, local)
+        key = (element.name, target)      # a storage law is read again for its energy function
+        if key not in self.law_memo:
+            self.law_memo[key] = self.translate(element.laws[target], element)
+        return self.law_memo[key]
 
     def add(self, target, rhs, node: str, role: str) -> None:
         self.equations.append(_Equation(target, as_sympy(rhs), node, role, len(self.equations)))

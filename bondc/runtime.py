@@ -2342,6 +2342,13 @@ _NATIVE_FLAGS = ("-fPIC", "-shared", "-ffp-contract=off")
 #: Optimisation by the size of the C text: gcc's -O2 (and -O1) grow faster than linearly on
 #: functions of tens of thousands of statements (22 s at 1 MB, against 1 s at -O0).
 _NATIVE_OPTIMIZE = ((400_000, "-O2"), (float("inf"), "-O0"))
+#: From this size of C text on, each function of the model (and the driver) is compiled as a
+#: translation unit of its own, all at once, and the objects are linked: on a 2-core machine the
+#: 10000-section chain's build takes 11 s instead of 17 s. A model's C text marks where its units
+#: begin (``UNIT_MARK``, written by bondc's code generation); the part before the first is the
+#: prelude every unit starts with.
+_NATIVE_SPLIT_FROM = 400_000
+UNIT_MARK = "/* ---- bondc: a translation unit of its own ---- */\n"
 _NATIVE_LIBRARIES: dict = {}        # digest -> (ffi, lib) loaded in this process
 _NATIVE_NOTES: set = set()          # reasons already printed (each once per process)
 
@@ -2639,7 +2646,7 @@ def load_native(source, driver=True):
     link = _sundials_link() if driver else None
     variants = []
     if link is not None:
-        variants.append((source + "\n" + _DRIVER_SOURCE.replace("BONDC_INDEX_TYPE", link[0]), link[1]))
+        variants.append((source + "\n" + UNIT_MARK + _DRIVER_SOURCE.replace("BONDC_INDEX_TYPE", link[0]), link[1]))
     variants.append((source, ()))
     why = ""
     for text, libraries in variants:
@@ -2654,7 +2661,9 @@ def _build_native(source, libraries):
     import hashlib
 
     flags = (next(flag for limit, flag in _NATIVE_OPTIMIZE if len(source) < limit), *_NATIVE_FLAGS)
-    digest = hashlib.sha256("\n".join((*flags, *libraries, source)).encode("utf-8")).hexdigest()[:40]
+    units = _native_units(source)
+    digest = hashlib.sha256("\n".join((*flags, *libraries, f"units {len(units)}", source)).encode("utf-8")
+                            ).hexdigest()[:40]
     if digest in _NATIVE_LIBRARIES:
         return _NATIVE_LIBRARIES[digest]
     try:
@@ -2675,14 +2684,10 @@ def _build_native(source, libraries):
         try:
             os.makedirs(directory, exist_ok=True)
             with tempfile.TemporaryDirectory(dir=directory, prefix="build-") as work:
-                c_file, built = os.path.join(work, "model.c"), os.path.join(work, "model.so")
-                with open(c_file, "w", encoding="utf-8") as stream:
-                    stream.write(source)
-                done = subprocess.run([compiler, *flags, "-o", built, c_file, *link, "-lm"],
-                                      capture_output=True, text=True, timeout=900)
-                if done.returncode != 0:
-                    first = (done.stderr.strip().splitlines() or ["no message"])[0]
-                    return None, f"the C compiler failed ({first})"
+                built = os.path.join(work, "model.so")
+                failure = _compile_native(compiler, flags, units, work, built, link)
+                if failure:
+                    return None, f"the C compiler failed ({failure})"
                 os.replace(built, path)
         except (OSError, subprocess.SubprocessError) as error:
             return None, f"the C compiler could not run ({error})"
@@ -2695,6 +2700,57 @@ def _build_native(source, libraries):
         return None, f"the compiled model could not be loaded ({error})"
     _NATIVE_LIBRARIES[digest] = (ffi, lib)
     return ffi, lib
+
+
+def _native_units(source):
+    """The C text as the translation units to compile: one, or (from ``_NATIVE_SPLIT_FROM`` on,
+    where the text is marked) the prelude followed by each marked part, with the prototypes of the
+    model's functions (the driver calls them)."""
+    if len(source) < _NATIVE_SPLIT_FROM or UNIT_MARK not in source:
+        return [source.replace(UNIT_MARK, "")]
+    prelude, *parts = source.split(UNIT_MARK)
+    prototypes = "".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
+                         for name in _NATIVE_FUNCTIONS)
+    return [prelude + prototypes + part for part in parts]
+
+
+def _compile_native(compiler, flags, units, work, built, link):
+    """Compile ``units`` into the shared library ``built``: one compiler run for one unit, else
+    every unit at once (``-c``) and a link. Returns "" or the compiler's first line of complaint."""
+    import subprocess
+
+    def first_line(stderr):
+        return (stderr.strip().splitlines() or ["no message"])[0]
+
+    files = []
+    for k, text in enumerate(units):
+        files.append(os.path.join(work, f"unit{k}.c"))
+        with open(files[-1], "w", encoding="utf-8") as stream:
+            stream.write(text)
+    if len(files) == 1:
+        done = subprocess.run([compiler, *flags, "-o", built, files[0], *link, "-lm"],
+                              capture_output=True, text=True, timeout=900)
+        return first_line(done.stderr) if done.returncode != 0 else ""
+    objects = [name[:-2] + ".o" for name in files]
+    compile_flags = [flag for flag in flags if flag != "-shared"]
+    runs = [subprocess.Popen([compiler, *compile_flags, "-c", "-o", obj, name], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True) for name, obj in zip(files, objects)]
+    failure = ""
+    try:
+        for run in runs:
+            _, stderr = run.communicate(timeout=900)
+            if run.returncode != 0 and not failure:
+                failure = first_line(stderr)
+    finally:
+        for run in runs:
+            if run.poll() is None:
+                run.kill()
+                run.wait()
+    if failure:
+        return failure
+    done = subprocess.run([compiler, *flags, "-o", built, *objects, *link, "-lm"],
+                          capture_output=True, text=True, timeout=900)
+    return first_line(done.stderr) if done.returncode != 0 else ""
 
 
 def attach_native(model, native=None):

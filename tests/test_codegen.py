@@ -395,3 +395,139 @@ def test_a_hostile_file_name_never_runs_as_code(tmp_path, monkeypatch, name, sta
     expected = subprocess.run([sys.executable, str(tmp_path / "plain_module.py"), "--t-end", "0.5", "--dt", "0.25"],
                               capture_output=True, text=True, cwd=tmp_path, check=True)
     assert result.stdout == expected.stdout and result.stdout.count("\n") == 4      # header and 3 rows
+
+
+# ------------------------------------------------------------------ the quick printing path
+
+def _printable_models():
+    """Every model of models/ and tests/ that derives: the corpus the quick path is checked on."""
+    paths = sorted(p for p in [*ROOT.glob("models/*.bg"), *ROOT.glob("tests/**/*.bg")] if p.is_file())
+    return [p for p in paths if "std" not in p.parts]
+
+
+@pytest.mark.parametrize("expr", [
+    x * y, -x * y, 2 * x * y, -2 * x, sympy.Float(-1.0) * x, sympy.Float(1e9) * x, sympy.Float(0.1) + x, sympy.Float(1.0) * x * y, sympy.Float(-2.5) * x / y,
+    -1 / x, 1 / (x * y), -x / (y * t), x / y**2, -x**3 / y**2, x**2 * y, 3 / x, sympy.Float(0.5) / (x * y**2),
+    x - y, -x - y, x - 2 * y + t, sympy.Float(-0.1) + x, 2 - x, -x + y**2 / t - 3, x * y - t / x,
+    sympy.Integer(-4), sympy.Float(-1e-300), x**-2, x**5,
+])
+def test_quick_printing_writes_what_sympy_writes(expr):
+    from bondc.codegen.cprinter import NativePrinter
+
+    from bondc.codegen.emit import _LawPrinter
+
+    for printer in (BondcPrinter(NAMES), NativePrinter({s: f"v_{n[0]}" for s, n in NAMES.items()}), _LawPrinter()):
+        assert printer.quick(expr) == printer.doprint(expr)
+
+
+def test_quick_printing_declines_what_it_does_not_know():
+    from bondc.codegen.cprinter import NativePrinter
+
+    z = sympy.Symbol("z", real=True)        # not in the name table: doprint refuses it
+    for expr in (sympy.sqrt(x), sympy.Rational(1, 3) * x, x + z, sympy.Piecewise((x, m0 < 0), (y, True)) + y,
+                 sympy.Float("nan") * x, sympy.pi * x, (x + y) ** 2, x**y):
+        assert BondcPrinter(NAMES).quick(expr) is None
+        assert NativePrinter(NAMES).quick(expr) is None
+
+
+def test_quick_printing_equals_sympys_printing_on_every_model(monkeypatch):
+    """Every expression the quick path prints, in every generated function (numpy and C) and law
+    text (VARIABLE_LAWS) of every model of the corpus, is compared with sympy's own printing of it."""
+    from bondc.codegen.printer import QuickPrinting
+    from bondc.errors import BondcError
+
+    quick = QuickPrinting.quick
+    compared, printers = [], set()
+
+    def checked(self, expr):
+        text = quick(self, expr)
+        if text is not None:
+            assert text == self.doprint(expr), (type(self).__name__, expr)
+            compared.append(text)
+            printers.add(type(self).__name__)
+        return text
+
+    monkeypatch.setattr(QuickPrinting, "quick", checked)
+    models = 0
+    for path in _printable_models():
+        try:
+            graph, _ = semantic.load(path, experiment=semantic.FIRST)
+            ss = equations.derive(causality.assign_causality(graph))
+        except BondcError:
+            continue                # a model the corpus keeps for its error
+        emit(ss, next(iter(graph.experiments.values()), None))
+        models += 1
+    assert models >= 40 and len(compared) > 2000
+    assert {"_LawPrinter", "BondcPrinter", "NativePrinter"} <= printers
+
+
+def test_common_subexpressions_are_sympys_on_every_model(monkeypatch):
+    """bondc's tree cse (which keeps a node whose arguments did not change, where sympy rebuilds
+    every node, and never makes 1/name a temporary) finds sympy's ``tree_cse`` temporaries, with
+    the same expressions once sympy's temporaries for 1/name are put back, on every pass of every
+    model of the corpus."""
+    from sympy.simplify.cse_main import tree_cse
+
+    from bondc.errors import BondcError
+
+    emit_module = sys.modules["bondc.codegen.emit"]
+    ours = emit_module._cse
+    passes = []
+
+    def without_reciprocals(replacements, reduced):
+        """sympy's result with its temporaries for reciprocals of names (1/m) put back"""
+        back, kept, temporaries = {}, [], {symbol for symbol, _ in replacements}
+        for symbol, expr in replacements:
+            expr = expr.xreplace(back)
+            if expr.is_Pow and expr.exp == -1 and expr.base.is_Symbol and expr.base not in temporaries:
+                back[symbol] = expr
+            else:
+                kept.append((symbol, expr))
+        return kept, [expr.xreplace(back) for expr in reduced]
+
+    def compared(exprs):
+        replacements, reduced = ours(exprs)
+        expected, expected_reduced = without_reciprocals(
+            *tree_cse(exprs, sympy.numbered_symbols("_c", real=True), {}, "none", ()))
+        assert len(replacements) == len(expected)
+        rename = {theirs: mine for (theirs, _), (mine, _) in zip(expected, replacements)}
+        assert replacements == [(rename[symbol], expr.xreplace(rename)) for symbol, expr in expected]
+        assert reduced == [expr.xreplace(rename) for expr in expected_reduced]
+        temporaries = {symbol for symbol, _ in replacements}
+        assert not any(expr.is_Pow and expr.exp == -1 and expr.base.is_Symbol and expr.base not in temporaries
+                       for _, expr in replacements)
+        passes.append(len(replacements))
+        return replacements, reduced
+
+    monkeypatch.setattr(emit_module, "_cse", compared)
+    for path in _printable_models():
+        try:
+            graph, _ = semantic.load(path, experiment=semantic.FIRST)
+            ss = equations.derive(causality.assign_causality(graph))
+        except BondcError:
+            continue
+        emit(ss, next(iter(graph.experiments.values()), None))
+    assert len(passes) > 80 and sum(passes) > 50       # passes that found temporaries were compared
+
+
+def test_symbols_are_ordered_as_sympys_default_sort_key_orders_them():
+    from bondc.codegen.emit import _ordered
+
+    rng = np.random.default_rng(5)
+    names = ["mass.p", "mass_p", "m10", "m9", "A", "a", "b3_f", "b12_f", "_c0", "Z.q"]
+    symbols = [sympy.Symbol(name, real=True) for name in names] + [sympy.Symbol("plain")]
+    for _ in range(20):
+        chosen = set(rng.choice(symbols, size=6, replace=False))
+        assert _ordered(chosen) == sorted(chosen, key=sympy.default_sort_key)
+    twins = {sympy.Dummy("x"), sympy.Dummy("x"), sympy.Symbol("x")}
+    assert _ordered(twins) == sorted(twins, key=sympy.default_sort_key)
+
+
+@pytest.mark.parametrize("a", [sympy.Integer(-1), sympy.Integer(3), sympy.Float(2.5), sympy.Float(-1.0),
+                               sympy.Float(1.0), sympy.Integer(0), sympy.Rational(1, 3), x + 1, sympy.oo])
+def test_the_jacobians_products_are_sympys(a):
+    from bondc.codegen.emit import _times
+
+    product = _times(a, y)
+    assert product == a * y and hash(product) == hash(a * y) and product.args == (a * y).args
+    assert product + y == a * y + y

@@ -228,3 +228,41 @@ def test_the_cvode_driver_integrates_whole_segments_in_c():
         1 - zeta ** 2) * np.sin(wd * s))), 0.0)
     np.testing.assert_allclose(run.states["spring.q"], expected, rtol=0, atol=1e-7 * force / k)
     assert run.stats["nfev"] > 0 and run.stats["steps"] == run.t.size - 1      # every step recorded once
+
+
+@needs_cc
+def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute_the_same(tmp_path, monkeypatch):
+    """From ``_NATIVE_SPLIT_FROM`` characters on, each C function (and the driver) is a translation
+    unit of its own, compiled in parallel and linked. Forced here on the flagship: the library built
+    that way gives bit-identical right-hand sides, Jacobians and switching functions, and the run
+    through its driver equals the one through the single-unit library."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    derived = derive_file(ROOT / "models" / "electro_pneumatic_hybrid.bg", cache=False)
+    namespace = compile_model(derived.state_space)
+    source = namespace["NATIVE_SOURCE"]
+    assert len(runtime._native_units(source)) == 1
+    runtime._NATIVE_LIBRARIES.clear()
+    whole_ffi, whole = runtime.load_native(source)
+    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    units = runtime._native_units(source + "\n" + runtime.UNIT_MARK + "int bondc_unit_probe;\n")
+    assert len(units) == 4 and all(unit.startswith(source[:source.index(runtime.UNIT_MARK)]) for unit in units)
+    runtime._NATIVE_LIBRARIES.clear()
+    split_ffi, split = runtime.load_native(source)
+    assert split is not whole and len(list((tmp_path / "native").glob("*.so"))) == 2
+    rng = np.random.default_rng(3)
+    n, modes = len(namespace["STATE_NAMES"]), len(namespace["SWITCHES"])
+    p = np.array(list(namespace["PARAMETERS"].values()), dtype=float)
+    sizes = {"bondc_rhs": n, "bondc_jac": len(namespace["JACOBIAN_PATTERN"]), "bondc_switches": modes}
+    for _ in range(20):
+        x = namespace["x0"]() * rng.uniform(0.5, 1.5, n) + rng.normal(0, 1e-3, n)
+        m = rng.choice([-1.0, 1.0], modes)
+        t = rng.uniform(0, 4.2)
+        for name, size in sizes.items():
+            outs = []
+            for ffi, lib in ((whole_ffi, whole), (split_ffi, split)):
+                out = np.zeros(size)
+                getattr(lib, name)(t, ffi.from_buffer("double[]", x), ffi.from_buffer("double[]", p),
+                                   ffi.from_buffer("double[]", m), ffi.from_buffer("double[]", out))
+                outs.append(out)
+            np.testing.assert_array_equal(outs[0], outs[1])
+    assert hasattr(split, "bondc_driver_new") == hasattr(whole, "bondc_driver_new")

@@ -59,7 +59,9 @@ from sympy.printing.str import StrPrinter
 from bondc import __version__
 from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
-from bondc.codegen.printer import BondcPrinter, UnsupportedExpression, negatives_last, relative_data_path
+from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,
+                                   relative_data_path)
+from bondc.runtime import UNIT_MARK
 from bondc.symbolic import as_sympy, partial_derivative
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
@@ -76,6 +78,9 @@ MODULE_NAMES = (
 )
 _INDENT = "    "
 _LAW_LIMIT = 200
+#: Print the common shapes by :meth:`~bondc.codegen.printer.BondcPrinting.quick` (off: every
+#: expression by sympy's printer, which the tests compare it with).
+QUICK_PRINTING = True
 
 
 #: Modules the runtime imports under its own names (the generated module imports them itself).
@@ -161,15 +166,62 @@ def _hide_piecewise(expr, pieces: dict):
 
 
 def _cse(exprs: list):
-    """Common subexpressions of ``exprs``: sympy's tree cse, without its ``opt_cse`` pre-pass.
+    """Common subexpressions of ``exprs``: sympy's tree cse (``cse_main.tree_cse``, without the
+    ``opt_cse`` pre-pass), written again with two differences:
 
-    The pre-pass (common subsets of sums' and products' arguments, negations) costs more than
-    the rest of code generation on a large model and grows faster than linearly; equal
-    subtrees are still shared.
+    - a node none of whose arguments changed is kept as it is. sympy's ``_rebuild`` compares the
+      list of rebuilt arguments with the tuple of the old ones, which always differ, so it rebuilds
+      (and re-evaluates) every node of every expression: on a large model that was most of the pass;
+    - the reciprocal of a name (``1/m``) is never a temporary: ``p/m`` stays a division as the law
+      writes it. ``p*(1/m)`` differs from it in the last bit, and is not finite where ``1/m``
+      overflows (a mass of 1e-320 kg) although ``p/m`` may be.
+
+    The pre-pass (common subsets of sums' and products' arguments, negations) costs more than the
+    rest of code generation on a large model and grows faster than linearly; equal subtrees are
+    still shared. ``tests/test_codegen.py`` checks that the result is sympy's, reciprocals of names
+    put back, on every model of the corpus.
     """
-    from sympy.simplify.cse_main import tree_cse
+    from sympy.utilities.iterables import iterable
 
-    return tree_cse(exprs, sympy.numbered_symbols("_c", real=True), {}, "none", ())
+    seen, to_eliminate, excluded = set(), set(), set()
+
+    def find_repeated(expr):
+        if not isinstance(expr, sympy.Basic) or isinstance(expr, sympy.RootOf):
+            return
+        if expr.is_Atom or expr.is_Order:
+            if expr.is_Symbol:
+                excluded.add(expr.name)
+            return
+        if not iterable(expr):
+            if expr in seen:
+                if not (expr.is_Pow and expr.exp is sympy.S.NegativeOne and expr.base.is_Symbol):
+                    to_eliminate.add(expr)
+                return
+            seen.add(expr)
+        for arg in expr.args:
+            find_repeated(arg)
+
+    for expr in exprs:
+        find_repeated(expr)
+    symbols = (s for s in sympy.numbered_symbols("_c", real=True) if s.name not in excluded)
+    replacements, subs = [], {}
+
+    def rebuild(expr):
+        if not isinstance(expr, sympy.Basic) or not expr.args:
+            return expr
+        if not iterable(expr) and expr in subs:
+            return subs[expr]
+        args = expr.args
+        new_args = [rebuild(arg) for arg in args]
+        new = expr.func(*new_args) if any(a is not b for a, b in zip(new_args, args)) else expr
+        if not iterable(expr) and expr in to_eliminate:
+            symbol = next(symbols)
+            subs[expr] = symbol
+            replacements.append((symbol, new))
+            return symbol
+        return new
+
+    return replacements, [rebuild(expr) for expr in exprs]
 
 
 # --------------------------------------------------------------------- plan
@@ -251,7 +303,7 @@ def _switch_depends(plan: _Plan) -> list:
     return [sorted(modes_of([s.g]) - {s.index}) for s in plan.switches]
 
 
-class _LawPrinter(StrPrinter):
+class _LawPrinter(QuickPrinting, StrPrinter):
     """sympy's str printer, with sums in sympy's argument order and negative terms last
     ("q - 1"): sorting the terms of every sum for display is most of a large model's printing."""
 
@@ -260,12 +312,15 @@ class _LawPrinter(StrPrinter):
     def _as_ordered_terms(self, expr, order=None):
         return negatives_last(expr)
 
+    def _quick_name(self, symbol):
+        return symbol.name
+
 
 _LAW_PRINTER = _LawPrinter()
 
 
 def _law_text(expr) -> str:
-    text = _LAW_PRINTER.doprint(expr)
+    text = (_LAW_PRINTER.quick(expr) if QUICK_PRINTING else None) or _LAW_PRINTER.doprint(expr)
     return text if len(text) <= _LAW_LIMIT else text[: _LAW_LIMIT - 3] + "..."
 
 
@@ -311,6 +366,23 @@ def _plan(ss) -> _Plan:
     return plan
 
 
+def _ordered(symbols) -> list:
+    """``sorted(symbols, key=sympy.default_sort_key)``: by name, which is that order for plain
+    symbols, at a tenth of its cost; by sympy's key where two share a name (a Dummy)."""
+    ordered = sorted(symbols, key=lambda symbol: symbol.name)
+    if any(a.name == b.name for a, b in zip(ordered, ordered[1:])) or any(s.is_Dummy for s in ordered):
+        return sorted(symbols, key=sympy.default_sort_key)
+    return ordered
+
+
+def _times(a, b):
+    """``a * b``; a number (not 0 or 1) times a name is built as the product sympy would build,
+    without its flattening (most products of a large model's Jacobian are -1 times a name)."""
+    if a.is_Number and b.is_Symbol and a.is_finite and not (a == 0 or a == 1):
+        return sympy.Mul._from_args((a, b))
+    return a * b
+
+
 def _forward_jacobian(plan: _Plan, state_symbols) -> None:
     """Sparse forward-mode derivatives of the frozen statements (see the module docstring)."""
     column = {s: j for j, s in enumerate(state_symbols)}
@@ -325,19 +397,19 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
 
     def row_of(expr, exclude=()):
         accumulated: dict = {}
-        for symbol in sorted(expr.free_symbols - set(exclude), key=sympy.default_sort_key):
+        for symbol in _ordered(expr.free_symbols - set(exclude)):
             ds = sensitivity(symbol)
             if not ds:
                 continue
             partial = partial_derivative(expr, symbol)
-            if partial == 0:
+            if partial.is_Number and partial == 0:
                 continue
-            one = partial == 1
+            one = partial.is_Number and partial == 1
             for j, dsj in ds.items():
                 # (sympy's 0 + x and 1*x are x: skip building them, most partials of a graph are 1)
-                term = dsj if one else partial if dsj == 1 else partial * dsj
+                term = dsj if one else partial if dsj.is_Number and dsj == 1 else _times(partial, dsj)
                 accumulated[j] = accumulated[j] + term if j in accumulated else term
-        return {j: v for j, v in sorted(accumulated.items()) if v != 0}
+        return {j: v for j, v in sorted(accumulated.items()) if not (v.is_Number and v == 0)}
 
     def name_entries(entries):
         named = {}
@@ -437,6 +509,9 @@ class _Emitter:
                 data_paths[path] = relative_data_path(path, module_dir) if module_dir else Path(path).name
         self.data_paths = data_paths
         self.reduced: dict = {}        # body() memo, shared with the C emitter (a shallow copy of this one)
+        self.shared = None             # share(): one cse of every function's statements and results
+        self.free_memo: dict = {}      # free(): expr -> its free symbols
+        self.reads_memo: dict = {}     # reads(): id(statement) -> the symbols it reads
         self.printed: dict = {}        # text() memo (keyed by the printer's class: numpy and C differ)
 
     def printer(self, extra_frozen=()):
@@ -452,18 +527,63 @@ class _Emitter:
         kept, replacements, reduced, frozen = self.reduced[key]
         return self.print_body(kept, replacements, reduced, frozen)
 
+    def share(self):
+        """One common-subexpression pass over every statement and the results of every function
+        that reads them (the right-hand side, the Jacobian, the switches, outputs, variables, when
+        clauses and loop unknowns). A subexpression two functions share is one temporary; each
+        function prints the temporaries it reads (:meth:`print_body`). One pass instead of one per
+        function: on a large model each pass costs about as much as printing its function."""
+        plan = self.plan
+        finals = list(plan.derivatives) + list(plan.jacobian_entries.values()) + [s.g for s in plan.switches]
+        finals += [expr for _, expr in plan.outputs] + [symbol for _, symbol, _ in plan.variables]
+        for _, condition, actions in plan.events:
+            finals += [condition] + [value for _, value in actions]
+        finals = list(dict.fromkeys(as_sympy(f) for f in finals))
+        statements = plan.jacobian_statements        # every statement of plan.statements, and the Jacobian's
+        exprs = [expr for statement in statements for expr in statement.exprs] + finals
+        replacements, reduced, frozen = self.common(exprs)
+        by_statement, position = {}, 0
+        for statement in statements:
+            by_statement[id(statement)] = reduced[position:position + len(statement.exprs)]
+            position += len(statement.exprs)
+        self.shared = (by_statement, dict(zip(finals, reduced[position:])), replacements, frozen)
+
+    def free(self, expr) -> frozenset:
+        """``expr.free_symbols``, once per expression (sympy walks the tree on every call)."""
+        found = self.free_memo.get(expr)
+        if found is None:
+            found = self.free_memo[expr] = frozenset(expr.free_symbols)
+        return found
+
+    def reads(self, statement) -> frozenset:
+        """Every symbol a statement reads."""
+        found = self.reads_memo.get(id(statement))
+        if found is None:
+            found = statement.uses.union(*(self.free(expr) for expr in statement.exprs))
+            self.reads_memo[id(statement)] = found
+        return found
+
     def reduce(self, statements, finals):
         """The statements ``finals`` need, and their common subexpressions (sympy, not printed)."""
-        needed = set().union(*(as_sympy(f).free_symbols for f in finals)) if finals else set()
+        finals = [as_sympy(f) for f in finals]
+        needed = set().union(*(self.free(f) for f in finals)) if finals else set()
         kept = []
         for statement in reversed(statements):
-            if needed & set(statement.defines):
+            if not needed.isdisjoint(statement.defines):
                 kept.append(statement)
-                needed |= statement.uses
-                for expr in statement.exprs:
-                    needed |= expr.free_symbols
+                needed |= self.reads(statement)
         kept.reverse()
-        exprs = [expr for statement in kept for expr in statement.exprs] + [as_sympy(f) for f in finals]
+        if self.shared is not None:
+            by_statement, by_final, replacements, frozen = self.shared
+            if all(id(s) in by_statement for s in kept) and all(f in by_final for f in finals):
+                reduced = [expr for s in kept for expr in by_statement[id(s)]] + [by_final[f] for f in finals]
+                return kept, replacements, reduced, frozen
+        exprs = [expr for statement in kept for expr in statement.exprs] + finals
+        replacements, reduced, frozen = self.common(exprs)
+        return kept, replacements, reduced, frozen
+
+    def common(self, exprs):
+        """(replacements, reduced exprs, the temporaries that are conditions on modes only)."""
         # cse must not hoist work out of an if's branches (only the active one is evaluated, so its
         # modes are the only ones read): every Piecewise is hidden behind a placeholder first
         pieces: dict = {}
@@ -484,7 +604,7 @@ class _Emitter:
         for symbol, expr in replacements:       # cse temps that are conditions on modes only
             if expr.free_symbols <= (self.modes | frozen):
                 frozen.add(symbol)
-        return kept, replacements, reduced, frozen
+        return replacements, reduced, frozen
 
     def print_body(self, kept, replacements, reduced, frozen):
         substitutes = dict(replacements)
@@ -492,37 +612,42 @@ class _Emitter:
         for symbol, _ in replacements:
             self.names.setdefault(symbol, symbol.name)
         printer = self.printer(frozen)
-        lines, emitted = [], set()
+        lines, emitted, used = [], set(), set()
 
-        def emit_replacements(expr):
-            for symbol in sorted(expr.free_symbols & set(substitutes) - emitted, key=order.get):
+        def emit_replacements(free):
+            pending = free & substitutes.keys()
+            if not pending:
+                return
+            for symbol in sorted(pending - emitted, key=order.get):
                 if symbol in emitted:
                     continue
-                emit_replacements(substitutes[symbol])
+                expr = substitutes[symbol]
+                inner = self.free(expr)
+                emit_replacements(inner)
                 emitted.add(symbol)
-                lines.append(self.assign_line(self.names[symbol], self.text(printer, substitutes[symbol])))
+                used.update(inner)
+                lines.append(self.assign_line(self.names[symbol], self.text(printer, expr)))
 
         position = 0
         for statement in kept:
+            used |= statement.uses
             count = len(statement.exprs)
             statement_exprs = reduced[position:position + count]
             position += count
+            frees = [self.free(expr) for expr in statement_exprs]
+            for free in frees:
+                used |= free
             if statement.kind == "assign" and statement.defines[0] in self.aliases:
                 continue        # a copy: printed by its source's name
-            for expr in statement_exprs:
-                emit_replacements(expr)
+            for free in frees:
+                emit_replacements(free)
             lines += self.statement_lines(statement, statement_exprs, printer)
         final_texts = []
         for expr in reduced[position:]:
-            emit_replacements(expr)
+            free = self.free(expr)
+            used |= free
+            emit_replacements(free)
             final_texts.append(self.text(printer, expr))
-        used = set()
-        for _, expr in replacements:
-            used |= expr.free_symbols
-        for expr in reduced:
-            used |= expr.free_symbols
-        for statement in kept:
-            used |= statement.uses
         return lines, final_texts, used
 
     #: how a function body makes t a number with numpy's arithmetic (None: it already is one)
@@ -538,10 +663,12 @@ class _Emitter:
         key = (type(printer), getattr(printer, "mode_symbols", None), expr)
         text = self.printed.get(key)
         if text is None:
-            # a name is printed by the name table alone (most statements of a large graph alias a
-            # bond variable to another: b3_f = b2_f), without the printer's per-call setup
-            name = printer.names.get(expr) if isinstance(expr, sympy.Symbol) else None
-            text = self.printed[key] = name if name is not None else printer.doprint(expr)
+            # the common shapes (names, products, sums) by the printer's quick path, the same text
+            # without sympy's per-call setup and dispatch (see BondcPrinting.quick)
+            text = printer.quick(expr) if QUICK_PRINTING else None
+            if text is None:
+                text = printer.doprint(expr)
+            self.printed[key] = text
         return text
 
     def statement_lines(self, statement, exprs, printer):
@@ -605,6 +732,7 @@ class _Emitter:
                      self.model_banner()]
         else:
             parts = [self.header(model_name), self.runtime_import(), self.model_banner()]
+        self.share()
         parts.append(self.constants(model_name))
         statements = plan.statements
         parts.append(self.derive_parameters())
@@ -897,7 +1025,9 @@ class _NativeEmitter(_Emitter):
                      self.c_function("bondc_switches", plan.statements, [s.g for s in plan.switches])]
         except UnsupportedExpression as error:
             return "", str(error)
-        return "\n\n".join(parts) + "\n", ""
+        # each function may be compiled on its own (runtime._native_units: a large model's
+        # functions are built in parallel); the prelude comes first in every unit
+        return ("\n\n" + UNIT_MARK).join(parts) + "\n", ""
 
 
 def _text_literal(text: str) -> str:

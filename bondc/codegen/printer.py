@@ -44,7 +44,104 @@ def negatives_last(expr) -> list:
     return sorted(expr.args, key=lambda term: term.as_coeff_Mul()[0].is_negative is True)
 
 
-class BondcPrinting:
+class QuickPrinting:
+    """A quick path for sympy printers (see :meth:`quick`); ``_quick_name`` gives a name's text
+    or None where the printer would refuse it."""
+
+    def _quick_name(self, symbol):
+        return self.names.get(symbol)
+
+    def quick(self, expr):
+        """``doprint(expr)`` for the shapes most of a bond graph's laws have, without sympy's
+        printing machinery (its per-call setup, dispatch and precedence tests cost more than the rest
+        of a large model's code generation); None for any other shape, which ``doprint`` prints.
+
+        The shapes: a name; a finite Integer or Float; a power of a name to an integer; a product
+        of those with at most one number in front; a sum of any of these. The text is what sympy's
+        code printers write for them (``CodePrinter._print_Mul``, ``StrPrinter._print_Add``, with
+        this printer's numbers and powers; sympy's ``StrPrinter._print_Mul`` writes the same for
+        them): ``tests/test_codegen.py`` compares the two on every expression of every model of
+        the test corpus. In these shapes no factor or term ever needs
+        parentheses: names and positive numbers are atoms, a power of a name binds tighter than a
+        product, and a product (even with a minus sign) binds tighter than a sum.
+        """
+        if expr.is_Add:
+            parts = []
+            for term in negatives_last(expr):
+                if term.is_Add:
+                    return None
+                text = self._quick_factor(term) if not term.is_Mul else self._quick_product(term)
+                if text is None:
+                    return None
+                if text[0] == "-":
+                    parts += ("-", text[1:])
+                else:
+                    parts += ("+", text)
+            sign = parts.pop(0)
+            return ("" if sign == "+" else "-") + " ".join(parts)
+        if expr.is_Mul:
+            return self._quick_product(expr)
+        return self._quick_factor(expr, nested=False)
+
+    def _quick_factor(self, expr, nested=True):
+        if expr.is_Symbol:
+            return self._quick_name(expr)
+        if expr.is_Integer or (expr.is_Float and expr.is_finite):
+            # as doprint would: inside a product or sum the number is printed one level down
+            # (sympy's str printer writes a Float's trailing zeros only at the top level)
+            self._print_level += nested
+            try:
+                return self._print(expr)
+            finally:
+                self._print_level -= nested
+        if expr.is_Pow and expr.exp.is_Integer and expr.base.is_Symbol and self._quick_name(expr.base) is not None:
+            return self._print_Pow(expr)
+        return None
+
+    def _quick_product(self, expr):
+        """``CodePrinter._print_Mul`` for a product of names and integer powers of names with an
+        Integer or Float in front (the only number a sympy product can hold, always its first
+        argument)."""
+        factors = list(expr.args)
+        sign = ""
+        first = factors[0]
+        if first.is_Number:
+            if not (first.is_Integer or first.is_Float) or not first.is_finite:
+                return None
+            if first.is_negative:
+                sign = "-"
+                first = -first
+                if first is sympy.S.One:    # -x*y prints as "-x*y", -2*x as "-2*x", -1.0*x as "-1.0*x"
+                    del factors[0]
+                else:
+                    factors[0] = first
+        numerator, denominator = [], []
+        for factor in factors:
+            if factor.is_Pow and factor.exp.is_Integer and factor.exp < 0:
+                base = factor.base
+                name = self._quick_name(base) if base.is_Symbol else None
+                if name is None:
+                    return None
+                if factor.exp == -1:
+                    denominator.append(name)
+                else:
+                    denominator.append(self._print_Pow(sympy.Pow(base, -factor.exp, evaluate=False)))
+            else:
+                text = self._quick_factor(factor)
+                if text is None:
+                    return None
+                numerator.append(text)
+        if not numerator:
+            numerator.append(self._print(sympy.S.One))
+        text = sign + "*".join(numerator)
+        if not denominator:
+            return text
+        if len(denominator) == 1:
+            return f"{text}/{denominator[0]}"
+        return f"{text}/({'*'.join(denominator)})"
+
+
+class BondcPrinting(QuickPrinting):
     """What bondc's numpy and C printers share: names only from the map, sums in sympy's argument
     order with negative terms last, min/max folded pairwise, relations in parentheses, and a
     refusal (:class:`UnsupportedExpression`) for anything they do not know. ``target`` names the
