@@ -16,6 +16,10 @@ equations), ``module.py`` once a simulation generated its module,
 and the stored-energy functions as printed recipes: a :class:`LightStateSpace`,
 so that the next ``bondc simulate`` imports neither sympy nor lark), and
 ``depends.json``: the SHA-256 of every other file the model read (imports).
+``bondc check`` keeps what its equations stage found (the states kept, E605 and the other
+diagnostics of that stage) in ``<cache_dir>/check/<key>.pickle``, keyed by bondc's code and the
+text of every file the model read (:func:`check_key`): checking an unchanged file again needs
+no sympy.
 An entry whose imports changed is a miss. The compiled C library is cached
 separately, by the hash of its text (``bondc.runtime.load_native``).
 
@@ -89,6 +93,40 @@ def _atomic_write(path: Path, data: bytes) -> None:
         except OSError:
             pass
         raise
+
+
+def check_key(sources, model=None, sets=()) -> str:
+    """The key of ``bondc check``'s equations-stage result: bondc's code, the name and text of
+    every file the model read (imports too), the ``--model`` and ``--set`` values."""
+    digest = hashlib.sha256(code_hash().encode())
+    digest.update(json.dumps([model, [item if isinstance(item, str) else repr(item) for item in sets or ()]]).encode())
+    for name in sorted(sources):
+        digest.update(hashlib.sha256(name.encode("utf-8", "surrogatepass")).digest())
+        digest.update(hashlib.sha256(sources[name].text.encode("utf-8", "surrogatepass")).digest())
+    return digest.hexdigest()[:40]
+
+
+def load_check(key: str):
+    """What :func:`store_check` kept under ``key``, or None (absent, unreadable, cache off)."""
+    if not enabled():
+        return None
+    try:
+        return pickle.loads((cache_dir() / "check" / f"{key}.pickle").read_bytes())
+    except Exception:       # noqa: BLE001  (absent or partial: a miss)
+        return None
+
+
+def store_check(key: str, value) -> None:
+    """Keep ``check``'s equations-stage result (the states kept, its diagnostics) for the next
+    check of the same files: that one then imports no sympy. A failure only means no cache."""
+    if not enabled():
+        return
+    try:
+        folder = cache_dir() / "check"
+        folder.mkdir(parents=True, exist_ok=True)
+        _atomic_write(folder / f"{key}.pickle", pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
+    except Exception:       # noqa: BLE001  (a cache must never fail the run)
+        return
 
 
 class Entry:

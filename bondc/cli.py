@@ -13,6 +13,7 @@ import json
 import os
 import sys
 import traceback
+from dataclasses import dataclass
 from pathlib import Path
 
 from bondc import __version__
@@ -67,8 +68,9 @@ def _derived(args, light: bool = False):
 
 # ------------------------------------------------------------------ commands
 
-def _check_one(args, model: str | None, component: bool) -> tuple:
-    """Load and check one model (causality too, unless it is a component with ports).
+def _check_one(args, model: str | None, component: bool, loaded=None) -> tuple:
+    """Load and check one model (causality too, unless it is a component with ports); ``loaded``:
+    the file already parsed (``semantic.load_files``).
 
     Returns (diagnostics, sources, graph, causal)."""
     from bondc import semantic
@@ -77,19 +79,18 @@ def _check_one(args, model: str | None, component: bool) -> tuple:
     graph = causal = state_space = None
     sources = {}
     try:
-        graph, warnings = semantic.load(Path(args.file), model=model, sets=_parse_sets(args.set))
+        graph, warnings = semantic.load(Path(args.file), model=model, sets=_parse_sets(args.set), loaded=loaded)
         diagnostics += warnings
         sources = graph.sources
         if not component:
             from bondc.causality import assign_causality
-            from bondc.equations import derive
 
             causal = assign_causality(graph)
             diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
             # what simulate would reject about the model itself (a law that cannot be inverted,
             # E605), and the states the equations keep
-            state_space = derive(causal)
-            diagnostics += [d for d in state_space.diagnostics if d not in diagnostics]
+            state_space, found = _equations_checked(args, model, graph, causal)
+            diagnostics += [d for d in found if d not in diagnostics]
     except BondcError as error:
         if error.stage in ("usage",):
             raise
@@ -98,32 +99,66 @@ def _check_one(args, model: str | None, component: bool) -> tuple:
     return diagnostics, sources, graph, causal, state_space
 
 
-def _models_to_check(args) -> list[tuple[str | None, bool]]:
+@dataclass(frozen=True)
+class _CheckedEquations:
+    """What ``check`` reports of the equations stage: the states they keep."""
+
+    states: tuple
+
+
+def _equations_checked(args, model, graph, causal) -> tuple:
+    """(the equations' states as :class:`_CheckedEquations`, or None where the stage failed; its
+    diagnostics). Taken from the check cache when bondc and every file the model read are
+    unchanged (``bondc.cache.check_key``): then sympy is not even imported."""
+    from bondc import cache
+
+    use_cache = not getattr(args, "no_cache", False)
+    key = cache.check_key(graph.sources, model, args.set) if use_cache else None
+    known = cache.load_check(key) if key else None
+    if known is None:
+        from bondc.equations import derive
+
+        try:
+            state_space = derive(causal)
+            known = (tuple(s.name for s in state_space.states), tuple(state_space.diagnostics))
+        except BondcError as error:
+            if error.stage in ("usage",):
+                raise
+            known = (None, tuple(error.diagnostics))
+        if key:
+            cache.store_check(key, known)
+    states, diagnostics = known
+    return (None if states is None else _CheckedEquations(states)), list(diagnostics)
+
+
+def _models_to_check(args) -> tuple[list[tuple[str | None, bool]], tuple | None]:
     """(model name, is a component) for each model ``check`` looks at: the one asked for, or every
-    model of the file (LANGUAGE.md section 11: a model with ports is a component)."""
+    model of the file (LANGUAGE.md section 11: a model with ports is a component); and the parsed
+    files (``semantic.load_files``), or None where they do not parse."""
     from bondc import semantic
     from bondc.flatten import ports_of
 
     try:
-        files, _, _ = semantic.load_files(Path(args.file))
+        loaded = semantic.load_files(Path(args.file))
     except BondcError:
-        return [(args.model, False)]      # the single run reports it
-    every = [m for f in files for m in f.models]
+        return [(args.model, False)], None      # the single run reports it
+    every = [m for f in loaded[0] for m in f.models]
     if args.model is not None:
         chosen = [m for m in every if m.name == args.model]
-        return [(args.model, bool(chosen and ports_of(chosen[0])))]
-    own = files[0].models
+        return [(args.model, bool(chosen and ports_of(chosen[0])))], loaded
+    own = loaded[0][0].models
     if len(own) <= 1:
-        return [(None, bool(own and ports_of(own[0])))]
-    return [(m.name, bool(ports_of(m))) for m in own]
+        return [(None, bool(own and ports_of(own[0])))], loaded
+    return [(m.name, bool(ports_of(m))) for m in own], loaded
 
 
 def _cmd_check(args) -> int:
     diagnostics: list[Diagnostic] = []
     sources: dict = {}
     results = []
-    for name, component in _models_to_check(args):
-        found, found_sources, graph, causal, state_space = _check_one(args, name, component)
+    chosen, loaded = _models_to_check(args)
+    for name, component in chosen:
+        found, found_sources, graph, causal, state_space = _check_one(args, name, component, loaded)
         diagnostics += [d for d in found if d not in diagnostics]
         sources.update(found_sources or {})
         results.append((graph, causal, component, state_space))

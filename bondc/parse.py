@@ -137,19 +137,57 @@ class _LinePostLexer:
             yield Token.new_borrow_pos("_NL", "\n", previous)
 
 
+_PARSER_OPTIONS = {"parser": "lalr", "lexer": "contextual", "propagate_positions": True,
+                   "maybe_placeholders": True, "start": ["start", "set_value"]}
+
+
 @functools.lru_cache(maxsize=1)
 def _parser() -> tuple[Lark, _LinePostLexer]:
+    """The LALR parser. Its tables are built from the grammar once, kept in bondc's cache folder
+    (lark's ``cache``, which checks them against the grammar and the options) and loaded from
+    there afterwards: building them is a third of a ``bondc check``."""
     postlex = _LinePostLexer()
-    parser = Lark(
-        _grammar_text(),
-        parser="lalr",
-        lexer="contextual",
-        postlex=postlex,
-        propagate_positions=True,
-        maybe_placeholders=True,
-        start=["start", "set_value"],
-    )
-    return parser, postlex
+    text = _grammar_text()
+    path = _parser_cache_path(text)
+    if path is None:
+        return Lark(text, postlex=postlex, **_PARSER_OPTIONS), postlex
+    if path.exists():
+        return Lark(text, postlex=postlex, cache=str(path), **_PARSER_OPTIONS), postlex
+    import os
+    import tempfile
+
+    # built into a file of its own, then renamed into place: a concurrent run reads a whole
+    # file or none (lark itself writes its cache file in place)
+    temporary = None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".lalr-", suffix=".tmp")
+        os.close(handle)
+        os.unlink(temporary)            # lark writes it anew
+        parser = Lark(text, postlex=postlex, cache=temporary, **_PARSER_OPTIONS)
+        os.replace(temporary, path)
+        return parser, postlex
+    except OSError:     # a read-only or full cache folder: the parser is built each time
+        return Lark(text, postlex=postlex, **_PARSER_OPTIONS), postlex
+    finally:
+        if temporary is not None and os.path.exists(temporary):
+            os.unlink(temporary)
+
+
+def _parser_cache_path(grammar: str) -> Path | None:
+    """Where the parser of this grammar, these options and this lark is kept (None: nowhere)."""
+    import hashlib
+
+    import lark
+
+    try:
+        from bondc.runtime import cache_dir
+
+        key = hashlib.sha256("\n".join((lark.__version__, sys.version, repr(sorted(_PARSER_OPTIONS.items())),
+                                        grammar)).encode("utf-8")).hexdigest()[:32]
+        return Path(cache_dir()) / "parser" / f"lalr-{key}.lark"
+    except Exception:
+        return None
 
 
 def _unquote(token: Token) -> str:

@@ -2269,14 +2269,19 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
 
 
 def load(path: str | Path, *, model: str | None = None, experiment: str | None = None,
-         sets: Sequence[ast.SetValue] = (), text: str | None = None) -> tuple[BondGraph, list[Diagnostic]]:
+         sets: Sequence[ast.SetValue] = (), text: str | None = None,
+         loaded: tuple | None = None) -> tuple[BondGraph, list[Diagnostic]]:
     """Read, parse and check a ``.bg`` file; return its graph and warnings, or raise ModelError.
 
     ``experiment`` names the experiment whose overrides apply (None: none; :data:`FIRST`: the first);
     ``sets`` are command-line ``--set`` values (from ``parse_set_value``), applied last; ``text``
-    is the file's text when it is not read from disk (an editor's unsaved buffer).
+    is the file's text when it is not read from disk (an editor's unsaved buffer); ``loaded`` is
+    what :func:`load_files` returned for it, when the caller has parsed it already.
     """
-    files, sources, diagnostics = load_files(path, text)
+    if loaded is not None:
+        files, sources, diagnostics = list(loaded[0]), dict(loaded[1]), list(loaded[2])
+    else:
+        files, sources, diagnostics = load_files(path, text)
     for assignment in sets:
         if assignment.source is not None:
             sources[assignment.source.name] = assignment.source
