@@ -417,3 +417,28 @@ def test_an_if_operand_needs_parentheses():
     (diagnostic,) = info.value.diagnostics
     assert (diagnostic.code, diagnostic.span.line, diagnostic.span.column) == ("E100", 2, 17)
     assert "parentheses" in diagnostic.hint
+
+
+def test_the_parser_tables_are_kept_in_the_cache_folder_and_a_damaged_file_is_rebuilt(tmp_path, monkeypatch):
+    """The LALR tables are built once and loaded from bondc's cache folder afterwards; a damaged
+    or unwritable cache never stops a parse."""
+    from bondc import parse as parse_module
+
+    text = "model M\n  I mass : f = p/m\nend\n"
+    expected = parse_module.parse_text(text, "m.bg")
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "cache"))
+    try:
+        parse_module._parser.cache_clear()
+        assert parse_module.parse_text(text, "m.bg") == expected
+        (kept,) = (tmp_path / "cache" / "parser").iterdir()
+        assert kept.suffix == ".lark" and kept.stat().st_size > 1000
+        parse_module._parser.cache_clear()
+        assert parse_module.parse_text(text, "m.bg") == expected            # loaded
+        kept.write_bytes(b"not a parser")
+        parse_module._parser.cache_clear()
+        assert parse_module.parse_text(text, "m.bg") == expected            # rebuilt
+        monkeypatch.setenv("BONDC_CACHE_DIR", str(kept))                    # a file, not a folder
+        parse_module._parser.cache_clear()
+        assert parse_module.parse_text(text, "m.bg") == expected
+    finally:
+        parse_module._parser.cache_clear()
