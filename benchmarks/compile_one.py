@@ -34,7 +34,7 @@ def measure(n: int) -> dict:
     from bondc.causality import assign_causality
     from bondc.codegen import emit
     from bondc.equations import derive
-    from bondc.runtime import load_native
+    from bondc.runtime import load_native, native_text, start_native
 
     stages["import"] = time.perf_counter() - start
     mark = time.perf_counter()
@@ -50,6 +50,7 @@ def measure(n: int) -> dict:
     source = emit(state_space, next(iter(graph.experiments.values())), module_dir=folder)
     stages["codegen"] = time.perf_counter() - mark
     mark = time.perf_counter()
+    start_native(native_text(source))      # as bondc.simulate.compile_model does
     namespace = {"__name__": "chain", "__file__": str(folder / "chain_gen.py")}
     exec(compile(source, "chain_gen.py", "exec"), namespace)  # noqa: S102  (bondc's own generated module)
     ffi, lib = load_native(namespace["NATIVE_SOURCE"])

@@ -95,6 +95,7 @@ computed before it, ``complete`` is False and ``failure`` names the time, the
 variable that first became nan or inf (in causal order) and its law.
 """
 
+import atexit
 import csv as _csv
 import importlib
 import math
@@ -2643,13 +2644,8 @@ def load_native(source, driver=True):
         source = "".join(source)
     if not source:
         return None, "the model has no native code"
-    link = _sundials_link() if driver else None
-    variants = []
-    if link is not None:
-        variants.append((source + "\n" + UNIT_MARK + _DRIVER_SOURCE.replace("BONDC_INDEX_TYPE", link[0]), link[1]))
-    variants.append((source, ()))
     why = ""
-    for text, libraries in variants:
+    for text, libraries in _native_variants(source, driver):
         ffi, lib = _build_native(text, libraries)
         if ffi is not None:
             return ffi, lib
@@ -2657,40 +2653,68 @@ def load_native(source, driver=True):
     return None, why
 
 
-def _build_native(source, libraries):
+def _native_variants(source, driver):
+    """[(C text, libraries)] to try in order: with bondc's CVODE driver where SUNDIALS can be
+    linked, then the model alone."""
+    link = _sundials_link() if driver else None
+    variants = []
+    if link is not None:
+        variants.append((source + "\n" + UNIT_MARK + _DRIVER_SOURCE.replace("BONDC_INDEX_TYPE", link[0]), link[1]))
+    variants.append((source, ()))
+    return variants
+
+
+def _native_plan(source, libraries):
+    """(compiler flags, translation units, digest, library path) of a C text."""
     import hashlib
 
     flags = (next(flag for limit, flag in _NATIVE_OPTIMIZE if len(source) < limit), *_NATIVE_FLAGS)
     units = _native_units(source)
     digest = hashlib.sha256("\n".join((*flags, *libraries, f"units {len(units)}", source)).encode("utf-8")
                             ).hexdigest()[:40]
+    return flags, units, digest, os.path.join(cache_dir(), "native", f"model_{digest}.so")
+
+
+def _compiler():
+    import shutil
+
+    return os.environ.get("CC") or next(filter(None, map(shutil.which, ("cc", "gcc", "clang"))), None)
+
+
+def _link_flags(libraries):
+    return [*libraries, f"-Wl,-rpath,{os.path.dirname(os.path.realpath(libraries[0]))}"] if libraries else []
+
+
+def _build_native(source, libraries):
+    flags, units, digest, path = _native_plan(source, libraries)
     if digest in _NATIVE_LIBRARIES:
         return _NATIVE_LIBRARIES[digest]
     try:
         import cffi
     except ImportError:
         return None, "cffi is not installed"
-    directory = os.path.join(cache_dir(), "native")
-    path = os.path.join(directory, f"model_{digest}.so")
+    build = _NATIVE_PENDING.pop(digest, None)        # started ahead by start_native
     if not os.path.exists(path):
-        import shutil
         import subprocess
-        import tempfile
 
-        compiler = os.environ.get("CC") or next(filter(None, map(shutil.which, ("cc", "gcc", "clang"))), None)
-        if not compiler:
+        compiler = _compiler()
+        if build is None and not compiler:
             return None, "no C compiler was found (set CC)"
-        link = [*libraries, *(f"-Wl,-rpath,{os.path.dirname(os.path.realpath(libraries[0]))}",)] if libraries else []
         try:
-            os.makedirs(directory, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=directory, prefix="build-") as work:
-                built = os.path.join(work, "model.so")
-                failure = _compile_native(compiler, flags, units, work, built, link)
-                if failure:
-                    return None, f"the C compiler failed ({failure})"
-                os.replace(built, path)
+            if build is None:
+                os.makedirs(os.path.dirname(path), exist_ok=True)
+                build = _NativeBuild(compiler, flags, units, os.path.dirname(path), _link_flags(libraries))
+            failure = build.finish()
+            if failure:
+                return None, f"the C compiler failed ({failure})"
+            os.replace(build.library, path)
         except (OSError, subprocess.SubprocessError) as error:
             return None, f"the C compiler could not run ({error})"
+        finally:
+            if build is not None:
+                build.discard()
+    elif build is not None:
+        build.discard()
     ffi = cffi.FFI()
     ffi.cdef("".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
                      for name in _NATIVE_FUNCTIONS) + (_DRIVER_DECLARATIONS if libraries else ""))
@@ -2700,6 +2724,111 @@ def _build_native(source, libraries):
         return None, f"the compiled model could not be loaded ({error})"
     _NATIVE_LIBRARIES[digest] = (ffi, lib)
     return ffi, lib
+
+
+def start_native(source, driver=True) -> None:
+    """Start building, in the background, the library ``load_native(source, driver)`` will load,
+    when it is a large model's (compiled as several units) and not built yet: its compilers then
+    run while the caller goes on (Python compiling the generated module), and ``load_native``
+    waits for them. Does nothing otherwise, or where anything is missing (it is only a head start)."""
+    if os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false") or not source:
+        return
+    if isinstance(source, (tuple, list)):
+        source = "".join(source)
+    text, libraries = _native_variants(source, driver)[0]
+    try:
+        flags, units, digest, path = _native_plan(text, libraries)
+        compiler = _compiler()
+        if (len(units) == 1 or not compiler or digest in _NATIVE_LIBRARIES or digest in _NATIVE_PENDING
+                or os.path.exists(path)):
+            return
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        _NATIVE_PENDING[digest] = _NativeBuild(compiler, flags, units, os.path.dirname(path),
+                                               _link_flags(libraries))
+    except Exception:       # noqa: BLE001  (load_native builds it, and says why not)
+        return
+
+
+def native_text(module_source: str) -> str:
+    """The C text of a generated module (its ``NATIVE_SOURCE`` literal), read without running it."""
+    import ast as python_ast
+
+    marker = "\nNATIVE_SOURCE = "
+    start = module_source.rfind(marker)
+    end = module_source.find("\nNATIVE_UNAVAILABLE = ", start)
+    if start < 0 or end < 0:
+        return ""
+    try:
+        value = python_ast.literal_eval(module_source[start + len(marker):end])
+    except (ValueError, SyntaxError):
+        return ""
+    return "".join(value) if isinstance(value, tuple) else str(value)
+
+
+class _NativeBuild:
+    """A shared library being compiled: every translation unit's compiler started at once (``-c``
+    for several, then a link in :meth:`finish`), in a private folder of the native cache."""
+
+    def __init__(self, compiler, flags, units, directory, link):
+        import subprocess
+        import tempfile
+
+        self.work = tempfile.mkdtemp(dir=directory, prefix="build-")
+        self.library = os.path.join(self.work, "model.so")
+        self.compiler, self.flags, self.link = compiler, flags, link
+        files = []
+        for k, text in enumerate(units):
+            files.append(os.path.join(self.work, f"unit{k}.c"))
+            with open(files[-1], "w", encoding="utf-8") as stream:
+                stream.write(text)
+        if len(files) == 1:
+            self.objects = None
+            commands = [[compiler, *flags, "-o", self.library, files[0], *link, "-lm"]]
+        else:
+            self.objects = [name[:-2] + ".o" for name in files]
+            compile_flags = [flag for flag in flags if flag != "-shared"]
+            commands = [[compiler, *compile_flags, "-c", "-o", obj, name] for name, obj in zip(files, self.objects)]
+        self.runs = [subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                     for command in commands]
+
+    def finish(self) -> str:
+        """Wait for the compilers (and link): "" or the compiler's first line of complaint."""
+        import subprocess
+
+        def first_line(stderr):
+            return (stderr.strip().splitlines() or ["no message"])[0]
+
+        failure = ""
+        for run in self.runs:
+            _, stderr = run.communicate(timeout=900)
+            if run.returncode != 0 and not failure:
+                failure = first_line(stderr)
+        if failure or self.objects is None:
+            return failure
+        done = subprocess.run([self.compiler, *self.flags, "-o", self.library, *self.objects, *self.link, "-lm"],
+                              capture_output=True, text=True, timeout=900)
+        return first_line(done.stderr) if done.returncode != 0 else ""
+
+    def discard(self) -> None:
+        """Stop any compiler still running and remove the private folder."""
+        import shutil
+
+        for run in self.runs:
+            if run.poll() is None:
+                run.kill()
+                run.wait()
+        shutil.rmtree(self.work, ignore_errors=True)
+
+
+_NATIVE_PENDING: dict = {}          # digest -> _NativeBuild started by start_native
+
+
+def _discard_pending() -> None:
+    while _NATIVE_PENDING:
+        _NATIVE_PENDING.popitem()[1].discard()
+
+
+atexit.register(_discard_pending)
 
 
 def _native_units(source):
@@ -2712,45 +2841,6 @@ def _native_units(source):
     prototypes = "".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
                          for name in _NATIVE_FUNCTIONS)
     return [prelude + prototypes + part for part in parts]
-
-
-def _compile_native(compiler, flags, units, work, built, link):
-    """Compile ``units`` into the shared library ``built``: one compiler run for one unit, else
-    every unit at once (``-c``) and a link. Returns "" or the compiler's first line of complaint."""
-    import subprocess
-
-    def first_line(stderr):
-        return (stderr.strip().splitlines() or ["no message"])[0]
-
-    files = []
-    for k, text in enumerate(units):
-        files.append(os.path.join(work, f"unit{k}.c"))
-        with open(files[-1], "w", encoding="utf-8") as stream:
-            stream.write(text)
-    if len(files) == 1:
-        done = subprocess.run([compiler, *flags, "-o", built, files[0], *link, "-lm"],
-                              capture_output=True, text=True, timeout=900)
-        return first_line(done.stderr) if done.returncode != 0 else ""
-    objects = [name[:-2] + ".o" for name in files]
-    compile_flags = [flag for flag in flags if flag != "-shared"]
-    runs = [subprocess.Popen([compiler, *compile_flags, "-c", "-o", obj, name], stdout=subprocess.DEVNULL,
-                             stderr=subprocess.PIPE, text=True) for name, obj in zip(files, objects)]
-    failure = ""
-    try:
-        for run in runs:
-            _, stderr = run.communicate(timeout=900)
-            if run.returncode != 0 and not failure:
-                failure = first_line(stderr)
-    finally:
-        for run in runs:
-            if run.poll() is None:
-                run.kill()
-                run.wait()
-    if failure:
-        return failure
-    done = subprocess.run([compiler, *flags, "-o", built, *objects, *link, "-lm"],
-                          capture_output=True, text=True, timeout=900)
-    return first_line(done.stderr) if done.returncode != 0 else ""
 
 
 def attach_native(model, native=None):

@@ -156,6 +156,10 @@ def compile_model(ss) -> dict:
         source = emit(ss, None, module_dir=module_dir)
         if entry is not None:
             entry.write_module(source)
+    from bondc.runtime import native_text, start_native
+
+    # a large model's C library compiles (in parallel units) while Python compiles its module
+    start_native(native_text(source))
     name = getattr(graph, "name", "model")
     namespace = {"__name__": f"bondc_generated_{name}", "__file__": str(module_dir / f"__bondc_{name}__.py")}
     # the text is bondc's own output (printed from sympy), never user text

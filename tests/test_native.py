@@ -10,6 +10,7 @@ to the solver tolerance.
 from __future__ import annotations
 
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -266,3 +267,43 @@ def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute
                 outs.append(out)
             np.testing.assert_array_equal(outs[0], outs[1])
     assert hasattr(split, "bondc_driver_new") == hasattr(whole, "bondc_driver_new")
+
+
+@needs_cc
+def test_a_build_started_ahead_is_the_one_load_native_finishes_and_an_unused_one_is_removed(tmp_path, monkeypatch):
+    """start_native begins a large model's build in the background (here forced on the flagship):
+    load_native waits for that build instead of starting another, and gives the same library as a
+    build from scratch; a build nobody loads is stopped and its folder removed (at exit)."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    derived = derive_file(ROOT / "models" / "electro_pneumatic_hybrid.bg", cache=False)
+    namespace = compile_model(derived.state_space)
+    source = runtime.native_text(namespace["__bondc_source__"])
+    assert source == "".join(namespace["NATIVE_SOURCE"])
+    runtime._NATIVE_LIBRARIES.clear()
+    for path in (tmp_path / "native").glob("*.so"):
+        path.unlink()
+    runtime.start_native(source)
+    assert len(runtime._NATIVE_PENDING) == 1
+    (pending,) = runtime._NATIVE_PENDING.values()
+    started = []
+    monkeypatch.setattr(runtime, "_NativeBuild", lambda *a, **k: started.append(a))   # no second build
+    ffi, lib = runtime.load_native(source)
+    assert ffi is not None and not started and not runtime._NATIVE_PENDING
+    assert not os.path.exists(pending.work) and len(list((tmp_path / "native").glob("*.so"))) == 1
+    x = namespace["x0"]()
+    p = np.array(list(namespace["PARAMETERS"].values()), dtype=float)
+    m = np.ones(len(namespace["SWITCHES"]))
+    out = np.zeros(x.size)
+    lib.bondc_rhs(0.3, ffi.from_buffer("double[]", x), ffi.from_buffer("double[]", p), ffi.from_buffer("double[]", m),
+                  ffi.from_buffer("double[]", out))
+    np.testing.assert_allclose(out, namespace["_rhs"](0.3, x, p, m), rtol=1e-12, atol=1e-12)
+    monkeypatch.undo()
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "other"))
+    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    runtime._NATIVE_LIBRARIES.clear()
+    runtime.start_native(source)
+    (unused,) = runtime._NATIVE_PENDING.values()
+    runtime._discard_pending()
+    assert not runtime._NATIVE_PENDING and not os.path.exists(unused.work)
+    assert all(run.poll() is not None for run in unused.runs)

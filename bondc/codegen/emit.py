@@ -84,7 +84,8 @@ QUICK_PRINTING = True
 
 
 #: Modules the runtime imports under its own names (the generated module imports them itself).
-_RUNTIME_MODULES = frozenset({"math", "os", "sys", "np", "_csv", "importlib", "_integrate", "_optimize", "_time_module"})
+_RUNTIME_MODULES = frozenset({"atexit", "math", "os", "sys", "np", "_csv", "importlib", "_integrate", "_optimize",
+                              "_time_module"})
 
 
 def runtime_source() -> str:
