@@ -2637,6 +2637,8 @@ def load_native(source, driver=True):
     and loaded with cffi. ``BONDC_NATIVE=0`` turns native code off. With ``driver`` and
     scikit-sundae's SUNDIALS libraries at hand, bondc's CVODE driver is built in too
     (``hasattr(lib, "bondc_driver_new")``); if that build fails, the model alone is built.
+    A large model's functions are compiled as separate units at once (``_NATIVE_SPLIT_FROM``),
+    and :func:`start_native` may have started that build already: it is then waited for.
     """
     if os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false"):
         return None, "native code is turned off (BONDC_NATIVE=0)"
