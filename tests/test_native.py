@@ -103,9 +103,9 @@ def test_a_measured_signal_has_no_native_form():
 
 # ------------------------------------------------------------------ whole models
 
-MODELS = sorted([*ROOT.glob("models/*.bg"), *(ROOT / "tests" / "fixtures" / "engine").glob("*.bg"),
-                 *(ROOT / "tests" / "fixtures" / "sim").glob("*.bg"),
-                 *(ROOT / "tests" / "fixtures" / "textbook").glob("*.bg")])
+MODELS = sorted([*ROOT.glob("models/*.bg"),
+                 *(p for folder in ("engine", "sim", "textbook", "components", "language")
+                   for p in (ROOT / "tests" / "fixtures" / folder).glob("*.bg"))])
 QUICK = {"mass_spring_damper.bg", "orifice_reversing.bg", "two_stuck_masses.bg"}     # the rest: slow
 
 
@@ -144,6 +144,8 @@ def test_compiled_and_numpy_code_give_the_same_run(path):
         # only models whose laws C cannot print (an algebraic loop solved numerically, a csv signal)
         assert native_run.stats["code"] == "numpy"
         assert native_run.stats["code_note"] == namespace["NATIVE_UNAVAILABLE"]
+    elif not namespace["STATE_NAMES"]:      # (the language reference's examples of sources alone)
+        assert native_run.stats["code"] == "numpy" and "no states" in native_run.stats["code_note"]
     else:
         assert native_run.stats["code"] == "native", native_run.stats.get("code_note")
     assert native_run.complete == numpy_run.complete
