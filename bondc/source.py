@@ -53,9 +53,10 @@ class Source:
 
     def __post_init__(self) -> None:
         starts = [0]
-        for index, char in enumerate(self.text):
-            if char == "\n":
-                starts.append(index + 1)
+        find, index = self.text.find, self.text.find("\n")
+        while index >= 0:
+            starts.append(index + 1)
+            index = find("\n", index + 1)
         object.__setattr__(self, "_line_starts", tuple(starts))
 
     @classmethod
@@ -71,9 +72,15 @@ class Source:
         return line_index + 1, offset - self._line_starts[line_index] + 1
 
     def span(self, start: int, end: int) -> Span:
-        line, column = self.position(start)
-        end_line, end_column = self.position(end)
-        return Span(self.name, line, column, end_line, end_column, start, end)
+        """The span of offsets ``start`` to ``end`` (every AST node has one: a large model makes a
+        million, so the end's line is looked up only when it is not the start's)."""
+        starts, size = self._line_starts, len(self.text)
+        first = 0 if start < 0 else size if start > size else start
+        last = 0 if end < 0 else size if end > size else end
+        line = bisect.bisect_right(starts, first)
+        end_line = line if line == len(starts) or last < starts[line] else bisect.bisect_right(starts, last)
+        return Span(self.name, line, first - starts[line - 1] + 1, end_line, last - starts[end_line - 1] + 1,
+                    start, end)
 
     def line_text(self, line: int) -> str:
         """The text of a 1-based line, without its newline."""

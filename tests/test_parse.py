@@ -442,3 +442,25 @@ def test_the_parser_tables_are_kept_in_the_cache_folder_and_a_damaged_file_is_re
         assert parse_module.parse_text(text, "m.bg") == expected
     finally:
         parse_module._parser.cache_clear()
+
+
+def test_spans_are_the_positions_of_their_ends():
+    """Source.span (which looks the end's line up only when it differs from the start's) gives each
+    end's 1-based line and column, offsets outside the text clamped to it, as position() does."""
+    import random
+
+    from bondc.source import Source
+
+    rng = random.Random(11)
+    for _ in range(50):
+        text = "".join(rng.choice("ab \n\n") for _ in range(rng.randrange(0, 60)))
+        source = Source("t.bg", text)
+        lines = text.split("\n")
+        for _ in range(40):
+            start, end = sorted(rng.randrange(-3, len(text) + 4) for _ in range(2))
+            span = source.span(start, end)
+            for offset, (line, column) in ((start, (span.line, span.column)), (end, (span.end_line, span.end_column))):
+                clamped = max(0, min(offset, len(text)))
+                before = text[:clamped].split("\n")
+                assert (line, column) == (len(before), len(before[-1]) + 1) == source.position(offset)
+            assert (span.start, span.end) == (start, end) and len(lines) == len(source._line_starts)
