@@ -463,9 +463,9 @@ def test_quick_printing_equals_sympys_printing_on_every_model(monkeypatch):
 
 def test_common_subexpressions_are_sympys_on_every_model(monkeypatch):
     """bondc's tree cse (which keeps a node whose arguments did not change, where sympy rebuilds
-    every node, and never makes 1/name a temporary) finds sympy's ``tree_cse`` temporaries, with
-    the same expressions once sympy's temporaries for 1/name are put back, on every pass of every
-    model of the corpus."""
+    every node, and never makes 1/name or -name a temporary) finds sympy's ``tree_cse``
+    temporaries, with the same expressions once sympy's temporaries for 1/name and -name are put
+    back, on every pass of every model of the corpus."""
     from sympy.simplify.cse_main import tree_cse
 
     from bondc.errors import BondcError
@@ -474,12 +474,19 @@ def test_common_subexpressions_are_sympys_on_every_model(monkeypatch):
     ours = emit_module._cse
     passes = []
 
+    def of_a_name(expr, temporaries):
+        """1/x or -x of a name of the model (not of a temporary)"""
+        if expr.is_Pow and expr.exp == -1:
+            return expr.base.is_Symbol and expr.base not in temporaries
+        return (expr.is_Mul and len(expr.args) == 2 and expr.args[0] == -1 and expr.args[1].is_Symbol
+                and expr.args[1] not in temporaries)
+
     def without_reciprocals(replacements, reduced):
-        """sympy's result with its temporaries for reciprocals of names (1/m) put back"""
+        """sympy's result with its temporaries for reciprocals and negations of names put back"""
         back, kept, temporaries = {}, [], {symbol for symbol, _ in replacements}
         for symbol, expr in replacements:
             expr = expr.xreplace(back)
-            if expr.is_Pow and expr.exp == -1 and expr.base.is_Symbol and expr.base not in temporaries:
+            if of_a_name(expr, temporaries):
                 back[symbol] = expr
             else:
                 kept.append((symbol, expr))
@@ -494,8 +501,7 @@ def test_common_subexpressions_are_sympys_on_every_model(monkeypatch):
         assert replacements == [(rename[symbol], expr.xreplace(rename)) for symbol, expr in expected]
         assert reduced == [expr.xreplace(rename) for expr in expected_reduced]
         temporaries = {symbol for symbol, _ in replacements}
-        assert not any(expr.is_Pow and expr.exp == -1 and expr.base.is_Symbol and expr.base not in temporaries
-                       for _, expr in replacements)
+        assert not any(of_a_name(expr, temporaries) for _, expr in replacements)
         passes.append(len(replacements))
         return replacements, reduced
 

@@ -166,6 +166,13 @@ def _hide_piecewise(expr, pieces: dict):
     return expr.func(*args)
 
 
+def _kept_inline(expr) -> bool:
+    """``1/x`` or ``-x`` of a name: never a temporary of :func:`_cse`."""
+    if expr.is_Pow:
+        return expr.exp is sympy.S.NegativeOne and expr.base.is_Symbol
+    return expr.is_Mul and len(expr.args) == 2 and expr.args[0] is sympy.S.NegativeOne and expr.args[1].is_Symbol
+
+
 def _cse(exprs: list):
     """Common subexpressions of ``exprs``: sympy's tree cse (``cse_main.tree_cse``, without the
     ``opt_cse`` pre-pass), written again with two differences:
@@ -173,14 +180,15 @@ def _cse(exprs: list):
     - a node none of whose arguments changed is kept as it is. sympy's ``_rebuild`` compares the
       list of rebuilt arguments with the tuple of the old ones, which always differ, so it rebuilds
       (and re-evaluates) every node of every expression: on a large model that was most of the pass;
-    - the reciprocal of a name (``1/m``) is never a temporary: ``p/m`` stays a division as the law
-      writes it. ``p*(1/m)`` differs from it in the last bit, and is not finite where ``1/m``
-      overflows (a mass of 1e-320 kg) although ``p/m`` may be.
+    - the reciprocal of a name (``1/m``) and its negation (``-x``) are never temporaries: ``p/m``
+      stays a division and ``vs - x`` a subtraction, as the law writes them. ``p*(1/m)`` differs
+      from ``p/m`` in the last bit, and is not finite where ``1/m`` overflows (a mass of 1e-320
+      kg) although ``p/m`` may be; a temporary ``-x`` changes the order of a sum's additions.
 
     The pre-pass (common subsets of sums' and products' arguments, negations) costs more than the
     rest of code generation on a large model and grows faster than linearly; equal subtrees are
-    still shared. ``tests/test_codegen.py`` checks that the result is sympy's, reciprocals of names
-    put back, on every model of the corpus.
+    still shared. ``tests/test_codegen.py`` checks that the result is sympy's, reciprocals and
+    negations of names put back, on every model of the corpus.
     """
     from sympy.utilities.iterables import iterable
 
@@ -195,7 +203,7 @@ def _cse(exprs: list):
             return
         if not iterable(expr):
             if expr in seen:
-                if not (expr.is_Pow and expr.exp is sympy.S.NegativeOne and expr.base.is_Symbol):
+                if not _kept_inline(expr):
                     to_eliminate.add(expr)
                 return
             seen.add(expr)
