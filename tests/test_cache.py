@@ -325,6 +325,7 @@ def _check_runs(tmp_path, path, *options):
     return done.returncode, output, done.stderr, imported.strip() == "True"
 
 
+@pytest.mark.slow
 def test_a_second_check_of_unchanged_files_reports_the_same_without_sympy(tmp_path):
     """check runs the equations stage (E605, the states kept) once per content of the files: the
     next check of the same files reports the same, text and JSON, and imports no sympy; an edit
