@@ -639,17 +639,22 @@ class _Trajectory:
 
             recorded_t = np.asarray(self.result.t, dtype=float)
             mid = 0.5 * (self.ta + self.tb)
+            names = self.model.variable_names
+            recorded = np.array([np.asarray(self.result.variables[name], dtype=float) for name in names])
             for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
                 rows = np.flatnonzero(self.sliding & (mid > start) & (mid < end))
                 points = np.flatnonzero((recorded_t >= start) & (recorded_t <= end))
                 if rows.size == 0:
                     continue
-                for i, name in enumerate(self.model.variable_names):
-                    recorded = np.asarray(self.result.variables[name], dtype=float)
-                    if points.size >= 4 and np.all(np.isfinite(recorded[points])):
-                        values[i, rows, :] = CubicSpline(recorded_t[points], recorded[points])(times[rows])
-                    else:
-                        values[i, rows, :] = np.interp(times[rows], recorded_t, recorded)
+                # one spline through every variable that is finite there (column by column, as
+                # many splines would be), linear interpolation for the others
+                splined = np.all(np.isfinite(recorded[:, points]), axis=1) if points.size >= 4 else \
+                    np.zeros(len(names), dtype=bool)
+                if np.any(splined):
+                    spline = CubicSpline(recorded_t[points], recorded[splined][:, points].T, axis=0)
+                    values[np.flatnonzero(splined)[:, None], rows[None, :], :] = np.moveaxis(spline(times[rows]), -1, 0)
+                for i in np.flatnonzero(~splined):
+                    values[i, rows, :] = np.interp(times[rows], recorded_t, recorded[i])
         return times, {name: values[i] for i, name in enumerate(self.model.variable_names)}
 
     def states_at_bounds(self) -> dict:
