@@ -2696,6 +2696,8 @@ def _build_native(source, libraries):
     except ImportError:
         return None, "cffi is not installed"
     build = _NATIVE_PENDING.pop(digest, None)        # started ahead by start_native
+    if build is not None and build.owner != os.getpid():
+        build = None        # a forked process's copy of its parent's build: the parent finishes it
     if not os.path.exists(path):
         import subprocess
 
@@ -2775,6 +2777,7 @@ class _NativeBuild:
         import subprocess
         import tempfile
 
+        self.owner = os.getpid()        # only this process waits for the compilers it started
         self.work = tempfile.mkdtemp(dir=directory, prefix="build-")
         self.library = os.path.join(self.work, "model.so")
         self.compiler, self.flags, self.link = compiler, flags, link
@@ -2827,7 +2830,9 @@ _NATIVE_PENDING: dict = {}          # digest -> _NativeBuild started by start_na
 
 def _discard_pending() -> None:
     while _NATIVE_PENDING:
-        _NATIVE_PENDING.popitem()[1].discard()
+        build = _NATIVE_PENDING.popitem()[1]
+        if build.owner == os.getpid():
+            build.discard()
 
 
 atexit.register(_discard_pending)

@@ -309,3 +309,36 @@ def test_a_build_started_ahead_is_the_one_load_native_finishes_and_an_unused_one
     runtime._discard_pending()
     assert not runtime._NATIVE_PENDING and not os.path.exists(unused.work)
     assert all(run.poll() is not None for run in unused.runs)
+
+
+def _load_in_forked_child(source, work, queue):
+    ffi, lib = runtime.load_native(source)
+    queue.put((ffi is not None, os.path.isdir(work)))
+
+
+@needs_cc
+def test_a_forked_process_never_finishes_or_removes_its_parents_build(tmp_path, monkeypatch):
+    """Sweep workers are forked: a child inherits its parent's build started ahead, but only the
+    parent waits for those compilers. The child builds (or finds) the library itself and leaves
+    the parent's build folder alone; the parent then loads the library and removes its own."""
+    import multiprocessing
+
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    derived = derive_file(ROOT / "models" / "mass_spring_damper.bg", cache=False)
+    source = "".join(compile_model(derived.state_space)["NATIVE_SOURCE"])
+    runtime._discard_pending()
+    runtime._NATIVE_LIBRARIES.clear()
+    for path in (tmp_path / "native").glob("*.so"):
+        path.unlink()
+    runtime.start_native(source)
+    (pending,) = runtime._NATIVE_PENDING.values()
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_load_in_forked_child, args=(source, pending.work, queue))
+    child.start()
+    loaded, parents_folder_left = queue.get(timeout=300)
+    child.join(timeout=60)
+    assert child.exitcode == 0 and loaded and parents_folder_left
+    ffi, lib = runtime.load_native(source)
+    assert ffi is not None and not runtime._NATIVE_PENDING and not os.path.exists(pending.work)

@@ -688,7 +688,11 @@ def _base(setup: _Setup, loaded: tuple | None = None) -> _Base:
     graph, warnings = loaded or semantic.load(Path(setup.path), model=setup.model,
                                               experiment=_experiment_selector(setup), sets=list(setup.sets))
     causal, state_space = _derive(graph)
-    compile_model(state_space)
+    namespace = compile_model(state_space)
+    if namespace.get("NATIVE_SOURCE"):
+        from bondc.runtime import load_native
+
+        load_native(namespace["NATIVE_SOURCE"])     # built once here, before workers fork: they load it
     notes = list(warnings)
     notes += [d for d in list(causal.diagnostics) + list(state_space.diagnostics) if d not in notes]
     base = _Base(graph, state_space, _structure(graph), _file_texts(graph), notes)
