@@ -537,3 +537,14 @@ def test_the_jacobians_products_are_sympys(a):
     product = _times(a, y)
     assert product == a * y and hash(product) == hash(a * y) and product.args == (a * y).args
     assert product + y == a * y + y
+
+
+def test_quick_printing_leaves_unevaluated_products_to_sympy():
+    from bondc.codegen.cprinter import NativePrinter
+    from bondc.codegen.emit import _LawPrinter
+
+    for expr in (sympy.Mul(x, 2, evaluate=False), sympy.Mul(1, x, evaluate=False),
+                 sympy.Mul(x, sympy.Float(0.5), y, evaluate=False)):
+        for printer in (BondcPrinter(NAMES), NativePrinter(NAMES), _LawPrinter()):
+            assert printer.quick(expr) is None
+            assert printer.doprint(expr)        # sympy prints it

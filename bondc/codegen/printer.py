@@ -105,6 +105,8 @@ class QuickPrinting:
         factors = list(expr.args)
         sign = ""
         first = factors[0]
+        if first is sympy.S.One or any(factor.is_Number for factor in factors[1:]):
+            return None     # an unevaluated product: sympy's str printer writes it its own way
         if first.is_Number:
             if not (first.is_Integer or first.is_Float) or not first.is_finite:
                 return None
