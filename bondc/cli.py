@@ -112,7 +112,7 @@ def _equations_checked(args, model, graph, causal) -> tuple:
     unchanged (``bondc.cache.check_key``): then sympy is not even imported."""
     from bondc import cache
 
-    use_cache = not getattr(args, "no_cache", False)
+    use_cache = cache.enabled() and not getattr(args, "no_cache", False)
     key = cache.check_key(graph.sources, model, args.set) if use_cache else None
     known = cache.load_check(key) if key else None
     if known is None:
