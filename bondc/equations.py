@@ -354,13 +354,18 @@ class _Deriver:
         sign = {}
         for bond in junction.bonds:
             sign[bond] = 1 if self.graph.bond(bond).head == junction.name else -1
-        total = sympy.Integer(0)
+        # the strong bond's variable is minus its sign times the signed sum of the others: each
+        # term +-x built as sympy's -1*x would be, the sum built once (adding term by term and
+        # negating the sum rebuilt it at every step)
+        terms = []
         for bond in junction.bonds:
             if bond == strong:
                 continue
             self.add(common(bond), common(strong), junction.name, "junction")
-            total += sign[bond] * summed(bond)
-        self.add(summed(strong), -sign[strong] * total, junction.name, "junction")
+            variable = summed(bond)
+            terms.append(variable if sign[bond] != sign[strong] else sympy.Mul._from_args((sympy.S.NegativeOne,
+                                                                                          variable)))
+        self.add(summed(strong), sympy.Add(*terms), junction.name, "junction")
 
 
     # ------------------------------------------------------------- ordering
