@@ -78,9 +78,6 @@ MODULE_NAMES = (
 )
 _INDENT = "    "
 _LAW_LIMIT = 200
-#: Print the common shapes by :meth:`~bondc.codegen.printer.BondcPrinting.quick` (off: every
-#: expression by sympy's printer, which the tests compare it with).
-QUICK_PRINTING = True
 
 
 #: Modules the runtime imports under its own names (the generated module imports them itself).
@@ -329,7 +326,7 @@ _LAW_PRINTER = _LawPrinter()
 
 
 def _law_text(expr) -> str:
-    text = (_LAW_PRINTER.quick(expr) if QUICK_PRINTING else None) or _LAW_PRINTER.doprint(expr)
+    text = _LAW_PRINTER.quick(expr) or _LAW_PRINTER.doprint(expr)
     return text if len(text) <= _LAW_LIMIT else text[: _LAW_LIMIT - 3] + "..."
 
 
@@ -674,7 +671,7 @@ class _Emitter:
         if text is None:
             # the common shapes (names, products, sums) by the printer's quick path, the same text
             # without sympy's per-call setup and dispatch (see BondcPrinting.quick)
-            text = printer.quick(expr) if QUICK_PRINTING else None
+            text = printer.quick(expr)
             if text is None:
                 text = printer.doprint(expr)
             self.printed[key] = text
