@@ -170,11 +170,10 @@ class _Model:
     bindings: list = field(default_factory=list)       # flatten.Binding: instances' parameter values
     good_bindings: list = field(default_factory=list)  # those that fit their parameter
     instances: list = field(default_factory=list)      # flatten.Instance: the instance tree
+    by_kind: dict = field(default_factory=dict, repr=False)     # statements(): kind -> statements
 
     def report(self, diagnostic: Diagnostic) -> None:
         self.diagnostics.append(diagnostic)
-
-    by_kind: dict = field(default_factory=dict, repr=False)     # statements(): kind -> statements
 
     # The model's statements by type, in order (each kind sorted out once: the checks ask ~60
     # times, and a 10000-section chain has 120000 statements).
