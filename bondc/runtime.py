@@ -717,15 +717,24 @@ class _NativeDriver:
     and Jacobian called by SUNDIALS directly, steps gathered in C, Python only between batches."""
 
     CAPACITY = 2048
+    #: Values of the batch buffer (2 MB): a large model's batches hold fewer steps, so a run
+    #: never allocates (and the kernel never clears) a buffer of thousands of steps of every state.
+    BUFFER = 1 << 18
 
     def __init__(self, ffi, lib, handle, n, keep):
         self.ffi, self.lib, self.handle, self.n = ffi, lib, handle, n
         self.keep = keep                # arrays the C side points to
-        self.ts = np.empty(self.CAPACITY)
-        self.ys = np.empty((self.CAPACITY, n))
+        self.capacity = self.capacity_for(n)
+        self.ts = np.empty(self.capacity)
+        self.ys = np.empty((self.capacity, n))
         self.count = ffi.new("int *")
         self.modes = np.zeros(0)
         self.linear_solver = keep["solver"]
+
+    @classmethod
+    def capacity_for(cls, n: int) -> int:
+        """Steps per batch for ``n`` states: 2048, fewer where that would exceed ``BUFFER`` values."""
+        return max(16, min(cls.CAPACITY, cls.BUFFER // max(n, 1)))
 
     @classmethod
     def create(cls, model, library, p, adams):
@@ -765,12 +774,35 @@ class _NativeDriver:
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
         watched = int(watch.size)
         code = self.lib.bondc_driver_advance(
-            self.handle, self.CAPACITY, watched, buffer("int[]", watch) if watched else null,
+            self.handle, self.capacity, watched, buffer("int[]", watch) if watched else null,
             buffer("double[]", signs) if watched else null, buffer("double[]", band) if watched else null,
             buffer("double[]", g_old) if watched else null, buffer("double[]", self.ts),
             buffer("double[]", self.ys), self.count)
         count = self.count[0]
         return code, self.ts[:count], self.ys[:count]
+
+    def slide(self, k, plus, minus, alpha, probe, others):
+        """Make the segment just started a sliding mode on switch ``k`` (see ``bondc_driver_slide``)."""
+        buffer = self.ffi.from_buffer
+        self.corners = (np.array(plus, dtype=float), np.array(minus, dtype=float))
+        self.others = np.array(others, dtype=np.intc).reshape(-1)
+        self.alphas = np.empty(self.capacity)
+        self.exits = np.empty(2 + self.others.size)
+        self.lib.bondc_driver_slide(self.handle, int(k), buffer("double[]", self.corners[0]),
+                                    buffer("double[]", self.corners[1]), float(alpha), float(probe),
+                                    int(self.others.size),
+                                    buffer("int[]", self.others) if self.others.size else self.ffi.NULL)
+
+    def slide_advance(self, old):
+        """One batch of a sliding mode: (code, times, states, alphas) — see ``bondc_driver_slide_advance``;
+        ``old`` (the exits before the batch) is updated in place, ``self.exits`` holds the last step's."""
+        buffer = self.ffi.from_buffer
+        code = self.lib.bondc_driver_slide_advance(self.handle, self.capacity, buffer("double[]", old),
+                                                   buffer("double[]", self.exits), buffer("double[]", self.ts),
+                                                   buffer("double[]", self.ys), buffer("double[]", self.alphas),
+                                                   self.count)
+        count = self.count[0]
+        return code, self.ts[:count], self.ys[:count], self.alphas[:count]
 
     def interpolate(self, t):
         out = np.empty(self.n)
@@ -1516,8 +1548,8 @@ class _Run:
         """The native CVODE driver for a segment watching ``index`` in modes ``signs``, or None.
 
         It serves CVODE runs that report every step (no ``t_eval``) of models whose C code
-        carries the driver, when every watched switch is a sign switch (floor switches and
-        sliding segments keep the step-by-step loop)."""
+        carries the driver, when every watched switch is a sign switch (floor switches keep the
+        step-by-step loop). It also serves sliding modes on one switch (:meth:`driver_sliding`)."""
         if self._driver is False:
             return None
         if self._driver is None:
@@ -2045,6 +2077,15 @@ class _Run:
                 and t == self.t_start):
             # the initial point: its outputs are those of the sliding combination too
             self.blocks_mode[0] = ("slide", tuple(corner_ids), weights_at(self.blocks_t[0], self.blocks_x[0]))
+        driver = None
+        if len(sliding) == 1 and not self.model.floor_switches[sliding[0]]:
+            driver = self.driver_for(others, ())
+        if driver is not None:
+            outcome = self.driver_sliding(driver, t, y, modes, sliding[0], corners, sides, corner_ids, others,
+                                          memory, exits, weights_at, labels, t_stop)
+            if outcome[0] != "handover":
+                return outcome
+            _, t, y = outcome       # a law not finite at a trial point: the step loop goes on and explains
         solver = self.new_solver(fun, jac, t, y, t_stop)
         old = np.maximum(exits(t, y), 0.0)      # at the edge of the sliding region: leaving counts from here
         while True:
@@ -2082,6 +2123,83 @@ class _Run:
                     self.note_event(end, f"sliding on {labels} ends")
                 return end, np.array(y_end)
             old = new
+
+    def driver_sliding(self, driver, t, y, modes, k, corners, sides, corner_ids, others, memory, exits,
+                       weights_at, labels, t_stop):
+        """:meth:`sliding_segment` on one switch ``k`` with the native driver: the combination of the
+        two corners, its Jacobian and the exits evaluated in C, each batch of steps recorded at once.
+        Returns (t, y), or ("handover", t, y) to go on with the step loop from there."""
+        options = self.options
+        first_step = float(options.get("first_step") or 0.0)
+        if first_step > t_stop - t:
+            first_step = 0.0
+        max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
+        if not driver.start(t, y, modes, t_stop, options["rtol"], options["atol"], max_step, first_step):
+            return "handover", t, np.array(y, dtype=float)
+        plus, minus = corners[sides[:, 0] > 0][0], corners[sides[:, 0] < 0][0]
+        driver.slide(k, plus, minus, float(memory["alpha"][0]), self.probe, others)
+        old = np.maximum(exits(t, y), 0.0)      # at the edge of the sliding region: leaving counts from here
+        t_prev, y_prev = float(t), np.array(y, dtype=float)
+        positive = sides[:, 0] > 0
+        try:
+            while True:
+                code, ts, ys, alphas = driver.slide_advance(old)
+                done = len(ts) - (1 if code == 1 else 0)
+                if done > 0:
+                    self.stats["steps"] += done
+                    weights = np.clip(alphas[:done], 0.0, 1.0)
+                    self.blocks_t.append(ts[:done].copy())
+                    self.blocks_x.append(ys[:done].T.copy())
+                    self.blocks_mode.append(("slide", tuple(corner_ids),
+                                             np.where(positive[:, None], weights[None, :], 1.0 - weights[None, :])))
+                    t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
+                    if math.isfinite(alphas[done - 1]):
+                        memory["alpha"] = np.array([alphas[done - 1]])
+                    if self.progress is not None:
+                        self.progress(t_prev)
+                if code == 0:
+                    continue
+                if code == 2:
+                    return t_prev, y_prev
+                if code != 1:       # 3, 4 or a CVODE failure: the step loop takes over and explains
+                    return "handover", t_prev, y_prev
+                # a possible end in the last step: located as the step loop does
+                t_new, y_new = float(ts[-1]), ys[-1].copy()
+                self.stats["steps"] += 1
+                dense = _DriverStep(driver, t_prev, t_new, y_new).dense_output()
+                new = driver.exits.copy()
+                hit = None
+                for j in range(new.size):
+                    if not (old[j] > 0 >= new[j] or old[j] >= 0 > new[j]):
+                        continue
+                    if old[j] <= 0:
+                        root = t_prev
+                    else:
+                        try:
+                            root = _optimize.brentq(lambda tt, j=j: exits(tt, dense(tt))[j], t_prev, t_new,
+                                                    xtol=4 * _EPS, rtol=4 * _EPS)
+                        except ValueError:
+                            root = t_new
+                    hit = root if hit is None else min(hit, root)
+                end = t_new if hit is None else hit
+                y_end = y_new if hit is None else dense(hit)
+                self.record_sliding(t_prev, end, y_end, dense, corner_ids, weights_at)
+                if self.progress is not None:
+                    self.progress(end)
+                if hit is not None:
+                    self.note_event(end, f"sliding on {labels} ends")
+                    return end, np.array(y_end)
+                old[:] = new
+                t_prev, y_prev = t_new, y_new
+                if t_new >= t_stop:
+                    return t_new, y_new
+        finally:
+            nfev, njev, nlu = driver.counts()
+            self.stats["nfev"] += nfev
+            self.stats["njev"] += njev
+            self.stats["nlu"] += nlu
+            self.stats["linear_solver"] = driver.linear_solver
+            self.stats["driver_sliding_segments"] = self.stats.get("driver_sliding_segments", 0) + 1
 
     def record_sliding(self, t_old, t_new, y_new, dense, corner_ids, weights_at):
         if self.t_eval is None:
@@ -2423,6 +2541,12 @@ typedef struct {
     const int *rows, *cols;
     double *p, *m, *g, *values;
     double t_stop;
+    /* a Filippov sliding mode on switch `slide` (-1: none), between the corners mp (side +) and
+       mm (side -): see bondc_driver_slide */
+    int slide, exits;
+    const int *others;
+    double *mp, *mm, *fp, *fm, *shifted, *extra;
+    double probe, alpha;
 } bondc_driver;
 
 static int driver_finite(const double *v, int n)
@@ -2432,11 +2556,46 @@ static int driver_finite(const double *v, int n)
     return 1;
 }
 
+/* d g_slide / dt along the rate f in corner m: a central difference over the probe step
+   (as _Run.switch_rate) */
+static double slide_rate(bondc_driver *d, double t, const double *y, const double *f, const double *m)
+{
+    double h = d->probe;
+    for (int i = 0; i < d->n; i++) d->shifted[i] = y[i] + h * f[i];
+    bondc_switches(t + h, d->shifted, d->p, m, d->g);
+    double ahead = d->g[d->slide];
+    for (int i = 0; i < d->n; i++) d->shifted[i] = y[i] - h * f[i];
+    bondc_switches(t - h, d->shifted, d->p, m, d->g);
+    double behind = d->g[d->slide];
+    return (ahead - behind) / (2 * h);
+}
+
+/* The sliding weight at (t, y), as _Run.solve_alpha for one switch: the alpha that makes
+   alpha*rate+ + (1 - alpha)*rate- zero (not clipped), the last one where both rates are equal,
+   NaN where a rate is not finite. Leaves the corners' right-hand sides in d->fp and d->fm. */
+static double slide_alpha(bondc_driver *d, double t, const double *y)
+{
+    bondc_rhs(t, y, d->p, d->mp, d->fp);
+    bondc_rhs(t, y, d->p, d->mm, d->fm);
+    double plus = slide_rate(d, t, y, d->fp, d->mp), minus = slide_rate(d, t, y, d->fm, d->mm);
+    if (!isfinite(plus) || !isfinite(minus)) return NAN;
+    double alpha = minus == plus ? fmin(fmax(d->alpha, 0.0), 1.0) : minus / (minus - plus);
+    if (isfinite(alpha)) d->alpha = alpha;
+    return alpha;
+}
+
+static double clip01(double a) { return a < 0 ? 0.0 : (a > 1 ? 1.0 : a); }
+
 static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
 {
     bondc_driver *d = (bondc_driver *)data;
     double *out = N_VGetArrayPointer(ydot);
-    bondc_rhs(t, N_VGetArrayPointer(y), d->p, d->m, out);
+    if (d->slide >= 0) {
+        double w = clip01(slide_alpha(d, t, N_VGetArrayPointer(y)));
+        for (int i = 0; i < d->n; i++) out[i] = (1 - w) * d->fm[i] + w * d->fp[i];
+    } else {
+        bondc_rhs(t, N_VGetArrayPointer(y), d->p, d->m, out);
+    }
     if (!driver_finite(out, d->n)) { d->bad = 1; return -1; }   /* numpy's runtime takes over */
     return 0;
 }
@@ -2446,7 +2605,21 @@ static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, voi
 {
     bondc_driver *d = (bondc_driver *)data;
     (void)fy; (void)t1; (void)t2; (void)t3;
-    bondc_jac(t, N_VGetArrayPointer(y), d->p, d->m, d->values);
+    if (d->slide >= 0) {        /* the corners' Jacobians, weighted as their right-hand sides */
+        double w = clip01(slide_alpha(d, t, N_VGetArrayPointer(y)));
+        if (w != w) { d->bad = 2; return -1; }
+        for (int k = 0; k < d->entries; k++) d->values[k] = 0.0;
+        if (1 - w != 0) {
+            bondc_jac(t, N_VGetArrayPointer(y), d->p, d->mm, d->extra);
+            for (int k = 0; k < d->entries; k++) d->values[k] += (1 - w) * d->extra[k];
+        }
+        if (w != 0) {
+            bondc_jac(t, N_VGetArrayPointer(y), d->p, d->mp, d->extra);
+            for (int k = 0; k < d->entries; k++) d->values[k] += w * d->extra[k];
+        }
+    } else {
+        bondc_jac(t, N_VGetArrayPointer(y), d->p, d->m, d->values);
+    }
     if (!driver_finite(d->values, d->entries)) { d->bad = 2; return -1; }
     SUNMatZero(jac);
     for (int k = 0; k < d->entries; k++) {
@@ -2468,7 +2641,15 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
     d->m = (double *)calloc(switches + 1, sizeof(double));
     d->g = (double *)calloc(switches + 1, sizeof(double));
     d->values = (double *)calloc(entries + 1, sizeof(double));
-    if (!d->m || !d->g || !d->values || SUNContext_Create(0, &d->ctx) != 0) return NULL;
+    d->extra = (double *)calloc(entries + 1, sizeof(double));
+    d->mp = (double *)calloc(switches + 1, sizeof(double));
+    d->mm = (double *)calloc(switches + 1, sizeof(double));
+    d->fp = (double *)calloc(n + 1, sizeof(double));
+    d->fm = (double *)calloc(n + 1, sizeof(double));
+    d->shifted = (double *)calloc(n + 1, sizeof(double));
+    d->slide = -1;
+    if (!d->m || !d->g || !d->values || !d->extra || !d->mp || !d->mm || !d->fp || !d->fm || !d->shifted
+        || SUNContext_Create(0, &d->ctx) != 0) return NULL;
     d->y = N_VNew_Serial(n, d->ctx);
     d->work = N_VNew_Serial(n, d->ctx);
     d->cvode = CVodeCreate(adams ? 1 : 2, d->ctx);
@@ -2488,6 +2669,7 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
     for (int i = 0; i < d->n; i++) y[i] = y0[i];
     for (int k = 0; k < d->switches; k++) d->m[k] = m[k];
     d->bad = 0;
+    d->slide = -1;
     d->t_stop = t_stop;
     int flag;
     if (!d->started) {
@@ -2546,6 +2728,62 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
     return 0;
 }
 
+/* After bondc_driver_start (with the segment's modes): slide on switch k between the corners
+   mp (its side +) and mm (side -), starting from the weight alpha (the last one, used where both
+   rates are equal); probe: the step of the rates' central differences. The exits watched by
+   bondc_driver_slide_advance are alpha, 1 - alpha and m[j]*g[j] of the `count` switches `others`. */
+void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
+                        int count, const int *others)
+{
+    for (int j = 0; j < d->switches; j++) { d->mp[j] = mp[j]; d->mm[j] = mm[j]; }
+    d->slide = k; d->alpha = alpha; d->probe = probe; d->exits = count; d->others = others;
+}
+
+/* The exits (2 + count values, see bondc_driver_slide) at (t, y); returns the weight alpha. */
+static double slide_exits(bondc_driver *d, double t, const double *y, double *exits)
+{
+    double alpha = slide_alpha(d, t, y);
+    exits[0] = alpha; exits[1] = 1.0 - alpha;
+    if (d->exits) {
+        bondc_switches(t, y, d->p, d->m, d->g);
+        for (int j = 0; j < d->exits; j++) exits[2 + j] = d->m[d->others[j]] * d->g[d->others[j]];
+    }
+    return alpha;
+}
+
+/* bondc_driver_advance for a sliding mode: each stored step also stores its weight alpha (not
+   clipped). After each step the exits are compared with `old` (2 + count values, updated in
+   place): an entry that went from > 0 to <= 0, or from >= 0 to < 0, is a possible end of the
+   sliding mode. Returns 0: capacity reached; 1: a possible end in the last stored step (`old`
+   still holds the values before it); 2: t_stop reached; 3: a law was not finite at a trial
+   point; 4: the state or the combination at a step is not finite; < 0: CVODE's error flag. */
+int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
+                               double *ys, double *alphas, int *count)
+{
+    double *y = N_VGetArrayPointer(d->y);
+    int watched = 2 + d->exits;
+    *count = 0;
+    for (int k = 0; k < capacity; k++) {
+        double t;
+        int flag = CVode(d->cvode, d->t_stop, d->y, &t, 2);
+        if (flag < 0) return d->bad ? 3 : flag;
+        if (!driver_finite(y, d->n)) return 4;
+        double alpha = slide_exits(d, t, y, exits);
+        double w = clip01(alpha);
+        for (int i = 0; i < d->n; i++)
+            if (!isfinite((1 - w) * d->fm[i] + w * d->fp[i])) return 4;
+        ts[k] = t;
+        alphas[k] = alpha;
+        for (int i = 0; i < d->n; i++) ys[(long)k * d->n + i] = y[i];
+        *count = k + 1;
+        for (int j = 0; j < watched; j++)
+            if ((old[j] > 0 && exits[j] <= 0) || (old[j] >= 0 && exits[j] < 0)) return 1;
+        for (int j = 0; j < watched; j++) old[j] = exits[j];
+        if (t >= d->t_stop) return 2;
+    }
+    return 0;
+}
+
 /* y(t) (k = 0) or its derivative (k = 1) inside the last step. */
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out)
 {
@@ -2574,7 +2812,8 @@ void bondc_driver_free(bondc_driver *d)
     if (d->y) N_VDestroy(d->y);
     if (d->work) N_VDestroy(d->work);
     if (d->ctx) SUNContext_Free(&d->ctx);
-    free(d->m); free(d->g); free(d->values); free(d);
+    free(d->m); free(d->g); free(d->values); free(d->extra); free(d->mp); free(d->mm);
+    free(d->fp); free(d->fm); free(d->shifted); free(d);
 }
 """
 
@@ -2587,6 +2826,10 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
                          const double *band, double *g_old, double *ts, double *ys, int *count);
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out);
+void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
+                        int count, const int *others);
+int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
+                               double *ys, double *alphas, int *count);
 void bondc_driver_counts(bondc_driver *d, long *out);
 void bondc_driver_free(bondc_driver *d);
 """

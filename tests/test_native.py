@@ -9,6 +9,7 @@ to the solver tolerance.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import shutil
@@ -231,6 +232,83 @@ def test_the_cvode_driver_integrates_whole_segments_in_c():
         1 - zeta ** 2) * np.sin(wd * s))), 0.0)
     np.testing.assert_allclose(run.states["spring.q"], expected, rtol=0, atol=1e-7 * force / k)
     assert run.stats["nfev"] > 0 and run.stats["steps"] == run.t.size - 1      # every step recorded once
+
+
+@functools.lru_cache(maxsize=None)
+def _compiled(path):
+    """(generated module's namespace, first experiment) of a model, compiled once for this module."""
+    derived = derive_file(path, cache=False)
+    return compile_model(derived.state_space), derived.experiment
+
+
+def _driver_run(path, monkeypatch, *, sliding_in_c=True, truncate=None):
+    """The model's first experiment through the C driver; with ``sliding_in_c`` False its sliding
+    modes go to the step loop (scikit-sundae's CVODE stepped from Python), and with ``truncate`` the
+    driver hands a sliding mode over to that loop after its first few steps (as it does where a
+    law is not finite at a trial point), appending the time of each handover to ``truncate``."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(path)
+    with monkeypatch.context() as patch:
+        if not sliding_in_c:
+            patch.setattr(namespace["_Run"], "driver_sliding",
+                          lambda self, driver, t, y, *rest: ("handover", t, np.array(y, dtype=float)))
+        if truncate is not None:
+            original = namespace["_NativeDriver"].slide_advance
+
+            def first_steps_then_handover(driver, old):
+                code, ts, ys, alphas = original(driver, old)
+                if len(ts) < 4:
+                    return code, ts, ys, alphas
+                truncate.append(float(ts[2]))
+                return 3, ts[:3], ys[:3], alphas[:3]
+            patch.setattr(namespace["_NativeDriver"], "slide_advance", first_steps_then_handover)
+        return namespace["simulate_model"](namespace["_MODEL"], t_end=experiment.t_end, method="CVODE",
+                                           rtol=experiment.rtol, atol=experiment.atol, max_step=experiment.max_step)
+
+
+@needs_cc
+@pytest.mark.parametrize("model", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/breakaway.bg",
+                                   "tests/fixtures/sim/friction_stick.bg"])
+def test_a_sliding_mode_on_one_switch_runs_in_the_driver_and_equals_the_step_loop(model, monkeypatch):
+    """A Filippov sliding mode on one switch (stuck friction) is integrated by the C driver: the
+    corners' combination, its Jacobian and the exits in C. The independent expectation is the step
+    loop (tested against analytic solutions in test_engine): the same CVODE on the same
+    combination, so the same steps, states, outputs and events, to rounding."""
+    path = ROOT / model
+    ours = _driver_run(path, monkeypatch)
+    loop = _driver_run(path, monkeypatch, sliding_in_c=False)
+    assert ours.stats["code"] == "native" and ours.stats["sliding_segments"] >= 1
+    assert ours.stats["driver_sliding_segments"] == ours.stats["sliding_segments"]
+    assert "driver_sliding_segments" not in loop.stats
+    assert ours.t.size == loop.t.size
+    np.testing.assert_allclose(ours.t, loop.t, rtol=1e-12, atol=0)
+    for group in ("states", "outputs", "variables"):
+        for name, values in getattr(loop, group).items():
+            scale = max(float(np.ptp(values)), 1e-300)
+            np.testing.assert_allclose(getattr(ours, group)[name], values, rtol=0, atol=1e-10 * scale, err_msg=name)
+    assert [label for _, label in ours.events] == [label for _, label in loop.events]
+    np.testing.assert_allclose([t for t, _ in ours.events], [t for t, _ in loop.events], rtol=1e-12, atol=1e-15)
+
+
+@needs_cc
+def test_a_sliding_mode_the_driver_hands_over_goes_on_in_the_step_loop(monkeypatch):
+    """Where the driver gives a sliding mode up (a law not finite at a trial point, a failed step),
+    the step loop goes on from the last step it stored: the run still reaches the end with the same
+    events, and agrees with the step loop's own run to the solver tolerance (compared at the loop's
+    points, interpolating linearly between the other run's steps)."""
+    path = ROOT / "models" / "electro_pneumatic_hybrid.bg"
+    handovers = []
+    handed = _driver_run(path, monkeypatch, truncate=handovers)
+    loop = _driver_run(path, monkeypatch, sliding_in_c=False)
+    assert len(handovers) >= 2 and set(handovers) <= set(handed.t.tolist())
+    assert handed.complete and handed.stats["driver_sliding_segments"] == handed.stats["sliding_segments"]
+    assert [label for _, label in handed.events] == [label for _, label in loop.events]
+    np.testing.assert_allclose([t for t, _ in handed.events], [t for t, _ in loop.events], rtol=0, atol=1e-5)
+    for name, values in loop.states.items():
+        scale = max(float(np.ptp(values)), 1e-12)
+        difference = np.abs(np.interp(loop.t, handed.t, handed.states[name]) - values)
+        assert difference.max() <= 1e-3 * scale, name
 
 
 @needs_cc
