@@ -84,7 +84,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from bondc.errors import AnalysisError, Diagnostic
-from bondc.runtime import mode_values
+from bondc.runtime import _unique_rows, mode_values
 
 # Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
 _LOBATTO_NODES = np.array([-1.0, -math.sqrt(3.0 / 7.0), 0.0, math.sqrt(3.0 / 7.0), 1.0])
@@ -450,12 +450,14 @@ class _Model:
         out = np.empty((rows, t.size))
         if self.switch_count == 0:
             return self._columns(function, t, x, np.zeros(0), rows)
-        modes = np.ascontiguousarray(modes, dtype=float)
-        keys = modes.view(np.dtype((np.void, modes.itemsize * modes.shape[1]))).ravel()
-        _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-        inverse = inverse.ravel()
-        for r, row in enumerate(modes[first]):
-            columns = np.flatnonzero(inverse == r)
+        unique, inverse = _unique_rows(np.ascontiguousarray(modes, dtype=float))
+        inverse = np.ravel(inverse)
+        if len(unique) == 1:
+            return self._columns(function, t, x, unique[0], rows)
+        # each mode's columns, in order: one stable sort instead of a comparison per mode
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.cumsum(np.bincount(inverse, minlength=len(unique)))[:-1]
+        for row, columns in zip(unique, np.split(order, bounds)):
             out[:, columns] = self._columns(function, t[columns], x[:, columns], row, rows)
         return out
 
