@@ -79,7 +79,10 @@ across a switch blindly:
    needed exceeds its limit) and leaves on that side; the others are solved
    again (complementarity by active set). The segment ends when a weight
    reaches 0 or 1 (break-away), another switch crosses, or a known time;
-   outputs are the same combination (the friction forces that hold).
+   outputs are the same combination (the friction forces that hold). With the
+   native CVODE driver, a sliding mode on one switch is integrated in C (the
+   weight is then ``rate- / (rate- - rate+)``, the same formula), batches of
+   steps at a time; several switches at once are stepped from Python.
 6. Chattering. When events come faster than ``max_event_rate`` per 1/1000 of
    the run, or repeat without time advancing, the next short interval ``tau``
    is integrated with the *unfrozen* law (modes recomputed at every
