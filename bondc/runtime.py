@@ -100,6 +100,7 @@ variable that first became nan or inf (in causal order) and its law.
 
 import atexit
 import csv as _csv
+import functools
 import importlib
 import math
 import os
@@ -367,6 +368,9 @@ class _Model:
         self.NATIVE_UNAVAILABLE = optional("NATIVE_UNAVAILABLE", str, "")
         self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
+        # the modes some switching function reads (a nested switch's); None: not known
+        self.modes_read_by_switches = None if self.SWITCH_DEPENDS is None else np.array(
+            [any(k in read for read in self.SWITCH_DEPENDS) for k in range(count)], dtype=bool)
         self.parameter_names = tuple(self.PARAMETERS)
 
 
@@ -416,10 +420,13 @@ def modes_at(model, t, x, p, guess=None):
     if count == 0:
         return np.zeros(0)
     modes = np.ones(count) if guess is None else np.array(guess, dtype=float)
+    read = getattr(model, "modes_read_by_switches", None)
     for _ in range(count + 1):
         new = mode_values(model.switches(t, x, p, modes), getattr(model, "floor_switches", None))
         if np.array_equal(new, modes):
             break
+        if read is not None and not read[new != modes].any():
+            return new      # no switching function reads a mode that changed: the next pass gives new again
         modes = new
     return modes
 
@@ -807,6 +814,19 @@ class _NativeDriver:
         count = self.count[0]
         return code, self.ts[:count], self.ys[:count], self.alphas[:count]
 
+    def deadbands(self, t, y, modes, index, rtol, atol):
+        """:meth:`_Run.deadbands` in C (the same sums in the same order), or None where it cannot run."""
+        buffer = self.ffi.from_buffer
+        y = np.ascontiguousarray(y, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        index = np.ascontiguousarray(index, dtype=np.intc)
+        out = np.empty(index.size)
+        if y.size != self.n or self.lib.bondc_deadbands(
+                self.handle, float(t), buffer("double[]", y), buffer("double[]", modes) if modes.size else self.ffi.NULL,
+                float(rtol), float(atol), int(index.size), buffer("int[]", index), buffer("double[]", out)) != 0:
+            return None
+        return out
+
     def interpolate(self, t):
         out = np.empty(self.n)
         self.lib.bondc_driver_dky(self.handle, float(t), 0, self.ffi.from_buffer("double[]", out))
@@ -834,6 +854,14 @@ class _DriverStep:
             return driver.interpolate(min(max(tt, t_old), t_new))
 
         return interpolate
+
+    def switch_value(self, modes, tt, k):
+        """Switching function ``k`` with ``modes`` at ``tt``, on the state ``dense_output()`` gives
+        there: one call into C (the crossing's root finding calls it a few times per event)."""
+        driver = self.driver
+        return driver.lib.bondc_driver_switch(driver.handle, float(tt), self.t_old, self.t,
+                                              driver.ffi.from_buffer("double[]", self.y),
+                                              driver.ffi.from_buffer("double[]", modes), int(k))
 
 
 class CVODE(CvodeSolver):
@@ -1048,6 +1076,7 @@ class _Run:
                       "chattering_intervals": 0}
         self.bad = None
         self.last_relevant = np.ones(self.switch_count, dtype=bool)
+        self.relevant_by_modes = {}    # mode vector -> the switches its law's active branches read
         self.sliding_now = []          # the switches of the last sliding segment
         self.vertex_override = {}      # coulomb switches held between their sliding forces
         self.jumps = []                # (t, state before, state after) of every when clause that fired
@@ -1597,10 +1626,14 @@ class _Run:
                 if done > 0:
                     self.stats["steps"] += done
                     steps = np.diff(np.concatenate(([t_prev], ts[:done])))
-                    for tiny in steps <= _CREEP * np.maximum(np.abs(ts[:done]), 1.0):
-                        creeping = creeping + 1 if tiny else 0
-                        if creeping >= _CREEP_STEPS:
-                            return "handover", t_prev, y_prev    # the step loop diagnoses it
+                    tinies = steps <= _CREEP * np.maximum(np.abs(ts[:done]), 1.0)
+                    if tinies.any():
+                        for tiny in tinies:
+                            creeping = creeping + 1 if tiny else 0
+                            if creeping >= _CREEP_STEPS:
+                                return "handover", t_prev, y_prev    # the step loop diagnoses it
+                    else:
+                        creeping = 0        # the common batch, at once
                     self.blocks_t.append(ts[:done].copy())
                     self.blocks_x.append(ys[:done].T.copy())
                     self.blocks_mode.append(mode)
@@ -1764,6 +1797,12 @@ class _Run:
         depends = self.model.SWITCH_DEPENDS
         if depends is None or self.switch_count == 0:
             return relevant
+        # which branches are active, so which modes are read, depends on the modes alone (every
+        # condition of a law is a switch): once per mode vector and run
+        key = tuple(modes)
+        known = self.relevant_by_modes.get(key)
+        if known is not None:
+            return known.copy()
         reader = _ModeReader(modes)
         try:
             with np.errstate(all="ignore"):
@@ -1779,6 +1818,7 @@ class _Run:
                 stack_.extend(depends[k])
         relevant[:] = False
         relevant[sorted(needed)] = True
+        self.relevant_by_modes[key] = relevant.copy()
         return relevant
 
     def switches_at(self, t, y, modes, index):
@@ -1791,6 +1831,11 @@ class _Run:
         (a chamber pressure sitting at its regulator's set point) and are not events."""
         if index.size == 0:
             return np.zeros(0)
+        driver = self._driver
+        if driver and np.ndim(self.options["atol"]) == 0 and np.ndim(self.options["rtol"]) == 0:
+            total = driver.deadbands(t, y, modes, index, self.options["rtol"], self.options["atol"])
+            if total is not None:
+                return total
         scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
         base = self.switches_at(t, y, modes, index)
         total = np.zeros(index.size)
@@ -1810,6 +1855,11 @@ class _Run:
         t_old, t_new = solver.t_old, solver.t
         found = []
         floors = self.model.floor_switches
+        fused = getattr(solver, "switch_value", None)
+        if fused is not None:       # the driver's step: g_k at tt in one call
+            g = functools.partial(fused, np.ascontiguousarray(modes, dtype=float))
+        else:
+            g = lambda tt, k: self.model.switches(tt, self._dense(tt), self.p, modes)[k]
         if not floors[index].any() and signs.all():
             # the common step: no switch in mode +-1 went below its band (the loop's first test, at once)
             before, after = signs * old + deadband, signs * new + deadband
@@ -1850,14 +1900,12 @@ class _Run:
                 # the deadband only decides *whether* it crossed; when the zero itself lies in this
                 # step, locate the zero (no bias), else where it left the band
                 band = 0.0 if sign * old[j] > 0 else band
-                function = lambda tt, k=k, s=sign, b=band: s * self.model.switches(tt, self._dense(tt), self.p,
-                                                                                   modes)[k] + b
+                function = lambda tt, k=k, s=sign, b=band: s * g(tt, k) + b
             else:
                 if not (np.isfinite(new[j]) and abs(new[j]) > band and new[j] != 0):
                     continue
                 level = band if band > 0 else 1e-6 * abs(new[j])   # leaving the surface
-                function = lambda tt, k=k, lv=level: lv - abs(self.model.switches(tt, self._dense(tt), self.p,
-                                                                                  modes)[k])
+                function = lambda tt, k=k, lv=level: lv - abs(g(tt, k))
             if self._dense is None:
                 self._dense = solver.dense_output()
             with np.errstate(all="ignore"):
@@ -2321,7 +2369,10 @@ class _Run:
         free = np.flatnonzero(~np.asarray(relevant, dtype=bool))
         if free.size == 0 or t.size == 0:
             return rows
-        for _ in range(self.switch_count + 1):
+        read = self.model.modes_read_by_switches
+        # when no switching function reads a free mode, one pass is the fixed point
+        passes = 1 if read is not None and not read[free].any() else self.switch_count + 1
+        for _ in range(passes):
             changed = False
             unique, inverse = _unique_rows(rows)
             for r, row in enumerate(unique):
@@ -2787,6 +2838,41 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
     return 0;
 }
 
+/* Switching function k with modes m at t, on the state of the last step (t_old, t_new] there:
+   y_new at t_new, else CVODE's interpolant at t clamped to the step (as _DriverStep.dense_output). */
+double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
+                           const double *m, int k)
+{
+    const double *y = y_new;
+    if (t != t_new) {
+        CVodeGetDky(d->cvode, t < t_old ? t_old : (t > t_new ? t_new : t), 0, d->work);
+        y = N_VGetArrayPointer(d->work);
+    }
+    bondc_switches(t, y, d->p, m, d->g);
+    return d->g[k];
+}
+
+/* _Run.deadbands in C: for each of the `count` switches `index`, the sum over the states i of
+   |g(y + scale_i e_i) - g(y)|, scale_i = atol + rtol*|y_i| (0 where not finite); 0 on success. */
+int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
+                    int count, const int *index, double *out)
+{
+    double *base = (double *)calloc(d->switches + 1, sizeof(double));
+    if (!base) return -1;
+    bondc_switches(t, y, d->p, m, base);
+    for (int j = 0; j < count; j++) out[j] = 0.0;
+    for (int i = 0; i < d->n; i++) {
+        for (int q = 0; q < d->n; q++) d->shifted[q] = y[q];
+        d->shifted[i] += atol + rtol * fabs(y[i]);
+        bondc_switches(t, d->shifted, d->p, m, d->g);
+        for (int j = 0; j < count; j++) out[j] += fabs(d->g[index[j]] - base[index[j]]);
+    }
+    for (int j = 0; j < count; j++)
+        if (!isfinite(out[j])) out[j] = 0.0;
+    free(base);
+    return 0;
+}
+
 /* y(t) (k = 0) or its derivative (k = 1) inside the last step. */
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out)
 {
@@ -2829,6 +2915,10 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
                          const double *band, double *g_old, double *ts, double *ys, int *count);
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out);
+int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
+                    int count, const int *index, double *out);
+double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
+                           const double *m, int k);
 void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
                         int count, const int *others);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,

@@ -311,6 +311,66 @@ def test_a_sliding_mode_the_driver_hands_over_goes_on_in_the_step_loop(monkeypat
         assert difference.max() <= 1e-3 * scale, name
 
 
+@pytest.mark.parametrize("model", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/diode_bridge.bg"])
+def test_the_modes_a_right_hand_side_reads_depend_on_the_modes_alone(model):
+    """The step loop keeps, per mode vector, which switches matter (the modes the active branches
+    read): every condition of a law is a switch, so the state cannot change which branches run.
+    Checked on the generated numpy code at random states for random mode vectors."""
+    namespace, _ = _compiled(ROOT / model)
+    runtime_model = namespace["_Model"](namespace["_MODEL"])
+    p = namespace["param_array"](runtime_model.PARAMETERS, None, runtime_model.derive_parameters)
+    x0, count = runtime_model.x0(p), len(runtime_model.SWITCHES)
+    rng = np.random.default_rng(2)
+    for _ in range(8):
+        modes = rng.choice([-1.0, 1.0], count)
+        seen = set()
+        for _ in range(10):
+            reader = namespace["_ModeReader"](modes)
+            with np.errstate(all="ignore"):
+                runtime_model.rhs(float(rng.uniform(0, 1)), x0 * rng.uniform(-2, 2, x0.size), p, reader)
+            seen.add(frozenset(reader.read))
+        assert len(seen) == 1 and next(iter(seen))
+
+
+@needs_cc
+def test_the_drivers_deadbands_and_switch_values_are_the_step_loops_to_the_bit():
+    """Two of the step loop's evaluations have a C form in the driver: the deadbands (how far each
+    switching function moves when each state moves by its tolerance) and a switching function on the
+    last step's interpolant (the crossing's root finding). Both equal the Python forms exactly, at
+    random states and modes of the flagship, inside the step and (clamped) outside it."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, _ = _compiled(ROOT / "models" / "electro_pneumatic_hybrid.bg")
+    model = namespace["_Model"](namespace["_MODEL"])
+    assert namespace["attach_native"](model, None)[0]
+    p = namespace["param_array"](model.PARAMETERS, None, model.derive_parameters)
+    run = namespace["_Run"](model, p, 0.0, 4.2, None, "CVODE", 1e-6, 1e-9, np.inf, None, None, 1000, 100)
+    driver = namespace["_NativeDriver"].create(model, model.native_library, p, False)
+    rng = np.random.default_rng(11)
+    x0, count = model.x0(p), len(model.SWITCHES)
+    index = np.arange(count)
+    for _ in range(10):
+        y = x0 * rng.uniform(0.5, 1.5, x0.size) + rng.normal(0, 1e-3, x0.size)
+        modes = rng.choice([-1.0, 1.0], count)
+        t = float(rng.uniform(0, 4.2))
+        run._driver = None
+        python = run.deadbands(t, y, modes, index)
+        assert python.shape == (count,) and np.any(python > 0)
+        np.testing.assert_array_equal(driver.deadbands(t, y, modes, index, 1e-6, 1e-9), python)
+        run._driver = driver
+        np.testing.assert_array_equal(run.deadbands(t, y, modes, index), python)
+    modes = namespace["modes_at"](model, 0.0, x0, p)
+    assert driver.start(0.0, x0, modes, 0.5, 1e-6, 1e-9, 0.0, 0.0)
+    code, ts, ys = driver.advance(np.zeros(0, dtype=np.intc), np.zeros(0), np.zeros(0), np.zeros(0))
+    assert code in (0, 2) and len(ts) >= 2
+    step = namespace["_DriverStep"](driver, float(ts[-2]), float(ts[-1]), ys[-1].copy())
+    dense = step.dense_output()
+    for tt in np.concatenate([np.linspace(ts[-2], ts[-1], 7), [ts[-2] - 1e-3, ts[-1] + 1e-3]]):
+        for k in range(count):
+            expected = model.switches(float(tt), dense(tt), p, modes)[k]
+            assert step.switch_value(modes, tt, k) == expected
+
+
 @needs_cc
 def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute_the_same(tmp_path, monkeypatch):
     """From ``_NATIVE_SPLIT_FROM`` characters on, each C function (and the driver) is a translation
