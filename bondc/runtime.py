@@ -2394,8 +2394,13 @@ class _Run:
         if out is None:
             out = np.full((rows, t.size), np.nan)
         if getattr(self.model, "VECTORIZED", True):
-            for row, value in enumerate(function(t, x, self.p, modes)):
-                out[row, columns] = value
+            values = function(t, x, self.p, modes)
+            # rows written into a view (or a block scattered once): not a fancy index per row
+            target = out[:, columns] if isinstance(columns, slice) else np.empty((rows, t.size))
+            for row, value in enumerate(values):
+                target[row] = value
+            if not isinstance(columns, slice):
+                out[:, columns] = target
         else:
             indices = np.arange(out.shape[1])[columns]
             for j in range(t.size):
