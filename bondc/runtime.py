@@ -2424,7 +2424,16 @@ class _Run:
         all_relevant = (True,) * self.switch_count
         start = 0
         with np.errstate(all="ignore"):
+            blocks = []         # consecutive blocks of one sliding mode merged: one evaluation per corner
             for times, mode in zip(self.blocks_t, self.blocks_mode):
+                if (blocks and isinstance(mode, tuple) and mode[0] == "slide" and isinstance(blocks[-1][1], tuple)
+                        and blocks[-1][1][0] == "slide" and blocks[-1][1][1] == mode[1]):
+                    last_times, last = blocks[-1]
+                    blocks[-1] = (np.concatenate([last_times, times]),
+                                  ("slide", mode[1], np.concatenate([last[2], mode[2]], axis=1)))
+                else:
+                    blocks.append((times, mode))
+            for times, mode in blocks:
                 columns = np.arange(start, start + times.size)
                 start += times.size
                 if isinstance(mode, tuple) and mode[0] == "slide":     # the Filippov combination
@@ -3212,6 +3221,7 @@ def attach_native(model, native=None):
     rows = np.array([i for i, _ in pattern], dtype=np.intp)
     cols = np.array([j for _, j in pattern], dtype=np.intp)
     buffer, empty, ndarray, contiguous = ffi.from_buffer, np.empty, np.ndarray, np.ascontiguousarray
+    doubles = ffi.typeof("double[]")        # resolved once: these wrappers run thousands of times a run
     c_rhs, c_jac, c_switches = lib.bondc_rhs, lib.bondc_jac, lib.bondc_switches
     numpy_rhs, numpy_jac, numpy_switches = model.rhs, model.jac, model.switches
     held = {}       # "p"/"m" -> (the array given, its C buffer): both are the same for many calls
@@ -3220,7 +3230,7 @@ def attach_native(model, native=None):
         last = held.get(key)
         if last is not None and last[0] is value:
             return last[1]
-        made = buffer("double[]", contiguous(value, dtype=float))
+        made = buffer(doubles, contiguous(value, dtype=float))
         held[key] = (value, made)
         return made
 
@@ -3230,7 +3240,7 @@ def attach_native(model, native=None):
             return None
         if count and type(m) is not ndarray:
             return None
-        return (float(t), buffer("double[]", contiguous(x, dtype=float)), pointer("p", p),
+        return (float(t), buffer(doubles, contiguous(x, dtype=float)), pointer("p", p),
                 pointer("m", m) if count else ffi.NULL)
 
     def rhs(t, x, p, m):
@@ -3238,7 +3248,7 @@ def attach_native(model, native=None):
         if arguments is None:
             return numpy_rhs(t, x, p, m)
         out = empty(n)
-        c_rhs(*arguments, buffer("double[]", out))
+        c_rhs(*arguments, buffer(doubles, out))
         return out
 
     def jac(t, x, p, m):
@@ -3248,7 +3258,7 @@ def attach_native(model, native=None):
         matrix = np.zeros((n, n))
         if len(pattern):
             entries = empty(len(pattern))      # in JACOBIAN_PATTERN order
-            c_jac(*arguments, buffer("double[]", entries))
+            c_jac(*arguments, buffer(doubles, entries))
             matrix[rows, cols] = entries
         return matrix
 
@@ -3258,7 +3268,7 @@ def attach_native(model, native=None):
             return numpy_switches(t, x, p, m)
         out = empty(count)
         if count:
-            c_switches(*arguments, buffer("double[]", out))
+            c_switches(*arguments, buffer(doubles, out))
         return out
 
     model.rhs, model.jac, model.switches = rhs, jac, switches
