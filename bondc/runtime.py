@@ -803,6 +803,13 @@ class _NativeDriver:
                                     int(self.others.size),
                                     buffer("int[]", self.others) if self.others.size else self.ffi.NULL)
 
+    def exits_at(self, t, y):
+        """The sliding mode's exits at (t, y), evaluated in C (as ``exits`` of :meth:`_Run.sliding_segment`)."""
+        out = np.empty(self.exits.size)
+        self.lib.bondc_driver_exits(self.handle, float(t), self.ffi.from_buffer("double[]", np.ascontiguousarray(
+            y, dtype=float)), self.ffi.from_buffer("double[]", out))
+        return out
+
     def slide_advance(self, old):
         """One batch of a sliding mode: (code, times, states, alphas) — see ``bondc_driver_slide_advance``;
         ``old`` (the exits before the batch) is updated in place, ``self.exits`` holds the last step's."""
@@ -2133,7 +2140,7 @@ class _Run:
             driver = self.driver_for(others, ())
         if driver is not None:
             outcome = self.driver_sliding(driver, t, y, modes, sliding[0], corners, sides, corner_ids, others,
-                                          memory, exits, weights_at, labels, t_stop)
+                                          memory, weights_at, labels, t_stop)
             if outcome[0] != "handover":
                 return outcome
             _, t, y = outcome       # a law not finite at a trial point: the step loop goes on and explains
@@ -2175,11 +2182,12 @@ class _Run:
                 return end, np.array(y_end)
             old = new
 
-    def driver_sliding(self, driver, t, y, modes, k, corners, sides, corner_ids, others, memory, exits,
-                       weights_at, labels, t_stop):
+    def driver_sliding(self, driver, t, y, modes, k, corners, sides, corner_ids, others, memory, weights_at,
+                       labels, t_stop):
         """:meth:`sliding_segment` on one switch ``k`` with the native driver: the combination of the
-        two corners, its Jacobian and the exits evaluated in C, each batch of steps recorded at once.
-        Returns (t, y), or ("handover", t, y) to go on with the step loop from there."""
+        two corners, its Jacobian and the exits evaluated in C (the same formulas), each batch of
+        steps recorded at once. Returns (t, y), or ("handover", t, y) to go on with the step loop
+        from there."""
         options = self.options
         first_step = float(options.get("first_step") or 0.0)
         if first_step > t_stop - t:
@@ -2189,7 +2197,7 @@ class _Run:
             return "handover", t, np.array(y, dtype=float)
         plus, minus = corners[sides[:, 0] > 0][0], corners[sides[:, 0] < 0][0]
         driver.slide(k, plus, minus, float(memory["alpha"][0]), self.probe, others)
-        old = np.maximum(exits(t, y), 0.0)      # at the edge of the sliding region: leaving counts from here
+        old = np.maximum(driver.exits_at(t, y), 0.0)    # at the edge of the sliding region: leaving counts from here
         t_prev, y_prev = float(t), np.array(y, dtype=float)
         positive = sides[:, 0] > 0
         try:
@@ -2227,8 +2235,8 @@ class _Run:
                         root = t_prev
                     else:
                         try:
-                            root = _optimize.brentq(lambda tt, j=j: exits(tt, dense(tt))[j], t_prev, t_new,
-                                                    xtol=4 * _EPS, rtol=4 * _EPS)
+                            root = _optimize.brentq(lambda tt, j=j: driver.exits_at(tt, dense(tt))[j], t_prev,
+                                                    t_new, xtol=4 * _EPS, rtol=4 * _EPS)
                         except ValueError:
                             root = t_new
                     hit = root if hit is None else min(hit, root)
@@ -2819,6 +2827,12 @@ static double slide_exits(bondc_driver *d, double t, const double *y, double *ex
     return alpha;
 }
 
+/* The exits of the sliding mode (see bondc_driver_slide) at (t, y), into out (2 + count values). */
+void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
+{
+    slide_exits(d, t, y, out);
+}
+
 /* bondc_driver_advance for a sliding mode: each stored step also stores its weight alpha (not
    clipped). After each step the exits are compared with `old` (2 + count values, updated in
    place): an entry that went from > 0 to <= 0, or from >= 0 to < 0, is a possible end of the
@@ -2937,6 +2951,7 @@ void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *
                         int count, const int *others);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count);
+void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
 void bondc_driver_counts(bondc_driver *d, long *out);
 void bondc_driver_free(bondc_driver *d);
 """
