@@ -52,9 +52,16 @@ def enabled() -> bool:
 
 
 def cache_dir() -> Path:
-    from bondc.runtime import cache_dir as runtime_cache_dir
+    """bondc's cache folder, as :func:`bondc.runtime.cache_dir` gives it (a test keeps the two
+    equal): ``$BONDC_CACHE_DIR``, else the user cache directory (platformdirs). Written out here
+    because the runtime, which a generated module carries whole, imports numpy: ``bondc check``
+    needs the folder but not numpy."""
+    given = os.environ.get("BONDC_CACHE_DIR")
+    if given:
+        return Path(given)
+    import platformdirs
 
-    return Path(runtime_cache_dir())
+    return Path(platformdirs.user_cache_dir("bondc", appauthor=False))
 
 
 def code_hash() -> str:

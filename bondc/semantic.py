@@ -42,7 +42,6 @@ from typing import Iterable, Mapping, Sequence
 
 from bondc import ast, builtins, units
 from bondc.io import read_source
-from bondc.runtime import CsvError, csv_header
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import (
@@ -1016,6 +1015,8 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     shown = os.path.normpath(os.path.join(os.path.dirname(node.span.file), path_arg.value))
     key = str(path)
     if key not in m.csv_headers:
+        from bondc.runtime import CsvError, csv_header      # (numpy: only for a model that reads a csv file)
+
         try:
             m.csv_headers[key] = csv_header(path)      # the simulator's own reader
         except CsvError as problem:

@@ -300,7 +300,7 @@ def test_a_corrupt_light_entry_is_a_miss_and_the_full_entry_is_read(tmp_path, is
 
 
 _CHECK = ("import sys\nfrom bondc.cli import main\ncode = main(sys.argv[1:])\n"
-          "print('SYMPY', 'sympy' in sys.modules)\nsys.exit(code)\n")
+          "print('SYMPY', 'sympy' in sys.modules, 'numpy' in sys.modules)\nsys.exit(code)\n")
 
 _NOT_INVERTIBLE = """model Friction
   Sf pump     : f = 2
@@ -322,25 +322,41 @@ def _check_runs(tmp_path, path, *options):
     done = subprocess.run([sys.executable, "-c", _CHECK, "check", str(path), *options], capture_output=True,
                           text=True, env=env, cwd=tmp_path, timeout=300)
     output, imported = done.stdout.rsplit("SYMPY", 1)
-    return done.returncode, output, done.stderr, imported.strip() == "True"
+    sympy, numpy = imported.split()
+    return done.returncode, output, done.stderr, sympy == "True", numpy == "True"
 
 
 @pytest.mark.slow
 def test_a_second_check_of_unchanged_files_reports_the_same_without_sympy(tmp_path):
     """check runs the equations stage (E605, the states kept) once per content of the files: the
-    next check of the same files reports the same, text and JSON, and imports no sympy; an edit
-    that makes a law not invertible is reported at once; --no-cache always derives."""
+    next check of the same files reports the same, text and JSON, and imports no sympy (nor numpy,
+    for a model that reads no csv file); an edit that makes a law not invertible is reported at
+    once; --no-cache always derives."""
     path = _write(tmp_path / "msd.bg")
     first = _check_runs(tmp_path, path, "--json")
     again = _check_runs(tmp_path, path, "--json")
     assert first[0] == again[0] == 0 and first[1] == again[1] and first[3] and not again[3]
+    assert not again[4]
     assert '"states_kept": 2' in again[1]
     assert _check_runs(tmp_path, path)[1] == _check_runs(tmp_path, path, "--no-cache")[1]
     assert _check_runs(tmp_path, path, "--no-cache")[3]
     path.write_text(_NOT_INVERTIBLE, encoding="utf-8")
     for expected_sympy in (True, False):
-        code, _, stderr, imported = _check_runs(tmp_path, path)
+        code, _, stderr, imported, _ = _check_runs(tmp_path, path)
         assert code == 1 and "E605" in stderr and imported == expected_sympy
     path.write_text(_NOT_INVERTIBLE.replace("e = 3*abs(f)^1.5*sign(f)", "e = 3*f"), encoding="utf-8")
-    code, output, stderr, imported = _check_runs(tmp_path, path)
+    code, output, stderr, imported, _ = _check_runs(tmp_path, path)
     assert code == 0 and "E605" not in stderr and imported
+
+
+def test_the_cache_folder_is_the_runtimes(tmp_path, monkeypatch):
+    """``bondc.cache.cache_dir`` writes out the runtime's rule (the runtime imports numpy, which
+    ``check`` does not need): both give the same folder, with and without ``BONDC_CACHE_DIR``."""
+    from bondc import runtime
+
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "here"))
+    assert cache.cache_dir() == Path(runtime.cache_dir()) == tmp_path / "here"
+    monkeypatch.delenv("BONDC_CACHE_DIR")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache.cache_dir() == Path(runtime.cache_dir())
+    assert str(cache.cache_dir()).startswith(str(tmp_path / "xdg"))
