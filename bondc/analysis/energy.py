@@ -445,20 +445,28 @@ class _Model:
                 out[:, j] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
         return out
 
-    def by_modes(self, function, t, x, modes, rows):
-        """``function`` at every column with that column's mode vector (rows of ``modes``)."""
+    def groups(self, modes):
+        """(the distinct rows of ``modes``, each row's index among them), for :meth:`by_modes`."""
+        if self.switch_count == 0:
+            return None
+        unique, inverse = _unique_rows(np.ascontiguousarray(modes, dtype=float))
+        return unique, np.ravel(inverse)
+
+    def by_modes(self, function, t, x, modes, rows, groups=None):
+        """``function`` at every column with that column's mode vector (rows of ``modes``);
+        ``groups``: :meth:`groups` of ``modes`` where the caller has it already."""
         out = np.empty((rows, t.size))
         if self.switch_count == 0:
             return self._columns(function, t, x, np.zeros(0), rows)
-        unique, inverse = _unique_rows(np.ascontiguousarray(modes, dtype=float))
-        inverse = np.ravel(inverse)
+        unique, inverse = groups if groups is not None else self.groups(modes)
         if len(unique) == 1:
             return self._columns(function, t, x, unique[0], rows)
         # each mode's columns, in order: one stable sort instead of a comparison per mode
         order = np.argsort(inverse, kind="stable")
         bounds = np.cumsum(np.bincount(inverse, minlength=len(unique)))[:-1]
         for row, columns in zip(unique, np.split(order, bounds)):
-            out[:, columns] = self._columns(function, t[columns], x[:, columns], row, rows)
+            if columns.size:
+                out[:, columns] = self._columns(function, t[columns], x[:, columns], row, rows)
         return out
 
     def modes(self, t, x):
@@ -473,8 +481,8 @@ class _Model:
             rows = new
         return rows
 
-    def rhs(self, t, x, modes):
-        return self.by_modes(self._rhs, t, x, modes, len(self.state_names))
+    def rhs(self, t, x, modes, groups=None):
+        return self.by_modes(self._rhs, t, x, modes, len(self.state_names), groups)
 
     def variables(self, t, x, modes):
         return self.by_modes(self._variables, t, x, modes, len(self.variable_names))
@@ -526,6 +534,12 @@ def _corrected_nodes(model: _Model, ta, tb, xa, xb, fa, fb, modes, scale, *, wit
     if n == 0 or count == 0:
         return hermite, rates, corrected
     half = 0.5 * h
+    groups = model.groups(modes)        # the steps' distinct modes, found once for every sweep
+
+    def node_groups(steps):
+        """:meth:`_Model.groups` of the modes of ``steps``' three interior nodes."""
+        return None if groups is None else (groups[0], np.repeat(groups[1][steps], 3))
+
     current = hermite.copy()
     previous = np.full(count, np.inf)
     active = np.ones(count, dtype=bool)
@@ -534,8 +548,8 @@ def _corrected_nodes(model: _Model, ta, tb, xa, xb, fa, fb, modes, scale, *, wit
         if index.size == 0:
             break
         rates[:, index, 1:4] = model.rhs(
-            times[index, 1:4].ravel(), current[:, index, 1:4].reshape(n, -1), np.repeat(modes[index], 3, axis=0)
-        ).reshape(n, index.size, 3)
+            times[index, 1:4].ravel(), current[:, index, 1:4].reshape(n, -1), np.repeat(modes[index], 3, axis=0),
+            node_groups(index)).reshape(n, index.size, 3)
         integral = np.einsum("ij,nkj->nki", _INTEGRATION, rates[:, index, :]) * half[index][None, :, None]
         defect = xb[:, index] - xa[:, index] - integral[:, :, -1]
         new = xa[:, index, None] + integral + tau[None, None, :] * defect[:, :, None]
@@ -554,7 +568,7 @@ def _corrected_nodes(model: _Model, ta, tb, xa, xb, fa, fb, modes, scale, *, wit
     if not with_rates:
         return current, None, corrected
     rates[:, :, 1:4] = model.rhs(times[:, 1:4].ravel(), current[:, :, 1:4].reshape(n, -1),
-                                 np.repeat(modes, 3, axis=0)).reshape(n, count, 3)
+                                 np.repeat(modes, 3, axis=0), node_groups(slice(None))).reshape(n, count, 3)
     return current, rates, corrected
 
 
@@ -571,8 +585,9 @@ class _Trajectory:
         xa, xb = x[:, keep], x[:, keep + 1]
         mid = 0.5 * (ta + tb)
         modes = model.modes(mid, 0.5 * (xa + xb))
-        fa = model.rhs(ta, xa, modes)
-        fb = model.rhs(tb, xb, modes)
+        groups = model.groups(modes)
+        fa = model.rhs(ta, xa, modes, groups)
+        fb = model.rhs(tb, xb, modes, groups)
         sliding = np.zeros(ta.size, dtype=bool)
         for start, end in _sliding_spans(result.events, t[-1]):
             sliding |= (mid > start) & (mid < end)
