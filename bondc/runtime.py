@@ -1605,15 +1605,29 @@ class _Run:
             return None
         return self._driver
 
-    def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband):
-        """Integrate one segment with the native driver: (t, y, event) as :meth:`segment` returns,
-        or ("handover", t, y) to go on step by step from there."""
+    def start_driver(self, driver, t, y, modes, t_stop) -> bool:
+        """(Re)start the native driver at (t, y) with ``modes`` towards ``t_stop``, with the run's
+        tolerances and step limits; False where CVODE refuses."""
         options = self.options
         first_step = float(options.get("first_step") or 0.0)
         if first_step > t_stop - t:
             first_step = 0.0
         max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
-        if not driver.start(t, y, modes, t_stop, options["rtol"], options["atol"], max_step, first_step):
+        return driver.start(t, y, modes, t_stop, options["rtol"], options["atol"], max_step, first_step)
+
+    def collect_driver(self, driver, kind):
+        """Add the driver's counts since its start to the run's, and count one segment of ``kind``."""
+        nfev, njev, nlu = driver.counts()
+        self.stats["nfev"] += nfev
+        self.stats["njev"] += njev
+        self.stats["nlu"] += nlu
+        self.stats["linear_solver"] = driver.linear_solver
+        self.stats[kind] = self.stats.get(kind, 0) + 1
+
+    def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband):
+        """Integrate one segment with the native driver: (t, y, event) as :meth:`segment` returns,
+        or ("handover", t, y) to go on step by step from there."""
+        if not self.start_driver(driver, t, y, modes, t_stop):
             return "handover", t, np.array(y, dtype=float)
         g_old = np.array(values_old, dtype=float)
         watch = index.astype(np.intc)
@@ -1674,12 +1688,7 @@ class _Run:
                 if t_new >= t_stop:
                     return t_new, y_new, None
         finally:
-            nfev, njev, nlu = driver.counts()
-            self.stats["nfev"] += nfev
-            self.stats["njev"] += njev
-            self.stats["nlu"] += nlu
-            self.stats["linear_solver"] = driver.linear_solver
-            self.stats["driver_segments"] = self.stats.get("driver_segments", 0) + 1
+            self.collect_driver(driver, "driver_segments")
 
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
@@ -2188,12 +2197,7 @@ class _Run:
         two corners, its Jacobian and the exits evaluated in C (the same formulas), each batch of
         steps recorded at once. Returns (t, y), or ("handover", t, y) to go on with the step loop
         from there."""
-        options = self.options
-        first_step = float(options.get("first_step") or 0.0)
-        if first_step > t_stop - t:
-            first_step = 0.0
-        max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
-        if not driver.start(t, y, modes, t_stop, options["rtol"], options["atol"], max_step, first_step):
+        if not self.start_driver(driver, t, y, modes, t_stop):
             return "handover", t, np.array(y, dtype=float)
         plus, minus = corners[sides[:, 0] > 0][0], corners[sides[:, 0] < 0][0]
         driver.slide(k, plus, minus, float(memory["alpha"][0]), self.probe, others)
@@ -2253,12 +2257,7 @@ class _Run:
                 if t_new >= t_stop:
                     return t_new, y_new
         finally:
-            nfev, njev, nlu = driver.counts()
-            self.stats["nfev"] += nfev
-            self.stats["njev"] += njev
-            self.stats["nlu"] += nlu
-            self.stats["linear_solver"] = driver.linear_solver
-            self.stats["driver_sliding_segments"] = self.stats.get("driver_sliding_segments", 0) + 1
+            self.collect_driver(driver, "driver_sliding_segments")
 
     def record_sliding(self, t_old, t_new, y_new, dense, corner_ids, weights_at):
         if self.t_eval is None:
