@@ -360,3 +360,37 @@ def test_the_cache_folder_is_the_runtimes(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert cache.cache_dir() == Path(runtime.cache_dir())
     assert str(cache.cache_dir()).startswith(str(tmp_path / "xdg"))
+
+
+def test_the_generated_module_is_kept_compiled_and_checked_against_its_text(tmp_path, isolated, monkeypatch):
+    """The entry keeps the module compiled by this Python (as a ``.pyc``): the next process runs it
+    without compiling, with the same results; a damaged file, or a text that does not match the
+    one it was compiled from, is compiled again."""
+    from bondc import simulate as simulate_module
+
+    path = _write(tmp_path / "drive.bg")
+    first = derive_file(path)
+    result = simulate(first.state_space, first.experiment)
+    (kept,) = list((isolated[0] / "models").glob(f"*/module.{sys.implementation.cache_tag}.code"))
+    compiled = []
+    real_compile = compile
+
+    def counting(*args, **kwargs):
+        compiled.append(args[1])
+        return real_compile(*args, **kwargs)
+
+    monkeypatch.setattr(cache, "compile", counting, raising=False)
+    for damage in (None, "bytes", "text"):
+        simulate_module._COMPILED.clear()           # as a new process: the module from the entry
+        if damage == "bytes":
+            kept.write_bytes(kept.read_bytes()[:40] + b"\0garbage")
+        again = derive_file(path)
+        entry = cache.entry_of(again.state_space)
+        if damage == "text":
+            assert entry.module_code("x = 1\n", "<other>") is not None and compiled[-1] == "<other>"
+            continue
+        run = simulate(again.state_space, again.experiment)
+        assert len(compiled) == (0 if damage is None else 1)
+        np.testing.assert_array_equal(run.t, result.t)
+        np.testing.assert_array_equal(run.states["spring.q"], result.states["spring.q"])
+    assert kept.read_bytes().startswith(__import__("importlib.util").util.MAGIC_NUMBER)
