@@ -292,6 +292,35 @@ def test_a_sliding_mode_on_one_switch_runs_in_the_driver_and_equals_the_step_loo
 
 
 @needs_cc
+@pytest.mark.slow
+def test_the_drivers_sliding_modes_equal_the_step_loops_over_random_flagship_designs(monkeypatch):
+    """The flagship with its mass, inertias, stiffnesses, damping, backlash and friction law scaled
+    at random (0.6 to 1.6 times): every design sticks and slips differently (40 to 130 events), and
+    the driver's sliding modes give the step loop's run each time."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(ROOT / "models" / "electro_pneumatic_hybrid.bg")
+    varied = ("M", "Iz", "K", "k_nut", "c_nut", "gap", "c0", "v_th", "a_up", "n_up", "a_dn", "n_dn", "b_cr")
+    rng = np.random.default_rng(1)
+    settings = {"t_end": experiment.t_end, "method": "CVODE", "rtol": experiment.rtol, "atol": experiment.atol,
+                "max_step": experiment.max_step}
+    for _ in range(6):
+        design = {name: namespace["PARAMETERS"][name] * rng.uniform(0.6, 1.6) for name in varied}
+        ours = namespace["simulate_model"](namespace["_MODEL"], p=design, **settings)
+        with monkeypatch.context() as patch:
+            patch.setattr(namespace["_Run"], "driver_sliding",
+                          lambda self, driver, t, y, *rest: ("handover", t, np.array(y, dtype=float)))
+            loop = namespace["simulate_model"](namespace["_MODEL"], p=design, **settings)
+        assert ours.complete and ours.stats["driver_sliding_segments"] == ours.stats["sliding_segments"] >= 1
+        assert [label for _, label in ours.events] == [label for _, label in loop.events]
+        np.testing.assert_allclose([t for t, _ in ours.events], [t for t, _ in loop.events], rtol=1e-12, atol=1e-15)
+        assert ours.t.size == loop.t.size
+        for name, values in loop.states.items():
+            scale = max(float(np.ptp(values)), 1e-300)
+            np.testing.assert_allclose(ours.states[name], values, rtol=0, atol=1e-10 * scale, err_msg=name)
+
+
+@needs_cc
 def test_a_sliding_mode_the_driver_hands_over_goes_on_in_the_step_loop(monkeypatch):
     """Where the driver gives a sliding mode up (a law not finite at a trial point, a failed step),
     the step loop goes on from the last step it stored: the run still reaches the end with the same
