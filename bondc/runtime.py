@@ -794,12 +794,11 @@ class _NativeDriver:
     def slide(self, k, plus, minus, alpha, probe, others):
         """Make the segment just started a sliding mode on switch ``k`` (see ``bondc_driver_slide``)."""
         buffer = self.ffi.from_buffer
-        self.corners = (np.array(plus, dtype=float), np.array(minus, dtype=float))
-        self.others = np.array(others, dtype=np.intc).reshape(-1)
+        self.others = np.array(others, dtype=np.intc).reshape(-1)      # the C side keeps pointing to it
         self.alphas = np.empty(self.capacity)
         self.exits = np.empty(2 + self.others.size)
-        self.lib.bondc_driver_slide(self.handle, int(k), buffer("double[]", self.corners[0]),
-                                    buffer("double[]", self.corners[1]), float(alpha), float(probe),
+        self.lib.bondc_driver_slide(self.handle, int(k), buffer("double[]", np.array(plus, dtype=float)),
+                                    buffer("double[]", np.array(minus, dtype=float)), float(alpha), float(probe),
                                     int(self.others.size),
                                     buffer("int[]", self.others) if self.others.size else self.ffi.NULL)
 
@@ -2167,18 +2166,7 @@ class _Run:
                 self.stop_nonfinite(solver, fun, lambda tt, yy: corners[-1], corner_ids[-1])
             new = exits(t_new, y_new)
             dense = solver.dense_output()
-            hit = None
-            fired = [j for j in range(new.size) if old[j] > 0 >= new[j] or (old[j] >= 0 > new[j])]
-            for j in fired:
-                if old[j] <= 0:
-                    root = solver.t_old
-                else:
-                    try:
-                        root = _optimize.brentq(lambda tt: exits(tt, dense(tt))[j], solver.t_old, t_new,
-                                                xtol=4 * _EPS, rtol=4 * _EPS)
-                    except ValueError:
-                        root = t_new
-                hit = root if hit is None else min(hit, root)
+            hit = self.sliding_end(old, new, lambda tt: exits(tt, dense(tt)), solver.t_old, t_new)
             end = t_new if hit is None else hit
             y_end = y_new if hit is None else dense(hit)
             self.record_sliding(solver.t_old, end, y_end, dense, corner_ids, weights_at)
@@ -2190,6 +2178,26 @@ class _Run:
                     self.note_event(end, f"sliding on {labels} ends")
                 return end, np.array(y_end)
             old = new
+
+    @staticmethod
+    def sliding_end(old, new, exits_at, t_old, t_new):
+        """The earliest end of a sliding mode in the step (t_old, t_new], or None: where an exit (an
+        entry of ``exits_at(tt)``, positive while the mode lasts) went from > 0 to <= 0 or from >= 0
+        to < 0 (``old``, ``new``: the exits at the step's ends), located by brentq."""
+        hit = None
+        for j in range(new.size):
+            if not (old[j] > 0 >= new[j] or old[j] >= 0 > new[j]):
+                continue
+            if old[j] <= 0:
+                root = t_old
+            else:
+                try:
+                    root = _optimize.brentq(lambda tt, j=j: exits_at(tt)[j], t_old, t_new, xtol=4 * _EPS,
+                                            rtol=4 * _EPS)
+                except ValueError:
+                    root = t_new
+            hit = root if hit is None else min(hit, root)
+        return hit
 
     def driver_sliding(self, driver, t, y, modes, k, corners, sides, corner_ids, others, memory, weights_at,
                        labels, t_stop):
@@ -2231,19 +2239,7 @@ class _Run:
                 self.stats["steps"] += 1
                 dense = _DriverStep(driver, t_prev, t_new, y_new).dense_output()
                 new = driver.exits.copy()
-                hit = None
-                for j in range(new.size):
-                    if not (old[j] > 0 >= new[j] or old[j] >= 0 > new[j]):
-                        continue
-                    if old[j] <= 0:
-                        root = t_prev
-                    else:
-                        try:
-                            root = _optimize.brentq(lambda tt, j=j: driver.exits_at(tt, dense(tt))[j], t_prev,
-                                                    t_new, xtol=4 * _EPS, rtol=4 * _EPS)
-                        except ValueError:
-                            root = t_new
-                    hit = root if hit is None else min(hit, root)
+                hit = self.sliding_end(old, new, lambda tt: driver.exits_at(tt, dense(tt)), t_prev, t_new)
                 end = t_new if hit is None else hit
                 y_end = y_new if hit is None else dense(hit)
                 self.record_sliding(t_prev, end, y_end, dense, corner_ids, weights_at)
