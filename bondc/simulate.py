@@ -414,15 +414,13 @@ def _span_of(graph, variable: str | None):
     head, _, which = name.rpartition(".")
     for bond in getattr(graph, "bonds", ()):
         if bond.name == head:
-            for end in (bond.head, bond.tail):
-                element = graph.elements.get(end)
-                if element is None:
-                    continue
-                spans = element.law_spans
-                if which in spans:
-                    return spans[which]
-                if element.kind in ("C", "I", "R") and spans:
-                    return next(iter(spans.values()))
+            ends = [graph.elements[end] for end in (bond.head, bond.tail) if end in graph.elements]
+            for element in ends:        # the law that computes this variable, at either end
+                if which in element.law_spans:
+                    return element.law_spans[which]
+            for element in ends:        # else a storage or resistor law written the other way round
+                if element.kind in ("C", "I", "R") and element.law_spans:
+                    return next(iter(element.law_spans.values()))
             for end in (bond.head, bond.tail):
                 if end in graph.elements:
                     return graph.elements[end].span

@@ -241,6 +241,20 @@ def test_nan_is_reported_with_time_variable_and_law(tmp_path):
     np.testing.assert_allclose(data[:, 2], 2.0 - data[:, 0], atol=1e-9)
 
 
+def test_a_nan_is_reported_at_the_law_that_computes_it_not_at_the_storage_element_across_the_bond(tmp_path):
+    """An effort source's law leaves its domain; the bond's other end is an I element whose law
+    computes the flow. The diagnostic points at the source's law (line 3), which computes the
+    effort that became nan, not at the mass's."""
+    path = tmp_path / "push.bg"
+    path.write_text("model Push\n  param m = 2 [kg]\n  Se force : e = sqrt(1 - t)\n  I mass : f = p/m\n"
+                    "  force -> mass\n  experiment run\n    t_end = 2 [s]\n  end\nend\n", encoding="utf-8")
+    with pytest.raises(SimulationError) as caught:
+        run(path)
+    diagnostic, = caught.value.diagnostics
+    assert diagnostic.code == "E810" and "'b1.e' (force.e) became nan" in diagnostic.message
+    assert (diagnostic.span.line, diagnostic.span.column) == (3, 14)
+
+
 def test_a_singularity_stops_the_run_instead_of_creeping_forever():
     with pytest.raises(SimulationError) as caught:
         run(SIM / "singular_force.bg")
