@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bondc import cache, semantic
+from bondc import cache, runtime, semantic
 from bondc.pipeline import derive_file
 from bondc.simulate import simulate
 
@@ -230,6 +230,8 @@ def test_every_stored_energy_function_is_rebuilt_from_its_recipe_to_the_same_num
 
 _IMPORTED = ("import sys\nfrom bondc.cli import main\ncode = main(sys.argv[1:])\n"
              "print('IMPORTED', sorted(m for m in ('sympy', 'lark', 'bondc.statespace') if m in sys.modules))\n"
+             "print('SCIPY', sorted(m for m in ('scipy.optimize', 'scipy.integrate', 'scipy.interpolate',\n"
+             "                                   'scipy.linalg', 'scipy.special') if m in sys.modules))\n"
              "sys.exit(code)\n")
 
 
@@ -248,12 +250,18 @@ def test_a_cached_simulate_imports_no_sympy_or_lark_and_writes_the_same_results(
                               capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
         assert done.returncode == 0, done.stderr
         text = done.stdout.replace(str(out), "OUT")
-        runs.append((out.read_bytes(), text.split("IMPORTED")[0], text.split("IMPORTED")[1].strip()))
+        summary, imported = text.split("IMPORTED")
+        imported, scipy_modules = imported.split("SCIPY")
+        runs.append((out.read_bytes(), summary, imported.strip(), scipy_modules.strip()))
     assert runs[0][0] == runs[1][0] == runs[2][0]       # byte-identical results
     assert runs[0][1] == runs[1][1] == runs[2][1]       # and the same summary and energy tables
     assert "Energy account" in runs[2][1]
     assert runs[0][2] == "['bondc.statespace', 'lark', 'sympy']"
     assert runs[1][2] == runs[2][2] == "[]"
+    if runtime._sundials_link() is not None and runtime._scipy_kernel("optimize", "_zeros", runtime._zeros_probe):
+        # on bondc's C driver the run, its events and its energy account (Brent's method,
+        # QUADPACK, the splines of sliding spans) need none of scipy's 0.5 s of imports
+        assert runs[1][3] == runs[2][3] == "[]"
 
 
 def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(tmp_path, isolated):

@@ -7,6 +7,7 @@ Filippov solution is known exactly.
 """
 
 import io
+import math
 
 import numpy as np
 import pytest
@@ -219,3 +220,53 @@ def test_modes_at_a_point_are_the_fixed_point_with_and_without_nested_switches()
             for _ in range(10):          # brute force: iterate well past the nesting depth
                 expected = np.sign(switches(0.0, x, None, expected))
             assert np.array_equal(runtime.modes_at(model, 0.0, x, None, guess), expected)
+
+
+ROOT_FUNCTIONS = [
+    (lambda x: x - 0.3, 0.0, 1.0),
+    (lambda x: math.cos(x) - x, 0.0, 1.0),
+    (lambda x: x ** 3 - 2.0 * x - 5.0, 2.0, 3.0),          # Wallis's cubic
+    (lambda x: math.exp(x) - 1e-3, -10.0, 5.0),
+    (lambda x: math.copysign(1.0, x - 1e-7), -1.0, 1.0),    # a jump: no root, a sign change
+    (lambda x: -(x - 5e-9), 0.0, 1e-8),
+]
+
+
+@pytest.mark.parametrize("function, a, b", ROOT_FUNCTIONS)
+def test_brentq_is_scipys_brentq_to_the_bit_with_or_without_scipy_optimize(function, a, b, monkeypatch):
+    """The runtime calls scipy's compiled Brent solver without importing scipy.optimize (0.3 s);
+    the roots are the public function's, and so they are when that module is not usable."""
+    from scipy.optimize import brentq as scipy_brentq
+
+    eps = np.finfo(float).eps
+    expected = scipy_brentq(function, a, b, xtol=4 * eps, rtol=4 * eps)
+    assert runtime._scipy_kernel("optimize", "_zeros", runtime._zeros_probe) is not None
+    assert runtime.brentq(function, a, b, 4 * eps, 4 * eps) == expected
+    monkeypatch.setattr(runtime, "_scipy_kernel", lambda *args: None)
+    assert runtime.brentq(function, a, b, 4 * eps, 4 * eps) == expected
+
+
+def test_brentq_refuses_a_bracket_without_a_sign_change_and_a_nan_as_scipy_does():
+    eps = np.finfo(float).eps
+    with pytest.raises(ValueError):
+        runtime.brentq(lambda x: x * x + 1.0, -1.0, 1.0, 4 * eps, 4 * eps)
+    with pytest.raises(ValueError):     # nan inside the bracket, at the first trial point
+        runtime.brentq(lambda x: math.nan if 0.2 < x < 0.8 else x - 0.5, 0.0, 1.0, 4 * eps, 4 * eps)
+
+
+@pytest.mark.filterwarnings("ignore:The occurrence of roundoff error")      # scipy's, on sqrt(|x|)
+@pytest.mark.parametrize("law, a, b, exact", [
+    (lambda x: 3.0 * x * x, 0.0, 2.0, 8.0),
+    (lambda x: np.sqrt(np.abs(x)), -1.0, 4.0, 2.0 / 3.0 + 16.0 / 3.0),
+    (lambda x: 1.0 / (1.0 + x * x), -50.0, 50.0, 2.0 * math.atan(50.0)),
+    (lambda x: x, 1.0, -1.0, 0.0),                          # reversed bounds
+])
+def test_quad_is_scipys_quad_without_importing_scipy_integrate(law, a, b, exact, monkeypatch):
+    import scipy.integrate
+
+    expected = scipy.integrate.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500)[0]
+    assert runtime._scipy_kernel("integrate", "_quadpack", runtime._quadpack_probe) is not None
+    assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == expected
+    assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == pytest.approx(exact, rel=1e-10, abs=1e-14)
+    monkeypatch.setattr(runtime, "_scipy_kernel", lambda *args: None)
+    assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == expected
