@@ -2491,6 +2491,22 @@ class _Run:
             x = np.concatenate(self.blocks_x, axis=1)
         else:
             t, x = np.zeros(0), np.zeros((n, 0))
+        # restarts that made no progress (a switch re-decided at the same instant) repeat a point:
+        # keep its first record, so the time of the result strictly increases. Dropped before the
+        # outputs and variables are evaluated (not a copy of every variable at every point after)
+        keep = np.concatenate([[True], np.diff(t) > 0]) if t.size else np.ones(0, dtype=bool)
+        kept_blocks = list(zip(self.blocks_t, self.blocks_mode))
+        if not keep.all():
+            t, x, start, kept_blocks = t[keep], x[:, keep], 0, []
+            for times, mode in zip(self.blocks_t, self.blocks_mode):
+                kept = keep[start:start + times.size]
+                start += times.size
+                if kept.all():
+                    kept_blocks.append((times, mode))
+                elif kept.any():
+                    if isinstance(mode, tuple) and mode[0] == "slide":
+                        mode = ("slide", mode[1], np.asarray(mode[2])[:, kept])
+                    kept_blocks.append((times[kept], mode))
         # every column is written below, by the sliding blend or by its mode's group
         outputs = np.empty((n_out, t.size))
         variables = np.empty((n_var, t.size))
@@ -2499,7 +2515,7 @@ class _Run:
         start = 0
         with np.errstate(all="ignore"):
             blocks = []         # consecutive blocks of one sliding mode merged: one evaluation per corner
-            for times, mode in zip(self.blocks_t, self.blocks_mode):
+            for times, mode in kept_blocks:
                 if (blocks and isinstance(mode, tuple) and mode[0] == "slide" and isinstance(blocks[-1][1], tuple)
                         and blocks[-1][1][0] == "slide" and blocks[-1][1][1] == mode[1]):
                     last_times, last = blocks[-1]
@@ -2540,12 +2556,6 @@ class _Run:
                     points, states = (tt, xx) if len(unique) == 1 else (tt[chosen], xx[:, chosen])
                     self.evaluate_columns(model.outputs, points, states, row, n_out, outputs, cols)
                     self.evaluate_columns(model.variables, points, states, row, n_var, variables, cols)
-        if t.size:
-            # restarts that made no progress (a switch re-decided at the same instant) repeat a point:
-            # keep its first record, so the time of the result strictly increases
-            keep = np.concatenate([[True], np.diff(t) > 0])
-            if not keep.all():      # (a copy of every variable at every point: only when needed)
-                t, x, outputs, variables = t[keep], x[:, keep], outputs[:, keep], variables[:, keep]
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
             message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"

@@ -509,3 +509,47 @@ def test_a_forked_process_never_finishes_or_removes_its_parents_build(tmp_path, 
     assert child.exitcode == 0 and loaded and parents_folder_left
     ffi, lib = runtime.load_native(source)
     assert ffi is not None and not runtime._NATIVE_PENDING and not os.path.exists(pending.work)
+
+
+@pytest.mark.parametrize("name", ["tests/fixtures/sim/friction_stick.bg", "models/electro_pneumatic_hybrid.bg"])
+def test_a_repeated_point_is_dropped_before_the_results_are_evaluated(name, monkeypatch):
+    """A restart that made no progress repeats a point; the result keeps its first record. The
+    repeated points are now dropped before the outputs and variables are evaluated: a point
+    repeated inside a sliding block (its Filippov weights too) and inside an ordinary block
+    gives the very result of the run without them."""
+    namespace, experiment = _compiled(ROOT / name)
+
+    def run():
+        return namespace["simulate_model"](namespace["_MODEL"], t_end=experiment.t_end, method="CVODE",
+                                           rtol=experiment.rtol, atol=experiment.atol,
+                                           max_step=experiment.max_step)
+
+    clean = run()
+    original = namespace["_Run"].result
+    repeated = []
+
+    def with_repeats(self, complete, failure):
+        kinds = set()
+        for i, (times, mode) in enumerate(zip(self.blocks_t, self.blocks_mode)):
+            sliding = isinstance(mode, tuple) and mode[0] == "slide"
+            if times.size < 3 or sliding in kinds:
+                continue
+            kinds.add(sliding)
+            k = times.size // 2
+            self.blocks_t[i] = np.insert(times, k + 1, times[k])
+            # the repeat's record differs: only the first record may be kept
+            self.blocks_x[i] = np.insert(self.blocks_x[i], k + 1, 1.5 * self.blocks_x[i][:, k] + 1.0, axis=1)
+            if sliding:
+                weights = np.asarray(mode[2])
+                self.blocks_mode[i] = ("slide", mode[1], np.insert(weights, k + 1, 1.0 - weights[:, k], axis=1))
+            repeated.append(sliding)
+        return original(self, complete, failure)
+
+    monkeypatch.setattr(namespace["_Run"], "result", with_repeats)
+    again = run()
+    assert sorted(repeated) == [False, True]          # one repeat in each kind of block
+    assert np.array_equal(again.t, clean.t)
+    for group in ("states", "outputs", "variables"):
+        ours, theirs = getattr(again, group), getattr(clean, group)
+        assert list(ours) == list(theirs)
+        assert all(np.array_equal(ours[key], theirs[key], equal_nan=True) for key in ours), group
