@@ -5,7 +5,9 @@ itself, or any object) with these names, all written by ``bondc.codegen``:
 
 - ``STATE_NAMES``, ``OUTPUT_NAMES``, ``VARIABLE_NAMES`` (every assigned
   variable in causal order), ``VARIABLE_LAWS`` (their laws as text, for
-  diagnostics), ``PARAMETERS`` (name -> SI default, in the order of ``p``),
+  diagnostics), optionally ``VARIABLE_ROWS`` (the result's row of each variable:
+  variables that ``_variables`` returns as one expression share a read-only row),
+  ``PARAMETERS`` (name -> SI default, in the order of ``p``),
   ``SWITCHES`` (one label per switching function), ``EVENT_SWITCHES`` (the
   indices of switches located as events; the others only change at known
   times), ``DEFAULTS`` (solver settings of the experiment);
@@ -428,6 +430,15 @@ class _Model:
         self.SWITCH_KINDS = optional("SWITCH_KINDS", tuple, ("sign",) * count)
         self.SWITCH_OWNERS = optional("SWITCH_OWNERS", tuple, ("",) * count)
         self.TIME_SWITCHES = optional("TIME_SWITCHES", lambda k: tuple(map(int, k)), ())
+        # variables that are one quantity share a row of the result (VARIABLE_ROWS[i]: variable
+        # i's row, rows numbered in order of first use); ``row_variables``: each row's first variable
+        rows = optional("VARIABLE_ROWS", lambda r: tuple(map(int, r)), None)
+        firsts: dict = {}
+        for i, row in enumerate(rows or ()):
+            firsts.setdefault(row, i)
+        if rows is None or len(rows) != len(self.VARIABLE_NAMES) or list(firsts) != list(range(len(firsts))):
+            rows, firsts = tuple(range(len(self.VARIABLE_NAMES))), dict(enumerate(range(len(self.VARIABLE_NAMES))))
+        self.VARIABLE_ROWS, self.row_variables = rows, tuple(firsts.values())
         self.JACOBIAN_PATTERN = optional("JACOBIAN_PATTERN", tuple, None)
         self.WHEN_LABELS = optional("WHEN_LABELS", tuple, ())
         self.WHEN_TARGETS = optional("WHEN_TARGETS", lambda w: tuple(map(tuple, w)), ())
@@ -2507,9 +2518,18 @@ class _Run:
                     if isinstance(mode, tuple) and mode[0] == "slide":
                         mode = ("slide", mode[1], np.asarray(mode[2])[:, kept])
                     kept_blocks.append((times[kept], mode))
-        # every column is written below, by the sliding blend or by its mode's group
+        # every column is written below, by the sliding blend or by its mode's group; variables that
+        # are one quantity (a junction's common effort or flow) are one row, evaluated once
         outputs = np.empty((n_out, t.size))
-        variables = np.empty((n_var, t.size))
+        picked = model.row_variables
+        n_rows = len(picked)
+        variables = np.empty((n_rows, t.size))
+        if n_rows == n_var:
+            variables_of = model.variables
+        else:
+            def variables_of(tt, xx, p, m, evaluate=model.variables):
+                values = evaluate(tt, xx, p, m)
+                return [values[i] for i in picked]
         groups = {}             # (mode id, relevant mask) -> column indices
         all_relevant = (True,) * self.switch_count
         start = 0
@@ -2530,7 +2550,7 @@ class _Run:
                     _, corner_ids, weights = mode
                     xx = x[:, columns]
                     for target, function, rows in ((outputs, model.outputs, n_out),
-                                                    (variables, model.variables, n_var)):
+                                                    (variables, variables_of, n_rows)):
                         blend = np.zeros((rows, times.size))
                         for corner_id, weight in zip(corner_ids, weights):
                             if np.any(weight != 0):
@@ -2555,7 +2575,10 @@ class _Run:
                         cols = slice(int(cols[0]), int(cols[-1]) + 1)
                     points, states = (tt, xx) if len(unique) == 1 else (tt[chosen], xx[:, chosen])
                     self.evaluate_columns(model.outputs, points, states, row, n_out, outputs, cols)
-                    self.evaluate_columns(model.variables, points, states, row, n_var, variables, cols)
+                    self.evaluate_columns(variables_of, points, states, row, n_rows, variables, cols)
+        # a row is shared by the variables that are one quantity: read-only, so that changing one
+        # in place cannot silently change the others
+        variables.flags.writeable = False
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
             message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
@@ -2566,7 +2589,7 @@ class _Run:
             t=t,
             states={name: x[i] for i, name in enumerate(model.STATE_NAMES)},
             outputs={name: outputs[i] for i, name in enumerate(model.OUTPUT_NAMES)},
-            variables={name: variables[i] for i, name in enumerate(model.VARIABLE_NAMES)},
+            variables={name: variables[row] for name, row in zip(model.VARIABLE_NAMES, model.VARIABLE_ROWS)},
             events=list(self.events),
             complete=complete,
             message=message,

@@ -548,3 +548,52 @@ def test_quick_printing_leaves_unevaluated_products_to_sympy():
         for printer in (BondcPrinter(NAMES), NativePrinter(NAMES), _LawPrinter()):
             assert printer.quick(expr) is None
             assert printer.doprint(expr)        # sympy prints it
+
+
+@pytest.mark.parametrize("name", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/diode_bridge.bg",
+                                  "models/mass_spring_damper.bg", "CHAIN"])
+def test_variables_that_share_a_row_of_the_result_are_equal_in_every_mode(name, tmp_path):
+    """``VARIABLE_ROWS`` groups the variables that ``_variables`` returns as one expression (a
+    junction's common effort or flow): the result keeps one row for them. Checked against the
+    generated function itself, at random states in random mode vectors (every branch of every
+    law), and in the result of a run: the shared rows are the same numbers, read-only."""
+    from benchmarks.chain import chain_source
+    from bondc.pipeline import derive_file
+    from bondc.simulate import compile_model
+
+    path = ROOT / name
+    if name == "CHAIN":
+        path = tmp_path / "chain.bg"
+        path.write_text(chain_source(10), encoding="utf-8")
+    derived = derive_file(path, cache=False)
+    namespace = compile_model(derived.state_space)
+    names, rows = namespace["VARIABLE_NAMES"], namespace["VARIABLE_ROWS"]
+    assert len(rows) == len(names) and sorted(set(rows)) == list(range(max(rows) + 1))
+    if name == "CHAIN":     # 12N + 1 variables, of which each junction's common ones are one row
+        assert (len(names), len(set(rows))) == (121, 60)
+    p = np.array(list(namespace["PARAMETERS"].values()), dtype=float)
+    if namespace.get("_derive_parameters") is not None:
+        p = namespace["_derive_parameters"](p)
+    rng = np.random.default_rng(3)
+    n, k = len(namespace["STATE_NAMES"]), len(namespace["SWITCHES"])
+    for _ in range(12):
+        t = rng.uniform(0.0, 2.0, 5)
+        x = rng.normal(size=(n, 5)) * rng.uniform(0.01, 10.0)
+        m = rng.choice([-1.0, 1.0], size=k) if k else np.zeros(0)
+        with np.errstate(all="ignore"):     # point by point (a model with a loop is not vectorized)
+            values = np.array([np.asarray(namespace["_variables"](t[j], x[:, j], p, m), dtype=float)
+                               for j in range(t.size)]).T
+        first = {}
+        for i, row in enumerate(rows):
+            j = first.setdefault(row, i)
+            assert np.array_equal(values[i], values[j], equal_nan=True), (names[i], names[j])
+    experiment = derived.experiment
+    result = namespace["simulate_model"](namespace["_MODEL"], t_end=min(experiment.t_end, 0.5), method="CVODE",
+                                         rtol=experiment.rtol, atol=experiment.atol, max_step=experiment.max_step)
+    for i, row in enumerate(rows):
+        j = rows.index(row)
+        assert np.shares_memory(result.variables[names[i]], result.variables[names[j]])
+    column = result.variables[names[0]]
+    assert not column.flags.writeable
+    with pytest.raises(ValueError):
+        column[0] = 1.0

@@ -68,7 +68,7 @@ RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
 ARGUMENTS = ("t", "x", "p", "m")
 #: Module-level names of the generated model code (besides the runtime's).
 MODULE_NAMES = (
-    "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "BOND_VARIABLES",
+    "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "VARIABLE_ROWS", "BOND_VARIABLES",
     "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "SWITCH_VERTICES",
     "SWITCH_KINDS", "SWITCH_OWNERS", "JACOBIAN_PATTERN", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
     "_when_conditions", "DEFAULTS",
@@ -771,10 +771,21 @@ class _Emitter:
             "def _outputs(t, x, p, m):", "Outputs with the modes m frozen.",
             statements, [expr for _, expr in plan.outputs],
             lambda texts: ["return (" + "".join(text + ", " for text in texts).rstrip() + ")"]))
+        returned = []
+
+        def variables_tail(texts):
+            returned.extend(texts)
+            return ["return (" + "".join(text + ", " for text in texts).rstrip() + ")"]
+
         parts.append(self.function(
             "def _variables(t, x, p, m):", "Every assigned variable (VARIABLE_NAMES) with the modes m frozen.",
-            statements, [symbol for _, symbol, _ in plan.variables],
-            lambda texts: ["return (" + "".join(text + ", " for text in texts).rstrip() + ")"]))
+            statements, [symbol for _, symbol, _ in plan.variables], variables_tail))
+        # variables that _variables returns as one expression (a junction's common effort or flow,
+        # an input and its source's effort) are one quantity: one row of the result, shared
+        first: dict = {}
+        parts.append("#: The result's row of each variable (VARIABLE_NAMES order): one row per distinct\n"
+                     "#: expression that _variables returns, in order of first use.\n"
+                     "VARIABLE_ROWS = " + _numbers([first.setdefault(text, len(first)) for text in returned]))
         parts.append(self.time_breaks())
         parts.append(self.when_functions())
         parts.append(_WRAPPERS)
@@ -1041,6 +1052,14 @@ def _text_literal(text: str) -> str:
     if not text:
         return "''"
     return "(\n" + "".join(f"    {line!r}\n" for line in text.splitlines(keepends=True)) + ")"
+
+
+def _numbers(values) -> str:
+    """A tuple of integers, 20 to a line."""
+    if not values:
+        return "()"
+    rows = [", ".join(map(str, values[i:i + 20])) for i in range(0, len(values), 20)]
+    return "(" + "".join(f"\n    {row}," for row in rows) + "\n)"
 
 
 def _tuple(values, multiline=False) -> str:
