@@ -114,6 +114,44 @@ def check_key(sources, model=None, sets=()) -> str:
     return digest.hexdigest()[:40]
 
 
+def value_spans(graph) -> dict:
+    """Source name -> the (start, end) offsets of every parameter value written as a plain number
+    (``param M = 31.7 [kg]``: the ``31.7``; a minus sign included)."""
+    from bondc import ast
+
+    spans: dict = {}
+    for parameter in getattr(graph, "parameters", {}).values():
+        expr = parameter.expr
+        number = expr.operand if isinstance(expr, ast.Unary) and expr.op == "-" else expr
+        span = getattr(expr, "span", None)
+        if isinstance(number, ast.Num) and span is not None and span.end > span.start:
+            spans.setdefault(span.file, set()).add((span.start, span.end, span.line))
+    return spans
+
+
+def check_key_of_structure(sources, graph, model=None, sets=()) -> tuple[str, frozenset]:
+    """(key, lines): like :func:`check_key`, with each parameter value written as a plain number
+    left out of the files' texts (:func:`value_spans`), and the lines ((file, line)) of those
+    numbers. An equations stage that no parameter value decided (``values_consulted`` False)
+    gives the same states and diagnostics for any values, so a check after an edit of values
+    only reuses it; its diagnostics must not lie on those lines (their columns may move)."""
+    spans = value_spans(graph)
+    digest = hashlib.sha256(("values\0" + code_hash()).encode())
+    digest.update(json.dumps([model, [item if isinstance(item, str) else repr(item) for item in sets or ()]]).encode())
+    lines = set()
+    for name in sorted(sources):
+        text = sources[name].text
+        parts, last = [], 0
+        for start, end, line in sorted(spans.get(name, ())):
+            parts += [text[last:start], "\0"]
+            last = end
+            lines.add((name, line))
+        parts.append(text[last:])
+        digest.update(hashlib.sha256(name.encode("utf-8", "surrogatepass")).digest())
+        digest.update(hashlib.sha256("".join(parts).encode("utf-8", "surrogatepass")).digest())
+    return digest.hexdigest()[:40], frozenset(lines)
+
+
 def load_check(key: str):
     """What :func:`store_check` kept under ``key``, or None (absent, unreadable, cache off)."""
     if not enabled():

@@ -109,24 +109,37 @@ class _CheckedEquations:
 def _equations_checked(args, model, graph, causal) -> tuple:
     """(the equations' states as :class:`_CheckedEquations`, or None where the stage failed; its
     diagnostics). Taken from the check cache when bondc and every file the model read are
-    unchanged (``bondc.cache.check_key``): then sympy is not even imported."""
+    unchanged (``bondc.cache.check_key``), or differ only in parameter values that the equations
+    stage did not use (``bondc.cache.check_key_of_structure``): then sympy is not even imported."""
     from bondc import cache
 
     use_cache = cache.enabled() and not getattr(args, "no_cache", False)
     key = cache.check_key(graph.sources, model, args.set) if use_cache else None
     known = cache.load_check(key) if key else None
+    # after an edit of parameter values only: the equations stage of the same model with other
+    # values, when no value decided anything there
+    structural, value_lines = cache.check_key_of_structure(graph.sources, graph, model, args.set) \
+        if key and known is None else (None, frozenset())
+    if structural:
+        known = cache.load_check(structural)
+        if known is not None and any((d.span.file, d.span.line) in value_lines for d in known[1]):
+            known = None
     if known is None:
         from bondc.equations import derive
 
+        consulted = True
         try:
             state_space = derive(causal)
             known = (tuple(s.name for s in state_space.states), tuple(state_space.diagnostics))
+            consulted = state_space.values_consulted
         except BondcError as error:
             if error.stage in ("usage",):
                 raise
             known = (None, tuple(error.diagnostics))
         if key:
             cache.store_check(key, known)
+        if structural and not consulted and not any((d.span.file, d.span.line) in value_lines for d in known[1]):
+            cache.store_check(structural, known)
     states, diagnostics = known
     return (None if states is None else _CheckedEquations(states)), list(diagnostics)
 

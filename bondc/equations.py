@@ -93,6 +93,7 @@ class _Deriver:
         self.symbols: dict[str, sympy.Symbol] = {"t": self.t}
         self.parameters = {name: self._new_symbol(name) for name in graph.parameters}
         self.param_values = {self.parameters[n]: p.value for n, p in graph.parameters.items()}
+        self.values_consulted = False
         self.input_symbols = {name: self._new_symbol(name) for name in graph.inputs}
         self.output_symbols = {name: self._new_symbol(name) for name in graph.outputs}
         self.state_symbols = {s.qualified: self._new_symbol(s.qualified) for s in graph.states}
@@ -220,6 +221,8 @@ class _Deriver:
             return None
         others = sorted(expr.free_symbols - {variable}, key=lambda s: s.name)
         values = {s: self.param_values.get(s, 0.7) for s in others}
+        if any(s in self.param_values for s in others):
+            self.values_consulted = True        # the parameters' values chose the inverse
         accepted = [c for c in candidates if self._reproduces(expr, variable, c, values)]
         return accepted[0] if len(accepted) == 1 else None
 
@@ -631,7 +634,8 @@ class _Deriver:
             inputs=inputs, time=self.t, assignments=tuple(self.assignments), derivatives=derivatives,
             outputs=outputs, algebraic_blocks=tuple(self.blocks), discontinuities=tuple(found),
             energy=self._energy(), eliminated=eliminated, symbols=dict(self.symbols),
-            bond_symbols=dict(self.bond_symbols), diagnostics=tuple(self.diagnostics), events=self._events())
+            bond_symbols=dict(self.bond_symbols), diagnostics=tuple(self.diagnostics), events=self._events(),
+            values_consulted=self.values_consulted)
 
     def _initials_at_start(self, states: list, input_values: Mapping) -> list:
         """Initial values in parameters only: a discrete variable's may use inputs and other states'

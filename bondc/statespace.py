@@ -125,6 +125,9 @@ class StateSpace:
     # when clauses: (label, condition, ((state name, new value), ...)); discrete variables are
     # states whose derivative is 0, set only here
     events: tuple = ()
+    # whether a parameter's value decided anything here (which solution of a law to keep): when
+    # not, the equations are those of any other values of the parameters
+    values_consulted: bool = False
 
     # -- lookups
 

@@ -402,3 +402,66 @@ def test_the_generated_module_is_kept_compiled_and_checked_against_its_text(tmp_
         np.testing.assert_array_equal(run.t, result.t)
         np.testing.assert_array_equal(run.states["spring.q"], result.states["spring.q"])
     assert kept.read_bytes().startswith(__import__("importlib.util").util.MAGIC_NUMBER)
+
+
+_GEARED = """model Geared
+  param J = 0.1 [kg*m^2] "motor inertia"
+  Se torque : e = 1
+  I  motor  : f = p/J
+  TF gear   : r = 3
+  I  load   : f = p/2, p(0) = 0.5
+  torque -> motor_j
+  1 motor_j, load_j
+  motor_j -> motor
+  motor_j -> gear -> load_j
+  load_j -> load
+end
+"""
+
+
+def _check_counting_derive(path, monkeypatch, capsys, *options):
+    """(exit code, stdout, stderr, how many times the equations stage ran) of ``bondc check``."""
+    from bondc import cli, equations
+
+    calls = []
+    real = equations.derive
+    monkeypatch.setattr(equations, "derive", lambda causal: calls.append(1) or real(causal))
+    code = cli.main(["check", str(path), *options])
+    out, err = capsys.readouterr()
+    return code, out, err, len(calls)
+
+
+def test_a_check_after_an_edit_of_parameter_values_only_reuses_the_equations_stage(tmp_path, isolated,
+                                                                                    monkeypatch, capsys):
+    """The equations stage is kept per content of the files with each parameter value written as
+    a number left out, when no value decided anything there: a check after an edit of values
+    only skips it (no sympy) and reports what a fresh check of the edited file reports (here
+    W704, on a line the edit did not touch); any other edit runs it."""
+    path = tmp_path / "geared.bg"
+    path.write_text(_GEARED, encoding="utf-8")
+    code, out, err, derived = _check_counting_derive(path, monkeypatch, capsys)
+    assert (code, derived) == (0, 1) and "W704" in err
+    path.write_text(_GEARED.replace("J = 0.1 [", "J = 0.25 ["), encoding="utf-8")
+    edited = _check_counting_derive(path, monkeypatch, capsys)
+    fresh = _check_counting_derive(path, monkeypatch, capsys, "--no-cache")
+    assert edited[3] == 0 and fresh[3] == 1
+    assert edited[:3] == fresh[:3]
+    assert "geared.bg:6:" in edited[2]          # the warning's place in the edited file
+    # a change of anything but a value (here a law) runs the stage again
+    path.write_text(_GEARED.replace("J = 0.1 [", "J = 0.25 [").replace("f = p/2", "f = p/3"), encoding="utf-8")
+    assert _check_counting_derive(path, monkeypatch, capsys)[3] == 1
+
+
+def test_a_parameter_value_that_decides_a_laws_inverse_is_checked_again_after_each_edit(tmp_path, isolated,
+                                                                                      monkeypatch, capsys):
+    """``e = f^3 + a*f`` solved for f: for a > 0 the law is monotonic and its inverse is found; for
+    a < 0 it is not invertible (E605). The stage used a's value, so an edit of a alone is never
+    answered from the check cache."""
+    path = tmp_path / "inverse.bg"
+    source = "model T\n  param a = {}\n  Se s : e = 1\n  R r : e = f^3 + a*f\n  s -> r\nend\n"
+    results = []
+    for a in ("1", "-1", "2.5", "-0.5"):
+        path.write_text(source.format(a), encoding="utf-8")
+        code, _, err, derived = _check_counting_derive(path, monkeypatch, capsys)
+        results.append((code, "E605" in err, derived))
+    assert results == [(0, False, 1), (1, True, 1), (0, False, 1), (1, True, 1)]
