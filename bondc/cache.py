@@ -135,10 +135,20 @@ def check_key_of_structure(sources, graph, model=None, sets=()) -> tuple[str, fr
     numbers. An equations stage that no parameter value decided (``values_consulted`` False)
     gives the same states and diagnostics for any values, so a check after an edit of values
     only reuses it; its diagnostics must not lie on those lines (their columns may move)."""
-    spans = value_spans(graph)
+    texts, lines = masked_texts(sources, graph)
     digest = hashlib.sha256(("values\0" + code_hash()).encode())
     digest.update(json.dumps([model, [item if isinstance(item, str) else repr(item) for item in sets or ()]]).encode())
-    lines = set()
+    for name, text in texts:
+        digest.update(hashlib.sha256(name.encode("utf-8", "surrogatepass")).digest())
+        digest.update(hashlib.sha256(text.encode("utf-8", "surrogatepass")).digest())
+    return digest.hexdigest()[:40], lines
+
+
+def masked_texts(sources, graph) -> tuple[tuple, frozenset]:
+    """(((source name, text with each parameter value written as a number replaced by a NUL), ...)
+    in name order, the (source name, line) of each such number)."""
+    spans = value_spans(graph)
+    texts, lines = [], set()
     for name in sorted(sources):
         text = sources[name].text
         parts, last = [], 0
@@ -147,9 +157,8 @@ def check_key_of_structure(sources, graph, model=None, sets=()) -> tuple[str, fr
             last = end
             lines.add((name, line))
         parts.append(text[last:])
-        digest.update(hashlib.sha256(name.encode("utf-8", "surrogatepass")).digest())
-        digest.update(hashlib.sha256("".join(parts).encode("utf-8", "surrogatepass")).digest())
-    return digest.hexdigest()[:40], frozenset(lines)
+        texts.append((name, "".join(parts)))
+    return tuple(texts), frozenset(lines)
 
 
 def load_check(key: str):

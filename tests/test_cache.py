@@ -3,6 +3,7 @@ to the model, its imports, the options or bondc itself is a miss; a broken cache
 
 from __future__ import annotations
 
+import json
 import os
 import stat
 import sys
@@ -465,3 +466,24 @@ def test_a_parameter_value_that_decides_a_laws_inverse_is_checked_again_after_ea
         code, _, err, derived = _check_counting_derive(path, monkeypatch, capsys)
         results.append((code, "E605" in err, derived))
     assert results == [(0, False, 1), (1, True, 1), (0, False, 1), (1, True, 1)]
+
+
+def test_the_energy_account_of_a_run_with_set_values_uses_the_base_module(tmp_path, isolated, monkeypatch):
+    """``--set`` values are bound late to the base model's module; its energy account evaluates
+    that module with the run's values too (no second code generation) and gives the account of
+    the model with those values written in the file."""
+    import bondc.codegen
+    from bondc.analysis.energy import energy_account
+
+    bound = derive_file(_write(tmp_path / "drive.bg"), sets=["b=20"])
+    assert getattr(bound.state_space, "bound_base", None) is not None
+    run = simulate(bound.state_space, bound.experiment)
+    emitted = []
+    real = bondc.codegen.emit
+    monkeypatch.setattr(bondc.codegen, "emit", lambda *args, **kwargs: emitted.append(1) or real(*args, **kwargs))
+    account = energy_account(bound.state_space, run)
+    assert emitted == []
+    written = derive_file(_write(tmp_path / "written.bg", b=20), cache=False)
+    expected = energy_account(written.state_space, simulate(written.state_space, written.experiment))
+    ours, theirs = account.to_json(), expected.to_json()
+    assert json.dumps(ours["cycles"], sort_keys=True) == json.dumps(theirs["cycles"], sort_keys=True)

@@ -998,7 +998,8 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     steps = _resimulate(ss, result) if resimulated else result
 
     units = getattr(graph, "si_units", {}) or {}
-    namespace = compile_model(ss)
+    # values bound late (--set, an edit of values only): the base's module, given the run's values
+    namespace = compile_model(getattr(ss, "bound_base", None) or ss)
     model = _Model(namespace, steps.parameters)
     boundaries = sorted({edge for start, end, _ in windows for edge in (start, end)})
     trajectory = _Trajectory(model, steps, boundaries)
