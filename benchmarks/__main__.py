@@ -11,8 +11,9 @@ Three tables (see benchmarks/README.md for the targets and the last recorded run
    bondc / hand of the best of several runs (model compilation excluded), the
    right-hand side and Jacobian counts, and the largest difference of the
    trajectories (relative to each state's range).
-3. **Startup**: whole-process wall time of ``bondc --help``, ``bondc check``,
-   a cold ``bondc simulate`` (empty cache) and a cached one, on the flagship.
+3. **Startup**: whole-process wall time of ``bondc --help``, ``bondc check``
+   (``--no-cache``, unchanged, after an edit of a parameter value), a cold
+   ``bondc simulate`` (empty cache) and a cached one, on the flagship.
 4. **Analysis of a large model**: ``bondc equations`` and ``bondc linearize`` of
    the 1000-section chain (100 with ``--quick``), cold and cached, with peak memory.
 
