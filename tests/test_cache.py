@@ -405,19 +405,7 @@ def test_the_generated_module_is_kept_compiled_and_checked_against_its_text(tmp_
     assert kept.read_bytes().startswith(__import__("importlib.util").util.MAGIC_NUMBER)
 
 
-_GEARED = """model Geared
-  param J = 0.1 [kg*m^2] "motor inertia"
-  Se torque : e = 1
-  I  motor  : f = p/J
-  TF gear   : r = 3
-  I  load   : f = p/2, p(0) = 0.5
-  torque -> motor_j
-  1 motor_j, load_j
-  motor_j -> motor
-  motor_j -> gear -> load_j
-  load_j -> load
-end
-"""
+_GEARED = (Path(__file__).parent / "fixtures" / "sim" / "geared_inertia.bg").read_text(encoding="utf-8")
 
 
 def _check_counting_derive(path, monkeypatch, capsys, *options):
