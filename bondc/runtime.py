@@ -199,6 +199,7 @@ def quad(function, a, b, epsabs, epsrel, limit):
             return float(_integrate.quad(function, a, b, epsabs=epsabs, epsrel=epsrel, limit=limit)[0])
     return float(kernel._qagse(function, a, b, (), 0, epsabs, epsrel, limit)[0])
 
+
 RUNTIME_VERSION = 1
 
 # ------------------------------------------------------------------ signals
