@@ -106,11 +106,16 @@ def _atomic_write(path: Path, data: bytes) -> None:
 def check_key(sources, model=None, sets=()) -> str:
     """The key of ``bondc check``'s equations-stage result: bondc's code, the name and text of
     every file the model read (imports too), the ``--model`` and ``--set`` values."""
-    digest = hashlib.sha256(code_hash().encode())
+    return _files_key(code_hash(), [(name, sources[name].text) for name in sorted(sources)], model, sets)
+
+
+def _files_key(prefix: str, texts, model, sets) -> str:
+    """The hash of ``prefix``, the ``--model`` and ``--set`` values and each (name, text)."""
+    digest = hashlib.sha256(prefix.encode())
     digest.update(json.dumps([model, [item if isinstance(item, str) else repr(item) for item in sets or ()]]).encode())
-    for name in sorted(sources):
+    for name, text in texts:
         digest.update(hashlib.sha256(name.encode("utf-8", "surrogatepass")).digest())
-        digest.update(hashlib.sha256(sources[name].text.encode("utf-8", "surrogatepass")).digest())
+        digest.update(hashlib.sha256(text.encode("utf-8", "surrogatepass")).digest())
     return digest.hexdigest()[:40]
 
 
@@ -136,12 +141,7 @@ def check_key_of_structure(sources, graph, model=None, sets=()) -> tuple[str, fr
     gives the same states and diagnostics for any values, so a check after an edit of values
     only reuses it; its diagnostics must not lie on those lines (their columns may move)."""
     texts, lines = masked_texts(sources, graph)
-    digest = hashlib.sha256(("values\0" + code_hash()).encode())
-    digest.update(json.dumps([model, [item if isinstance(item, str) else repr(item) for item in sets or ()]]).encode())
-    for name, text in texts:
-        digest.update(hashlib.sha256(name.encode("utf-8", "surrogatepass")).digest())
-        digest.update(hashlib.sha256(text.encode("utf-8", "surrogatepass")).digest())
-    return digest.hexdigest()[:40], lines
+    return _files_key("values\0" + code_hash(), texts, model, sets), lines
 
 
 def masked_texts(sources, graph) -> tuple[tuple, frozenset]:

@@ -120,9 +120,13 @@ def _equations_checked(args, model, graph, causal) -> tuple:
     # values, when no value decided anything there
     structural, value_lines = cache.check_key_of_structure(graph.sources, graph, model, args.set) \
         if key and known is None else (None, frozenset())
+
+    def on_edited_lines(diagnostics) -> bool:     # their columns may have moved
+        return any((d.span.file, d.span.line) in value_lines for d in diagnostics)
+
     if structural:
         known = cache.load_check(structural)
-        if known is not None and any((d.span.file, d.span.line) in value_lines for d in known[1]):
+        if known is not None and on_edited_lines(known[1]):
             known = None
     if known is None:
         from bondc.equations import derive
@@ -138,7 +142,7 @@ def _equations_checked(args, model, graph, causal) -> tuple:
             known = (None, tuple(error.diagnostics))
         if key:
             cache.store_check(key, known)
-        if structural and not consulted and not any((d.span.file, d.span.line) in value_lines for d in known[1]):
+        if structural and not consulted and not on_edited_lines(known[1]):
             cache.store_check(structural, known)
     states, diagnostics = known
     return (None if states is None else _CheckedEquations(states)), list(diagnostics)
