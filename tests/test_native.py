@@ -553,3 +553,26 @@ def test_a_repeated_point_is_dropped_before_the_results_are_evaluated(name, monk
         ours, theirs = getattr(again, group), getattr(clean, group)
         assert list(ours) == list(theirs)
         assert all(np.array_equal(ours[key], theirs[key], equal_nan=True) for key in ours), group
+
+
+@needs_cc
+def test_a_loaded_models_library_is_found_again_by_its_text_without_building(tmp_path, monkeypatch):
+    """Every run of a loaded model asks for its library: the same text object gives the same
+    library without joining, hashing or building anything; once the process forgets the library
+    (as a new process would), it is loaded again."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    source = (PRELUDE, "".join(
+        f"void {name}(double t, const double *x, const double *p, const double *m, double *out) {{ out[0] = 3*t; }}\n"
+        for name in ("bondc_rhs", "bondc_jac", "bondc_switches")))
+    first = runtime.load_native(source)
+    assert first[0] is not None
+    real = runtime._build_native
+    monkeypatch.setattr(runtime, "_build_native", lambda *args: pytest.fail("built or hashed again"))
+    assert runtime.load_native(source)[1] is first[1]
+    monkeypatch.setattr(runtime, "_build_native", real)
+    runtime._NATIVE_LIBRARIES.clear()
+    again = runtime.load_native(source)
+    assert again[1] is not first[1]
+    out = np.zeros(1)
+    again[1].bondc_rhs(2.0, again[0].NULL, again[0].NULL, again[0].NULL, again[0].from_buffer("double[]", out))
+    assert out[0] == 6.0
