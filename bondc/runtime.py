@@ -658,6 +658,13 @@ def sundials_available() -> bool:
         return False
 
 
+class _NotFinite(Exception):
+    """CVODE asked for the derivative at a time that is not finite: its step size overflowed (a
+    derivative near the largest float makes the error estimate inf). SUNDIALS would go on with
+    nan forever; raised from the right-hand side, it ends the step. (A state that is not finite
+    is CVODE's to handle: a trial that failed, retried with a shorter step.)"""
+
+
 class CvodeSolver:
     """SUNDIALS CVODE (through scikit-sundae) behind the stepping interface of scipy's ``OdeSolver``.
 
@@ -747,10 +754,14 @@ class CvodeSolver:
 
     def _rhs(self, t, y, yp):
         self.nfev += 1
+        if not math.isfinite(t):
+            raise _NotFinite(t)
         yp[:] = self.fun(t, y)
 
     def _jacobian(self, t, y, yp, JJ):
         self.njev += 1
+        if not math.isfinite(t):
+            raise _NotFinite(t)
         matrix = np.asarray(self.jac_function(t, y), dtype=float)
         if not np.all(np.isfinite(matrix)):
             matrix = self.difference_jacobian(t, np.array(y), np.array(yp))
@@ -780,7 +791,12 @@ class CvodeSolver:
         if self.status != "running":
             raise RuntimeError("the solver is not running")
         for _ in range(2):      # after an interpolation SUNDIALS first returns the step it had already taken
-            result = self._sundials.step(self.t_bound, "onestep", self.t_bound)
+            try:
+                result = self._sundials.step(self.t_bound, "onestep", self.t_bound)
+            except _NotFinite:
+                self.status = "failed"
+                return (f"{self.label}: the step size became nan (a derivative near the largest float "
+                        f"overflows the error estimate)")
             if not result.success:
                 self.status = "failed"
                 return f"{self.label}: {result.message}"
@@ -2767,6 +2783,9 @@ static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
 {
     bondc_driver *d = (bondc_driver *)data;
     double *out = N_VGetArrayPointer(ydot);
+    /* a time that is not finite: CVODE's step size overflowed (a derivative near the largest
+       float); SUNDIALS would go on with nan forever */
+    if (!isfinite(t)) { d->bad = 1; return -1; }
     if (d->slide >= 0) {
         double w = clip01(slide_alpha(d, t, N_VGetArrayPointer(y)));
         for (int i = 0; i < d->n; i++) out[i] = (1 - w) * d->fm[i] + w * d->fp[i];
@@ -2782,6 +2801,7 @@ static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, voi
 {
     bondc_driver *d = (bondc_driver *)data;
     (void)fy; (void)t1; (void)t2; (void)t3;
+    if (!isfinite(t)) { d->bad = 2; return -1; }
     if (d->slide >= 0) {        /* the corners' Jacobians, weighted as their right-hand sides */
         double w = clip01(slide_alpha(d, t, N_VGetArrayPointer(y)));
         if (w != w) { d->bad = 2; return -1; }

@@ -550,6 +550,7 @@ def test_quick_printing_leaves_unevaluated_products_to_sympy():
             assert printer.doprint(expr)        # sympy prints it
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/diode_bridge.bg",
                                   "models/mass_spring_damper.bg", "CHAIN"])
 def test_variables_that_share_a_row_of_the_result_are_equal_in_every_mode(name, tmp_path):

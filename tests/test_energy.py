@@ -450,6 +450,7 @@ def _not_a_knot_reference(x, y, at):
     return out.reshape(at.shape + (y.shape[1],))
 
 
+@pytest.mark.slow
 def test_the_sliding_spans_spline_is_scipys_not_a_knot_cubic_spline():
     """The energy account interpolates a sliding span's recorded variables with a not-a-knot
     cubic spline computed with numpy alone (scipy.interpolate costs 0.4 s to import). It is

@@ -415,3 +415,30 @@ def test_a_diverging_run_stops_naming_the_state_and_keeps_its_results(tmp_path):
     late = [i for i in peaks if t[i] > t[-1] / 2]
     slope = np.polyfit(t[late], np.log(np.abs(p[late])), 1)[0]
     assert slope == pytest.approx(12 / (2 * 2.0), rel=0.02)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("native", ["1", "0"])
+def test_a_derivative_near_the_largest_float_stops_the_run_instead_of_hanging(tmp_path, native):
+    """A relief valve whose closed branch gives a flow of 1e308: the chamber's derivative at the
+    start is -1e308, finite, but CVODE's error estimate overflows and its step size becomes nan,
+    after which SUNDIALS asks for derivatives at t = nan forever (the run hung). It now stops at
+    once with E811, with the C driver and with the numpy code."""
+    import os
+    import subprocess
+    import sys
+
+    path = tmp_path / "relief.bg"
+    path.write_text("model Relief\n  param beta = 1.4e9 [Pa]\n  param V = 1 [L]\n  param Q0 = 0.2 [L/s]\n"
+                    "  param Rl = 5e10 [Pa*s/m^3]\n  param pr = 0 [Pa]\n  param kr = 1e-9 [m^3/(s*Pa)]\n"
+                    "  Sf pump : f = Q0\n  C chamber : e = q*beta/V\n  R leak : f = e/Rl\n"
+                    "  R relief : f = if e > pr then kr*(e - pr) else 1e308\n  0 n\n  pump -> n\n"
+                    "  n -> chamber\n  n -> leak\n  n -> relief\n  experiment run\n    t_end = 10 [s]\n  end\nend\n",
+                    encoding="utf-8")
+    environment = {**os.environ, "BONDC_CACHE": "0", "BONDC_NATIVE": native}
+    done = subprocess.run([sys.executable, "-m", "bondc", "simulate", str(path), "-o", str(tmp_path / "out.csv")],
+                          capture_output=True, text=True, env=environment, timeout=120)
+    assert done.returncode == 1, done.stderr
+    assert "error[E811]" in done.stderr and "failed at t=0" in done.stderr and "step size became nan" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert (tmp_path / "out.csv").read_text(encoding="utf-8").splitlines()[1] == "0.0,0.0"     # the start, kept
