@@ -488,3 +488,23 @@ def test_the_sliding_spans_spline_is_scipys_not_a_knot_cubic_spline():
     cubic = lambda t: 2.0 * t ** 3 - t ** 2 + 0.5 * t - 4.0      # noqa: E731
     at = np.linspace(-0.5, 4.0, 37)
     assert np.allclose(_not_a_knot_spline(x, cubic(x)[:, None], at)[:, 0], cubic(at), rtol=1e-12, atol=1e-12)
+
+
+def test_sliding_spans_run_from_each_sliding_event_to_the_next_later_event():
+    """Each "sliding on ..." event opens a span that ends at the first event strictly later (or
+    at the end of the run); found by bisection, as the direct definition gives, with ties,
+    unsorted events and "... ends" labels."""
+    from bondc.analysis.energy import _sliding_spans
+
+    rng = np.random.default_rng(11)
+    labels = ["sliding on sign(v)", "sliding on sign(v) ends", "sign(v) -> +1", "step(t, 1)"]
+    for _ in range(200):
+        times = np.round(rng.uniform(0.0, 5.0, int(rng.integers(0, 30))), 1)     # ties on purpose
+        events = [(float(time), labels[int(rng.integers(0, 4))]) for time in times]
+        expected = []
+        ordered = sorted(events, key=lambda item: item[0])
+        for i, (time, label) in enumerate(ordered):
+            if label.startswith("sliding on") and not label.endswith(" ends"):
+                later = [other for other, _ in ordered[i + 1:] if other > time]
+                expected.append((time, later[0] if later else 6.0))
+        assert _sliding_spans(events, 6.0) == expected

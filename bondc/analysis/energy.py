@@ -76,6 +76,7 @@ True
 
 from __future__ import annotations
 
+import bisect
 import functools
 import math
 from dataclasses import dataclass, field
@@ -544,10 +545,11 @@ def _sliding_spans(events, t_end) -> list[tuple[float, float]]:
     """Spans of Filippov sliding modes: from a "sliding on ..." event to the next event (or the end)."""
     spans = []
     ordered = sorted(events, key=lambda item: item[0])
+    times = [float(time) for time, _ in ordered]
     for i, (time, label) in enumerate(ordered):
         if label.startswith("sliding on") and not label.endswith(" ends"):
-            later = [other for other, _ in ordered[i + 1:] if other > time]
-            spans.append((float(time), float(later[0]) if later else float(t_end)))
+            later = bisect.bisect_right(times, time, i + 1)      # the first later event after it
+            spans.append((float(time), times[later] if later < len(times) else float(t_end)))
     return spans
 
 
@@ -634,8 +636,12 @@ class _Trajectory:
         fa = model.rhs(ta, xa, modes, groups)
         fb = model.rhs(tb, xb, modes, groups)
         sliding = np.zeros(ta.size, dtype=bool)
+        ordered = bool(np.all(np.diff(mid) > 0))
         for start, end in _sliding_spans(result.events, t[-1]):
-            sliding |= (mid > start) & (mid < end)
+            if ordered:         # the steps inside the span, by bisection
+                sliding[np.searchsorted(mid, start, "right"):np.searchsorted(mid, end, "left")] = True
+            else:
+                sliding |= (mid > start) & (mid < end)
         self.ta, self.tb, self.xa, self.xb, self.fa, self.fb = ta, tb, xa, xb, fa, fb
         self.modes, self.sliding = modes, sliding
         self.scale = np.max(np.abs(x), axis=1) + 1e-300 if x.size else np.ones(x.shape[0])
@@ -701,9 +707,18 @@ class _Trajectory:
             mid = 0.5 * (self.ta + self.tb)
             names = self.model.variable_names
             recorded = np.array([np.asarray(self.result.variables[name], dtype=float) for name in names])
+            # the steps and points of a span, found by bisection (both increase): not a pass over
+            # all of them per span (a run with thousands of sliding spans)
+            ordered = bool(np.all(np.diff(mid) > 0) and np.all(np.diff(recorded_t) > 0))
             for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
-                rows = np.flatnonzero(self.sliding & (mid > start) & (mid < end))
-                points = np.flatnonzero((recorded_t >= start) & (recorded_t <= end))
+                if ordered:
+                    lo, hi = np.searchsorted(mid, start, "right"), np.searchsorted(mid, end, "left")
+                    rows = lo + np.flatnonzero(self.sliding[lo:hi])
+                    points = np.arange(np.searchsorted(recorded_t, start, "left"),
+                                       np.searchsorted(recorded_t, end, "right"))
+                else:
+                    rows = np.flatnonzero(self.sliding & (mid > start) & (mid < end))
+                    points = np.flatnonzero((recorded_t >= start) & (recorded_t <= end))
                 if rows.size == 0:
                     continue
                 # one spline through every variable that is finite there (column by column, as
