@@ -541,6 +541,16 @@ def _not_a_knot_spline(x, y, at):
     return values.reshape(at.shape + (y.shape[1],))
 
 
+def _inside(values, increasing, start, end, closed=False):
+    """Indices of ``values`` in (start, end) (``closed``: [start, end]), by bisection where the
+    values increase (a run with thousands of sliding spans: not a pass over all of them per span)."""
+    if increasing:
+        return np.arange(np.searchsorted(values, start, "left" if closed else "right"),
+                         np.searchsorted(values, end, "right" if closed else "left"))
+    inside = (values >= start) & (values <= end) if closed else (values > start) & (values < end)
+    return np.flatnonzero(inside)
+
+
 def _sliding_spans(events, t_end) -> list[tuple[float, float]]:
     """Spans of Filippov sliding modes: from a "sliding on ..." event to the next event (or the end)."""
     spans = []
@@ -636,12 +646,9 @@ class _Trajectory:
         fa = model.rhs(ta, xa, modes, groups)
         fb = model.rhs(tb, xb, modes, groups)
         sliding = np.zeros(ta.size, dtype=bool)
-        ordered = bool(np.all(np.diff(mid) > 0))
+        increasing = bool(np.all(np.diff(mid) > 0))
         for start, end in _sliding_spans(result.events, t[-1]):
-            if ordered:         # the steps inside the span, by bisection
-                sliding[np.searchsorted(mid, start, "right"):np.searchsorted(mid, end, "left")] = True
-            else:
-                sliding |= (mid > start) & (mid < end)
+            sliding[_inside(mid, increasing, start, end)] = True
         self.ta, self.tb, self.xa, self.xb, self.fa, self.fb = ta, tb, xa, xb, fa, fb
         self.modes, self.sliding = modes, sliding
         self.scale = np.max(np.abs(x), axis=1) + 1e-300 if x.size else np.ones(x.shape[0])
@@ -707,18 +714,11 @@ class _Trajectory:
             mid = 0.5 * (self.ta + self.tb)
             names = self.model.variable_names
             recorded = np.array([np.asarray(self.result.variables[name], dtype=float) for name in names])
-            # the steps and points of a span, found by bisection (both increase): not a pass over
-            # all of them per span (a run with thousands of sliding spans)
-            ordered = bool(np.all(np.diff(mid) > 0) and np.all(np.diff(recorded_t) > 0))
+            increasing = (bool(np.all(np.diff(mid) > 0)), bool(np.all(np.diff(recorded_t) > 0)))
             for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
-                if ordered:
-                    lo, hi = np.searchsorted(mid, start, "right"), np.searchsorted(mid, end, "left")
-                    rows = lo + np.flatnonzero(self.sliding[lo:hi])
-                    points = np.arange(np.searchsorted(recorded_t, start, "left"),
-                                       np.searchsorted(recorded_t, end, "right"))
-                else:
-                    rows = np.flatnonzero(self.sliding & (mid > start) & (mid < end))
-                    points = np.flatnonzero((recorded_t >= start) & (recorded_t <= end))
+                rows = _inside(mid, increasing[0], start, end)
+                rows = rows[self.sliding[rows]]
+                points = _inside(recorded_t, increasing[1], start, end, closed=True)
                 if rows.size == 0:
                     continue
                 # one spline through every variable that is finite there (column by column, as
