@@ -108,6 +108,7 @@ import math
 import os
 import sys  # noqa: F401  (the generated module's main writes to sys.stdout)
 import time as _time_module
+from collections.abc import Mapping as _Mapping
 
 import numpy as np
 
@@ -555,8 +556,86 @@ def evaluate(model, what, t, x, p=None):
 # ------------------------------------------------------------------ result
 
 
+class _Deferred:
+    """A matrix of ``shape`` whose columns the ``tasks`` fill (each called with the matrix), on
+    the first call only; read-only afterwards. The tasks hold the model, the parameters and the
+    points they need, never the run."""
+
+    __slots__ = ("shape", "tasks", "matrix")
+
+    def __init__(self, shape, tasks):
+        self.shape, self.tasks, self.matrix = shape, list(tasks), None
+
+    def __call__(self):
+        if self.matrix is None:
+            matrix = np.empty(self.shape)
+            with np.errstate(all="ignore"):
+                for task in self.tasks:
+                    task(matrix)
+            # a row is shared by the variables that are one quantity: read-only, so that changing
+            # one in place cannot silently change the others
+            matrix.flags.writeable = False
+            self.matrix, self.tasks = matrix, None
+        return self.matrix
+
+
+class LazyRows(_Mapping):
+    """``name -> array``: the rows of a matrix that is evaluated when a value is first read
+    (``rows``: name -> row index; names sharing a row share one read-only array).
+
+    A run's variables are this: the integration stores the states, and every bond variable at
+    every point is evaluated only by a caller that reads one (``bondc simulate`` reads them all,
+    for the CSV, the energy account and the check that each is finite). Names, their number
+    and ``in`` need no evaluation; a copy (``dict(...)``) or a pickle holds plain arrays.
+
+    >>> lazy = LazyRows({"a": 0, "b": 1, "c": 0}, _Deferred((2, 3), [lambda m: m.__setitem__(
+    ...     slice(None), [[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])]))
+    >>> list(lazy), "b" in lazy, lazy.evaluated
+    (['a', 'b', 'c'], True, False)
+    >>> lazy["b"].tolist(), lazy["a"] is lazy["c"], lazy.evaluated
+    ([4.0, 5.0, 6.0], True, True)
+    """
+
+    __slots__ = ("_rows", "_deferred", "_views")
+
+    def __init__(self, rows, deferred):
+        self._rows, self._deferred, self._views = dict(rows), deferred, None
+
+    @property
+    def evaluated(self) -> bool:
+        return self._views is not None
+
+    def _values(self) -> dict:
+        if self._views is None:
+            matrix = self._deferred()
+            by_row = {}
+            self._views = {name: by_row.setdefault(row, matrix[row]) for name, row in self._rows.items()}
+            self._deferred = None
+        return self._views
+
+    def __getitem__(self, name):
+        return self._values()[name]
+
+    def __iter__(self):
+        return iter(self._rows)
+
+    def __len__(self):
+        return len(self._rows)
+
+    def __contains__(self, name):
+        return name in self._rows
+
+    def __reduce__(self):
+        return dict, (dict(self._values()),)
+
+    def __repr__(self):
+        shown = ", ".join(list(self._rows)[:4]) + (", ..." if len(self._rows) > 4 else "")
+        return f"<LazyRows of {len(self._rows)} ({shown}){'' if self.evaluated else ', not evaluated yet'}>"
+
+
 class Result:
-    """A simulation: ``t``, dicts ``states``, ``outputs``, ``variables`` of arrays by name.
+    """A simulation: ``t``, dicts ``states``, ``outputs``, ``variables`` of arrays by name
+    (``variables`` a :class:`LazyRows`: evaluated when one is first read).
 
     ``complete`` is False when the run stopped early; ``message`` says why and
     ``failure`` (a dict: time, variable, law, cause, hint) gives the details.
@@ -1739,7 +1818,9 @@ class _Run:
             while True:
                 code, ts, ys = driver.advance(watch, signs, band, g_old)
                 done = len(ts) - (1 if code in (1, 4) else 0)
-                grown = np.flatnonzero(np.max(np.abs(ys[:done]), axis=1, initial=0.0) >= DIVERGED) if done else ()
+                grown = ()      # the batch's states are finite (code 4 ends it before the first that is not)
+                if done and (ys[:done].max() >= DIVERGED or ys[:done].min() <= -DIVERGED):   # no |ys| copy
+                    grown = np.flatnonzero(np.max(np.abs(ys[:done]), axis=1) >= DIVERGED)
                 if len(grown):
                     done = int(grown[0]) + 1        # keep the step where it happened, then stop
                     code = "diverged"
@@ -2489,24 +2570,25 @@ class _Run:
         return rows
 
     def evaluate_columns(self, function, t, x, modes, rows, out=None, columns=slice(None)):
-        """``function(t, x, p, modes)`` over columns: at once when the model is vectorized, else one by one.
+        """``function(t, x, p, modes)`` over columns: see :func:`_evaluate_columns`."""
+        return _evaluate_columns(self.model, self.p, function, t, x, modes, rows, out, columns)
 
-        Written into ``out[:, columns]`` when given (no matrix of its own: the result's matrices
-        of every variable at every point are filled in place), else into a new matrix."""
+    def _blend(self, function, times, x, corner_ids, weights, modes_by_id, rows, out=None, columns=slice(None)):
+        """``function`` on a Filippov sliding mode's points: its corners' values weighted (a corner
+        of weight 0 counts 0, even where its value is not finite). Into ``out[:, columns]``."""
+        model, p = self.model, self.p
+        corners = [(modes_by_id[corner_id], weight) for corner_id, weight in zip(corner_ids, weights)]
+
+        def blend(out):
+            total = np.zeros((rows, times.size))
+            for modes, weight in corners:
+                if np.any(weight != 0):
+                    corner = _evaluate_columns(model, p, function, times, x, modes, rows)
+                    total += weight * np.where(weight != 0, corner, 0.0)
+            out[:, columns] = total
         if out is None:
-            out = np.full((rows, t.size), np.nan)
-        if getattr(self.model, "VECTORIZED", True):
-            values = function(t, x, self.p, modes)
-            # rows written into a view (or a block scattered once): not a fancy index per row
-            target = out[:, columns] if isinstance(columns, slice) else np.empty((rows, t.size))
-            for row, value in enumerate(values):
-                target[row] = value
-            if not isinstance(columns, slice):
-                out[:, columns] = target
-        else:
-            indices = np.arange(out.shape[1])[columns]
-            for j in range(t.size):
-                out[:, indices[j]] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
+            return blend
+        blend(out)
         return out
 
     def result(self, complete, failure):
@@ -2540,7 +2622,7 @@ class _Run:
         outputs = np.empty((n_out, t.size))
         picked = model.row_variables
         n_rows = len(picked)
-        variables = np.empty((n_rows, t.size))
+        variable_tasks = []     # each fills its columns of the variables' matrix, when one is read
         if n_rows == n_var:
             variables_of = model.variables
         else:
@@ -2565,21 +2647,19 @@ class _Run:
                 start += times.size
                 if isinstance(mode, tuple) and mode[0] == "slide":     # the Filippov combination
                     _, corner_ids, weights = mode
-                    xx = x[:, columns]
-                    for target, function, rows in ((outputs, model.outputs, n_out),
-                                                    (variables, variables_of, n_rows)):
-                        blend = np.zeros((rows, times.size))
-                        for corner_id, weight in zip(corner_ids, weights):
-                            if np.any(weight != 0):
-                                corner = self.evaluate_columns(function, times, xx, modes_by_id[corner_id], rows)
-                                blend += weight * np.where(weight != 0, corner, 0.0)
-                        target[:, columns] = blend
+                    xx = x[:, start - times.size:start]
+                    self._blend(model.outputs, times, xx, corner_ids, weights, modes_by_id, n_out, outputs, columns)
+                    variable_tasks.append(self._blend(variables_of, times, xx, corner_ids, weights, modes_by_id,
+                                                      n_rows, columns=columns))
                     continue
                 key = (mode[1], mode[2]) if isinstance(mode, tuple) else (mode, all_relevant)
                 groups.setdefault(key, []).append(columns)
             for (mode, relevant), parts in groups.items():
                 columns = np.concatenate(parts)
-                tt, xx = t[columns], x[:, columns]
+                # contiguous (a run without mode changes): views of the states, not copies
+                whole = slice(int(columns[0]), int(columns[-1]) + 1) \
+                    if columns.size and columns[-1] - columns[0] + 1 == columns.size else columns
+                tt, xx = t[whole], x[:, whole]
                 per_point = self.point_modes(tt, xx, modes_by_id[int(mode)], relevant)
                 unique, inverse = _unique_rows(per_point)
                 for r, row in enumerate(unique):
@@ -2592,10 +2672,10 @@ class _Run:
                         cols = slice(int(cols[0]), int(cols[-1]) + 1)
                     points, states = (tt, xx) if len(unique) == 1 else (tt[chosen], xx[:, chosen])
                     self.evaluate_columns(model.outputs, points, states, row, n_out, outputs, cols)
-                    self.evaluate_columns(variables_of, points, states, row, n_rows, variables, cols)
-        # a row is shared by the variables that are one quantity: read-only, so that changing one
-        # in place cannot silently change the others
-        variables.flags.writeable = False
+                    variable_tasks.append(functools.partial(_evaluate_columns, model, self.p, variables_of, points,
+                                                            states, row, n_rows, columns=cols))
+        # the variables are evaluated from these when first read: read-only, like the variables
+        t.flags.writeable = x.flags.writeable = False
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
             message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
@@ -2606,7 +2686,8 @@ class _Run:
             t=t,
             states={name: x[i] for i, name in enumerate(model.STATE_NAMES)},
             outputs={name: outputs[i] for i, name in enumerate(model.OUTPUT_NAMES)},
-            variables={name: variables[row] for name, row in zip(model.VARIABLE_NAMES, model.VARIABLE_ROWS)},
+            variables=LazyRows(zip(model.VARIABLE_NAMES, model.VARIABLE_ROWS),
+                               _Deferred((n_rows, t.size), variable_tasks)),
             events=list(self.events),
             complete=complete,
             message=message,
@@ -2616,6 +2697,28 @@ class _Run:
             jumps=[(time, dict(zip(model.STATE_NAMES, before)), dict(zip(model.STATE_NAMES, after)))
                    for time, before, after in self.jumps],
         )
+
+
+def _evaluate_columns(model, p, function, t, x, modes, rows, out=None, columns=slice(None)):
+    """``function(t, x, p, modes)`` over columns: at once when the model is vectorized, else one by one.
+
+    Written into ``out[:, columns]`` when given (no matrix of its own: the result's matrices
+    of every variable at every point are filled in place), else into a new matrix."""
+    if out is None:
+        out = np.full((rows, t.size), np.nan)
+    if getattr(model, "VECTORIZED", True):
+        values = function(t, x, p, modes)
+        # rows written into a view (or a block scattered once): not a fancy index per row
+        target = out[:, columns] if isinstance(columns, slice) else np.empty((rows, t.size))
+        for row, value in enumerate(values):
+            target[row] = value
+        if not isinstance(columns, slice):
+            out[:, columns] = target
+    else:
+        indices = np.arange(out.shape[1])[columns]
+        for j in range(t.size):
+            out[:, indices[j]] = np.asarray(function(t[j], x[:, j], p, modes), dtype=float)
+    return out
 
 
 def _unique_rows(rows):
@@ -2650,8 +2753,11 @@ def output_grid(t_start, t_end, dt):
 _NATIVE_FUNCTIONS = ("bondc_rhs", "bondc_jac", "bondc_switches")
 #: Compiler flags: no contraction into fused multiply-adds, so C rounds like numpy.
 _NATIVE_FLAGS = ("-fPIC", "-shared", "-ffp-contract=off")
-#: Optimisation by the size of the C text: gcc's -O2 (and -O1) grow faster than linearly on
-#: functions of tens of thousands of statements (22 s at 1 MB, against 1 s at -O0).
+#: Optimisation by the size of each translation unit's text: gcc's -O2 (and -O1) grow faster than
+#: linearly on functions of tens of thousands of statements (22 s at 1 MB, against 1 s at -O0). A
+#: large model's own small units (its switching functions, the CVODE driver) are still -O2: the
+#: driver's loops over every state at every step (the finiteness checks, the stored steps) took
+#: 10 % of the 1000-section chain's run at -O0.
 _NATIVE_OPTIMIZE = ((400_000, "-O2"), (float("inf"), "-O0"))
 #: From this size of C text on, each function of the model (and the driver) is compiled as a
 #: translation unit of its own, all at once, and the objects are linked: on a 2-core machine the
@@ -3170,7 +3276,12 @@ def _native_plan(source, libraries):
 
     flags = (next(flag for limit, flag in _NATIVE_OPTIMIZE if len(source) < limit), *_NATIVE_FLAGS)
     units = _native_units(source)
-    digest = hashlib.sha256("\n".join((*flags, *libraries, f"units {len(units)}", source)).encode("utf-8")
+    if len(units) > 1:      # each unit optimised by its own size
+        units = [(text, next(flag for limit, flag in _NATIVE_OPTIMIZE if len(text) < limit)) for text in units]
+    else:
+        units = [(units[0], flags[0])]
+    levels = " ".join(level for _, level in units)
+    digest = hashlib.sha256("\n".join((*flags, *libraries, f"units {len(units)} {levels}", source)).encode("utf-8")
                             ).hexdigest()[:40]
     return flags, units, digest, os.path.join(cache_dir(), "native", f"model_{digest}.so")
 
@@ -3280,7 +3391,7 @@ class _NativeBuild:
         self.library = os.path.join(self.work, "model.so")
         self.compiler, self.flags, self.link = compiler, flags, link
         files = []
-        for k, text in enumerate(units):
+        for k, (text, _) in enumerate(units):
             files.append(os.path.join(self.work, f"unit{k}.c"))
             with open(files[-1], "w", encoding="utf-8") as stream:
                 stream.write(text)
@@ -3289,8 +3400,9 @@ class _NativeBuild:
             commands = [[compiler, *flags, "-o", self.library, files[0], *link, "-lm"]]
         else:
             self.objects = [name[:-2] + ".o" for name in files]
-            compile_flags = [flag for flag in flags if flag != "-shared"]
-            commands = [[compiler, *compile_flags, "-c", "-o", obj, name] for name, obj in zip(files, self.objects)]
+            compile_flags = [flag for flag in flags[1:] if flag != "-shared"]
+            commands = [[compiler, level, *compile_flags, "-c", "-o", obj, name]
+                        for (_, level), name, obj in zip(units, files, self.objects)]
         self.runs = [subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
                      for command in commands]
 

@@ -153,7 +153,7 @@ def test_module_imports_only_numpy_scipy_sundials_and_the_standard_library():
             top_level |= {(node.module if isinstance(node, ast.ImportFrom) else a.name).split(".")[0]
                           for a in node.names}
     standard = {"math", "os", "stat", "sys", "time", "argparse", "warnings", "csv", "importlib", "hashlib", "glob",
-                "shutil", "subprocess", "tempfile", "atexit", "ast", "functools"}
+                "shutil", "subprocess", "tempfile", "atexit", "ast", "functools", "collections"}
     optional = {"sksundae", "cffi", "platformdirs"}
     assert imported <= {"numpy", "scipy"} | standard | optional
     # SUNDIALS, cffi (native code) and platformdirs (where native code is cached) are imported only

@@ -155,6 +155,47 @@ def test_sliding_mode_follows_the_filippov_solution():
     assert result.stats["sliding_segments"] == 1
 
 
+def test_variables_are_evaluated_when_first_read_and_follow_their_laws():
+    """A run stores its states; the variables are evaluated from them when one is first read (once),
+    and equal their laws there: y = 2 x = 2 exp(-3 t) on a smooth run, the Filippov sign (0 while
+    sliding) on a sliding one. States and variables are read-only; a pickle holds plain arrays."""
+    import pickle
+
+    calls = []
+
+    def counted(law):
+        def variables(t, x, p, m):
+            calls.append(t)
+            return law(t, x, p, m)
+        return variables
+
+    result = runtime.simulate_model(_namespace(_variables=counted(lambda t, x, p, m: (2 * x[0],))), 2.0,
+                                    {"a": 3.0}, rtol=1e-9, atol=1e-12)
+    assert result.complete and not calls and not result.variables.evaluated
+    assert list(result.variables) == ["y"] and "y" in result.variables and len(result.variables) == 1
+    np.testing.assert_allclose(result.variables["y"], 2 * np.exp(-3.0 * result.t), rtol=1e-7, atol=1e-12)
+    evaluated = len(calls)
+    assert evaluated and result.variables.evaluated
+    assert result.variables["y"] is result.variables["y"] and len(calls) == evaluated
+    for array in (result.variables["y"], result.states["x"], result.t):
+        with pytest.raises(ValueError):
+            array[0] = 0.0
+    copied = pickle.loads(pickle.dumps(result.variables))
+    assert type(copied) is dict and np.array_equal(copied["y"], result.variables["y"])
+
+    calls.clear()
+    sliding = _namespace(
+        _rhs=lambda t, x, p, m: np.array([-m[0]]), _jac=lambda t, x, p, m: np.zeros((1, 1)),
+        SWITCHES=("sign(x)",), EVENT_SWITCHES=(0,), _switches=lambda t, x, p, m: np.array([x[0]]),
+        _outputs=lambda t, x, p, m: (m[0] + 0 * x[0],), _variables=counted(lambda t, x, p, m: (m[0] + 0 * x[0],)))
+    result = runtime.simulate_model(sliding, 3.0, dt=0.25)
+    assert result.stats["sliding_segments"] == 1 and not calls
+    y = result.variables["y"]
+    np.testing.assert_array_equal(y[result.t < 1.0], 1.0)
+    np.testing.assert_allclose(y[result.t > 1.0], 0.0, atol=1e-6)
+    np.testing.assert_array_equal(y, result.outputs["y"])
+
+
 @pytest.mark.parametrize("method", ["RK45", "Radau", "BDF"])
 def test_nonfinite_derivative_stops_the_run_and_names_the_variable(method):
     # y = sqrt(x - 0.5) with x = 1 - t: nan from t = 0.5
