@@ -145,33 +145,22 @@ _PARSER_OPTIONS = {"parser": "lalr", "lexer": "contextual", "propagate_positions
 def _parser() -> tuple[Lark, _LinePostLexer]:
     """The LALR parser. Its tables are built from the grammar once, kept in bondc's cache folder
     (lark's ``cache``, which checks them against the grammar and the options) and loaded from
-    there afterwards: building them is a third of a ``bondc check``."""
+    there afterwards: building them is a third of a ``bondc check``.
+
+    lark writes the file itself, under its final name: the check it writes into the file hashes
+    every option, the file's name included, so a file written under another name (to be renamed
+    into place) is never loaded. A file another run is still writing, or a damaged one, fails
+    lark's check or its unpickling: lark then builds the tables and writes the file again."""
     postlex = _LinePostLexer()
     text = _grammar_text()
     path = _parser_cache_path(text)
-    if path is None:
-        return Lark(text, postlex=postlex, **_PARSER_OPTIONS), postlex
-    if path.exists():
-        return Lark(text, postlex=postlex, cache=str(path), **_PARSER_OPTIONS), postlex
-    import os
-    import tempfile
-
-    # built into a file of its own, then renamed into place: a concurrent run reads a whole
-    # file or none (lark itself writes its cache file in place)
-    temporary = None
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".lalr-", suffix=".tmp")
-        os.close(handle)
-        os.unlink(temporary)            # lark writes it anew
-        parser = Lark(text, postlex=postlex, cache=temporary, **_PARSER_OPTIONS)
-        os.replace(temporary, path)
-        return parser, postlex
-    except OSError:     # a read-only or full cache folder: the parser is built each time
-        return Lark(text, postlex=postlex, **_PARSER_OPTIONS), postlex
-    finally:
-        if temporary is not None and os.path.exists(temporary):
-            os.unlink(temporary)
+    if path is not None:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            return Lark(text, postlex=postlex, cache=str(path), **_PARSER_OPTIONS), postlex
+        except OSError:     # a read-only or full cache folder: the parser is built each time
+            pass
+    return Lark(text, postlex=postlex, **_PARSER_OPTIONS), postlex
 
 
 def _parser_cache_path(grammar: str) -> Path | None:
