@@ -10,6 +10,7 @@ standalone run.
 import ast
 import hashlib
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -261,6 +262,38 @@ def test_analytic_jacobian_matches_finite_differences(name):
             down[j] -= h
             numeric[:, j] = (module["rhs"](t_point, up) - module["rhs"](t_point, down)) / (2 * h)
         np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-8)
+
+
+def test_equal_jacobian_entries_are_named_once_and_stay_right(tmp_path):
+    """A Jacobian entry equal to one named before is that name: the entries of a uniform chain are
+    a handful of expressions (-k, 1/m, b/m, ...) whatever its length, so the number of named entries
+    does not grow with N (it grew by seven per section). The Jacobian still equals central
+    differences of the right-hand side at random states (the chain is linear: exact but rounding)."""
+    from benchmarks.chain import chain_source
+
+    counts = []
+    for sections in (4, 24):
+        path = tmp_path / f"chain{sections}.bg"
+        path.write_text(chain_source(sections), encoding="utf-8")
+        graph, _ = semantic.load(path, experiment=semantic.FIRST)
+        ss = equations.derive(causality.assign_causality(graph))
+        source = emit(ss, next(iter(graph.experiments.values())))
+        body = source[source.index("\ndef _jac("):]
+        body = body[:body.index("\ndef ", 1)]
+        counts.append(len(re.findall(r"^ +_d\d+ = ", body, flags=re.M)))
+        module = load_module(source)
+        rng = np.random.default_rng(sections)
+        n = len(ss.states)
+        for _ in range(3):
+            state = rng.uniform(-1.0, 1.0, n)
+            numeric = np.empty((n, n))
+            for j in range(n):
+                up, down = state.copy(), state.copy()
+                up[j] += 1e-3
+                down[j] -= 1e-3
+                numeric[:, j] = (module["rhs"](0.1, up) - module["rhs"](0.1, down)) / 2e-3
+            np.testing.assert_allclose(module["jacobian"](0.1, state), numeric, rtol=1e-9, atol=1e-9)
+    assert 0 < counts[0] == counts[1] <= 10, counts
 
 
 def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):

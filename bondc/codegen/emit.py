@@ -417,16 +417,23 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
                 accumulated[j] = accumulated[j] + term if j in accumulated else term
         return {j: v for j, v in sorted(accumulated.items()) if not (v.is_Number and v == 0)}
 
+    named_as: dict = {}             # expression -> the symbol it was named first
+
     def name_entries(entries):
+        # an entry equal to one named before is that symbol (the statements are straight-line and
+        # assign each symbol once, so the same expression has the same value): a chain's sections
+        # repeat -k and 1/m, and then the products of those, thousands of times
         named = {}
         for j, value in entries.items():
             if value.is_Number or value.is_Symbol:
                 named[j] = value
-            else:
-                symbol = sympy.Symbol(f"_d{counter[0]}", real=True)
+                continue
+            symbol = named_as.get(value)
+            if symbol is None:
+                symbol = named_as[value] = sympy.Symbol(f"_d{counter[0]}", real=True)
                 counter[0] += 1
                 statements.append(_assign(symbol, value))
-                named[j] = symbol
+            named[j] = symbol
         return named
 
     for statement in plan.statements:
