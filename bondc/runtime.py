@@ -2573,10 +2573,12 @@ class _Run:
         """``function(t, x, p, modes)`` over columns: see :func:`_evaluate_columns`."""
         return _evaluate_columns(self.model, self.p, function, t, x, modes, rows, out, columns)
 
-    def _blend(self, function, times, x, corner_ids, weights, modes_by_id, rows, out=None, columns=slice(None)):
+    def _blend(self, function, times, x, corner_ids, weights, modes_by_id, rows, out=None, columns=slice(None),
+               p=None):
         """``function`` on a Filippov sliding mode's points: its corners' values weighted (a corner
-        of weight 0 counts 0, even where its value is not finite). Into ``out[:, columns]``."""
-        model, p = self.model, self.p
+        of weight 0 counts 0, even where its value is not finite). Into ``out[:, columns]``; without
+        ``out``, the function that does that when called with it."""
+        model, p = self.model, self.p if p is None else p
         corners = [(modes_by_id[corner_id], weight) for corner_id, weight in zip(corner_ids, weights)]
 
         def blend(out):
@@ -2623,6 +2625,8 @@ class _Run:
         picked = model.row_variables
         n_rows = len(picked)
         variable_tasks = []     # each fills its columns of the variables' matrix, when one is read
+        # the parameters as they are now (the caller's array may be changed after the run)
+        parameters = np.array(self.p, dtype=float)
         if n_rows == n_var:
             variables_of = model.variables
         else:
@@ -2650,7 +2654,7 @@ class _Run:
                     xx = x[:, start - times.size:start]
                     self._blend(model.outputs, times, xx, corner_ids, weights, modes_by_id, n_out, outputs, columns)
                     variable_tasks.append(self._blend(variables_of, times, xx, corner_ids, weights, modes_by_id,
-                                                      n_rows, columns=columns))
+                                                      n_rows, columns=columns, p=parameters))
                     continue
                 key = (mode[1], mode[2]) if isinstance(mode, tuple) else (mode, all_relevant)
                 groups.setdefault(key, []).append(columns)
@@ -2672,8 +2676,8 @@ class _Run:
                         cols = slice(int(cols[0]), int(cols[-1]) + 1)
                     points, states = (tt, xx) if len(unique) == 1 else (tt[chosen], xx[:, chosen])
                     self.evaluate_columns(model.outputs, points, states, row, n_out, outputs, cols)
-                    variable_tasks.append(functools.partial(_evaluate_columns, model, self.p, variables_of, points,
-                                                            states, row, n_rows, columns=cols))
+                    variable_tasks.append(functools.partial(_evaluate_columns, model, parameters, variables_of,
+                                                            points, states, row, n_rows, columns=cols))
         # the variables are evaluated from these when first read: read-only, like the variables
         t.flags.writeable = x.flags.writeable = False
         reached = float(t[-1]) if t.size else self.t_start

@@ -183,6 +183,13 @@ def test_variables_are_evaluated_when_first_read_and_follow_their_laws():
     copied = pickle.loads(pickle.dumps(result.variables))
     assert type(copied) is dict and np.array_equal(copied["y"], result.variables["y"])
 
+    # the parameters of the run, even when the caller changes its array before the first read
+    p = np.array([3.0])
+    result = runtime.simulate_model(_namespace(_variables=lambda t, x, p, m: (p[0] * x[0],)), 2.0, p,
+                                    rtol=1e-9, atol=1e-12)
+    p[0] = 100.0
+    np.testing.assert_allclose(result.variables["y"], 3.0 * np.exp(-3.0 * result.t), rtol=1e-7, atol=1e-12)
+
     calls.clear()
     sliding = _namespace(
         _rhs=lambda t, x, p, m: np.array([-m[0]]), _jac=lambda t, x, p, m: np.zeros((1, 1)),
