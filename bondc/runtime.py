@@ -3509,12 +3509,19 @@ def attach_native(model, native=None):
         return (float(t), buffer(doubles, contiguous(x, dtype=float)), pointer("p", p),
                 pointer("m", m) if count else ffi.NULL)
 
+    # a nonlinear algebraic loop is solved in C by Newton's method; where that fails (its unknowns
+    # nan), the numpy module solves it as without C (MINPACK's hybr), so that C never makes a
+    # point fail that numpy would have solved
+    loops = not getattr(model, "VECTORIZED", True)
+
     def rhs(t, x, p, m):
         arguments = arrays(t, x, p, m)
         if arguments is None:
             return numpy_rhs(t, x, p, m)
         out = empty(n)
         c_rhs(*arguments, buffer(doubles, out))
+        if loops and not math.isfinite(out.sum()):
+            return numpy_rhs(t, x, p, m)
         return out
 
     def jac(t, x, p, m):
@@ -3525,6 +3532,8 @@ def attach_native(model, native=None):
         if len(pattern):
             entries = empty(len(pattern))      # in JACOBIAN_PATTERN order
             c_jac(*arguments, buffer(doubles, entries))
+            if loops and not math.isfinite(entries.sum()):
+                return numpy_jac(t, x, p, m)
             matrix[rows, cols] = entries
         return matrix
 
@@ -3535,6 +3544,8 @@ def attach_native(model, native=None):
         out = empty(count)
         if count:
             c_switches(*arguments, buffer(doubles, out))
+            if loops and not math.isfinite(out.sum()):
+                return numpy_switches(t, x, p, m)
         return out
 
     model.rhs, model.jac, model.switches = rhs, jac, switches
@@ -3563,8 +3574,13 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     padded = not model.STATE_NAMES
     if padded:
         model = _padded(model)
-    native_used, native_note = attach_native(model, native)
     defaults = model.DEFAULTS
+    chosen = method or defaults.get("method") or (DEFAULT_SOLVER if sundials_available() else "LSODA")
+    if model.dae is not None and (chosen is IDA or str(chosen).lower() == "ida") and native is not False:
+        # IDA integrates the loops' unknowns as algebraic variables of the numpy module's _dae
+        native_used, native_note = False, "IDA integrates the algebraic loops with the numpy module's DAE"
+    else:
+        native_used, native_note = attach_native(model, native)
     t_end = defaults.get("t_end") if t_end is None else t_end
     if t_end is None:
         raise ValueError("t_end is needed (the experiment does not set it)")
@@ -3585,7 +3601,7 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
         if np.any(np.diff(t_eval) < 0):
             raise ValueError("t_eval must be increasing")
         t_eval = t_eval[(t_eval >= t_start) & (t_eval <= t_end)]
-    method = method or defaults.get("method") or (DEFAULT_SOLVER if sundials_available() else "LSODA")
+    method = chosen
     rtol = float(rtol if rtol is not None else defaults.get("rtol") or 1e-6)
     atol = float(atol if atol is not None else defaults.get("atol") or 1e-9)
     max_step = float(max_step if max_step is not None else defaults.get("max_step") or np.inf)

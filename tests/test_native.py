@@ -171,6 +171,54 @@ def test_compiled_and_numpy_code_give_the_same_run(path):
 
 
 @needs_cc
+def test_a_nonlinear_algebraic_loop_is_solved_in_c_and_equals_its_closed_form():
+    """The coil of nonlinear_loop.bg feeds r2 (e = a3 f^3 + a1 f) in parallel with r3 (e = R3 f):
+    the loop's u solves a3 f2^3 + (a1 + R3) f2 = R3 i with u = R3 (i - f2), one real root, and
+    dp/dt = V - R1 i - u. The C right-hand side (Newton's method inside C, no numpy) equals that
+    root from numpy.roots, and the numpy module's (MINPACK's hybr), at states of both signs and 0,
+    for random parameter values; its Jacobian equals central differences."""
+    namespace, _ = _compiled(ROOT / "tests" / "fixtures" / "sim" / "nonlinear_loop.bg")
+    model = namespace["_Model"](namespace["_MODEL"])
+    numpy_rhs = model.rhs
+    assert namespace["attach_native"](model, None)[0] and model.rhs is not numpy_rhs
+    names = list(model.PARAMETERS)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        values = {name: float(rng.uniform(0.5, 4.0)) for name in names}
+        p = namespace["param_array"](model.PARAMETERS, values, model.derive_parameters)
+        for momentum in (-3.0, -1e-3, 0.0, 0.4, 7.0):
+            x = np.array([momentum * values["L"]])
+            i = momentum
+            roots = np.roots([values["a3"], 0.0, values["a1"] + values["R3"], -values["R3"] * i])
+            f2 = float(roots[np.argmin(np.abs(roots.imag))].real)
+            expected = values["V"] - values["R1"] * i - values["R3"] * (i - f2)
+            native = model.rhs(0.0, x, p, np.zeros(0))
+            assert native[0] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+            assert native[0] == pytest.approx(numpy_rhs(0.0, x, p, np.zeros(0))[0], rel=1e-10, abs=1e-12)
+            h = 1e-6 * max(1.0, abs(x[0]))
+            difference = (model.rhs(0.0, x + h, p, np.zeros(0))[0] - model.rhs(0.0, x - h, p, np.zeros(0))[0]) / (2 * h)
+            assert model.jac(0.0, x, p, np.zeros(0))[0, 0] == pytest.approx(difference, rel=1e-6, abs=1e-9)
+
+
+@needs_cc
+def test_where_cs_newton_fails_the_numpy_module_solves_the_loop(monkeypatch, tmp_path):
+    """With no Newton iteration allowed, the C loop gives nan at every call, and every call goes to
+    the numpy module (MINPACK's hybr): the run equals the numpy module's run to the bit."""
+    from bondc.codegen.emit import _NativeEmitter
+
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(_NativeEmitter, "LOOP_ITERATIONS", 0)
+    namespace, runs, _ = _runs(ROOT / "tests" / "fixtures" / "sim" / "nonlinear_loop.bg")
+    assert "bondc_k < 0" in namespace["NATIVE_SOURCE"]
+    native, numpy_run = runs[None], runs[False]
+    assert native.stats["code"] == "native" and numpy_run.stats["code"] == "numpy"
+    reference = namespace["simulate_model"](namespace["_MODEL"], native=False,
+                                            t_end=1.0, rtol=None, atol=None)
+    for name, values in reference.states.items():
+        assert np.array_equal(native.states[name], values), name
+
+
+@needs_cc
 def test_without_a_compiler_the_numpy_code_runs_and_says_why(tmp_path, monkeypatch):
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))

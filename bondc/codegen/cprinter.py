@@ -62,6 +62,40 @@ static double bondc_table(double x, int n, const double *xs, const double *vs)
 }
 """
 
+#: Helpers of a model with a nonlinear algebraic loop: an LU factorisation with partial pivoting of
+#: a small dense matrix (the loop's dR/dz, row-major, overwritten) and its solve, for the loop's
+#: Newton steps and its sensitivities dz/dx. bondc_lu returns -1 where a pivot is 0 or not finite.
+LOOP_PRELUDE = r"""
+static int bondc_lu(int n, double *a, int *piv)
+{
+    for (int k = 0; k < n; k++) {
+        int best = k;
+        for (int i = k + 1; i < n; i++)
+            if (fabs(a[i * n + k]) > fabs(a[best * n + k])) best = i;
+        piv[k] = best;
+        if (!(fabs(a[best * n + k]) > 0.0) || !isfinite(a[best * n + k])) return -1;
+        if (best != k)
+            for (int j = 0; j < n; j++) { double s = a[k * n + j]; a[k * n + j] = a[best * n + j]; a[best * n + j] = s; }
+        for (int i = k + 1; i < n; i++) {
+            double f = a[i * n + k] /= a[k * n + k];
+            for (int j = k + 1; j < n; j++) a[i * n + j] -= f * a[k * n + j];
+        }
+    }
+    return 0;
+}
+static void bondc_lu_solve(int n, const double *a, const int *piv, double *b)
+{
+    for (int k = 0; k < n; k++) {
+        if (piv[k] != k) { double s = b[k]; b[k] = b[piv[k]]; b[piv[k]] = s; }
+        for (int i = k + 1; i < n; i++) b[i] -= a[i * n + k] * b[k];
+    }
+    for (int k = n - 1; k >= 0; k--) {
+        for (int j = k + 1; j < n; j++) b[k] -= a[k * n + j] * b[j];
+        b[k] /= a[k * n + k];
+    }
+}
+"""
+
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 
 

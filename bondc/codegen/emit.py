@@ -58,7 +58,7 @@ from sympy.printing.str import StrPrinter
 
 from bondc import __version__
 from bondc.codegen.freeze import Freezer
-from bondc.codegen.cprinter import PRELUDE, NativePrinter, c_name
+from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,
                                    relative_data_path)
 from bondc.runtime import UNIT_MARK
@@ -997,6 +997,8 @@ class _NativeEmitter(_Emitter):
 
     ``bondc_jac`` writes the Jacobian's entries in JACOBIAN_PATTERN order. Every name is a C
     identifier made from the numpy module's (already sanitised) names; no model text is copied.
+    A nonlinear algebraic loop is solved inside each function by Newton's method
+    (:meth:`loop_lines`), and its sensitivities dz/dx by an LU solve (``LOOP_PRELUDE``).
     """
 
     def __init__(self, emitter: _Emitter):
@@ -1021,10 +1023,92 @@ class _NativeEmitter(_Emitter):
     def assign_line(name: str, text: str) -> str:
         return f"const double {name} = {text};"
 
+    #: Newton iterations of a nonlinear algebraic loop in C (from its guesses)
+    LOOP_ITERATIONS = 50
+
     def statement_lines(self, statement, exprs, printer):
-        if statement.kind != "assign":
-            raise UnsupportedExpression("an algebraic loop is solved by the numpy module")
-        return [self.assign_line(self.names[statement.defines[0]], self.text(printer, exprs[0]))]
+        if statement.kind == "assign":
+            return [self.assign_line(self.names[statement.defines[0]], self.text(printer, exprs[0]))]
+        if statement.kind == "block":
+            return self.loop_lines(statement, printer)
+        return self.loop_sensitivity_lines(statement, exprs, printer)
+
+    def loop_lines(self, statement, printer) -> list:
+        """A nonlinear algebraic loop R(z) = 0 solved in C by Newton's method with its analytic
+        dR/dz, from its guesses at every call (no state kept between calls: a run never depends on
+        the runs or calls before it, as the numpy module's loops start from their guesses in every
+        run). Where it does not converge (a singular dR/dz, a value that is not finite, 50
+        iterations) its unknowns are nan, and the runtime evaluates that point with the numpy
+        module (MINPACK's hybr, as without C). Converged: the Newton step is below 1e-12 of the
+        unknowns' size."""
+        unknowns = statement.defines
+        size = len(unknowns)
+        names = [self.names[u] for u in unknowns]
+        residuals = statement.data["residuals"]
+        slopes = [partial_derivative(r, z) for r in residuals for z in unknowns]
+        text = lambda expr: self.text(printer, expr)     # noqa: E731
+        lines = [f"/* algebraic loop {statement.data['number']}: Newton's method from its guesses */",
+                 f"double {', '.join(names)};",
+                 "{",
+                 f"    double bondc_z[{size}], bondc_r[{size}], bondc_a[{size * size}];",
+                 f"    int bondc_piv[{size}], bondc_done = 0;"]
+        lines += [f"    bondc_z[{i}] = {text(guess)};" for i, guess in enumerate(statement.data["guesses"])]
+        lines.append(f"    for (int bondc_k = 0; bondc_k < {self.LOOP_ITERATIONS}; bondc_k++) {{")
+        lines += [f"        {name} = bondc_z[{i}];" for i, name in enumerate(names)]
+        lines += [f"        bondc_r[{i}] = {text(r)};" for i, r in enumerate(residuals)]
+        lines += [f"        bondc_a[{i}] = {text(slope)};" for i, slope in enumerate(slopes)]
+        lines += [f"        if (bondc_lu({size}, bondc_a, bondc_piv) != 0) break;",
+                  f"        bondc_lu_solve({size}, bondc_a, bondc_piv, bondc_r);",
+                  "        double bondc_step = 0.0, bondc_size = 0.0;",
+                  "        int bondc_finite = 1;",
+                  f"        for (int i = 0; i < {size}; i++) {{",
+                  "            bondc_z[i] -= bondc_r[i];",
+                  "            if (!isfinite(bondc_z[i])) bondc_finite = 0;",
+                  "            bondc_step = fmax(bondc_step, fabs(bondc_r[i]));",
+                  "            bondc_size = fmax(bondc_size, fabs(bondc_z[i]));",
+                  "        }",
+                  "        if (!bondc_finite) break;",
+                  "        if (bondc_step <= 1e-12 * (1.0 + bondc_size)) { bondc_done = 1; break; }",
+                  "    }",
+                  f"    if (!bondc_done) for (int i = 0; i < {size}; i++) bondc_z[i] = NAN;"]
+        lines += [f"    {name} = bondc_z[{i}];" for i, name in enumerate(names)]
+        lines.append("}")
+        return lines
+
+    def loop_sensitivity_lines(self, statement, exprs, printer) -> list:
+        """dz/dx = -(dR/dz)^-1 dR/dx of an algebraic loop, for the columns the Jacobian reads (nan
+        where dR/dz is singular)."""
+        number, size = statement.data["number"], statement.data["size"]
+        rz, rx = exprs[: size * size], exprs[size * size:]
+        columns = sorted({j for _, j in statement.data["rx_keys"]})
+        where = {j: q for q, j in enumerate(columns)}
+        count = len(columns)
+        table = f"bondc_dz{number}"
+        lines = [f"/* algebraic loop {number}: dz/dx = -(dR/dz)^-1 dR/dx */",
+                 f"double {table}[{max(size * count, 1)}];",
+                 "{",
+                 f"    double bondc_a[{size * size}], bondc_b[{max(size * count, 1)}];",
+                 f"    int bondc_piv[{size}];"]
+        lines += [f"    bondc_a[{i}] = {self.text(printer, value)};" for i, value in enumerate(rz)]
+        lines.append(f"    for (int i = 0; i < {max(size * count, 1)}; i++) bondc_b[i] = 0.0;")
+        lines += [f"    bondc_b[{i * count + where[j]}] = -({self.text(printer, value)});"
+                  for (i, j), value in zip(statement.data["rx_keys"], rx)]
+        lines += [f"    if (bondc_lu({size}, bondc_a, bondc_piv) != 0) {{",
+                  f"        for (int i = 0; i < {max(size * count, 1)}; i++) {table}[i] = NAN;",
+                  "    } else {",
+                  f"        for (int q = 0; q < {count}; q++) {{",
+                  f"            double bondc_column[{size}];",
+                  f"            for (int i = 0; i < {size}; i++) bondc_column[i] = bondc_b[i * {count} + q];",
+                  f"            bondc_lu_solve({size}, bondc_a, bondc_piv, bondc_column);",
+                  f"            for (int i = 0; i < {size}; i++) {table}[i * {count} + q] = bondc_column[i];",
+                  "        }",
+                  "    }",
+                  "}"]
+        texts = statement.data["texts"]      # symbol -> "_Dz{number}[l, j]" (the numpy text)
+        for symbol in statement.defines:
+            l, j = (int(part) for part in texts[symbol].partition("[")[2].rstrip("]").split(","))
+            lines.append(self.assign_line(self.names[symbol], f"{table}[{l * count + where[j]}]"))
+        return lines
 
 
     def c_function(self, name, statements, finals) -> str:
@@ -1038,11 +1122,9 @@ class _NativeEmitter(_Emitter):
     def native_source(self) -> tuple:
         """(C source, "") or ("", why the model has no native code)."""
         plan = self.plan
-        if plan.blocks:
-            return "", "an algebraic loop is solved by the numpy module"
         pattern = sorted(plan.jacobian_entries, key=lambda key: (key[1], key[0]))
         try:
-            parts = [PRELUDE,
+            parts = [PRELUDE + (LOOP_PRELUDE if plan.blocks else ""),
                      self.c_function("bondc_rhs", plan.statements, plan.derivatives),
                      self.c_function("bondc_jac", plan.jacobian_statements,
                                      [plan.jacobian_entries[key] for key in pattern]),

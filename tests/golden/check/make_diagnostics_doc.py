@@ -144,7 +144,9 @@ d("I603", "algebraic loop",
 d("W604", "nonlinear algebraic loop",
   "An algebraic loop (I603) whose equations are not linear in the loop's unknowns (a diode, a turbulent "
   "orifice, a friction law), so bondc cannot solve it symbolically. It is kept as an implicit equation and "
-  "solved numerically (`scipy.optimize.root`, warm-started) at every evaluation of the state equations.",
+  "solved numerically at every evaluation of the state equations: in the compiled C code by Newton's method "
+  "with the loop's analytic Jacobian, from its guesses; where that does not converge, by the numpy module "
+  "(`scipy.optimize.root`, warm-started).",
   "Usually nothing: the run is slower, and where the solve fails its unknowns become nan and the run stops "
   "(E810). To remove the loop, add a small storage element, or give the resistor's law in the form the loop needs.")
 d("E605", "law cannot be inverted",
