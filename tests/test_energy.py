@@ -240,6 +240,39 @@ def test_energy_balance_closes_on_model(name):
     assert not [d for d in account.diagnostics if d.code == "W930"]
 
 
+@pytest.mark.slow
+def test_a_models_algebraic_loop_is_evaluated_in_c_for_its_energy_account(monkeypatch):
+    """The diode bridge is evaluated point by point (its loop is solved at every point): the energy
+    account takes its right-hand side and switches from the C code (Newton inside C) where that is
+    built. Its balance closes, and every element's energies equal the account computed with the
+    numpy module alone (MINPACK's hybr at every point) to 1e-9 of the throughput."""
+    import shutil
+
+    from bondc.analysis.energy import _Model
+    from bondc.simulate import compile_model
+
+    ss, experiment = load(Path(__file__).parent / "fixtures" / "engine" / "diode_bridge.bg")
+    namespace = compile_model(ss)
+    evaluator = _Model(namespace, {})
+    if shutil.which("cc") or shutil.which("gcc"):
+        assert evaluator._rhs is not namespace["_rhs"] and evaluator._switches is not namespace["_switches"]
+    result = simulate(ss, experiment)
+    accounts = [energy_account(ss, result)]
+    monkeypatch.setenv("BONDC_NATIVE", "0")
+    accounts.append(energy_account(ss, result))
+    assert _Model(namespace, {})._rhs is namespace["_rhs"]
+    for window, numpy_window in zip(accounts[0].windows, accounts[1].windows):
+        assert window.balance.relative_residual < 1e-6, window.balance
+        scale = window.balance.throughput
+        assert [e.element for e in window.elements] == [e.element for e in numpy_window.elements]
+        for entry, numpy_entry in zip(window.elements, numpy_window.elements):
+            for key in ("work_in", "gross", "dissipated", "stored_change"):
+                a, b = getattr(entry, key), getattr(numpy_entry, key)
+                assert (a is None) == (b is None), (entry.element, key)
+                if a is not None:
+                    assert abs(a - b) <= 1e-9 * scale, (entry.element, key, a, b)
+
+
 def test_series_rlc_energy_as_documented():
     """models/README.md: the source gives C*U0^2 = 10 mJ, 5 mJ stored in C, 5 mJ dissipated in R."""
     ss, experiment = load(MODELS / "series_rlc.bg")

@@ -200,6 +200,7 @@ def test_a_nonlinear_algebraic_loop_is_solved_in_c_and_equals_its_closed_form():
             assert model.jac(0.0, x, p, np.zeros(0))[0, 0] == pytest.approx(difference, rel=1e-6, abs=1e-9)
 
 
+@pytest.mark.slow
 @needs_cc
 def test_where_cs_newton_fails_the_numpy_module_solves_the_loop(monkeypatch, tmp_path):
     """With no Newton iteration allowed, the C loop gives nan at every call, and every call goes to

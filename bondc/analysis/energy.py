@@ -424,10 +424,23 @@ class _Model:
         self.vectorized = bool(namespace.get("VECTORIZED", False))
         self._rhs, self._variables = namespace["_rhs"], namespace["_variables"]
         self._switches = namespace["_switches"]
+        if not self.vectorized:
+            self._native_point_functions(namespace)
         kinds = tuple(namespace.get("SWITCH_KINDS", ())) or ("sign",) * self.switch_count
         self.floors = np.array([kind == "floor" for kind in kinds], dtype=bool)
         names = tuple(namespace["PARAMETERS"])
         self.p = np.array([float(parameters.get(name, namespace["PARAMETERS"][name])) for name in names])
+
+    def _native_point_functions(self, namespace: Mapping) -> None:
+        """A model evaluated point by point (its algebraic loops are solved at every point: numpy's
+        MINPACK from Python) has its right-hand side and switching functions evaluated by its C code
+        where that is built (the loops solved there by Newton's method; numpy's where that fails)."""
+        make, attach = namespace.get("_Model"), namespace.get("attach_native")
+        if make is None or attach is None or "_MODEL" not in namespace:
+            return
+        model = make(namespace["_MODEL"])
+        if attach(model, None)[0]:
+            self._rhs, self._switches = model.rhs, model.switches
 
     def _columns(self, function, t, x, modes, rows):
         out = np.empty((rows, t.size))
