@@ -403,7 +403,9 @@ HOSTILE_NAMES = [
 ]
 
 
-@pytest.mark.parametrize("name", HOSTILE_NAMES, ids=["triple-quotes", "newline", "line-separators", "quotes"])
+@pytest.mark.parametrize("name", [HOSTILE_NAMES[0]] + [pytest.param(name, marks=pytest.mark.slow)
+                                                          for name in HOSTILE_NAMES[1:]],
+                         ids=["triple-quotes", "newline", "line-separators", "quotes"])
 @pytest.mark.parametrize("standalone", [pytest.param(False, marks=pytest.mark.slow), True],
                          ids=["imports-runtime", "standalone"])
 def test_a_hostile_file_name_never_runs_as_code(tmp_path, monkeypatch, name, standalone):
@@ -463,6 +465,7 @@ def test_quick_printing_declines_what_it_does_not_know():
         assert NativePrinter(NAMES).quick(expr) is None
 
 
+@pytest.mark.slow
 def test_quick_printing_equals_sympys_printing_on_every_model(monkeypatch):
     """Every expression the quick path prints, in every generated function (numpy and C) and law
     text (VARIABLE_LAWS) of every model of the corpus, is compared with sympy's own printing of it."""
@@ -494,6 +497,7 @@ def test_quick_printing_equals_sympys_printing_on_every_model(monkeypatch):
     assert {"_LawPrinter", "BondcPrinter", "NativePrinter"} <= printers
 
 
+@pytest.mark.slow
 def test_common_subexpressions_are_sympys_on_every_model(monkeypatch):
     """bondc's tree cse (which keeps a node whose arguments did not change, where sympy rebuilds
     every node, and never makes 1/name or -name a temporary) finds sympy's ``tree_cse``
