@@ -2573,12 +2573,11 @@ class _Run:
         """``function(t, x, p, modes)`` over columns: see :func:`_evaluate_columns`."""
         return _evaluate_columns(self.model, self.p, function, t, x, modes, rows, out, columns)
 
-    def _blend(self, function, times, x, corner_ids, weights, modes_by_id, rows, out=None, columns=slice(None),
-               p=None):
-        """``function`` on a Filippov sliding mode's points: its corners' values weighted (a corner
-        of weight 0 counts 0, even where its value is not finite). Into ``out[:, columns]``; without
-        ``out``, the function that does that when called with it."""
-        model, p = self.model, self.p if p is None else p
+    def _blend(self, function, p, times, x, corner_ids, weights, modes_by_id, rows, columns):
+        """The function that writes into ``out[:, columns]`` ``function`` on a Filippov sliding
+        mode's points: its corners' values weighted (a corner of weight 0 counts 0, even where its
+        value is not finite)."""
+        model = self.model
         corners = [(modes_by_id[corner_id], weight) for corner_id, weight in zip(corner_ids, weights)]
 
         def blend(out):
@@ -2588,10 +2587,7 @@ class _Run:
                     corner = _evaluate_columns(model, p, function, times, x, modes, rows)
                     total += weight * np.where(weight != 0, corner, 0.0)
             out[:, columns] = total
-        if out is None:
-            return blend
-        blend(out)
-        return out
+        return blend
 
     def result(self, complete, failure):
         model = self.model
@@ -2652,9 +2648,10 @@ class _Run:
                 if isinstance(mode, tuple) and mode[0] == "slide":     # the Filippov combination
                     _, corner_ids, weights = mode
                     xx = x[:, start - times.size:start]
-                    self._blend(model.outputs, times, xx, corner_ids, weights, modes_by_id, n_out, outputs, columns)
-                    variable_tasks.append(self._blend(variables_of, times, xx, corner_ids, weights, modes_by_id,
-                                                      n_rows, columns=columns, p=parameters))
+                    self._blend(model.outputs, self.p, times, xx, corner_ids, weights, modes_by_id, n_out,
+                                columns)(outputs)
+                    variable_tasks.append(self._blend(variables_of, parameters, times, xx, corner_ids, weights,
+                                                      modes_by_id, n_rows, columns))
                     continue
                 key = (mode[1], mode[2]) if isinstance(mode, tuple) else (mode, all_relevant)
                 groups.setdefault(key, []).append(columns)
@@ -3280,12 +3277,13 @@ def _native_plan(source, libraries):
     """(compiler flags, translation units, digest, library path) of a C text."""
     import hashlib
 
-    flags = (next(flag for limit, flag in _NATIVE_OPTIMIZE if len(source) < limit), *_NATIVE_FLAGS)
-    units = _native_units(source)
-    if len(units) > 1:      # each unit optimised by its own size
-        units = [(text, next(flag for limit, flag in _NATIVE_OPTIMIZE if len(text) < limit)) for text in units]
-    else:
-        units = [(units[0], flags[0])]
+    def level(text):
+        return next(flag for limit, flag in _NATIVE_OPTIMIZE if len(text) < limit)
+
+    flags = (level(source), *_NATIVE_FLAGS)
+    texts = _native_units(source)
+    # several units: each optimised by its own size; one: by the whole text's
+    units = [(text, level(text) if len(texts) > 1 else flags[0]) for text in texts]
     levels = " ".join(level for _, level in units)
     digest = hashlib.sha256("\n".join((*flags, *libraries, f"units {len(units)} {levels}", source)).encode("utf-8")
                             ).hexdigest()[:40]

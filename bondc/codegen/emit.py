@@ -448,22 +448,24 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
             unknowns = statement.defines
             residuals = statement.data["residuals"]
             rz = [[partial_derivative(r, z) for z in unknowns] for r in residuals]
+            statement.data["slopes"] = [v for row in rz for v in row]   # dR/dz: the C loop's Newton steps too
             rx = {}
             for i, r in enumerate(residuals):
                 for j, value in row_of(r, exclude=unknowns).items():
                     rx[(i, j)] = value
             columns = sorted({j for _, j in rx})
-            outputs = {}
+            outputs, cells = {}, {}
             for l, z in enumerate(unknowns):
                 rows[z] = {}
                 for j in columns:
                     symbol = sympy.Symbol(f"_Dz{number}_{l}_{j}", real=True)
                     outputs[symbol] = f"_Dz{number}[{l}, {j}]"
+                    cells[symbol] = (l, j)
                     rows[z][j] = symbol
-            exprs = [v for row in rz for v in row] + [rx[key] for key in sorted(rx)]
+            exprs = statement.data["slopes"] + [rx[key] for key in sorted(rx)]
             statements.append(_Statement("block_jac", tuple(outputs), exprs, frozenset(),
                                          {"number": number, "size": len(unknowns), "rx_keys": sorted(rx),
-                                          "texts": outputs, "states": len(column)}))
+                                          "texts": outputs, "cells": cells, "states": len(column)}))
     entries = {}
     for k, expr in enumerate(plan.derivatives):
         for j, value in row_of(expr).items():
@@ -1045,7 +1047,7 @@ class _NativeEmitter(_Emitter):
         size = len(unknowns)
         names = [self.names[u] for u in unknowns]
         residuals = statement.data["residuals"]
-        slopes = [partial_derivative(r, z) for r in residuals for z in unknowns]
+        slopes = statement.data["slopes"]       # dR/dz, row by row (from the Jacobian's plan)
         text = lambda expr: self.text(printer, expr)     # noqa: E731
         lines = [f"/* algebraic loop {statement.data['number']}: Newton's method from its guesses */",
                  f"double {', '.join(names)};",
@@ -1104,9 +1106,8 @@ class _NativeEmitter(_Emitter):
                   "        }",
                   "    }",
                   "}"]
-        texts = statement.data["texts"]      # symbol -> "_Dz{number}[l, j]" (the numpy text)
         for symbol in statement.defines:
-            l, j = (int(part) for part in texts[symbol].partition("[")[2].rstrip("]").split(","))
+            l, j = statement.data["cells"][symbol]
             lines.append(self.assign_line(self.names[symbol], f"{table}[{l * count + where[j]}]"))
         return lines
 
