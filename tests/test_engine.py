@@ -303,6 +303,45 @@ def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     assert len(switching) >= 8 and len(switching) % 2 == 0
 
 
+def shockley_bridge(vs, vc, Rs=1.0, RL=100.0, Is=1e-12, Vt=0.025):
+    """Nodal analysis of diode_bridge_shockley.bg (node b = 0 V, v_p = v_n + vc): the capacitor
+    current and (v_a, v_n). With I(v) = Is (exp(v/Vt) - 1) for d1 (a -> p), d2 (b -> p), d3
+    (n -> a) and d4 (n -> b): KCL at p and n together, I1 + I2 = I3 + I4, falls in v_n for any
+    v_a, and KCL at a, (vs - v_a)/Rs = I1 - I3, then falls in v_a: nested brentq."""
+    def current(v):
+        return Is * np.expm1(min(v / Vt, 700.0))
+
+    def inner(va):
+        return brentq(lambda vn: current(va - vn - vc) + current(-vn - vc) - current(vn - va) - current(vn),
+                      -100.0, 100.0, xtol=1e-14, rtol=1e-15)
+
+    def outer(va):
+        vn = inner(va)
+        return (vs - va) / Rs - current(va - vn - vc) + current(vn - va)
+
+    va = brentq(outer, -100.0, 100.0, xtol=1e-14, rtol=1e-15)
+    vn = inner(va)
+    ic = current(va - vn - vc) + current(-vn - vc) - vc / RL
+    return ic, (va, vn)
+
+
+@pytest.mark.slow
+def test_a_bridge_of_shockley_diodes_matches_nodal_analysis():
+    """diode_bridge_shockley.bg: seven loop unknowns from zero at every evaluation, diodes at up to
+    exp(400) there, and between the half-waves a node that floats between four reverse-biased
+    diodes. The output voltage is the nodal analysis's (nested brentq) to the run's tolerance, and
+    settles at the peak less two diode drops and the ripple."""
+    result = run(ENGINE / "diode_bridge_shockley.bg")
+    assert result.complete, result.message
+    V, fs, Cf = 10.0, 50.0, 200e-6
+    reference = solve_ivp(lambda t, q: [shockley_bridge(V * np.sin(2 * np.pi * fs * t), q[0] / Cf)[0]],
+                          (0.0, 0.06), [0.0], method="LSODA", rtol=1e-10, atol=1e-14, dense_output=True)
+    assert reference.success
+    expected = reference.sol(result.t)[0] / Cf
+    np.testing.assert_allclose(result.outputs["vout"], expected, rtol=0, atol=1e-5 * V)
+    assert 6.0 < result.outputs["vout"][-1] < V - 2 * 0.5
+
+
 @pytest.mark.slow
 def test_ida_integrates_the_diode_bridge_as_a_dae_to_the_same_answer(tmp_path):
     """solver = "IDA": the loop's seven unknowns are IDA's algebraic variables (no Newton iteration

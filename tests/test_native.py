@@ -200,15 +200,62 @@ def test_a_nonlinear_algebraic_loop_is_solved_in_c_and_equals_its_closed_form():
             assert model.jac(0.0, x, p, np.zeros(0))[0, 0] == pytest.approx(difference, rel=1e-6, abs=1e-9)
 
 
+@needs_cc
+def test_an_exponential_diode_loop_is_solved_in_c_far_from_its_guess():
+    """exp_diode.bg's loop starts at 0 V across r1, the whole source across the diode: exp(V/Vt)
+    is 1e173 at 10 V (plain Newton's 50 steps move it by 50 e-folds) and overflows at 20 V. The C
+    right-hand side alone (called directly: no numpy fallback) gives dq/dt = (v - q/Cf)/R3 with
+    the node voltage v that bisection finds, at reverse, zero and forward bias, and so does the
+    numpy module (MINPACK's hybr, then the same search with a difference Jacobian)."""
+    from test_runtime import shockley_node
+
+    namespace, _ = _compiled(ROOT / "tests" / "fixtures" / "sim" / "exp_diode.bg")
+    model = namespace["_Model"](namespace["_MODEL"])
+    ffi, lib = runtime.load_native(model.NATIVE_SOURCE)
+    for v_source in (-20.0, 0.0, 10.0, 20.0, 40.0):
+        p = namespace["param_array"](model.PARAMETERS, {"V": v_source}, model.derive_parameters)
+        for v_cap in (-15.0, 0.0, 0.3, 5.0, 19.0):
+            x = np.array([v_cap * 1e-3])
+            expected = (shockley_node(v_source, v_cap) - v_cap) / 50.0
+            out = np.zeros(1)
+            lib.bondc_rhs(0.0, ffi.from_buffer("double[]", x), ffi.from_buffer("double[]", p), ffi.NULL,
+                          ffi.from_buffer("double[]", out))
+            assert out[0] == pytest.approx(expected, rel=1e-9, abs=1e-12), (v_source, v_cap)
+            assert model.rhs(0.0, x, p, np.zeros(0))[0] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+@needs_cc
+def test_the_exponential_diode_charges_its_capacitor_as_the_circuit_does(monkeypatch, tmp_path):
+    """exp_diode.bg simulated with C and with numpy equals scipy's LSODA on the circuit written by
+    hand (node voltage by bisection at every call) to the model's tolerance: at 20 V the
+    capacitor settles where the diode clamps the node, near 0.48 V."""
+    from scipy.integrate import solve_ivp
+    from test_runtime import shockley_node
+
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    namespace, runs, _ = _runs(ROOT / "tests" / "fixtures" / "sim" / "exp_diode.bg")
+    reference = solve_ivp(lambda t, q: [(shockley_node(20.0, q[0] / 1e-3) - q[0] / 1e-3) / 50.0],
+                          (0.0, 0.5), [0.0], method="LSODA", rtol=1e-10, atol=1e-14, dense_output=True)
+    assert runs[None].stats["code"] == "native" and runs[False].stats["code"] == "numpy"
+    for run in runs.values():
+        assert run.complete and run.t[-1] == 0.5
+        q = run.states["cap.q"]
+        scale = float(np.ptp(reference.y[0]))
+        assert np.max(np.abs(q - reference.sol(run.t)[0])) <= 1e-4 * scale
+        assert 0.4 < run.outputs["v_diode"][-1] < 0.55
+        assert run.outputs["v_diode"][-1] == pytest.approx(shockley_node(20.0, q[-1] / 1e-3), rel=1e-9)
+
+
 @pytest.mark.slow
 @needs_cc
 def test_where_cs_newton_fails_the_numpy_module_solves_the_loop(monkeypatch, tmp_path):
-    """With no Newton iteration allowed, the C loop gives nan at every call, and every call goes to
+    """With no Newton iteration allowed (neither attempt), the C loop gives nan at every call, and every call goes to
     the numpy module (MINPACK's hybr): the run equals the numpy module's run to the bit."""
     from bondc.codegen.emit import _NativeEmitter
 
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(_NativeEmitter, "LOOP_ITERATIONS", 0)
+    monkeypatch.setattr(_NativeEmitter, "LOOP_SEARCHES", 0)
     namespace, runs, _ = _runs(ROOT / "tests" / "fixtures" / "sim" / "nonlinear_loop.bg")
     assert "bondc_k < 0" in namespace["NATIVE_SOURCE"]
     native, numpy_run = runs[None], runs[False]

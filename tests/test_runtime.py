@@ -318,3 +318,84 @@ def test_quad_is_scipys_quad_without_importing_scipy_integrate(law, a, b, exact,
     assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == pytest.approx(exact, rel=1e-10, abs=1e-14)
     monkeypatch.setattr(runtime, "_scipy_kernel", lambda *args: None)
     assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == expected
+
+
+# ------------------------------------------------------------------ nonlinear algebraic loops
+
+def shockley_node(v_source, v_cap, r1=100.0, r3=50.0, i_s=1e-9, v_t=0.025):
+    """The node voltage of exp_diode.bg, by bisection in plain floats (an independent reference):
+    (V - v)/R1 = Is (exp(v/Vt) - 1) + (v - v_cap)/R3, whose left side falls and right side rises."""
+    def kcl(v):
+        return (v_source - v) / r1 - i_s * math.expm1(min(v / v_t, 700.0)) - (v - v_cap) / r3
+    low, high = -1e3, 1e3
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if kcl(middle) > 0 else (low, middle)
+    return 0.5 * (low + high)
+
+
+@pytest.mark.parametrize("v_source", [-20.0, 0.0, 10.0, 20.0])
+def test_newton_search_solves_an_exponential_loop_far_from_its_guess(v_source):
+    """The loop of exp_diode.bg in the form the equations stage writes it (unknown: r1's effort z,
+    the diode's voltage V - z): from z = 0 the diode's exp((V - z)/Vt) is 1e173 at 10 V (hundreds
+    of plain Newton steps, where MINPACK's hybr gives up) and overflows at 20 V. The search reaches
+    the root that bisection finds, at reverse, zero and forward bias."""
+    def residual(z):
+        with np.errstate(over="ignore"):
+            return np.array([-100.0 * (1e-9 * (np.exp((v_source - z[0]) / 0.025) - 1)
+                                       + (v_source - z[0] - 2.0) / 50.0) + z[0]])
+
+    found = runtime.newton_search(residual, (0.0,))
+    expected = v_source - shockley_node(v_source, 2.0)
+    assert found is not None
+    assert found[0] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+    solved = runtime.solve_block(lambda z: tuple(residual(np.asarray(z))), 9001, (0.0,))
+    assert solved[0] == pytest.approx(expected, rel=1e-12, abs=1e-12)
+
+
+def test_minpack_alone_does_not_solve_the_exponential_loop():
+    """Why solve_block has its second attempt: hybr from the guess stops far from the root at 10 V."""
+    from scipy.optimize import root
+
+    def residual(z):
+        return np.array([-100.0 * (1e-9 * (np.exp((10.0 - z[0]) / 0.025) - 1) + (10.0 - z[0]) / 50.0) + z[0]])
+
+    attempt = root(residual, np.zeros(1), method="hybr", options={"xtol": 1e-12})
+    assert not (attempt.success and abs(residual(attempt.x)[0]) < 1e-6)
+
+
+def test_newton_search_finds_two_unknowns_and_gives_up_without_a_root():
+    """Two diodes in series with a resistor (unknowns: both diode voltages; the current is equal):
+    the search meets the bisection of the series equation; z^2 + 1 = 0 has no real root: None."""
+    def series(z):
+        with np.errstate(over="ignore"):
+            current = 1e-12 * (np.exp(z[0] / 0.025) - 1)
+            return np.array([current - 1e-12 * (np.exp(z[1] / 0.025) - 1),
+                             z[0] + z[1] + 10.0 * current - 5.0])
+
+    found = runtime.newton_search(series, (0.0, 0.0))
+    low, high = 0.0, 2.5        # each diode's voltage v: 2 v + 10 Is (exp(v/Vt) - 1) = 5
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if 2 * middle + 1e-11 * math.expm1(middle / 0.025) < 5.0 else (low, middle)
+    assert found == pytest.approx([low, low], rel=1e-12)
+    assert runtime.newton_search(lambda z: np.array([z[0] ** 2 + 1.0]), (0.0,)) is None
+
+
+def test_solve_block_does_not_take_minpacks_word_for_convergence():
+    """Warm-started at the root of the diode loop with the diode off (V = -20 V, capacitor at
+    5 V), the next call (capacitor at 19 V: the diode conducts) makes hybr report "converged" at
+    its start, where the residual is 28. solve_block checks the residual and the Newton step it
+    leaves, and finds the root that bisection finds."""
+    point = {"v_cap": 5.0}
+
+    def residual(z):
+        with np.errstate(over="ignore"):
+            return (-100.0 * (1e-9 * (np.exp((-20.0 - z[0]) / 0.025) - 1)
+                              + (-20.0 - z[0] - point["v_cap"]) / 50.0) + z[0],)
+
+    first = runtime.solve_block(residual, 9002, (0.0,))
+    assert first[0] == pytest.approx(-20.0 - shockley_node(-20.0, 5.0), rel=1e-12)
+    point["v_cap"] = 19.0
+    second = runtime.solve_block(residual, 9002, (0.0,))
+    assert second[0] == pytest.approx(-20.0 - shockley_node(-20.0, 19.0), rel=1e-12)

@@ -61,7 +61,7 @@ from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,
                                    relative_data_path)
-from bondc.runtime import UNIT_MARK
+from bondc.runtime import LOOP_START_OFFSETS, UNIT_MARK
 from bondc.symbolic import as_sympy, partial_derivative
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
@@ -1027,6 +1027,8 @@ class _NativeEmitter(_Emitter):
 
     #: Newton iterations of a nonlinear algebraic loop in C (from its guesses)
     LOOP_ITERATIONS = 50
+    #: iterations of the loop's second attempt, Newton's method with a line search
+    LOOP_SEARCHES = 100
 
     def statement_lines(self, statement, exprs, printer):
         if statement.kind == "assign":
@@ -1038,29 +1040,53 @@ class _NativeEmitter(_Emitter):
     def loop_lines(self, statement, printer) -> list:
         """A nonlinear algebraic loop R(z) = 0 solved in C by Newton's method with its analytic
         dR/dz, from its guesses at every call (no state kept between calls: a run never depends on
-        the runs or calls before it, as the numpy module's loops start from their guesses in every
-        run). Where it does not converge (a singular dR/dz, a value that is not finite, 50
-        iterations) its unknowns are nan, and the runtime evaluates that point with the numpy
-        module (MINPACK's hybr, as without C). Converged: the Newton step is below 1e-12 of the
-        unknowns' size."""
+        the runs or calls before it). Converged: the Newton step is below 1e-12 of the unknowns'
+        size.
+
+        Where plain Newton does not converge in 50 iterations (an exponential law far from its
+        root moves by one e-fold per step; a step that leaves a law's range), a second attempt
+        starts again from the guesses with a line search on max |R|: a step that does not lower
+        it is halved, and one that lowers it to more than a tenth is doubled while it keeps lowering
+        it (``runtime.newton_search``, the same method in numpy). Where R is not finite at the
+        guesses (a law's exponential overflows there), the search starts from the first of the
+        guesses plus ``LOOP_START_OFFSETS`` (added to every unknown) where it is finite. Where
+        dR/dz is singular or no step lowers the residual, and that is at rounding level (below
+        1e-10 of the unknowns' size: a node floating between reverse-biased diodes), that is the
+        root. Where the search fails otherwise (100 iterations), the unknowns are nan and the
+        runtime evaluates that point with the numpy module."""
         unknowns = statement.defines
         size = len(unknowns)
         names = [self.names[u] for u in unknowns]
         residuals = statement.data["residuals"]
         slopes = statement.data["slopes"]       # dR/dz, row by row (from the Jacobian's plan)
         text = lambda expr: self.text(printer, expr)     # noqa: E731
+        residual_texts = [text(r) for r in residuals]
+        slope_texts = [text(slope) for slope in slopes]
+        guesses = [f"    bondc_z[{i}] = {text(guess)};" for i, guess in enumerate(statement.data["guesses"])]
+
+        def evaluate(into, indent, source="bondc_z"):      # the unknowns' names from `source`, R into `into`
+            return ([f"{indent}{name} = {source}[{i}];" for i, name in enumerate(names)]
+                    + [f"{indent}{into}[{i}] = {r};" for i, r in enumerate(residual_texts)])
+
+        def factor(indent, singular="break;"):      # dR/dz at the unknowns' names, factorised
+            return ([f"{indent}bondc_a[{i}] = {slope};" for i, slope in enumerate(slope_texts)]
+                    + [f"{indent}if (bondc_lu({size}, bondc_a, bondc_piv) != 0) {singular}"])
+
+        # the search's end where it cannot go on: a root if the residual is at rounding level
+        at_rounding = (f"{{ double bondc_largest = 1.0; for (int i = 0; i < {size}; i++) "
+                       "bondc_largest = fmax(bondc_largest, fabs(bondc_z[i])); "
+                       "if (bondc_norm <= 1e-10 * bondc_largest) bondc_done = 1; break; }")
+
         lines = [f"/* algebraic loop {statement.data['number']}: Newton's method from its guesses */",
                  f"double {', '.join(names)};",
                  "{",
                  f"    double bondc_z[{size}], bondc_r[{size}], bondc_a[{size * size}];",
                  f"    int bondc_piv[{size}], bondc_done = 0;"]
-        lines += [f"    bondc_z[{i}] = {text(guess)};" for i, guess in enumerate(statement.data["guesses"])]
+        lines += guesses
         lines.append(f"    for (int bondc_k = 0; bondc_k < {self.LOOP_ITERATIONS}; bondc_k++) {{")
-        lines += [f"        {name} = bondc_z[{i}];" for i, name in enumerate(names)]
-        lines += [f"        bondc_r[{i}] = {text(r)};" for i, r in enumerate(residuals)]
-        lines += [f"        bondc_a[{i}] = {text(slope)};" for i, slope in enumerate(slopes)]
-        lines += [f"        if (bondc_lu({size}, bondc_a, bondc_piv) != 0) break;",
-                  f"        bondc_lu_solve({size}, bondc_a, bondc_piv, bondc_r);",
+        lines += evaluate("bondc_r", "        ")
+        lines += factor("        ")
+        lines += [f"        bondc_lu_solve({size}, bondc_a, bondc_piv, bondc_r);",
                   "        double bondc_step = 0.0, bondc_size = 0.0;",
                   "        int bondc_finite = 1;",
                   f"        for (int i = 0; i < {size}; i++) {{",
@@ -1071,8 +1097,64 @@ class _NativeEmitter(_Emitter):
                   "        }",
                   "        if (!bondc_finite) break;",
                   "        if (bondc_step <= 1e-12 * (1.0 + bondc_size)) { bondc_done = 1; break; }",
-                  "    }",
-                  f"    if (!bondc_done) for (int i = 0; i < {size}; i++) bondc_z[i] = NAN;"]
+                  "    }"]
+        if self.LOOP_SEARCHES:
+            offsets = ", ".join(f"{offset:g}" for offset in LOOP_START_OFFSETS)
+            lines += ["    if (!bondc_done) {     /* again from the guesses, with a line search on max |R| */",
+                      f"        static const double bondc_offsets[{len(LOOP_START_OFFSETS)}] = {{{offsets}}};",
+                      f"        double bondc_d[{size}], bondc_t[{size}], bondc_q[{size}], bondc_b[{size}];",
+                      "        double bondc_norm = INFINITY;",
+                      "        /* from the first of guesses + offset where R is finite */",
+                      f"        for (int bondc_o = 0; bondc_o < {len(LOOP_START_OFFSETS)} && !isfinite(bondc_norm); bondc_o++) {{"]
+            lines += ["        " + line[:-1] + " + bondc_offsets[bondc_o];" for line in guesses]
+            lines += evaluate("bondc_r", "            ")
+            lines += ["            bondc_norm = 0.0;",
+                      f"            for (int i = 0; i < {size}; i++) bondc_norm = fmax(bondc_norm, fabs(bondc_r[i]));",
+                      "            if (bondc_norm != bondc_norm) bondc_norm = INFINITY;",
+                      "        }",
+                      f"        for (int bondc_k = 0; bondc_k < {self.LOOP_SEARCHES} && isfinite(bondc_norm); bondc_k++) {{"]
+            lines += [f"            {name} = bondc_z[{i}];" for i, name in enumerate(names)]
+            lines += factor("            ", at_rounding)
+            lines += [f"            for (int i = 0; i < {size}; i++) bondc_d[i] = bondc_r[i];",
+                      f"            bondc_lu_solve({size}, bondc_a, bondc_piv, bondc_d);",
+                      "            double bondc_step = 0.0, bondc_size = 0.0;",
+                      f"            for (int i = 0; i < {size}; i++) {{",
+                      "                bondc_step = fmax(bondc_step, fabs(bondc_d[i]));",
+                      "                bondc_size = fmax(bondc_size, fabs(bondc_z[i] - bondc_d[i]));",
+                      "            }",
+                      "            if (!isfinite(bondc_step)) break;",
+                      "            if (bondc_step <= 1e-12 * (1.0 + bondc_size)) {",
+                      f"                for (int i = 0; i < {size}; i++) bondc_z[i] -= bondc_d[i];",
+                      "                bondc_done = 1;",
+                      "                break;",
+                      "            }",
+                      "            double bondc_alpha = 1.0, bondc_best = 0.0, bondc_least = bondc_norm;",
+                      "            int bondc_shrunk = 0;",
+                      "            for (int bondc_s = 0; bondc_s < 60; bondc_s++) {",
+                      f"                for (int i = 0; i < {size}; i++) bondc_t[i] = bondc_z[i] - bondc_alpha * bondc_d[i];"]
+            lines += evaluate("bondc_q", "                ", "bondc_t")
+            lines += ["                double bondc_tried = 0.0;",
+                      f"                for (int i = 0; i < {size}; i++) bondc_tried = fmax(bondc_tried, fabs(bondc_q[i]));",
+                      "                if (bondc_tried < bondc_least) {      /* false for nan */",
+                      "                    bondc_best = bondc_alpha;",
+                      "                    bondc_least = bondc_tried;",
+                      f"                    for (int i = 0; i < {size}; i++) bondc_b[i] = bondc_q[i];",
+                      "                    if (!bondc_shrunk && (bondc_alpha > 1.0 || bondc_tried > 0.1 * bondc_norm)) { bondc_alpha *= 2.0; continue; }",
+                      "                    break;",
+                      "                }",
+                      "                if (bondc_best > 0.0) break;",
+                      "                bondc_alpha *= 0.5;",
+                      "                bondc_shrunk = 1;",
+                      "            }",
+                      f"            if (!(bondc_best > 0.0)) {at_rounding}",
+                      f"            for (int i = 0; i < {size}; i++) {{",
+                      "                bondc_z[i] -= bondc_best * bondc_d[i];",
+                      "                bondc_r[i] = bondc_b[i];",
+                      "            }",
+                      "            bondc_norm = bondc_least;",
+                      "        }",
+                      "    }"]
+        lines.append(f"    if (!bondc_done) for (int i = 0; i < {size}; i++) bondc_z[i] = NAN;")
         lines += [f"    {name} = bondc_z[{i}];" for i, name in enumerate(names)]
         lines.append("}")
         return lines

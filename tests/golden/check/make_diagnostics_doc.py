@@ -145,8 +145,12 @@ d("W604", "nonlinear algebraic loop",
   "An algebraic loop (I603) whose equations are not linear in the loop's unknowns (a diode, a turbulent "
   "orifice, a friction law), so bondc cannot solve it symbolically. It is kept as an implicit equation and "
   "solved numerically at every evaluation of the state equations: in the compiled C code by Newton's method "
-  "with the loop's analytic Jacobian, from its guesses; where that does not converge, by the numpy module "
-  "(`scipy.optimize.root`, warm-started).",
+  "with the loop's analytic Jacobian, from its guesses, and where that does not converge in 50 steps (an "
+  "exponential law far from its root moves one e-fold per step) by Newton's method again with a line search "
+  "that halves or doubles the step on the largest residual, from the guesses or, where the residual overflows "
+  "there, from the guesses plus 1, -1, 10, -10, ... 1000, -1000; where that fails too, by the numpy module "
+  "(`scipy.optimize.root`, warm-started, then the same line search). A solution counts when its residual, "
+  "or the Newton step it leaves, is at rounding level.",
   "Usually nothing: the run is slower, and where the solve fails its unknowns become nan and the run stops "
   "(E810). To remove the loop, add a small storage element, or give the resistor's law in the form the loop needs.")
 d("E605", "law cannot be inverted",
