@@ -240,6 +240,31 @@ def test_energy_balance_closes_on_model(name):
     assert not [d for d in account.diagnostics if d.code == "W930"]
 
 
+def test_a_balance_spoilt_by_atol_names_the_state_and_the_atol_that_closes_it():
+    """orifice_chamber.bg: the chamber's volume spans about 2e-6 m^3, which the default atol of
+    1e-9 resolves to 5e-4. The balance misses by more than 1e-6 of the throughput (W930), and the
+    hint names chamber.q and atol = rtol x its span, rounded down to a power of ten; the
+    experiment with that atol closes the balance (conservation: supplied = dissipated + stored)."""
+    from bondc.analysis.energy import atol_limited
+
+    path = Path(__file__).parent / "fixtures" / "engine" / "orifice_chamber.bg"
+    graph, _ = semantic.load(path, experiment=semantic.FIRST)
+    ss = derive(assign_causality(graph))
+    loose, resolved = graph.experiments["run"], graph.experiments["resolved"]
+    result = simulate(ss, loose)
+    span = float(np.ptp(result.states["chamber.q"]))
+    assert 1e-6 < span < 1e-5
+    assert atol_limited(result, 1e-6, 1e-9) == [("chamber.q", span)]
+    assert atol_limited(result, 1e-6, 1e-12) == []
+    (warning,) = [d for d in energy_account(ss, result).diagnostics if d.code == "W930"]
+    wanted = 10.0 ** math.floor(math.log10(1e-6 * span))
+    assert wanted == 1e-12
+    assert "'chamber.q' spans only" in warning.hint and "set atol = 1e-12" in warning.hint
+    closed = energy_account(ss, simulate(ss, resolved))
+    assert not [d for d in closed.diagnostics if d.code == "W930"]
+    assert closed.windows[0].balance.relative_residual < 1e-6
+
+
 @pytest.mark.slow
 def test_a_models_algebraic_loop_is_evaluated_in_c_for_its_energy_account(monkeypatch):
     """The diode bridge is evaluated point by point (its loop is solved at every point): the energy

@@ -398,8 +398,11 @@ d("W930", "energy balance does not close",
   "After a run, bondc accounts the energy of every element per cycle; for a cycle, the sources' net energy "
   "differs from dissipated + stored + net work in by more than 1e-6 of the energy throughput. The residual is "
   "the simulation's accumulated error. `bondc simulate` prints it as the last line of the energy account "
-  "(`--json`: in `energy.diagnostics`, with the hint).",
-  "Tighten `rtol` and `atol` in the experiment.")
+  "(`--json`: in `energy.diagnostics`, with the hint). Where a state spans so little over the run that "
+  "`atol` resolves it more than ten times more coarsely than `rtol` asks (a hydraulic chamber's volume in m^3, "
+  "about 1e-6, at the default atol of 1e-9), the hint names that state and the atol that resolves it: "
+  "tightening `rtol` alone changes nothing then.",
+  "Tighten `rtol` and `atol` in the experiment; `atol` to the value the hint gives where it names a state.")
 d("W931", "two-port does not conserve power",
   "A transformer's or gyrator's work in at its two ports does not sum to zero over a cycle. bondc writes the "
   "two-port equations so that p1.e*p1.f = p2.e*p2.f holds exactly, so this is an internal consistency check of "
