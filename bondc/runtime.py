@@ -2837,6 +2837,8 @@ def output_grid(t_start, t_end, dt):
 
 #: The three C functions of ``NATIVE_SOURCE`` (see ``bondc.codegen.emit._NativeEmitter``).
 _NATIVE_FUNCTIONS = ("bondc_rhs", "bondc_jac", "bondc_switches")
+#: a model with a nonlinear algebraic loop also has its outputs and variables in C (where C can print them)
+_NATIVE_POINT_FUNCTIONS = ("bondc_outputs", "bondc_variables")
 #: Compiler flags: no contraction into fused multiply-adds, so C rounds like numpy.
 _NATIVE_FLAGS = ("-fPIC", "-shared", "-ffp-contract=off")
 #: Optimisation by the size of each translation unit's text: gcc's -O2 (and -O1) grow much faster
@@ -3419,7 +3421,8 @@ def _build_native(source, libraries):
         build.discard()
     ffi = cffi.FFI()
     ffi.cdef("".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
-                     for name in _NATIVE_FUNCTIONS) + (_DRIVER_DECLARATIONS if libraries else ""))
+                     for name in _NATIVE_FUNCTIONS + _NATIVE_POINT_FUNCTIONS)
+             + (_DRIVER_DECLARATIONS if libraries else ""))
     try:
         lib = ffi.dlopen(path)
     except OSError as error:
@@ -3632,9 +3635,35 @@ def attach_native(model, native=None):
         return out
 
     model.rhs, model.jac, model.switches = rhs, jac, switches
+    if loops:
+        _attach_point_functions(model, lib, arrays, buffer, doubles)
     if hasattr(lib, "bondc_driver_new"):
         model.native_library = (ffi, lib)
     return True, ""
+
+
+def _attach_point_functions(model, lib, arrays, buffer, doubles) -> None:
+    """A model with a nonlinear algebraic loop, evaluated point by point: its outputs and variables
+    from C (the loop solved by Newton's method there) where the library has them; a point where C
+    gives a value that is not finite is evaluated by the numpy module (its loop solved by MINPACK's
+    hybr), which gives what the model gives there without C."""
+    for name, size in (("outputs", len(model.OUTPUT_NAMES)), ("variables", len(model.VARIABLE_NAMES))):
+        try:
+            function = getattr(lib, f"bondc_{name}")
+        except AttributeError:          # a library without them (C could not print them)
+            continue
+
+        def evaluate(t, x, p, m, c_function=function, numpy_function=getattr(model, name), size=size):
+            arguments = arrays(t, x, p, m)
+            if arguments is None or not size:
+                return numpy_function(t, x, p, m)
+            out = np.empty(size)
+            c_function(*arguments, buffer(doubles, out))
+            if not math.isfinite(out.sum()):
+                return numpy_function(t, x, p, m)
+            return out
+
+        setattr(model, name, evaluate)
 
 
 def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=None, atol=None,

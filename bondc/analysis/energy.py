@@ -435,14 +435,15 @@ class _Model:
 
     def _native_point_functions(self, namespace: Mapping) -> None:
         """A model evaluated point by point (its algebraic loops are solved at every point: numpy's
-        MINPACK from Python) has its right-hand side and switching functions evaluated by its C code
-        where that is built (the loops solved there by Newton's method; numpy's where that fails)."""
+        MINPACK from Python) has its right-hand side, switching functions and variables evaluated
+        by its C code where that is built (the loops solved there by Newton's method; numpy's where
+        that fails)."""
         make, attach = namespace.get("_Model"), namespace.get("attach_native")
         if make is None or attach is None or "_MODEL" not in namespace:
             return
         model = make(namespace["_MODEL"])
         if attach(model, None)[0]:
-            self._rhs, self._switches = model.rhs, model.switches
+            self._rhs, self._switches, self._variables = model.rhs, model.switches, model.variables
 
     def _columns(self, function, t, x, modes, rows):
         out = np.empty((rows, t.size))

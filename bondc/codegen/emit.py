@@ -1214,6 +1214,15 @@ class _NativeEmitter(_Emitter):
                      self.c_function("bondc_switches", plan.statements, [s.g for s in plan.switches])]
         except UnsupportedExpression as error:
             return "", str(error)
+        if plan.blocks:
+            # a model with a nonlinear algebraic loop is evaluated point by point: its outputs and
+            # variables in C too (the loop solved there), where C can print them
+            try:
+                parts += [self.c_function("bondc_outputs", plan.statements, [expr for _, expr in plan.outputs]),
+                          self.c_function("bondc_variables", plan.statements,
+                                          [symbol for _, symbol, _ in plan.variables])]
+            except UnsupportedExpression:
+                pass
         # each function may be compiled on its own (runtime._native_units: a large model's
         # functions are built in parallel); the prelude comes first in every unit
         return ("\n\n" + UNIT_MARK).join(parts) + "\n", ""
