@@ -240,6 +240,29 @@ def test_energy_balance_closes_on_model(name):
     assert not [d for d in account.diagnostics if d.code == "W930"]
 
 
+def test_a_hard_stops_stored_energy_is_not_missed_by_the_quadrature():
+    """hard_stop.bg rests 15 um into a stop whose law is zero over the first 50 mm: integrated from
+    0 in one piece, QUADPACK's nodes all fall where the law is zero and the stop's energy came out
+    0 (a false W930). Integrated in pieces split at the state's values at the run's events (the
+    contact), it is kc (q - gap)^2 / 2 of the final state, and the balance closes."""
+    from bondc.analysis.energy import stored_energy_functions
+
+    ss, experiment = load(Path(__file__).parent / "fixtures" / "engine" / "hard_stop.bg")
+    stop = stored_energy_functions(ss, {})["stop"]
+    assert stop.kind == "numeric"
+    assert stop.change(0.0, 0.050015)[2] == 0.0       # one piece: the law's nonzero end is missed
+    assert stop.change(0.0, 0.050015, breaks=(0.05,))[2] == pytest.approx(0.5e6 * 0.000015 ** 2, rel=1e-9)
+    assert stop.change(0.050015, 0.0, breaks=(0.05,))[2] == pytest.approx(-0.5e6 * 0.000015 ** 2, rel=1e-9)
+    result = simulate(ss, experiment)
+    account = energy_account(ss, result)
+    q_end = float(result.states["stop.q"][-1])
+    assert q_end == pytest.approx(0.05 + (20.0 - 100.0 * 0.05) / (100.0 + 1e6), rel=1e-6)
+    entry = account.windows[0].element("stop")
+    assert entry.stored_change == pytest.approx(0.5e6 * (q_end - 0.05) ** 2, rel=1e-6)
+    assert account.windows[0].balance.relative_residual < 1e-6
+    assert not [d for d in account.diagnostics if d.code == "W930"]
+
+
 def test_a_balance_spoilt_by_atol_names_the_state_and_the_atol_that_closes_it():
     """orifice_chamber.bg: the chamber's volume spans about 2e-6 m^3, which the default atol of
     1e-9 resolves to 5e-4. The balance misses by more than 1e-6 of the throughput (W930), and the

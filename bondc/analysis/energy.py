@@ -14,7 +14,10 @@ gives:
   function is ``StateSpace.energy`` (polynomial laws, analytic) or, for a law
   of the element's own default state alone that is not polynomial (a spring
   with backlash, a tyre that lifts off), ``integral of law dx`` between the two
-  end states by adaptive quadrature ("numeric");
+  end states by adaptive quadrature ("numeric"), in pieces split at the state's
+  values at the run's events, where such a law switches (a hard stop's law is
+  zero on all but the last 3e-4 of the way: in one piece, every node of the
+  quadrature can fall where it is zero);
 - a storage element with a state of its own whose rate is proportional to
   its port flow (C) or effort (I), ``der(x) = k(x)*f``, and whose law depends
   on that state alone (a hydraulic chamber ``state p, der(p) = beta/V*f,
@@ -808,19 +811,30 @@ class _StoredEnergy:
         self.law = law                      # e(q) or f(p): dH/dx, numeric
         self.recipe = recipe
 
-    def change(self, start: float, end: float) -> tuple[float, float, float]:
-        """(H at start, H at end, change); a numeric H is the law integrated from a zero state."""
+    def change(self, start: float, end: float, breaks=()) -> tuple[float, float, float]:
+        """(H at start, H at end, change); a numeric H is the law integrated from a zero state,
+        in pieces between the ``breaks`` (state values where the law may switch: quadrature that
+        straddles a switch can miss it, as 21 Kronrod nodes over [0, 0.050015] all miss a hard
+        stop's law, zero below 0.05)."""
         if self.kind == "analytic":
             h0, h1 = float(self.function(start)), float(self.function(end))
             return h0, h1, h1 - h0
         # the change is integrated directly (not as a difference of two large integrals)
-        return self._integral(0.0, start), self._integral(0.0, end), self._integral(start, end)
+        return (self._integral(0.0, start, breaks), self._integral(0.0, end, breaks),
+                self._integral(start, end, breaks))
 
-    def _integral(self, a: float, b: float) -> float:
-        from bondc.runtime import quad
-
+    def _integral(self, a: float, b: float, breaks=()) -> float:
         if a == b:
             return 0.0
+        low, high = min(a, b), max(a, b)
+        inner = sorted({float(x) for x in breaks if low < x < high})
+        edges = [low, *inner, high]
+        total = sum(self._piece(edges[i], edges[i + 1]) for i in range(len(edges) - 1))
+        return total if b > a else -total
+
+    def _piece(self, a: float, b: float) -> float:
+        from bondc.runtime import quad
+
         with np.errstate(all="ignore"):
             # a law that is not finite on the way (outside its domain) gives nan: no energy function
             size = max(abs(self.law(a)), abs(self.law(b)), abs(self.law(0.5 * (a + b)))) * abs(b - a)
@@ -1094,6 +1108,16 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
             return float(state_bounds[name][1 if at_end else 0][index])
         return float(values[name][index, -1 if at_end else 0])
 
+    event_times = np.array(sorted({float(time) for time, _ in getattr(result, "events", ())}))
+
+    def switch_values(name):
+        """The state's values at the run's events: where a law may switch (a hard stop's
+        ``if q > gap``), breakpoints of its numeric energy function's quadrature."""
+        if not event_times.size or name not in state_bounds:
+            return ()
+        index = np.clip(np.searchsorted(step_end, event_times), 0, step_end.size - 1)
+        return tuple(float(v) for v in np.asarray(state_bounds[name][1])[index] if math.isfinite(v))
+
     per_element: dict[str, list[ElementEnergy]] = {}
     diagnostics: list[Diagnostic] = []
     for element in graph.elements.values():
@@ -1125,9 +1149,10 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
                 entries.append(ElementEnergy(**common, port_work=(net[0], net[1])))
             elif element.name in energies:
                 energy = energies[element.name]
+                breaks = switch_values(energy.state_name) if energy.kind == "numeric" else ()
                 h0, h1, change = energy.change(value_at(energy.state_name, start, False),
-                                               value_at(energy.state_name, end, True))
-                jumps = [energy.change(before[energy.state_name], after[energy.state_name])[2]
+                                               value_at(energy.state_name, end, True), breaks)
+                jumps = [energy.change(before[energy.state_name], after[energy.state_name], breaks)[2]
                          for time, before, after in getattr(result, "jumps", ())
                          if start < time <= end and energy.state_name in before]
                 if math.isfinite(change):
