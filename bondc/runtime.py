@@ -1446,14 +1446,23 @@ class _Run:
         where = f"'{variable}' became {what} at t={t:.6g}" if variable else f"a {what} appeared at t={t:.6g}"
         if law:
             where += f" (its law: {variable} = {law})"
-        if what == "nan":
-            cause = ("a law was evaluated outside its domain: the square root or logarithm of a negative "
-                     "number, 0/0 or inf - inf")
-        else:
-            cause = "a division by zero or an overflow (a quantity growing without bound)"
         states = ", ".join(f"{name}={float(xi):.6g}" for name, xi in zip(model.STATE_NAMES, x))
-        hint = (f"check the law of '{variable or '?'}' for the states at t={t:.6g} ({states}); a state that "
-                "left its physical range (a negative pressure, a closed gap) is the usual reason")
+        if what == "nan" and law and law.startswith("root of the algebraic loop"):
+            cause = ("the nonlinear algebraic loop was not solved at this state (Newton's method with a line "
+                     "search from its guesses, then MINPACK's hybr): a law in the loop with an infinite slope "
+                     "(sign(e)*sqrt(abs(e)) at e = 0) or that leaves its domain on the way, unknowns of very "
+                     "different sizes (flows of 1e-8 m^3/s beside pressures of 1e5 Pa), or no solution there")
+            hint = (f"the states at t={t:.6g}: {states}. A small storage element in the loop (a node volume, "
+                    "a line capacitance, a mass) removes the loop and its solve; a law with a finite slope at "
+                    "zero (a laminar band around zero flow) lets Newton's method through")
+        else:
+            if what == "nan":
+                cause = ("a law was evaluated outside its domain: the square root or logarithm of a negative "
+                         "number, 0/0 or inf - inf")
+            else:
+                cause = "a division by zero or an overflow (a quantity growing without bound)"
+            hint = (f"check the law of '{variable or '?'}' for the states at t={t:.6g} ({states}); a state that "
+                    "left its physical range (a negative pressure, a closed gap) is the usual reason")
         return {"message": f"{context}{where}", "time": float(t), "variable": variable,
                 "law": law, "cause": cause, "hint": hint, "kind": "nonfinite"}
 

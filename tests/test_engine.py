@@ -303,6 +303,26 @@ def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     assert len(switching) >= 8 and len(switching) % 2 == 0
 
 
+def test_a_loop_that_loses_its_root_stops_with_the_loops_own_cause_and_hint():
+    """nonlinear_loop.bg with a3 = -1: r2's law e = -f^3 + f folds back. The loop u = R3 (i - f2) =
+    -f2^3 + f2, i.e. f2^3 - 4 f2 + 3 i = 0, loses the root the run follows (from f2 = 0) where
+    3 i reaches the cubic's local maximum 16/(3 sqrt 3): at a coil current of 1.0264 A. The run
+    stops there (E810) naming the loop's unknown, and the cause and hint speak of the loop (slopes,
+    sizes, a storage element to break it), not of a law outside its domain."""
+    from bondc.errors import SimulationError
+
+    with pytest.raises(SimulationError) as stopped:
+        run(Path(__file__).parent / "fixtures" / "sim" / "nonlinear_loop.bg", sets=["a3=-1"])
+    (diagnostic,) = [d for d in stopped.value.diagnostics if d.code == "E810"]
+    assert "root of the algebraic loop" in diagnostic.message
+    assert "the nonlinear algebraic loop was not solved at this state" in diagnostic.message
+    assert "outside its domain" not in diagnostic.message
+    assert "storage element in the loop" in diagnostic.hint
+    result = stopped.value.result
+    assert not result.complete
+    assert result.states["coil.p"][-1] / 0.5 == pytest.approx(16 / (3 * 3 ** 0.5) / 3, rel=1e-6)
+
+
 def shockley_bridge(vs, vc, Rs=1.0, RL=100.0, Is=1e-12, Vt=0.025):
     """Nodal analysis of diode_bridge_shockley.bg (node b = 0 V, v_p = v_n + vc): the capacitor
     current and (v_a, v_n). With I(v) = Is (exp(v/Vt) - 1) for d1 (a -> p), d2 (b -> p), d3

@@ -224,7 +224,11 @@ d("E810", "a value became nan or inf",
   "command exits with status 1.",
   "A law was evaluated outside its domain: the square root or logarithm of a negative number (a tank that "
   "emptied, a pressure that went negative), a division by zero. Guard the law (`sqrt(max(q - 1, 0))`), or "
-  "stop the experiment before the state leaves its physical range.")
+  "stop the experiment before the state leaves its physical range. Where the variable is an unknown of a "
+  "nonlinear algebraic loop (W604) that was not solved at that state, the cause and hint say so instead: a law "
+  "in the loop with an infinite slope (`sign(e)*sqrt(abs(e))` at zero flow), unknowns of very different sizes, "
+  "or a loop with no solution there; a small storage element in the loop, or a law with a finite slope at "
+  "zero, removes the difficulty.")
 d("E811", "solver failure",
   "The ODE solver gave up: its step size became too small. The model is stiffer than the method can handle "
   "(an explicit solver on a stiff model), a variable grows without bound (here `x` reaches infinity at "
