@@ -517,6 +517,8 @@ class _Model:
         self.SWITCH_KINDS = optional("SWITCH_KINDS", tuple, ("sign",) * count)
         self.SWITCH_OWNERS = optional("SWITCH_OWNERS", tuple, ("",) * count)
         self.TIME_SWITCHES = optional("TIME_SWITCHES", lambda k: tuple(map(int, k)), ())
+        # a model with an algebraic loop: its switches of time alone, over arrays of times
+        self.time_switches = optional("_time_switches", lambda f: f, None)
         # variables that are one quantity share a row of the result (VARIABLE_ROWS[i]: variable
         # i's row, rows numbered in order of first use); ``row_variables``: each row's first variable
         rows = optional("VARIABLE_ROWS", lambda r: tuple(map(int, r)), None)
@@ -1527,25 +1529,41 @@ class _Run:
         number of sign changes (level crossings for ``floor``) stops changing, and every change
         is refined by ``brentq``. Those switches then end segments at known times."""
         model = self.model
-        if not model.TIME_SWITCHES or not getattr(model, "VECTORIZED", True):
+        if not model.TIME_SWITCHES:
             return []
         n = len(model.STATE_NAMES)
         ones = np.ones(self.switch_count)
+        if getattr(model, "VECTORIZED", True):
+            switches, row_of, rows_count = model.switches, {k: k for k in model.TIME_SWITCHES}, self.switch_count
+        elif getattr(model, "time_switches", None) is not None:
+            # a model with an algebraic loop: its switches of time alone, without the loop
+            switches, row_of = model.time_switches, {k: i for i, k in enumerate(model.TIME_SWITCHES)}
+            rows_count = len(row_of)
+        else:
+            return []
 
         def values(times, k):
             out = np.empty(times.size)
             for start in range(0, times.size, 65536):
                 chunk = times[start:start + 65536]
                 with np.errstate(all="ignore"):
-                    rows = np.broadcast_to(model.switches(chunk, np.zeros((n, chunk.size)), self.p, ones),
-                                           (self.switch_count, chunk.size))
-                out[start:start + chunk.size] = rows[k]
+                    rows = np.broadcast_to(switches(chunk, np.zeros((n, chunk.size)), self.p, ones),
+                                           (rows_count, chunk.size))
+                out[start:start + chunk.size] = rows[row_of[k]]
             return out
 
         def changes(g, k):
             if model.floor_switches[k]:
                 return np.flatnonzero(np.diff(np.floor(g)) != 0)
             signs = np.sign(g)
+            zero = signs == 0
+            if zero.any():
+                # g exactly 0 at a sample (pwm's edge at t = 0.1 s on a grid through 0.1 s) takes the
+                # sign after it: the change then falls in the interval ending there, and brentq
+                # returns that sample (g(b) = 0); a product of signs through the zero saw none
+                after = np.where(zero, signs.size, np.arange(signs.size))
+                after = np.minimum.accumulate(after[::-1])[::-1]
+                signs = np.where(after < signs.size, signs[np.minimum(after, signs.size - 1)], 0.0)
             return np.flatnonzero(signs[:-1] * signs[1:] < 0)
 
         roots, located = [], set()
@@ -1564,7 +1582,7 @@ class _Run:
             if not settled:
                 continue            # not resolvable by sampling: left to event location
             label = model.SWITCHES[k]
-            scalar = lambda tt, k=k: float(model.switches(tt, np.zeros(n), self.p, ones)[k])
+            scalar = lambda tt, k=k: float(np.ravel(switches(tt, np.zeros(n), self.p, ones))[row_of[k]])
             for i in changes(g, k):
                 a, b = grid[i], grid[i + 1]
                 if model.floor_switches[k]:

@@ -323,6 +323,60 @@ def test_a_loop_that_loses_its_root_stops_with_the_loops_own_cause_and_hint():
     assert result.states["coil.p"][-1] / 0.5 == pytest.approx(16 / (3 * 3 ** 0.5) / 3, rel=1e-6)
 
 
+@pytest.mark.parametrize("native", ["1", "0"])
+def test_short_pulses_into_a_model_with_an_algebraic_loop_are_not_stepped_over(native, monkeypatch):
+    """pwm_diode.bg: 20 V pulses of 0.2 ms at 50 Hz into a Shockley diode's loop. The pulses are
+    switches of time alone, found before the run for this model too, with C and without (it is
+    evaluated point by point): every one of the 19 edges inside the run is an event, the rising
+    one at exactly 0.1 s too (the switch is exactly 0 at that sample of the search grid), and the
+    capacitor charges as the circuit integrated pulse by pulse with scipy (node voltage by
+    bisection) does. Before, the run had 1 event and stepped over every pulse after the first
+    (5.0e-7 C at the end instead of 9.7e-6 C)."""
+    from test_runtime import shockley_node
+
+    monkeypatch.setenv("BONDC_NATIVE", native)
+    result = run(Path(__file__).parent / "fixtures" / "sim" / "pwm_diode.bg")
+    assert result.complete
+    edges = sorted(time for time, label in result.events if "pwm" in label)
+    expected_edges = sorted([k / 50 for k in range(1, 10)] + [k / 50 + 0.0002 for k in range(10)])
+    assert edges == pytest.approx(expected_edges, abs=1e-12)
+
+    def rate(t, q, v_source):
+        return [(shockley_node(v_source, q[0] / 1e-3) - q[0] / 1e-3) / 50.0]
+
+    q, times, charges = [0.0], [], []
+    for k in range(10):
+        for start, end, v_source in ((k / 50, k / 50 + 0.0002, 20.0), (k / 50 + 0.0002, (k + 1) / 50, 0.0)):
+            piece = solve_ivp(rate, (start, end), q, args=(v_source,), method="LSODA", rtol=1e-10, atol=1e-14)
+            q = [float(piece.y[0, -1])]
+            times.append(end)
+            charges.append(q[0])
+    at = np.interp(times, result.t, result.states["cap.q"])
+    scale = max(charges)
+    assert 5e-6 < scale < 2e-5
+    np.testing.assert_allclose(at, charges, rtol=0, atol=1e-4 * scale)
+
+
+def test_a_time_switch_that_is_exactly_zero_at_a_sample_of_the_search_grid_is_an_edge():
+    """pwm(t, 50, 0.01)'s switch, cos(2 pi (50 t - 0.005)) - cos(0.01 pi), is exactly 0 at
+    t = 0.1 s, a sample of every grid the search takes over [0, 0.2] s. The same circuit with a
+    linear resistor (a model evaluated over arrays) has all 19 edges as events, at 0.1 s too."""
+    import re
+
+    text = (Path(__file__).parent / "fixtures" / "sim" / "pwm_diode.bg").read_text()
+    linear = re.sub(r"R  diode  : f = .*", "R  diode  : f = e/1000", text)
+    assert linear != text
+    t = np.linspace(0.0, 0.2, 4097)
+    assert (np.cos(2 * np.pi * (t * 50 - 0.005)) - np.cos(np.pi * 0.01))[2048] == 0.0
+    import tempfile
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "pwm_linear.bg"
+        path.write_text(linear)
+        result = run(path)
+    edges = sorted(time for time, label in result.events if "pwm" in label)
+    assert len(edges) == 19 and min(abs(e - 0.1) for e in edges) < 1e-12
+
+
 def shockley_bridge(vs, vc, Rs=1.0, RL=100.0, Is=1e-12, Vt=0.025):
     """Nodal analysis of diode_bridge_shockley.bg (node b = 0 V, v_p = v_n + vc): the capacitor
     current and (v_a, v_n). With I(v) = Is (exp(v/Vt) - 1) for d1 (a -> p), d2 (b -> p), d3

@@ -74,7 +74,7 @@ MODULE_NAMES = (
     "_when_conditions", "DEFAULTS",
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
-    "_time_breaks", "_MODEL", "_dae", "_loop_values", "_za", "_ra", "DAE_SIZE",
+    "_time_breaks", "_MODEL", "_dae", "_loop_values", "_za", "_ra", "DAE_SIZE", "_time_switches",
 )
 _INDENT = "    "
 _LAW_LIMIT = 200
@@ -776,6 +776,14 @@ class _Emitter:
             "def _switches(t, x, p, m):", "Switching functions: the sign of each is its mode.",
             statements, [s.g for s in plan.switches],
             lambda texts: ["return stack(" + "".join(text + ", " for text in texts).rstrip(", ") + ")"]))
+        timed = [sw for sw in plan.switches if sw.event and sw.time_only]
+        if plan.blocks and timed:
+            # a model with an algebraic loop is evaluated point by point, but its switches of time
+            # alone are not in the loop: over many times at once, to find their zeros before the run
+            parts.append(self.function(
+                "def _time_switches(t, x, p, m):", "The switches of time alone (TIME_SWITCHES), over arrays of times.",
+                statements, [sw.g for sw in timed],
+                lambda texts: ["return stack(" + "".join(text + ", " for text in texts).rstrip(", ") + ")"]))
         parts.append(self.function(
             "def _outputs(t, x, p, m):", "Outputs with the modes m frozen.",
             statements, [expr for _, expr in plan.outputs],
