@@ -1062,7 +1062,9 @@ def _check_expr(m: _Model, expr: ast.Expr, scope: _Scope) -> bool:
 _PARAMETER_RULE = "a parameter is a constant: numbers, parameters defined above it, pi and functions"
 _OVERRIDE_RULE = "an override is a constant: numbers, parameters, pi and functions"
 _CONSTANT_RULE = "{} is a constant: numbers, parameters, pi and functions"
-_INPUT_RULE = "an input is a signal of t, parameters and other inputs (table, step, csv, functions)"
+_INPUT_RULE = ("an input is a signal of t, parameters and other inputs (table, step, csv, functions); "
+               "feedback from the states goes into an element's law, a modulated source's for a controller "
+               "(MSe drive : e = Kp*(x_ref - mass.q))")
 _GENERAL_RULE = ("an expression may use parameters, inputs, outputs, model states, t, functions and graph "
                  "variables (X.e, X.f, X.q, J.e, b3.f)")
 

@@ -453,6 +453,9 @@ def test_contexts(tmp_path):
         ("E316", 2), ("E316", 3), ("E316", 4), ("E306", 5), ("E306", 5), ("E301", 5), ("E313", 6)]
     # a function inside a model may use the model's parameters (a), not its signals (F)
     assert found[2].message == "function 'g' cannot use input 'F'"
+    # an input that reads the graph (feedback, a first controller): the hint says where that goes
+    assert found[1].message == "an input cannot use the graph variable 'mass.f'"
+    assert "modulated source" in found[1].hint and "MSe" in found[1].hint
 
 
 def test_recursive_functions(tmp_path):
