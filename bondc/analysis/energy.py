@@ -1186,10 +1186,12 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
         relative = balance.relative_residual
         if relative is not None and relative > RESIDUAL_TOLERANCE:
             settings = getattr(result, "settings", {}) or {}
+            units_of = {e.unit for e in entries}        # a pseudo bond graph's own (K*J), as the table says
+            unit = " " + units_of.pop() if len(units_of) == 1 else ""
             diagnostics.append(Diagnostic(
                 "warning", "W930",
-                f"the energy balance of cycle {index + 1} does not close: residual {balance.residual:.3e} J, "
-                f"{relative:.2e} of the throughput {balance.throughput:.6g} J",
+                f"the energy balance of cycle {index + 1} does not close: residual {balance.residual:.3e}{unit}, "
+                f"{relative:.2e} of the throughput {balance.throughput:.6g}{unit}",
                 hint=_residual_hint(result, settings)))
     return EnergyAccount(
         model=getattr(graph, "name", ""), experiment=getattr(result, "experiment", None),
