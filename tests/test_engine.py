@@ -357,7 +357,7 @@ def test_short_pulses_into_a_model_with_an_algebraic_loop_are_not_stepped_over(n
     np.testing.assert_allclose(at, charges, rtol=0, atol=1e-4 * scale)
 
 
-def test_a_time_switch_that_is_exactly_zero_at_a_sample_of_the_search_grid_is_an_edge():
+def test_a_time_switch_that_is_exactly_zero_at_a_sample_of_the_search_grid_is_an_edge(tmp_path):
     """pwm(t, 50, 0.01)'s switch, cos(2 pi (50 t - 0.005)) - cos(0.01 pi), is exactly 0 at
     t = 0.1 s, a sample of every grid the search takes over [0, 0.2] s. The same circuit with a
     linear resistor (a model evaluated over arrays) has all 19 edges as events, at 0.1 s too."""
@@ -368,11 +368,9 @@ def test_a_time_switch_that_is_exactly_zero_at_a_sample_of_the_search_grid_is_an
     assert linear != text
     t = np.linspace(0.0, 0.2, 4097)
     assert (np.cos(2 * np.pi * (t * 50 - 0.005)) - np.cos(np.pi * 0.01))[2048] == 0.0
-    import tempfile
-    with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "pwm_linear.bg"
-        path.write_text(linear)
-        result = run(path)
+    path = tmp_path / "pwm_linear.bg"
+    path.write_text(linear)
+    result = run(path)
     edges = sorted(time for time, label in result.events if "pwm" in label)
     assert len(edges) == 19 and min(abs(e - 0.1) for e in edges) < 1e-12
 
