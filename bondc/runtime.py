@@ -380,8 +380,16 @@ def solve_block(residual, number, guess):
     start = _BLOCK_SOLUTIONS.get(key)
     if start is None or not np.all(np.isfinite(start)):
         start = np.asarray(guess, dtype=float)
-    function = lambda z: np.asarray(residual(z), dtype=float)
+    x = solve_loop(lambda z: np.asarray(residual(z), dtype=float), start, guess)
+    if x is None:
+        return tuple(np.full(len(start), np.nan))
+    _BLOCK_SOLUTIONS[key] = x
+    return tuple(x)
 
+
+def solve_loop(function, start, guess):
+    """A root of a nonlinear algebraic loop's residual ``function``, or None: MINPACK's hybr from
+    ``start`` (a warm start), then from ``guess``, then :func:`newton_search` from ``guess``."""
     def solved(x):
         # hybr's own verdict is not enough: "not making good progress" where the residual is
         # already at rounding level, and "converged" where its trust region collapsed far from
@@ -399,18 +407,14 @@ def solve_block(residual, number, guess):
             step = _newton_step(function, x, left)
         return step is not None and float(np.max(np.abs(step))) <= 1e-9 * size
 
-    for attempt in (start, np.asarray(guess, dtype=float)):
+    for attempt in (np.asarray(start, dtype=float), np.asarray(guess, dtype=float)):
         with np.errstate(all="ignore"):     # an overflow at a trial point: hybr steps back
             x = _optimize.root(function, attempt, method="hybr", options={"xtol": 1e-12}).x
         if solved(x):
-            break
-    else:
-        # MINPACK's hybr does not converge: Newton's method with a line search, from the guesses
-        x = newton_search(function, guess)
-        if not solved(x):
-            return tuple(np.full(len(start), np.nan))
-    _BLOCK_SOLUTIONS[key] = x
-    return tuple(x)
+            return x
+    # MINPACK's hybr does not converge: Newton's method with a line search, from the guesses
+    x = newton_search(function, guess)
+    return x if solved(x) else None
 
 
 def _newton_step(function, z, r):

@@ -278,6 +278,7 @@ class NumericModel:
         self.source = "\n".join(lines)
         self._guesses = {n: numpy.array([float(as_sympy(g).xreplace(numbers)) for g in b.guesses], dtype=float)
                          for n, b in enumerate(ss.algebraic_blocks)}
+        self._first_guesses = {n: guess.copy() for n, guess in self._guesses.items()}
         namespace = {"numpy": numpy, "functools": __import__("functools"), "_solve": self._solve_block}
         namespace.update(NUMERIC_FUNCTIONS)
         namespace.update({name: numpy.float64(values[symbol]) for symbol, name in parameter_names.items()})
@@ -289,14 +290,23 @@ class NumericModel:
 
     def _solve_block(self, number, residual):
         import numpy
-        from scipy.optimize import root
 
-        result = root(lambda z: numpy.asarray(residual(z), dtype=float), self._guesses[number], method="hybr",
-                      options={"xtol": 1e-12})
-        if not result.success:
-            raise ArithmeticError(f"algebraic block {number} did not converge: {result.message}")
-        self._guesses[number] = result.x
-        return tuple(float(v) for v in result.x)
+        from bondc.runtime import solve_loop
+
+        x = solve_loop(lambda z: numpy.asarray(residual(z), dtype=float), self._guesses[number],
+                       self._first_guesses[number])
+        if x is None:
+            from bondc.errors import AnalysisError, Diagnostic
+
+            block = self.ss.algebraic_blocks[number]
+            through = ", ".join(block.nodes) or ", ".join(u.name for u in block.unknowns)
+            raise AnalysisError(Diagnostic(
+                "error", "E941", f"cannot evaluate the state equations at the operating point: the algebraic loop "
+                                 f"through {through} has no solution found there",
+                hint="linearise at another point (another initial value, or --at equilibrium), or break the loop "
+                     "with a small storage element"))
+        self._guesses[number] = x
+        return tuple(float(v) for v in x)
 
     def _call(self, t, x, inputs):
         import numpy

@@ -285,3 +285,36 @@ def test_equilibrium_beyond_a_backlash_gap_where_the_jacobian_column_is_zero_at_
     assert q == pytest.approx(0.01 + 3 / 100, rel=1e-9)
     assert result.held == ()
     assert_same_spectrum(result.eigenvalues, np.roots([1.0, 5.0, 100.0]))
+
+
+def test_a_shockley_diode_loop_far_from_its_guess_linearises_as_its_circuit():
+    """exp_diode.bg at its initial point (empty capacitor, 20 V): the loop's guess puts the whole
+    source across the diode (exp(800) overflows), where MINPACK alone stopped `linearize` with an
+    internal error. Solved as in a run (newton_search), A is the circuit's: with the node voltage v
+    from bisection and the diode's conductance g = Is exp(v/Vt)/Vt, dv/dv_cap = (1/R3)/(1/R1 + g +
+    1/R3) and d(dq/dt)/dq = (dv/dv_cap - 1)/(R3 Cf)."""
+    from test_runtime import shockley_node
+
+    graph, _ = semantic.load(Path(__file__).parent / "fixtures" / "sim" / "exp_diode.bg")
+    lin = linearize(derive(assign_causality(graph)))
+    v = shockley_node(20.0, 0.0)
+    g = 1e-9 * math.exp(v / 0.025) / 0.025
+    slope = (1 / 50) / (1 / 100 + g + 1 / 50)
+    assert lin.states == ("cap.q",)
+    assert lin.A[0, 0] == pytest.approx((slope - 1) / (50 * 1e-3), rel=1e-6)
+    assert lin.C[lin.outputs.index("v_diode"), 0] == pytest.approx(slope / 1e-3, rel=1e-6)
+
+
+def test_a_loop_without_a_root_at_the_operating_point_is_e941_not_an_internal_error(tmp_path):
+    """r2 with e = f^2 + 10 (in SI) in parallel with r3 = 3 Ohm: at zero coil current the loop
+    -3 f2 = f2^2 + 10 has no real root (discriminant 9 - 40 < 0). linearize reports E941 naming the
+    loop, as a diagnostic, instead of an internal error."""
+    text = (Path(__file__).parent / "fixtures" / "sim" / "nonlinear_loop.bg").read_text()
+    text = text.replace("  R  r2   : e = a3*f^3 + a1*f", "  R  r2   : e = a1*f^2/I0 + V").replace(
+        '  param a1 = 1   [Ohm]   "linear coefficient of r2"',
+        '  param a1 = 1   [Ohm]   "linear coefficient of r2"\n  param I0 = 1   [A]')
+    assert "f^2/I0" in text and "param I0" in text
+    with pytest.raises(AnalysisError) as caught:
+        linearize(state_space_of(tmp_path, text))
+    (diagnostic,) = caught.value.diagnostics
+    assert diagnostic.code == "E941" and "algebraic loop through r2, r3, j0" in diagnostic.message
