@@ -401,11 +401,10 @@ def solve_loop(function, start, guess):
             left = function(x)
             if not np.all(np.isfinite(left)):
                 return False
-            size = max(1.0, float(np.max(np.abs(x))))
-            if np.max(np.abs(left)) <= 1e-10 * size:
+            if _at_rounding(left, x):
                 return True
             step = _newton_step(function, x, left)
-        return step is not None and float(np.max(np.abs(step))) <= 1e-9 * size
+        return step is not None and float(np.max(np.abs(step))) <= 1e-9 * max(1.0, float(np.max(np.abs(x))))
 
     for attempt in (np.asarray(start, dtype=float), np.asarray(guess, dtype=float)):
         with np.errstate(all="ignore"):     # an overflow at a trial point: hybr steps back
@@ -415,6 +414,12 @@ def solve_loop(function, start, guess):
     # MINPACK's hybr does not converge: Newton's method with a line search, from the guesses
     x = newton_search(function, guess)
     return x if solved(x) else None
+
+
+def _at_rounding(r, z) -> bool:
+    """Whether the residual ``r`` at ``z`` is at rounding level: max |r| below 1e-10 of the
+    unknowns' size (at least 1). The C loop's second attempt uses the same test."""
+    return bool(np.max(np.abs(r)) <= 1e-10 * max(1.0, float(np.max(np.abs(z)))))
 
 
 def _newton_step(function, z, r):
@@ -463,7 +468,7 @@ def newton_search(function, guess, iterations=100):
                 return None
             d = _newton_step(function, z, r)
             if d is None:       # singular: a root if the residual is at rounding level
-                return z if norm <= 1e-10 * max(1.0, float(np.max(np.abs(z)))) else None
+                return z if _at_rounding(r, z) else None
             step = float(np.max(np.abs(d)))
             if step <= 1e-12 * (1.0 + float(np.max(np.abs(z - d)))):
                 return z - d
@@ -482,7 +487,7 @@ def newton_search(function, guess, iterations=100):
                 alpha *= 0.5
                 shrunk = True
             if not best > 0.0:      # no step lowers the residual: a root if it is at rounding level
-                return z if norm <= 1e-10 * max(1.0, float(np.max(np.abs(z)))) else None
+                return z if _at_rounding(r, z) else None
             z, r, norm = z - best * d, kept, least
     return None
 
@@ -3585,7 +3590,8 @@ def _native_units(source):
 
 def attach_native(model, native=None):
     """Make ``model`` (a :class:`_Model`) evaluate its right-hand side, Jacobian and switching
-    functions with its compiled C code; returns ``(True, "")`` or ``(False, why not)``.
+    functions (and, with an algebraic loop, its outputs and variables) with its compiled C code;
+    returns ``(True, "")`` or ``(False, why not)``.
 
     ``native`` False keeps the numpy code; None (the default) uses C where it can. Calls the
     C code cannot serve (arrays of times, the mode reader that records which modes a law reads)
@@ -3631,15 +3637,20 @@ def attach_native(model, native=None):
     # point fail that numpy would have solved
     loops = not getattr(model, "VECTORIZED", True)
 
-    def rhs(t, x, p, m):
-        arguments = arrays(t, x, p, m)
-        if arguments is None:
-            return numpy_rhs(t, x, p, m)
-        out = empty(n)
-        c_rhs(*arguments, buffer(doubles, out))
-        if loops and not math.isfinite(out.sum()):
-            return numpy_rhs(t, x, p, m)
-        return out
+    def vector(c_function, numpy_function, size, checked):
+        """``c_function`` writing ``size`` values; ``numpy_function`` for a call C cannot serve, or
+        (``checked``) where C gives a value that is not finite."""
+        def evaluate(t, x, p, m):
+            arguments = arrays(t, x, p, m)
+            if arguments is None:
+                return numpy_function(t, x, p, m)
+            out = empty(size)
+            if size:
+                c_function(*arguments, buffer(doubles, out))
+                if checked and not math.isfinite(out.sum()):
+                    return numpy_function(t, x, p, m)
+            return out
+        return evaluate
 
     def jac(t, x, p, m):
         arguments = arrays(t, x, p, m)
@@ -3654,47 +3665,17 @@ def attach_native(model, native=None):
             matrix[rows, cols] = entries
         return matrix
 
-    def switches(t, x, p, m):
-        arguments = arrays(t, x, p, m)
-        if arguments is None:
-            return numpy_switches(t, x, p, m)
-        out = empty(count)
-        if count:
-            c_switches(*arguments, buffer(doubles, out))
-            if loops and not math.isfinite(out.sum()):
-                return numpy_switches(t, x, p, m)
-        return out
-
-    model.rhs, model.jac, model.switches = rhs, jac, switches
+    model.rhs, model.jac = vector(c_rhs, numpy_rhs, n, loops), jac
+    model.switches = vector(c_switches, numpy_switches, count, loops)
     if loops:
-        _attach_point_functions(model, lib, arrays, buffer, doubles)
+        # a model with a loop is evaluated point by point: its outputs and variables from C too,
+        # where the library has them (C could not print them otherwise)
+        for name, size in (("outputs", len(model.OUTPUT_NAMES)), ("variables", len(model.VARIABLE_NAMES))):
+            if hasattr(lib, f"bondc_{name}"):
+                setattr(model, name, vector(getattr(lib, f"bondc_{name}"), getattr(model, name), size, True))
     if hasattr(lib, "bondc_driver_new"):
         model.native_library = (ffi, lib)
     return True, ""
-
-
-def _attach_point_functions(model, lib, arrays, buffer, doubles) -> None:
-    """A model with a nonlinear algebraic loop, evaluated point by point: its outputs and variables
-    from C (the loop solved by Newton's method there) where the library has them; a point where C
-    gives a value that is not finite is evaluated by the numpy module (its loop solved by MINPACK's
-    hybr), which gives what the model gives there without C."""
-    for name, size in (("outputs", len(model.OUTPUT_NAMES)), ("variables", len(model.VARIABLE_NAMES))):
-        try:
-            function = getattr(lib, f"bondc_{name}")
-        except AttributeError:          # a library without them (C could not print them)
-            continue
-
-        def evaluate(t, x, p, m, c_function=function, numpy_function=getattr(model, name), size=size):
-            arguments = arrays(t, x, p, m)
-            if arguments is None or not size:
-                return numpy_function(t, x, p, m)
-            out = np.empty(size)
-            c_function(*arguments, buffer(doubles, out))
-            if not math.isfinite(out.sum()):
-                return numpy_function(t, x, p, m)
-            return out
-
-        setattr(model, name, evaluate)
 
 
 def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=None, atol=None,

@@ -772,18 +772,19 @@ class _Emitter:
         parts.append(self.function(
             "def _jac(t, x, p, m):", "Analytic Jacobian d rhs / d x with the modes m frozen.",
             plan.jacobian_statements, [entries[k] for k in keys], jac_tail))
+        def stacked(texts):
+            return ["return stack(" + "".join(text + ", " for text in texts).rstrip(", ") + ")"]
+
         parts.append(self.function(
             "def _switches(t, x, p, m):", "Switching functions: the sign of each is its mode.",
-            statements, [s.g for s in plan.switches],
-            lambda texts: ["return stack(" + "".join(text + ", " for text in texts).rstrip(", ") + ")"]))
+            statements, [s.g for s in plan.switches], stacked))
         timed = [sw for sw in plan.switches if sw.event and sw.time_only]
         if plan.blocks and timed:
             # a model with an algebraic loop is evaluated point by point, but its switches of time
             # alone are not in the loop: over many times at once, to find their zeros before the run
             parts.append(self.function(
                 "def _time_switches(t, x, p, m):", "The switches of time alone (TIME_SWITCHES), over arrays of times.",
-                statements, [sw.g for sw in timed],
-                lambda texts: ["return stack(" + "".join(text + ", " for text in texts).rstrip(", ") + ")"]))
+                statements, [sw.g for sw in timed], stacked))
         parts.append(self.function(
             "def _outputs(t, x, p, m):", "Outputs with the modes m frozen.",
             statements, [expr for _, expr in plan.outputs],
