@@ -131,16 +131,18 @@ def check(path=None, *, text: str | None = None, model: str | None = None) -> Ch
     'E404'
     """
     from bondc.causality import assign_causality
-    from bondc.equations import derive
+    from bondc.quickcheck import equations_findings
 
     try:
         loaded = load(path, text=text, model=model)
         causal = assign_causality(loaded.graph)
-        state_space = derive(causal)
+        (states, found), _ = equations_findings(causal)
     except BondcError as error:
         return CheckResult(False, tuple(error.diagnostics))
+    if states is None:
+        return CheckResult(False, found)
     diagnostics = list(loaded.warnings)
-    diagnostics += [d for d in list(causal.diagnostics) + list(state_space.diagnostics) if d not in diagnostics]
+    diagnostics += [d for d in list(causal.diagnostics) + list(found) if d not in diagnostics]
     return CheckResult(not any(d.is_error for d in diagnostics), tuple(diagnostics), loaded)
 
 

@@ -129,17 +129,9 @@ def _equations_checked(args, model, graph, causal) -> tuple:
         if known is not None and on_edited_lines(known[1]):
             known = None
     if known is None:
-        from bondc.equations import derive
+        from bondc.quickcheck import equations_findings
 
-        consulted = True
-        try:
-            state_space = derive(causal)
-            known = (tuple(s.name for s in state_space.states), tuple(state_space.diagnostics))
-            consulted = state_space.values_consulted
-        except BondcError as error:
-            if error.stage in ("usage",):
-                raise
-            known = (None, tuple(error.diagnostics))
+        known, consulted = equations_findings(causal)
         if key:
             cache.store_check(key, known)
         if structural and not consulted and not on_edited_lines(known[1]):

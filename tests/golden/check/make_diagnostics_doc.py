@@ -167,13 +167,15 @@ d("E605", "law cannot be inverted",
 # -- equations (bondc/equations.py, bondc/symbolic.py)
 
 d("E701", "expression cannot be translated",
-  "An internal guard of the equations stage: it translates every law to `sympy` and stops at anything it "
-  "cannot translate (an unknown name, a string or a list in arithmetic, a call with the wrong arguments, one "
-  "name for two quantities). The semantic checks report each of these first (E301, E302, E306, E312, E313, "
-  "E316), so a model that passes `bondc check` does not get E701: it cannot be triggered from a model. If "
-  "you see it, it is a bug in bondc.",
-  "Report it with the model file. The message and caret show the expression; rewriting it (e.g. with a "
-  "helper parameter or output) usually works around it.")
+  "The equations stage translates every law, rate, input, output, initial value and `when` clause to "
+  "`sympy` and stops at what has no value: a divisor, a `mod` divisor or the base of a negative power that "
+  "is 0 for every value of the variables once simplified (`q/(exp(q)*exp(-q) - 1)`, `log(b - b)`), a "
+  "constant beyond a double's range (`q*1e309`), initial values that depend on each other in a cycle, or "
+  "functions that call one another so often that expanding them would not end. Most other mistakes of "
+  "this kind (an unknown name, a divisor written as `a - a`, a function that calls itself) are reported "
+  "first by the semantic checks (E301, E302, E306, E311, E312, E313, E316). `bondc check` runs this stage "
+  "too, so a model that passes it does not get E701 later.",
+  "Rewrite the expression that the caret shows: the message says what has no value.")
 d("E702", "singular algebraic loop",
   "The equations of an algebraic loop do not determine its unknowns: the loop's laws cancel each other, as "
   "with two resistances whose parallel combination is infinite (a negative resistance balancing a positive "
