@@ -340,13 +340,15 @@ def test_a_second_check_of_unchanged_files_reports_the_same_without_sympy(tmp_pa
     """check runs the equations stage (E605, the states kept) once per content of the files: the
     next check of the same files reports the same, text and JSON, and imports no sympy (nor numpy,
     for a model that reads no csv file); an edit that makes a law not invertible is reported at
-    once; --no-cache always derives."""
-    path = _write(tmp_path / "msd.bg")
+    once; --no-cache always decides afresh. A model whose stage has certainly nothing to report
+    (bondc.quickcheck: here a linear law to invert) is checked without sympy even the first time."""
+    path = tmp_path / "cubic.bg"
+    path.write_text(_NOT_INVERTIBLE.replace("e = 3*abs(f)^1.5*sign(f)", "e = 3*f^3 + f"), encoding="utf-8")
     first = _check_runs(tmp_path, path, "--json")
     again = _check_runs(tmp_path, path, "--json")
     assert first[0] == again[0] == 0 and first[1] == again[1] and first[3] and not again[3]
     assert not again[4]
-    assert '"states_kept": 2' in again[1]
+    assert '"states_kept": 1' in again[1]
     assert _check_runs(tmp_path, path)[1] == _check_runs(tmp_path, path, "--no-cache")[1]
     assert _check_runs(tmp_path, path, "--no-cache")[3]
     path.write_text(_NOT_INVERTIBLE, encoding="utf-8")
@@ -354,8 +356,12 @@ def test_a_second_check_of_unchanged_files_reports_the_same_without_sympy(tmp_pa
         code, _, stderr, imported, _ = _check_runs(tmp_path, path)
         assert code == 1 and "E605" in stderr and imported == expected_sympy
     path.write_text(_NOT_INVERTIBLE.replace("e = 3*abs(f)^1.5*sign(f)", "e = 3*f"), encoding="utf-8")
-    code, output, stderr, imported, _ = _check_runs(tmp_path, path)
-    assert code == 0 and "E605" not in stderr and imported
+    for options in ((), ("--no-cache",)):
+        code, output, stderr, imported, _ = _check_runs(tmp_path, path, *options)
+        assert code == 0 and "E605" not in stderr and not imported
+    msd = _write(tmp_path / "msd.bg")
+    code, output, _, imported, _ = _check_runs(tmp_path, msd, "--no-cache", "--json")
+    assert code == 0 and '"states_kept": 2' in output and not imported
 
 
 def test_the_cache_folder_is_the_runtimes(tmp_path, monkeypatch):
