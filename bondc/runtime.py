@@ -2664,6 +2664,9 @@ class _Run:
         if getattr(self.model, "VECTORIZED", True):
             return np.asarray(np.broadcast_to(self.model.switches(t, x, self.p, modes),
                                               (self.switch_count, t.size)), dtype=float)
+        at_points = getattr(self.model.switches, "at_points", None)
+        if at_points is not None and t.size > 1:
+            return at_points(t, x, self.p, modes)
         return np.column_stack([self.model.switches(t[j], x[:, j], self.p, modes) for j in range(t.size)])
 
     def point_modes(self, t, x, modes, relevant):
@@ -2750,6 +2753,9 @@ class _Run:
             def variables_of(tt, xx, p, m, evaluate=model.variables):
                 values = evaluate(tt, xx, p, m)
                 return [values[i] for i in picked]
+            if getattr(model.variables, "at_points", None) is not None:
+                variables_of.at_points = (lambda tt, xx, p, m, at=model.variables.at_points, rows=list(picked):
+                                          at(tt, xx, p, m)[rows])
         groups = {}             # (mode id, relevant mask) -> column indices
         all_relevant = (True,) * self.switch_count
         start = 0
@@ -2836,6 +2842,8 @@ def _evaluate_columns(model, p, function, t, x, modes, rows, out=None, columns=s
             target[row] = value
         if not isinstance(columns, slice):
             out[:, columns] = target
+    elif getattr(function, "at_points", None) is not None and t.size > 1:
+        out[:, columns] = function.at_points(t, x, p, modes)
     else:
         indices = np.arange(out.shape[1])[columns]
         for j in range(t.size):
@@ -2875,6 +2883,8 @@ def output_grid(t_start, t_end, dt):
 _NATIVE_FUNCTIONS = ("bondc_rhs", "bondc_jac", "bondc_switches")
 #: a model with a nonlinear algebraic loop also has its outputs and variables in C (where C can print them)
 _NATIVE_POINT_FUNCTIONS = ("bondc_outputs", "bondc_variables")
+#: ... and each of its functions but the Jacobian over many points in one call (``<name>_at``)
+_NATIVE_AT_FUNCTIONS = ("bondc_rhs", "bondc_switches") + _NATIVE_POINT_FUNCTIONS
 #: Compiler flags: no contraction into fused multiply-adds, so C rounds like numpy.
 _NATIVE_FLAGS = ("-fPIC", "-shared", "-ffp-contract=off")
 #: Optimisation by the size of each translation unit's text: gcc's -O2 (and -O1) grow much faster
@@ -3458,6 +3468,8 @@ def _build_native(source, libraries):
     ffi = cffi.FFI()
     ffi.cdef("".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
                      for name in _NATIVE_FUNCTIONS + _NATIVE_POINT_FUNCTIONS)
+             + "".join(f"void {name}_at(int count, const double *t, const double *x, const double *p, "
+                       "const double *m, double *out);\n" for name in _NATIVE_AT_FUNCTIONS)
              + (_DRIVER_DECLARATIONS if libraries else ""))
     try:
         lib = ffi.dlopen(path)
@@ -3665,14 +3677,38 @@ def attach_native(model, native=None):
             matrix[rows, cols] = entries
         return matrix
 
+    def at_points(c_function, numpy_function, size):
+        """``c_function`` (a ``<name>_at``) over the columns of ``x`` in one call: values by
+        columns, each exactly the point's call; numpy's where C's is not finite."""
+        def evaluate(t, x, p, m):
+            t = np.ascontiguousarray(t, dtype=float)
+            rows = np.ascontiguousarray(np.asarray(x, dtype=float).T)      # a point's states in a row
+            out = empty((t.size, size))
+            if size and t.size:
+                c_function(t.size, buffer(doubles, t), buffer(doubles, rows), pointer("p", p),
+                           pointer("m", m) if count else ffi.NULL, buffer(doubles, out))
+                for j in np.flatnonzero(~np.isfinite(out).all(axis=1)):
+                    out[j] = numpy_function(float(t[j]), rows[j].copy(), p, m)
+            return out.T
+        return evaluate
+
     model.rhs, model.jac = vector(c_rhs, numpy_rhs, n, loops), jac
     model.switches = vector(c_switches, numpy_switches, count, loops)
     if loops:
         # a model with a loop is evaluated point by point: its outputs and variables from C too,
-        # where the library has them (C could not print them otherwise)
-        for name, size in (("outputs", len(model.OUTPUT_NAMES)), ("variables", len(model.VARIABLE_NAMES))):
-            if hasattr(lib, f"bondc_{name}"):
-                setattr(model, name, vector(getattr(lib, f"bondc_{name}"), getattr(model, name), size, True))
+        # where the library has them (C could not print them otherwise); where the library has
+        # them, each function also over many points at once (its attribute ``at_points``)
+        for name, size in (("rhs", n), ("switches", count), ("outputs", len(model.OUTPUT_NAMES)),
+                           ("variables", len(model.VARIABLE_NAMES))):
+            numpy_function = getattr(model, name)
+            if name in ("outputs", "variables"):
+                if not hasattr(lib, f"bondc_{name}"):
+                    continue
+                setattr(model, name, vector(getattr(lib, f"bondc_{name}"), numpy_function, size, True))
+            else:
+                numpy_function = {"rhs": numpy_rhs, "switches": numpy_switches}[name]
+            if hasattr(lib, f"bondc_{name}_at"):
+                getattr(model, name).at_points = at_points(getattr(lib, f"bondc_{name}_at"), numpy_function, size)
     if hasattr(lib, "bondc_driver_new"):
         model.native_library = (ffi, lib)
     return True, ""

@@ -234,6 +234,36 @@ def test_a_loop_models_outputs_and_variables_come_from_c_and_equal_the_numpy_mod
 
 
 @needs_cc
+@pytest.mark.parametrize("fixture", ["engine/diode_bridge.bg", "sim/nonlinear_loop.bg", "sim/exp_diode.bg"])
+def test_a_loop_models_functions_over_many_points_in_one_call_are_each_points_to_the_bit(fixture):
+    """The right-hand side, switching functions, outputs and variables of a loop model over the
+    columns of a trajectory in one C call (``at_points``: a run's outputs and variables, the energy
+    account) give exactly what one call per point gives; a point whose C value is not finite gets
+    the numpy module's."""
+    namespace, _ = _compiled(ROOT / "tests" / "fixtures" / fixture)
+    model = namespace["_Model"](namespace["_MODEL"])
+    numpy_functions = {kind: getattr(model, kind) for kind in ("rhs", "switches", "outputs", "variables")}
+    assert namespace["attach_native"](model, None)[0]
+    p = namespace["param_array"](model.PARAMETERS, {}, model.derive_parameters)
+    rng = np.random.default_rng(11)
+    n = len(model.STATE_NAMES)
+    t = np.linspace(0.0, 0.02, 40)
+    x = rng.uniform(-2.0, 2.0, (n, t.size)) * (np.abs(model.x0(p)) + 1e-3)[:, None]
+    x[:, 3] = 0.0
+    x[0, 5] = np.nan                        # C's value is not finite there: numpy's (nan too)
+    modes = np.ones(len(model.SWITCHES))
+    for kind, numpy_function in numpy_functions.items():
+        function = getattr(model, kind)
+        many = function.at_points(t, x, p, modes)
+        one_by_one = np.column_stack([np.asarray(function(t[j], x[:, j].copy(), p, modes), dtype=float)
+                                      for j in range(t.size)])
+        np.testing.assert_array_equal(many, one_by_one, err_msg=kind)
+        assert many.shape == (one_by_one.shape[0], t.size)
+        np.testing.assert_array_equal(many[:, 5], np.asarray(numpy_function(t[5], x[:, 5].copy(), p, modes),
+                                                             dtype=float), err_msg=kind)
+
+
+@needs_cc
 def test_an_exponential_diode_loop_is_solved_in_c_far_from_its_guess():
     """exp_diode.bg's loop starts at 0 V across r1, the whole source across the diode: exp(V/Vt)
     is 1e173 at 10 V (plain Newton's 50 steps move it by 50 e-folds) and overflows at 20 V. The C

@@ -461,6 +461,9 @@ class _Model:
                     return out
                 except (ValueError, TypeError, IndexError):
                     pass        # a law returns a constant in a list: evaluate point by point
+            elif getattr(function, "at_points", None) is not None:     # C, every point in one call
+                out[:] = function.at_points(t, x, self.p, modes)
+                return out
             for j in range(t.size):
                 out[:, j] = np.asarray(function(t[j], x[:, j], self.p, modes), dtype=float)
         return out

@@ -1211,25 +1211,43 @@ class _NativeEmitter(_Emitter):
         out += [f"{_INDENT}out[{k}] = {text};" for k, text in enumerate(texts)]
         return "\n".join(out + ["}"])
 
+    @staticmethod
+    def c_points(name: str, n: int, size: int) -> str:
+        """``name`` at ``count`` points: ``x`` holds each point's ``n`` states in a row, ``out``
+        each point's ``size`` values in a row."""
+        return "\n".join([
+            f"void {name}_at(int count, const double *t, const double *x, const double *p, const double *m, double *out)",
+            "{",
+            f"{_INDENT}for (int j = 0; j < count; j++)",
+            f"{_INDENT}{_INDENT}{name}(t[j], x + (long)j * {n}, p, m, out + (long)j * {size});",
+            "}"])
+
     def native_source(self) -> tuple:
         """(C source, "") or ("", why the model has no native code)."""
         plan = self.plan
         pattern = sorted(plan.jacobian_entries, key=lambda key: (key[1], key[0]))
+        # a model with a nonlinear algebraic loop is evaluated point by point (its loop solved at
+        # each): its functions also over many points in one call (``<name>_at``)
+        n = len(plan.derivatives)
+        at = (lambda name, size: "\n\n" + self.c_points(name, n, size)) if plan.blocks else (lambda name, size: "")
+        switches = [s.g for s in plan.switches]
         try:
             parts = [PRELUDE + (LOOP_PRELUDE if plan.blocks else ""),
-                     self.c_function("bondc_rhs", plan.statements, plan.derivatives),
+                     self.c_function("bondc_rhs", plan.statements, plan.derivatives) + at("bondc_rhs", n),
                      self.c_function("bondc_jac", plan.jacobian_statements,
                                      [plan.jacobian_entries[key] for key in pattern]),
-                     self.c_function("bondc_switches", plan.statements, [s.g for s in plan.switches])]
+                     self.c_function("bondc_switches", plan.statements, switches)
+                     + at("bondc_switches", len(switches))]
         except UnsupportedExpression as error:
             return "", str(error)
         if plan.blocks:
-            # a model with a nonlinear algebraic loop is evaluated point by point: its outputs and
-            # variables in C too (the loop solved there), where C can print them
+            # its outputs and variables in C too (the loop solved there), where C can print them
+            outputs, variables = [expr for _, expr in plan.outputs], [symbol for _, symbol, _ in plan.variables]
             try:
-                parts += [self.c_function("bondc_outputs", plan.statements, [expr for _, expr in plan.outputs]),
-                          self.c_function("bondc_variables", plan.statements,
-                                          [symbol for _, symbol, _ in plan.variables])]
+                parts += [self.c_function("bondc_outputs", plan.statements, outputs)
+                          + at("bondc_outputs", len(outputs)),
+                          self.c_function("bondc_variables", plan.statements, variables)
+                          + at("bondc_variables", len(variables))]
             except UnsupportedExpression:
                 pass
         # each function may be compiled on its own (runtime._native_units: a large model's
