@@ -363,6 +363,8 @@ def csv_times(base_dir, path, column, time_scale=1.0):
 # -------------------------------------------------------- algebraic loops
 
 _BLOCK_SOLUTIONS = {}
+#: True while a law is evaluated with a :class:`_ModeReader` (see :func:`solve_block`)
+_READING_MODES = False
 
 #: Where a loop's residual is not finite at its guesses, :func:`newton_search` (and the C loop's
 #: second attempt) starts from the first of the guesses plus one of these (added to every
@@ -376,6 +378,11 @@ def solve_block(residual, number, guess):
     Returns nan for every unknown when it does not converge, so the caller's
     non-finite check names the loop's unknowns.
     """
+    if _READING_MODES:
+        # only which modes the law reads is wanted (``_Run.relevant``): the residual's branches
+        # depend on the modes alone, so one evaluation reads them all, whatever the unknowns
+        residual(np.asarray(guess, dtype=float))
+        return tuple(np.asarray(guess, dtype=float))
     key = (residual.__code__, number)       # per model: modules importing this runtime share it
     start = _BLOCK_SOLUTIONS.get(key)
     if start is None or not np.all(np.isfinite(start)):
@@ -2121,11 +2128,15 @@ class _Run:
         if known is not None:
             return known.copy()
         reader = _ModeReader(modes)
+        global _READING_MODES
+        _READING_MODES = True
         try:
             with np.errstate(all="ignore"):
                 self.model.rhs(t, y, self.p, reader)
         except Exception:       # a law that needs a real array of modes: keep every switch
             return relevant
+        finally:
+            _READING_MODES = False
         # a when clause's condition is always watched
         needed, stack_ = set(), list(reader.read) + list(self.model.WHEN_SWITCHES)
         while stack_:

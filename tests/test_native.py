@@ -738,3 +738,32 @@ def test_a_loaded_models_library_is_found_again_by_its_text_without_building(tmp
     out = np.zeros(1)
     again[1].bondc_rhs(2.0, again[0].NULL, again[0].NULL, again[0].NULL, again[0].from_buffer("double[]", out))
     assert out[0] == 6.0
+
+
+@pytest.mark.parametrize("fixture", ["engine/diode_bridge.bg", "sim/pwm_diode.bg"])
+def test_the_modes_a_loop_models_laws_read_are_found_without_solving_the_loop(fixture):
+    """Which switches matter for a mode vector is found by evaluating the right-hand side with a
+    mode reader; in a model with a nonlinear loop the loop's residual is then evaluated once, not
+    solved (its branches depend on the modes alone): the modes read are those a full solve reads,
+    for every mode vector tried."""
+    namespace, _ = _compiled(ROOT / "tests" / "fixtures" / fixture)
+    model = namespace["_Model"](namespace["_MODEL"])        # the numpy module (MINPACK solves the loop)
+    p = namespace["param_array"](model.PARAMETERS, {}, model.derive_parameters)
+    reader = namespace["_ModeReader"]
+    count = len(model.SWITCHES)
+    assert count and model.SWITCH_DEPENDS is not None and not model.VECTORIZED      # switches, a loop
+    rng = np.random.default_rng(3)
+    x = model.x0(p) + rng.uniform(-1.0, 1.0, len(model.STATE_NAMES))
+    for _ in range(12):
+        modes = rng.choice([-1.0, 1.0], count)
+        solved = reader(modes)
+        with np.errstate(all="ignore"):
+            model.rhs(0.003, x, p, solved)
+            namespace["_READING_MODES"], solve = True, namespace["solve_loop"]
+            namespace["solve_loop"] = lambda *args: pytest.fail("the loop was solved to read modes")
+            try:
+                read = reader(modes)
+                model.rhs(0.003, x, p, read)
+            finally:
+                namespace["_READING_MODES"], namespace["solve_loop"] = False, solve
+        assert read.read == solved.read and read.read
