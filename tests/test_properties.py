@@ -170,6 +170,7 @@ def test_the_seed_model_is_valid():
     assert parse_text(fmt(MODEL)) == parse_text(MODEL)
 
 
+@pytest.mark.slow
 @given(mutated_models())
 @FAST
 def test_mutated_models_raise_only_bondc_errors(text):

@@ -127,6 +127,7 @@ def test_flagship_numbers_match_the_reference():
     assert float(summary["motor energy per cycle"]) == pytest.approx(54.7, rel=0.01)
 
 
+@pytest.mark.slow
 def test_non_default_experiment_file_name_and_overrides(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     target = build_report(FLAGSHIP, experiment="catalogue_valve", sets=["M=40 [kg]"], t_end=0.05, date=DATE)
