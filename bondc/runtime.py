@@ -3709,17 +3709,17 @@ def attach_native(model, native=None):
         # a model with a loop is evaluated point by point: its outputs and variables from C too,
         # where the library has them (C could not print them otherwise); where the library has
         # them, each function also over many points at once (its attribute ``at_points``)
+        numpy_functions = {"rhs": numpy_rhs, "switches": numpy_switches}
         for name, size in (("rhs", n), ("switches", count), ("outputs", len(model.OUTPUT_NAMES)),
                            ("variables", len(model.VARIABLE_NAMES))):
-            numpy_function = getattr(model, name)
-            if name in ("outputs", "variables"):
+            if name not in numpy_functions:
                 if not hasattr(lib, f"bondc_{name}"):
                     continue
-                setattr(model, name, vector(getattr(lib, f"bondc_{name}"), numpy_function, size, True))
-            else:
-                numpy_function = {"rhs": numpy_rhs, "switches": numpy_switches}[name]
+                numpy_functions[name] = getattr(model, name)
+                setattr(model, name, vector(getattr(lib, f"bondc_{name}"), numpy_functions[name], size, True))
             if hasattr(lib, f"bondc_{name}_at"):
-                getattr(model, name).at_points = at_points(getattr(lib, f"bondc_{name}_at"), numpy_function, size)
+                getattr(model, name).at_points = at_points(getattr(lib, f"bondc_{name}_at"), numpy_functions[name],
+                                                           size)
     if hasattr(lib, "bondc_driver_new"):
         model.native_library = (ffi, lib)
     return True, ""
