@@ -1543,13 +1543,19 @@ class _Run:
         ``floor(t*f)``), found before integrating: such a switch can change twice within one solver
         step, so it is not left to event location. ``g`` is sampled on a grid refined until the
         number of sign changes (level crossings for ``floor``) stops changing, and every change
-        is refined by ``brentq``. Those switches then end segments at known times."""
+        is refined by ``brentq``. Those switches then end segments at known times.
+
+        A switch of time may read the modes of other switches of time (``pwm(t, f, d)`` with a
+        duty ``d`` that steps at 50 ms): its ``g`` is evaluated with those modes as they are at
+        each time, piece by piece between their own changes (known breaks, or the roots found
+        for them first), not with every mode +1."""
         model = self.model
         if not model.TIME_SWITCHES:
             return []
         n = len(model.STATE_NAMES)
         ones = np.ones(self.switch_count)
-        if getattr(model, "VECTORIZED", True):
+        vectorized = getattr(model, "VECTORIZED", True)
+        if vectorized:
             switches, row_of, rows_count = model.switches, {k: k for k in model.TIME_SWITCHES}, self.switch_count
         elif getattr(model, "time_switches", None) is not None:
             # a model with an algebraic loop: its switches of time alone, without the loop
@@ -1557,16 +1563,11 @@ class _Run:
             rows_count = len(row_of)
         else:
             return []
-
-        def values(times, k):
-            out = np.empty(times.size)
-            for start in range(0, times.size, 65536):
-                chunk = times[start:start + 65536]
-                with np.errstate(all="ignore"):
-                    rows = np.broadcast_to(switches(chunk, np.zeros((n, chunk.size)), self.p, ones),
-                                           (rows_count, chunk.size))
-                out[start:start + chunk.size] = rows[row_of[k]]
-            return out
+        inner_of = self._inner_time_modes()
+        known = {}
+        for tb, label, kind in model.time_breaks(self.p):
+            if kind != "csv" and np.isfinite(float(tb)):
+                known.setdefault(label, []).append(float(tb))
 
         def changes(g, k):
             if model.floor_switches[k]:
@@ -1582,12 +1583,41 @@ class _Run:
                 signs = np.where(after < signs.size, signs[np.minimum(after, signs.size - 1)], 0.0)
             return np.flatnonzero(signs[:-1] * signs[1:] < 0)
 
-        roots, located = [], set()
-        for k in model.TIME_SWITCHES:
+        roots, located, found = [], set(), {}
+        for k in sorted(model.TIME_SWITCHES, key=lambda k: len(inner_of[k])):
+            inner = inner_of[k]
+            cuts, resolvable = [], True
+            for j in inner:
+                if j in found:
+                    cuts += found[j]
+                elif j in model.TIME_SWITCHES:
+                    resolvable = False          # its own roots were not found: left to event location
+                else:
+                    cuts += known.get(model.SWITCHES[j], [])
+            if not resolvable:
+                continue
+            cuts = np.unique([c for c in cuts if self.t_start < c < self.t_end])
+            modes_of = self._piece_modes(inner, cuts, n, ones)
+            if modes_of is None:
+                continue                    # an inner switch without a value: left to event location
+
+            def values(times, k=k, cuts=cuts, modes_of=modes_of):
+                out = np.empty(times.size)
+                piece = np.searchsorted(cuts, times, side="right")
+                for index in np.unique(piece):
+                    chosen = np.flatnonzero(piece == index)
+                    for start in range(0, chosen.size, 65536):
+                        columns = chosen[start:start + 65536]
+                        with np.errstate(all="ignore"):
+                            rows = np.broadcast_to(switches(times[columns], np.zeros((n, columns.size)), self.p,
+                                                            modes_of[index]), (rows_count, columns.size))
+                        out[columns] = rows[row_of[k]]
+                return out
+
             count, previous, size, settled = None, None, 4096, False
             while size <= 2 ** 22:
                 grid = np.linspace(self.t_start, self.t_end, size + 1)
-                g = values(grid, k)
+                g = values(grid)
                 if not np.all(np.isfinite(g)):
                     break
                 count = changes(g, k).size
@@ -1598,12 +1628,16 @@ class _Run:
             if not settled:
                 continue            # not resolvable by sampling: left to event location
             label = model.SWITCHES[k]
-            scalar = lambda tt, k=k: float(np.ravel(switches(tt, np.zeros(n), self.p, ones))[row_of[k]])
+
+            def scalar(tt, k=k, cuts=cuts, modes_of=modes_of):
+                modes = modes_of[int(np.searchsorted(cuts, tt, side="right"))]
+                return float(np.ravel(switches(tt, np.zeros(n), self.p, modes))[row_of[k]])
+            found[k] = []
             for i in changes(g, k):
                 a, b = grid[i], grid[i + 1]
                 if model.floor_switches[k]:
                     level = np.floor(g[i + 1]) if g[i + 1] > g[i] else np.floor(g[i])
-                    function = lambda tt, lv=level: scalar(tt) - lv
+                    function = lambda tt, lv=level, scalar=scalar: scalar(tt) - lv
                 else:
                     function = scalar
                 with np.errstate(all="ignore"):
@@ -1612,11 +1646,51 @@ class _Run:
                     except ValueError:
                         root = b
                 roots.append((float(root), label))
+                found[k].append(float(root))
             located.add(k)
         if located:
             self.event_switches = np.array([k for k in self.event_switches if k not in located], dtype=int)
             self.stats["switches_found_ahead"] = len(located)
         return roots
+
+    def _inner_time_modes(self) -> dict:
+        """Switch of time -> the switches whose modes its ``g`` reads, directly or through them
+        (SWITCH_DEPENDS; none where the module does not say)."""
+        depends = self.model.SWITCH_DEPENDS
+        inner = {}
+        for k in self.model.TIME_SWITCHES:
+            seen, stack_ = set(), list(depends[k]) if depends is not None else []
+            while stack_:
+                j = stack_.pop()
+                if j not in seen and j != k:
+                    seen.add(j)
+                    stack_.extend(depends[j])
+            inner[k] = sorted(seen)
+        return inner
+
+    def _piece_modes(self, inner, cuts, n, ones) -> list | None:
+        """The mode vector on each piece between ``cuts``: +1 everywhere but for the ``inner``
+        switches, whose modes are taken at the piece's middle (a fixed point, as nested switches
+        read one another; every switching function at one point, the state's value irrelevant to
+        these: a loop model's loop is solved there). None where one of them has no value."""
+        edges = np.concatenate(([self.t_start], cuts, [self.t_end]))
+        pieces = []
+        for a, b in zip(edges[:-1], edges[1:]):
+            modes = ones.copy()
+            if inner:
+                middle = 0.5 * (a + b)
+                for _ in range(len(inner) + 1):
+                    with np.errstate(all="ignore"):
+                        g = np.ravel(self.model.switches(middle, np.zeros(n), self.p, modes))
+                    if not np.all(np.isfinite(g[inner])):
+                        return None
+                    new = modes.copy()
+                    new[inner] = mode_values(g[inner], self.model.floor_switches[inner])
+                    if np.array_equal(new, modes):
+                        break
+                    modes = new
+            pieces.append(modes)
+        return pieces
 
     def restart_modes(self, t, y, guess):
         """Modes just after (t, y), and the switches that chatter there.

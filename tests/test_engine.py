@@ -748,3 +748,52 @@ def test_a_model_without_states_is_evaluated_on_its_grid(tmp_path):
     assert result.complete, result.message
     assert result.states == {}
     assert np.allclose(result.outputs["i"], 0.1 * np.sin(2 * np.pi * 50 * result.t), atol=1e-15)
+
+
+@pytest.mark.parametrize("duty", ["0.2 + 0.6*step(t, 0.05)", "if t < 0.05 then 0.2 else 0.8",
+                                  "0.8 - 0.6*pwm(t, 10, 0.5)"])
+def test_a_pwm_whose_duty_switches_in_time_has_the_edges_of_each_duty(tmp_path, duty):
+    """pwm(t, 1 kHz, d) into a capacitor: its charge is the time the pwm was on. With a duty that
+    steps from 0.2 to 0.8 at 50 ms (a step, an if, or a slower pwm: switches of time the pwm's
+    own switch reads), each period has the edges of the duty of its time: 100 rising edges, the
+    falling ones at (k + 0.2) ms before 50 ms and (k + 0.8) ms after, and the charge at
+    t = 0.1 s is 0.2*0.05 + 0.8*0.05 s. (Its zeros were sought with every mode +1: the duty of
+    after the step at every time, 0.08 s.)"""
+    path = tmp_path / "pwm_duty.bg"
+    path.write_text("model PwmDuty\n"
+                    f"  input d [1] = {duty}\n"
+                    "  MSf src : f = pwm(t, 1000, d)\n"
+                    "  C c : e = q\n"
+                    "  src -> c\n"
+                    "  experiment run\n    t_end = 0.1 [s]\n  end\nend\n")
+    result = run(path)
+    assert result.complete, result.message
+    assert result.states["c.q"][-1] == pytest.approx(0.2 * 0.05 + 0.8 * 0.05, abs=1e-9)
+    k = np.arange(100)
+    falling = np.where(k < 50, (k + 0.2) / 1000, (k + 0.8) / 1000)
+    expected = np.sort(np.concatenate([k[1:] / 1000, falling]))
+    edges = np.unique(np.round(_edge_events(result, "pwm(t, 1000"), 12))
+    np.testing.assert_allclose(edges, expected, rtol=0, atol=1e-12)
+
+
+def test_a_pwm_whose_duty_steps_has_the_edges_of_each_duty_in_a_loop_model_too(tmp_path):
+    """The same duty step into a model with a nonlinear algebraic loop (the pulses through a
+    resistor and a Shockley diode in series charge a capacitor): its switches of time are found
+    without the loop, the step's mode on each side of 50 ms with it."""
+    path = tmp_path / "pwm_duty_loop.bg"
+    path.write_text("model PwmDutyLoop\n"
+                    "  input d [1] = 0.2 + 0.6*step(t, 0.05)\n"
+                    "  MSe src : e = 5*pwm(t, 1000, d)\n"
+                    "  R r : e = 100*f\n"
+                    "  R diode : f = 1e-12*(exp(e/0.025) - 1)\n"
+                    "  C c : e = q/1e-3\n"
+                    "  1 j\n  src -> j\n  j -> r\n  j -> diode\n  j -> c\n"
+                    "  experiment run\n    t_end = 0.1 [s]\n  end\nend\n")
+    result = run(path)
+    assert result.complete, result.message
+    assert result.stats.get("switches_found_ahead") == 1
+    k = np.arange(100)
+    falling = np.where(k < 50, (k + 0.2) / 1000, (k + 0.8) / 1000)
+    expected = np.sort(np.concatenate([k[1:] / 1000, falling]))
+    edges = np.unique(np.round(_edge_events(result, "pwm(t, 1000"), 12))
+    np.testing.assert_allclose(edges, expected, rtol=0, atol=1e-12)
