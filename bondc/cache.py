@@ -66,11 +66,12 @@ def cache_dir() -> Path:
 
 
 def code_hash() -> str:
-    """SHA-256 of bondc's own source files and grammar (computed once per process)."""
+    """SHA-256 of bondc's own source files, grammar and component library (``std:`` models are
+    read from the package, not from a file the cache could check) (computed once per process)."""
     if not _CODE_HASH:
         package = Path(__file__).resolve().parent
         digest = hashlib.sha256(_LAYOUT.encode())
-        files = sorted(p for pattern in ("**/*.py", "**/*.lark") for p in package.glob(pattern))
+        files = sorted(p for pattern in ("**/*.py", "**/*.lark", "std/*.bg") for p in package.glob(pattern))
         grammar = package.parent / "grammar"
         if grammar.is_dir():
             files += sorted(grammar.glob("*.lark"))
