@@ -281,6 +281,10 @@ class _Flattener:
                     x.statements.append(statement)
             else:
                 x.statements.append(renamer.statement(statement))
+        for statement in model.body:
+            sub = x.instances.get(statement.name) if id(statement) in kinds else None
+            if sub is not None:
+                self.unbonded_ports(x, sub, statement)
         for port in x.ports.values():
             if port.end is None:
                 self.report(_error("E333", f"port '{port.name}' is not bonded inside model '{model.name}'",
@@ -293,6 +297,26 @@ class _Flattener:
                                        hint=f"give it one ('input {name} = ...') or use model '{model.name}' as "
                                             f"a component whose instances bind it"))
         return x
+
+    def unbonded_ports(self, x: _Expansion, sub: _Expansion, statement: ast.Element) -> None:
+        """E343 for each port of instance ``sub`` that no bond outside reaches. Inside, the port
+        becomes a boundary of zero effort (as a component checked on its own), so that its
+        elements are not reported as unbonded too."""
+        path = sub.prefix[:-1]
+        for port in sub.ports.values():
+            if port.used is not None or port.end is None:
+                continue
+            self.report(_error("E343", f"port '{port.name}' of instance '{path}' is not bonded",
+                               statement.name_span,
+                               hint=f"bond it once outside, e.g. '{path}.{port.name} -> j' or 'j -> "
+                                    f"{path}.{port.name}' (every port of a component carries one bond)"))
+            name = f"{path}.{port.name}"
+            end = ast.Endpoint(name, None, statement.name_span)
+            x.statements.append(ast.Element("Se", name, "unbonded port (checked as a boundary)",
+                                            (ast.LawAssign("e", ast.Num(0.0, "0")),), statement.name_span,
+                                            statement.name_span, statement.name_span))
+            x.bonds.append(ast.BondChain(None, (end, port.end) if port.inward else (port.end, end),
+                                         statement.name_span, statement.name_span))
 
     def boundary(self, statement: ast.PortDecl) -> list[ast.Element]:
         """A component checked on its own: each port becomes a source of zero effort, so that every

@@ -217,6 +217,18 @@ def test_malformed_instances_are_reported_at_the_instance(tmp_path, lines, code,
     assert text in found[0].message
 
 
+def test_an_instance_port_bonded_nowhere_is_one_error_at_the_instance(tmp_path):
+    """A port no bond outside reaches is E343 at the instance, once per port, and nothing else:
+    inside, the port is a boundary, so the component's own elements are not reported as
+    unbonded in its file."""
+    diagnostics = _errors(tmp_path, _plant("Pipe p", "0 n", "s -> n", "n -> p.a", "n -> tank"))
+    assert [(d.code, d.span.line) for d in diagnostics] == [("E343", 12)]
+    assert "port 'b' of instance 'p' is not bonded" in diagnostics[0].message
+    both = _errors(tmp_path, _plant("Pipe p", "0 n", "s -> n", "n -> tank"))
+    assert sorted(d.message for d in both) == ["port 'a' of instance 'p' is not bonded",
+                                               "port 'b' of instance 'p' is not bonded"]
+
+
 def test_an_error_inside_a_component_points_into_its_file_and_names_the_instance_path(tmp_path):
     library = PIPE.replace("e = R_h*f", "e = R_h*f + undefined_name")
     text = ('import "lib/pipes.bg"\n'
