@@ -740,7 +740,11 @@ class _Trajectory:
             for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
                 rows = _inside(mid, increasing[0], start, end)
                 rows = rows[self.sliding[rows]]
+                # the points of (start, end]: the one recorded at the span's start holds the values
+                # from before its event (a restart keeps a repeated time's first record), which a
+                # pwm source's effort, for one, does not share with the span
                 points = _inside(recorded_t, increasing[1], start, end, closed=True)
+                points = points[recorded_t[points] > start] if start > recorded_t[0] else points
                 if rows.size == 0:
                     continue
                 # one spline through every variable that is finite there (column by column, as
@@ -751,7 +755,8 @@ class _Trajectory:
                     spline = _not_a_knot_spline(recorded_t[points], recorded[splined][:, points].T, times[rows])
                     values[np.flatnonzero(splined)[:, None], rows[None, :], :] = np.moveaxis(spline, -1, 0)
                 for i in np.flatnonzero(~splined):
-                    values[i, rows, :] = np.interp(times[rows], recorded_t, recorded[i])
+                    values[i, rows, :] = np.interp(times[rows], recorded_t[points], recorded[i, points]) \
+                        if points.size else np.interp(times[rows], recorded_t, recorded[i])
         return times, {name: values[i] for i, name in enumerate(self.model.variable_names)}
 
     def states_at_bounds(self) -> dict:
