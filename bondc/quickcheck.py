@@ -398,23 +398,22 @@ class _Verdict:
         walks[0].nonzero(coefficient, f"the coefficient of {wanted}")
         add((wanted, bond), walks[0].found | {(given, bond)})
 
+    def _two_port(self, element, add, first, otherwise) -> None:
+        """``first`` or ``otherwise`` (whether the element sets its first bond's effort): pairs of
+        (variable, port) it sets and (variable, port) that variable reads, besides its law."""
+        bonds, r = element.bonds, self.law(element, "r")
+        for (kind, i), (read, j) in (first if self.causal.sets_effort(bonds[0], element.name) else otherwise):
+            add((kind, bonds[i]), r | {(read, bonds[j])})
+
     def _transformer(self, element, add) -> None:
-        (b1, b2), r = element.bonds, self.law(element, "r")
-        if self.causal.sets_effort(b1, element.name):
-            add(("e", b1), r | {("e", b2)})
-            add(("f", b2), r | {("f", b1)})
-        else:
-            add(("e", b2), r | {("e", b1)})
-            add(("f", b1), r | {("f", b2)})
+        # p1.e = r*p2.e, p2.f = r*p1.f (the equations stage's _transformer)
+        self._two_port(element, add, ((("e", 0), ("e", 1)), (("f", 1), ("f", 0))),
+                       ((("e", 1), ("e", 0)), (("f", 0), ("f", 1))))
 
     def _gyrator(self, element, add) -> None:
-        (b1, b2), r = element.bonds, self.law(element, "r")
-        if self.causal.sets_effort(b1, element.name):
-            add(("e", b1), r | {("f", b2)})
-            add(("e", b2), r | {("f", b1)})
-        else:
-            add(("f", b2), r | {("e", b1)})
-            add(("f", b1), r | {("e", b2)})
+        # p1.e = r*p2.f, p2.e = r*p1.f (the equations stage's _gyrator)
+        self._two_port(element, add, ((("e", 0), ("f", 1)), (("e", 1), ("f", 0))),
+                       ((("f", 1), ("e", 0)), (("f", 0), ("e", 1))))
 
     def _junction(self, junction, add) -> None:
         if not junction.bonds:
