@@ -298,12 +298,26 @@ class _Deriver:
         value = self.invert(expr, dummy, port_out, element, law, wanted=state.name)
         self.add(symbol, value, element.name, "state")
         self.dependents.append(_Dependent(element, symbol, rates[state.qualified], port_in))
-        if state.initial is not None and not (isinstance(state.initial, ast.Num) and state.initial.value == 0):
+        if state.initial is not None and not self._zero_initial(state.initial):
             self.diagnostics.append(Diagnostic(
                 "warning", "W704",
                 f"the initial value of '{state.qualified}' is ignored: {describe_node(self.graph, element.name)} is "
                 "in derivative causality, so its state follows from the other states",
                 state.initial.span if getattr(state.initial, "span", NO_SPAN).line > 0 else element_span(element)))
+
+    def _zero_initial(self, expr) -> bool:
+        """Whether an initial value is 0 with the parameters' values (a component's ``p(0) =
+        J*w0`` with its default ``w0 = 0``: nothing is ignored, W704 would only be noise)."""
+        from bondc.evaluate import EvaluationError, evaluate
+
+        if isinstance(expr, ast.Num):
+            return expr.value == 0
+        self.values_consulted = True        # the warning depends on the values: checked after each edit
+        values = {name: p.value for name, p in self.graph.parameters.items() if p.value is not None}
+        try:
+            return evaluate(expr, values, self.graph.functions) == 0.0
+        except EvaluationError:
+            return False        # it uses more than parameters (an input at t = 0): say it is ignored
 
     def _resistor(self, element: ElementNode) -> None:
         bond = element.bond

@@ -719,6 +719,29 @@ end
     assert warning.code == "W704" and "load.p" in warning.message and warning.span.line == 5
 
 
+@pytest.mark.parametrize("w0, warned", [("0", False), ("0 [rpm]", False), ("2", True)])
+def test_an_eliminated_states_initial_value_that_is_zero_is_not_reported(tmp_path, w0, warned):
+    """``p(0) = J*w0`` with w0 = 0 (a component's default, std:rotational's Inertia): nothing is
+    ignored, so no W704; with w0 = 2 the value 2*J is ignored and said so."""
+    ss = state_space_of(tmp_path, f"""model Geared
+  param J = 2
+  param w0 = {w0}
+  Se torque : e = 1
+  I  motor  : f = p/0.1
+  TF gear   : r = 3
+  I  load   : f = p/J, p(0) = J*w0
+  torque -> motor_j
+  1 motor_j, load_j
+  motor_j -> motor
+  motor_j -> gear -> load_j
+  load_j -> load
+end
+""")
+    assert ss.state_names == ("motor.p",)
+    assert [d.code for d in ss.diagnostics] == (["W704"] if warned else [])
+    assert ss.values_consulted          # the warning depends on the values: checked after each edit
+
+
 def test_eliminating_a_multi_state_element_is_e703(tmp_path):
     path = tmp_path / "model.bg"
     path.write_text("""model TwoStates
