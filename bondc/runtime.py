@@ -1925,6 +1925,18 @@ class _Run:
             if held:
                 t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
                 return t_new, y_new, held
+        if len(near) > _MAX_SLIDING:
+            named = "; ".join(self.model.SWITCHES[k] for k in near[:4]) + ("; ..." if len(near) > 4 else "")
+            raise _Stop({**stalled.failure,
+                         "message": f"the simulation stalled at t={t:.6g}: {len(near)} switches are on their "
+                                    f"surfaces at once ({named}), more than the {_MAX_SLIDING} that can slide "
+                                    "(stick) together",
+                         "cause": f"holding {len(near)} switches at once (dry frictions that stick together) "
+                                  f"combines 2^{len(near)} laws; bondc holds at most {_MAX_SLIDING} "
+                                  f"({2 ** _MAX_SLIDING} laws) at a time",
+                         "hint": "give some of these laws a narrow linear band around zero velocity (for a "
+                                 "friction, e = if abs(f) < v_band then F_s*f/v_band else coulomb(f, F_c, F_s)), "
+                                 "or join parts that always move together into one mass"})
         raise _Stop(stalled.failure)
 
     def sliding_candidates(self, t, y, modes, chattering):

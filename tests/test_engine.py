@@ -797,3 +797,36 @@ def test_a_pwm_whose_duty_steps_has_the_edges_of_each_duty_in_a_loop_model_too(t
     expected = np.sort(np.concatenate([k[1:] / 1000, falling]))
     edges = np.unique(np.round(_edge_events(result, "pwm(t, 1000"), 12))
     np.testing.assert_allclose(edges, expected, rtol=0, atol=1e-12)
+
+
+def _friction_chain(n: int, law: str) -> str:
+    """n unit masses in a row joined by springs, each on a rail with the friction ``law``, the first
+    pushed by 40 sin(pi t) N."""
+    lines = ["model FrictionChain", "  input F [N] = 40*sin(2*pi*0.5*t)", "  MSe push : e = F", "  push -> v1"]
+    for i in range(1, n + 1):
+        lines += [f"  I m{i} : f = p/1", f"  R fr{i} : e = {law}", f"  1 v{i}", f"  v{i} -> m{i}", f"  v{i} -> fr{i}"]
+        if i < n:
+            lines += [f"  C k{i} : e = 2000*q", f"  0 n{i}", f"  1 r{i}", f"  v{i} -> n{i}", f"  n{i} -> v{i + 1}",
+                      f"  n{i} -> r{i}", f"  r{i} -> k{i}"]
+    return "\n".join(lines + ["  experiment run", "    t_end = 4 [s]", "  end", "end"]) + "\n"
+
+
+def test_more_dry_frictions_sticking_at_once_than_can_be_held_stop_and_say_so(tmp_path):
+    """Nine masses at rest on dry friction hold nine switches on their surfaces at once, one more
+    than a sliding mode takes (2^8 laws combined): the run stops (E812) saying how many and what
+    the limit is, not that switches "keep changing mode"; with the hint's linear band around zero
+    velocity the same chain runs to its end."""
+    from bondc.errors import SimulationError
+
+    path = tmp_path / "chain9.bg"
+    path.write_text(_friction_chain(9, "coulomb(f, 2, 3)"))
+    with pytest.raises(SimulationError) as caught:
+        run(path)
+    (diagnostic,) = [d for d in caught.value.diagnostics if d.code == "E812"]
+    assert "9 switches are on their surfaces at once" in diagnostic.message
+    assert "more than the 8" in diagnostic.message and "linear band" in diagnostic.hint
+    banded = tmp_path / "chain9_band.bg"
+    banded.write_text(_friction_chain(9, "if abs(f) < 1e-3 then 3*f/1e-3 else coulomb(f, 2, 3)"))
+    result = run(banded)
+    assert result.complete, result.message
+    assert np.max(result.states["m9.p"]) > 0.1          # the last mass moves too

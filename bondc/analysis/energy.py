@@ -1027,8 +1027,9 @@ def _resimulate(ss, result):
 
 def atol_limited(result, rtol, atol) -> list:
     """(state, its span over the run) of each state that ``atol`` resolves more than ten times
-    more coarsely than ``rtol`` asks (atol > 10 rtol span): a hydraulic chamber's volume in m^3
-    (1e-6) at the default atol of 1e-9 is resolved to 1e-3 of its span, whatever rtol is."""
+    more coarsely than ``rtol`` asks (atol > 10 rtol span) while it moves by 10 atol at least: a
+    hydraulic chamber's volume in m^3 (1e-6) at the default atol of 1e-9 is resolved to 1e-3 of
+    its span, whatever rtol is."""
     try:
         rtol, atol = float(rtol), float(atol)
     except (TypeError, ValueError):
@@ -1038,7 +1039,9 @@ def atol_limited(result, rtol, atol) -> list:
         values = np.asarray(values, dtype=float)
         finite = values[np.isfinite(values)]
         span = float(np.ptp(finite)) if finite.size else 0.0
-        if span > 0.0 and atol > 10.0 * rtol * span:
+        # (a state that never moves by more than a few atol is at the solver's noise level: tightening
+        # atol for it is no remedy, as for the springs of a run stopped after 2 us)
+        if 10.0 * atol <= span and atol > 10.0 * rtol * span:
             limited.append((name, span))
     return limited
 
