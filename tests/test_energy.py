@@ -39,6 +39,13 @@ def load_text(tmp_path, text: str):
     return load(path)
 
 
+def _run_and_account(tmp_path, text: str):
+    """(the run of ``text``'s first experiment, its energy account)."""
+    ss, experiment = load_text(tmp_path, text)
+    result = simulate(ss, experiment)
+    return result, energy_account(ss, result)
+
+
 # ------------------------------------------------------------------ RC charging
 
 RC = """
@@ -348,11 +355,9 @@ def test_a_pwm_source_feeding_a_stuck_rotor_supplies_the_closed_form_energy(tmp_
   end
 end
 """
-    ss, experiment = load_text(tmp_path, text)
-    result = simulate(ss, experiment)
+    result, account = _run_and_account(tmp_path, text)
     assert result.complete
     assert np.max(np.abs(result.states["rotor.p"])) < 1e-9          # stuck throughout
-    account = energy_account(ss, result)
     row = account.windows[0].element("source")
     # the closed form: i' = (u - R i)/L, u = V on [k/f, (k + d)/f), 0 otherwise
     tau, supplied, i = L / R, 0.0, 0.0
@@ -388,10 +393,8 @@ def test_a_stuck_mass_that_breaks_away_at_a_step_of_its_force_has_the_closed_for
   end
 end
 """
-    ss, experiment = load_text(tmp_path, text)
-    result = simulate(ss, experiment)
+    result, account = _run_and_account(tmp_path, text)
     assert any(abs(time - 0.01) < 1e-12 and "step" in label for time, label in result.events)
-    account = energy_account(ss, result)
     window = account.windows[0]
     x = (20 - 5) / (2 * 2) * (0.2 - 0.01) ** 2
     assert window.element("push").supplied == pytest.approx(20 * x, rel=1e-6)

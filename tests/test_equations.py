@@ -701,19 +701,24 @@ end
     assert error.code == "E702" and "'r1'" in error.message
 
 
-def test_initial_value_of_an_eliminated_state_is_reported(tmp_path):
-    ss = state_space_of(tmp_path, """model Geared
-  Se torque : e = 1
+def _geared(load: str, params: str = "") -> str:
+    """A load inertia rigidly geared to a motor's (derivative causality), the load's law ``load``."""
+    return f"""model Geared
+{params}  Se torque : e = 1
   I  motor  : f = p/0.1
   TF gear   : r = 3
-  I  load   : f = p/2, p(0) = 0.5
+  I  load   : {load}
   torque -> motor_j
   1 motor_j, load_j
   motor_j -> motor
   motor_j -> gear -> load_j
   load_j -> load
 end
-""")
+"""
+
+
+def test_initial_value_of_an_eliminated_state_is_reported(tmp_path):
+    ss = state_space_of(tmp_path, _geared("f = p/2, p(0) = 0.5"))
     assert ss.state_names == ("motor.p",)
     (warning,) = ss.diagnostics
     assert warning.code == "W704" and "load.p" in warning.message and warning.span.line == 5
@@ -723,20 +728,7 @@ end
 def test_an_eliminated_states_initial_value_that_is_zero_is_not_reported(tmp_path, w0, warned):
     """``p(0) = J*w0`` with w0 = 0 (a component's default, std:rotational's Inertia): nothing is
     ignored, so no W704; with w0 = 2 the value 2*J is ignored and said so."""
-    ss = state_space_of(tmp_path, f"""model Geared
-  param J = 2
-  param w0 = {w0}
-  Se torque : e = 1
-  I  motor  : f = p/0.1
-  TF gear   : r = 3
-  I  load   : f = p/J, p(0) = J*w0
-  torque -> motor_j
-  1 motor_j, load_j
-  motor_j -> motor
-  motor_j -> gear -> load_j
-  load_j -> load
-end
-""")
+    ss = state_space_of(tmp_path, _geared("f = p/J, p(0) = J*w0", f"  param J = 2\n  param w0 = {w0}\n"))
     assert ss.state_names == ("motor.p",)
     assert [d.code for d in ss.diagnostics] == (["W704"] if warned else [])
     assert ss.values_consulted          # the warning depends on the values: checked after each edit
