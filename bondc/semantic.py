@@ -1061,6 +1061,8 @@ def _check_expr(m: _Model, expr: ast.Expr, scope: _Scope) -> bool:
 
 _PARAMETER_RULE = "a parameter is a constant: numbers, parameters defined above it, pi and functions"
 _OVERRIDE_RULE = "an override is a constant: numbers, parameters, pi and functions"
+_BINDING_RULE = ("a parameter is a constant: numbers, parameters, pi and functions; a value that varies "
+                 "needs an input of the component (bind it to any signal) or an element of your own")
 _CONSTANT_RULE = "{} is a constant: numbers, parameters, pi and functions"
 _INPUT_RULE = ("an input is a signal of t, parameters and other inputs (table, step, csv, functions); "
                "feedback from the states goes into an element's law, a modulated source's for a controller "
@@ -1443,7 +1445,12 @@ def _check_override(m: _Model, name: str, name_span: Span, expr: ast.Expr, unit:
                         hint=_did_you_mean(name, m.names("parameter"))))
         return False
     m.used.add(name)
-    ok = _check_expr(m, expr, _scope(m, "an override", CONSTANT, _OVERRIDE_RULE))
+    if where.startswith("instance "):       # a component's parameter bound in an instance
+        scope = _scope(m, f"the value of parameter '{name.rsplit('.', 1)[-1]}' in {where}", CONSTANT,
+                       _BINDING_RULE)
+    else:
+        scope = _scope(m, "an override", CONSTANT, _OVERRIDE_RULE)
+    ok = _check_expr(m, expr, scope)
     if _is_constant(expr):
         resolved = _resolve_unit(m, unit)
     else:

@@ -208,6 +208,8 @@ def _plant(*lines):
     (["Pipe p", "s -> p", "p.b -> tank"], "E340", 13, "bond one of its ports"),
     (["Pipe p : q(0) = 1", "s -> p.a", "p.b -> tank"], "E335", 12, "bindings"),
     (["Pipe p", "s -> p.a", "p.b -> tank", "output y = p.nothing.e"], "E312", 15, "has no 'nothing'"),
+    (["input u [1] = t", "Pipe p : R_h = 1e9*u", "s -> p.a", "p.b -> tank"], "E316", 13,
+     "the value of parameter 'R_h' in instance 'p' cannot use input 'u'"),
 ])
 def test_malformed_instances_are_reported_at_the_instance(tmp_path, lines, code, line_number, text):
     diagnostics = _errors(tmp_path, _plant(*lines))
