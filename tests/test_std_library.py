@@ -308,6 +308,24 @@ model Fill
     assert np.allclose(result.outputs["tank.p"], 100e5 - root ** 2, rtol=1e-7, atol=10)
 
 
+def test_a_variable_orifice_opened_at_5_ms_fills_a_chamber_as_the_closed_form(tmp_path):
+    # closed (A <= 0) until 5 ms, then as the fixed orifice from there
+    text = '''import "std:hydraulics"
+model Fill
+  PressureSource pump : p = 100e5
+  VariableOrifice valve : A = 2e-6*step(t, 0.005) - 1e-6, Cd = 0.6, rho = 870
+  Chamber tank : V = 1 [L], beta = 1.5e9
+  pump.a -> valve.a
+  valve.b -> tank.a
+%TIGHT%end
+'''
+    result = _run(tmp_path, text, 0.02, 0.001)
+    k = 0.6 * 1e-6 * math.sqrt(2 / 870)
+    root = np.maximum(math.sqrt(100e5) - 1.5e9 * k / (2 * 1e-3) * np.maximum(result.t - 0.005, 0), 0)
+    assert np.allclose(result.outputs["tank.p"], 100e5 - root ** 2, rtol=1e-7, atol=10)
+    assert np.all(result.outputs["valve.Q"][result.t < 0.005] == 0)
+
+
 def test_laminar_restriction_relief_valve_pump_and_accumulator(tmp_path):
     # Pump D*w into a chamber relieved above p_crack: steady state p = p_crack + D*w/K_v.
     text = '''import "std:hydraulics"
