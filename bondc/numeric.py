@@ -5,6 +5,7 @@ scales of a measured file's header units, and :data:`NUMERIC_FUNCTIONS`, the nam
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Mapping
 
 import numpy as np
@@ -17,6 +18,22 @@ def table_value(x, breakpoints, values):
 
 def step_value(x, x0):
     return 1.0 if x >= x0 else 0.0
+
+
+def pwm_value(x, f, d):
+    """``pwm(x, f, d)`` at numbers.
+
+    >>> pwm_value(0.0, 10.0, 0.3), pwm_value(0.029, 10.0, 0.3), pwm_value(0.03, 10.0, 0.3)
+    (1.0, 1.0, 0.0)
+    """
+    phase = x * f - math.floor(x * f)
+    return 1.0 if phase < d else 0.0
+
+
+def coulomb_value(v, slide, static=None):
+    """``coulomb(v, F_slide, F_static)`` away from sticking: ``F_slide*sign(v)`` (0 at v = 0, where
+    only a simulation finds the holding force); a negative limit acts as 0."""
+    return max(float(slide), 0.0) * float(np.sign(v))
 
 
 def read_csv_column(path: str, column: str) -> tuple[np.ndarray, np.ndarray]:
@@ -69,4 +86,6 @@ NUMERIC_FUNCTIONS: Mapping[str, Callable] = {
     "Table": lambda x, xs, vs: table_value(x, xs, vs),
     "Step": step_value,
     "Csv": csv_value,
+    "Pwm": pwm_value,
+    "Coulomb": coulomb_value,
 }

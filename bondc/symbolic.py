@@ -35,7 +35,6 @@ import math
 from pathlib import Path
 from typing import Callable, Mapping
 
-import numpy as np
 import sympy
 from sympy.core.symbol import Str as _SymStr
 
@@ -150,7 +149,7 @@ class Coulomb(sympy.Function):
         v, slide = self.args[0], self.args[1]
         if not (v.is_number and slide.is_number):
             return None
-        return sympy.Float(max(float(slide), 0.0) * float(np.sign(float(v))), prec)
+        return sympy.Float(coulomb_value(float(v), float(slide)), prec)
 
 
 class Pwm(_PiecewiseConstant):
@@ -164,16 +163,6 @@ class Pwm(_PiecewiseConstant):
             return None
         x, f, d = (float(a) for a in self.args)
         return sympy.Float(pwm_value(x, f, d), prec)
-
-
-def pwm_value(x, f, d):
-    """``pwm(x, f, d)`` at numbers.
-
-    >>> pwm_value(0.0, 10.0, 0.3), pwm_value(0.029, 10.0, 0.3), pwm_value(0.03, 10.0, 0.3)
-    (1.0, 1.0, 0.0)
-    """
-    phase = x * f - math.floor(x * f)
-    return 1.0 if phase < d else 0.0
 
 
 class Csv(sympy.Function):
@@ -256,7 +245,7 @@ def as_sympy(value):
 
 
 # bondc's numeric functions live in a module without sympy (a cached run reads them without it)
-from bondc.numeric import csv_scales, csv_value, step_value, table_value  # noqa: E402
+from bondc.numeric import coulomb_value, csv_scales, csv_value, pwm_value, step_value, table_value  # noqa: E402
 
 
 # ----------------------------------------------------------------- translator

@@ -318,3 +318,26 @@ def test_a_loop_without_a_root_at_the_operating_point_is_e941_not_an_internal_er
         linearize(state_space_of(tmp_path, text))
     (diagnostic,) = caught.value.diagnostics
     assert diagnostic.code == "E941" and "algebraic loop through r2, r3, j0" in diagnostic.message
+
+
+@pytest.mark.parametrize("duty_time, force", [(0.01, 5.0), (0.07, 0.0)])
+def test_a_model_with_dry_friction_and_a_pwm_input_linearises(tmp_path, duty_time, force):
+    """coulomb() and pwm() in the laws (the linearisation's numeric model had no value for them:
+    an internal error). coulomb's force F_slide*sign(v) has no slope away from v = 0, so A is the
+    mass-spring-damper's; the pwm input is held at its value at the time given, 5 N on, 0 off."""
+    ss = state_space_of(tmp_path, """model M
+  input F [N] = 5*pwm(t, 10, 0.5)
+  MSe push : e = F
+  I mass : f = p/2
+  C spring : e = 800*q
+  R damper : e = 3*f + coulomb(f, 4, 6)
+  1 v
+  push -> v
+  v -> mass
+  v -> spring
+  v -> damper
+end
+""")
+    lin = linearize(ss, time=duty_time)
+    assert lin.A == pytest.approx(np.array([[-3 / 2, -800.0], [1 / 2, 0.0]]))
+    assert lin.u0.tolist() == [force]
