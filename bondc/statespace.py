@@ -231,6 +231,10 @@ class NumericModel:
             def _print_Symbol(self, symbol):
                 return names[symbol]
 
+            def _print_Integer(self, expr):
+                # beyond a double's exact integers, numpy would take Python's int as an object
+                return str(int(expr)) if abs(int(expr)) < 2 ** 53 else repr(float(expr))
+
             _print_Dummy = _print_Symbol
 
         # sums in sympy's own argument order: this code is only run, and sorting every sum is slow
@@ -311,9 +315,21 @@ class NumericModel:
     def _call(self, t, x, inputs):
         import numpy
 
+        from bondc.errors import AnalysisError, DataError, Diagnostic
+        from bondc.runtime import CsvError
+
         # numpy evaluates every branch of a Piecewise: the unused ones may warn.
         with numpy.errstate(all="ignore"):
-            return self._run(float(t), list(x), self._fixed(inputs))
+            try:
+                return self._run(float(t), list(x), self._fixed(inputs))
+            except CsvError as error:           # as a simulation says it (E804)
+                raise DataError(Diagnostic("error", "E804", f"cannot read a measured signal: {error}")) from None
+            except (ArithmeticError, ValueError, TypeError) as error:   # a division by zero, a domain error
+                raise AnalysisError(Diagnostic(
+                    "error", "E941", f"cannot evaluate the state equations at the operating point (t = {float(t):g}): "
+                                     f"{error}",
+                    hint="linearise at another point (another initial value, or --at equilibrium), or check the "
+                         "parameters a law divides by")) from None
 
     def _fixed(self, inputs):
         inputs = inputs or {}

@@ -341,3 +341,57 @@ end
     lin = linearize(ss, time=duty_time)
     assert lin.A == pytest.approx(np.array([[-3 / 2, -800.0], [1 / 2, 0.0]]))
     assert lin.u0.tolist() == [force]
+
+
+def test_an_operating_point_where_a_law_has_no_slope_or_no_value_is_a_clear_error(tmp_path):
+    """A turbulent orifice at zero pressure difference (sqrt(abs(e)): an infinite slope) and an
+    input that divides by a step still at 0 are E941 naming the derivative or the cause, not an
+    internal error (numpy's eigenvalues of a matrix with nan; Python's float division by zero)."""
+    orifice = """model Tank
+  param k = 1e-7
+  Se supply : e = 0
+  R valve : f = k*sign(e)*sqrt(abs(e))
+  C tank : e = 1e9*q
+  1 j
+  supply -> j
+  j -> valve
+  j -> tank
+end
+"""
+    with pytest.raises(AnalysisError) as caught:
+        linearize(state_space_of(tmp_path, orifice))
+    (error,) = caught.value.diagnostics
+    assert error.code == "E941" and "partial derivative of der(tank.q) with respect to tank.q" in error.message
+    divided = """model Free
+  input u [N] = 10/step(t, 1)
+  MSe push : e = u
+  I mass : f = p/2
+  push -> mass
+end
+"""
+    with pytest.raises(AnalysisError) as caught:
+        linearize(state_space_of(tmp_path, divided))
+    (error,) = caught.value.diagnostics
+    assert error.code == "E941" and "division by zero" in error.message
+
+
+def test_a_staircase_law_linearises_with_no_slope(tmp_path):
+    """A drain whose flow is 0.5*floor(p): floor is constant between its jumps, so its slope is 0
+    (sympy keeps d floor(p)/dp unevaluated: it was an internal error, ValueError "Can't calculate
+    derivative wrt 0.0"). der(tank.q) = 1 - 0.5*floor(q): A = [[0]]; the outputs q, ceil(q) and
+    mod(q, 0.3) = q - 0.3*floor(q/0.3) have slopes 1, 0 and 1."""
+    ss = state_space_of(tmp_path, """model Drain
+  Sf inflow : f = 1
+  C  tank   : e = q
+  R  drain  : f = 0.5*floor(e)
+  0  n
+  inflow -> n
+  n -> tank
+  n -> drain
+  output level [m^3] = tank.q
+  output up [m^3] = ceil(tank.q)
+  output rest [m^3] = mod(tank.q, 0.3)
+end
+""")
+    lin = linearize(ss)
+    assert lin.A.tolist() == [[0.0]] and lin.C.tolist() == [[1.0], [0.0], [1.0]]

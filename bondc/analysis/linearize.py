@@ -177,7 +177,7 @@ class _Jacobian:
                          key=lambda s: s.name)
         out = []
         for s in symbols:
-            partial = strip_impulses(partial_derivative(expr, s, sympy.diff))
+            partial = _staircases_flat(strip_impulses(partial_derivative(expr, s, sympy.diff)))
             constant = None
             if not (partial.free_symbols - set(self.parameter_values)):
                 constant = self._value(partial, {})
@@ -185,13 +185,21 @@ class _Jacobian:
         return tuple(out)
 
     def _value(self, expr, values) -> float:
-        number = as_sympy(expr).xreplace(values).xreplace(self.parameter_values)
-        number = as_sympy(number).evalf()
+        number = None
         try:
+            number = as_sympy(expr).xreplace(values).xreplace(self.parameter_values)
+            number = as_sympy(number).evalf()
             return float(number)
-        except TypeError as error:
-            raise AnalysisError(Diagnostic("error", "E941", f"cannot evaluate the derivative {expr} "
-                                                            f"at the operating point ({number})")) from error
+        except (TypeError, ValueError) as error:
+            # zoo; a comparison of a complex value (sqrt of a tiny negative number)
+            text = str(expr)
+            text = text if len(text) <= 160 else text[:150] + " ..."
+            value = f" ({number})" if number is not None and len(str(number)) <= 40 else ""
+            raise AnalysisError(Diagnostic("error", "E941", f"cannot evaluate the derivative {text} at the "
+                                                            f"operating point{value}",
+                                           hint="linearise at another point (another initial value, or --at "
+                                                "equilibrium), or make the law smooth at the operating "
+                                                "point")) from error
 
     def __call__(self, values: Mapping) -> tuple[np.ndarray, np.ndarray]:
         """[A B] and [C D] at a point given by ``values`` (symbol -> float, incl. t).
@@ -294,6 +302,8 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
         if held:
             notes.append(f"no state equation depends on {', '.join(held)}: held at the initial value")
     f_rows, g_rows = jacobian(point(x))
+    _require_finite(f_rows, [f"der({name})" for name in ss.state_names], g_rows, list(ss.outputs),
+                    list(ss.state_names) + list(ss.inputs), time)
     A, B = f_rows[:, :n], f_rows[:, n:]
     C, D = g_rows[:, :n], g_rows[:, n:]
     eigenvalues = np.linalg.eigvals(A) if n else np.zeros(0, dtype=complex)
@@ -311,6 +321,33 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
         A=A, B=B.reshape(n, m), C=C, D=D.reshape(len(ss.outputs), m),
         eigenvalues=eigenvalues, natural_frequencies=magnitude, damping_ratios=damping,
         time=float(time), at=at, x0=np.asarray(x, dtype=float), u0=u0, held=held, notes=tuple(notes))
+
+
+def _staircases_flat(partial):
+    """``floor`` and ``ceil`` are constant between their jumps (whose impulses no linear model
+    carries, as a step's): their derivatives, which sympy keeps unevaluated, are 0."""
+    if not partial.has(sympy.Derivative):
+        return partial
+    flat = partial.replace(lambda e: isinstance(e, sympy.Derivative) and isinstance(e.expr, (sympy.floor,
+                                                                                            sympy.ceiling)),
+                           lambda e: sympy.Integer(0))
+    # the chain rule through an argument (floor(q/0.3) of a mod) leaves Subs(0, ...): 0 too
+    return flat.replace(lambda e: isinstance(e, sympy.Subs) and e.expr.is_number, lambda e: e.expr)
+
+
+def _require_finite(f_rows, f_names, g_rows, g_names, columns, time) -> None:
+    """E941 for the first partial derivative that is not a finite number at the operating point
+    (a law with an infinite slope there: d/dp sqrt(abs(p)) at p = 0), naming it."""
+    for rows, names in ((f_rows, f_names), (g_rows, g_names)):
+        bad = np.argwhere(~np.isfinite(rows))
+        if bad.size:
+            row, column = (int(i) for i in bad[0])
+            raise AnalysisError(Diagnostic(
+                "error", "E941", f"the partial derivative of {names[row]} with respect to {columns[column]} is "
+                                 f"{rows[row, column]} at the operating point (t = {time:g}): a law with an infinite "
+                                 "slope there, or a parameter that is zero or tiny",
+                hint="linearise at another point (another initial value, or --at equilibrium), or make the law "
+                     "smooth at the operating point (a linear band around zero flow)"))
 
 
 def _settle(rates, start):

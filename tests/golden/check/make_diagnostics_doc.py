@@ -424,8 +424,10 @@ d("E940", "no equilibrium",
   "exists.")
 d("E941", "derivative cannot be evaluated",
   "`bondc linearize` evaluates the partial derivatives of the state equations at the operating point, and one "
-  "is not a finite number there (`zoo` is sympy's complex infinity): e.g. d/dq sqrt(q) at q = 0. The message "
-  "shows the derivative. Also where a nonlinear algebraic loop (W604) has no solution found at the operating "
+  "is not a finite number there (`zoo` is sympy's complex infinity, or inf or nan as a number): e.g. d/dq "
+  "sqrt(q) at q = 0, a turbulent orifice at zero pressure difference. The message shows the derivative, or "
+  "names the state equation and the variable. Also where the state equations themselves have no value at the "
+  "operating point (a division by zero there), and where a nonlinear algebraic loop (W604) has no solution found at the operating "
   "point (hybr from the last solution and from the guesses, then Newton's method with a line search): the "
   "message names the loop.",
   "Linearise at another point (another initial value, or `--at equilibrium`), or make the law smooth at the "
