@@ -9,7 +9,8 @@ changes one to three lines of one file with a seeded random generator:
 - swap an operator.
 
 Every mutant goes through ``bondc check``. A sample of those that pass also
-goes through ``bondc simulate``, in a subprocess with a time limit. The outcome
+goes through ``bondc simulate``, in a subprocess with a time limit, and another
+through ``bondc linearize`` and ``bondc equations --format latex``. The outcome
 must be a normal exit (0, 1 or 2), never an internal error (exit 3) or a
 Python traceback, and never a hang. Every error diagnostic of ``check`` must
 name where it is: ``file:line:col``, or the file for a whole-file problem. The
@@ -158,4 +159,33 @@ def test_mutants_that_check_are_simulated_without_a_crash_or_a_hang(tmp_path):
                            + ", ".join(f"exit {code}: {count}" for code, count in sorted(outcomes.items()))
                            + f"; {len(problems)} problems")
     assert ran >= min(RUNS, 5), "too few mutants passed check to simulate"
+    assert not problems, "\n\n".join(problems[:5])
+
+
+@pytest.mark.slow
+def test_mutants_that_check_are_linearised_and_printed_without_an_internal_error(tmp_path, monkeypatch):
+    """``linearize`` evaluates the equations at an operating point (a law's infinite slope there, a
+    division by zero, a measured signal file it cannot read) and ``equations`` prints them: model
+    errors both, never an internal error."""
+    monkeypatch.setenv("BONDC_CACHE", "0")
+    ran, outcomes, problems = 0, {}, []
+    for number, (source, text) in enumerate(mutants(CHECKS, SEED + 2)):
+        if ran >= 2 * RUNS:
+            break
+        path = _place(tmp_path, source, text, number)
+        if _check(path)[0] != 0:
+            continue
+        ran += 1
+        for command in (["linearize", str(path)], ["equations", "--format", "latex", str(path)]):
+            out, err = io.StringIO(), io.StringIO()
+            with redirect_stdout(out), redirect_stderr(err):
+                code = main(command)
+            outcomes[code] = outcomes.get(code, 0) + 1
+            if code not in (0, 1, 2) or "Traceback" in err.getvalue() or "internal error" in err.getvalue():
+                problems.append(f"{source.relative_to(ROOT)} mutant {number}, {command[0]}: exit {code}\n"
+                                f"{err.getvalue()[-800:]}")
+    SUMMARY["linearize"] = (f"{ran} mutants that check linearised and printed: "
+                            + ", ".join(f"exit {code}: {count}" for code, count in sorted(outcomes.items()))
+                            + f"; {len(problems)} problems")
+    assert ran >= min(RUNS, 5), "too few mutants passed check to linearise"
     assert not problems, "\n\n".join(problems[:5])
