@@ -112,6 +112,12 @@ def _check(path: Path) -> tuple[int, str]:
     return code, err.getvalue()
 
 
+def _tally(what: str, outcomes: dict, problems: list) -> str:
+    """The summary line of a fuzz test: what ran, its exit codes and the problems."""
+    return (f"{what}: " + ", ".join(f"exit {code}: {count}" for code, count in sorted(outcomes.items()))
+            + f"; {len(problems)} problems")
+
+
 @pytest.mark.slow
 def test_mutants_of_every_model_are_checked_without_an_internal_error(tmp_path, monkeypatch):
     monkeypatch.setenv("BONDC_CACHE", "0")
@@ -155,9 +161,8 @@ def test_mutants_that_check_are_simulated_without_a_crash_or_a_hang(tmp_path):
         if done.returncode not in (0, 1, 2) or "Traceback" in done.stderr or "internal error" in done.stderr:
             problems.append(f"{source.relative_to(ROOT)} mutant {number}: exit {done.returncode}\n"
                             f"{done.stderr[-800:]}")
-    SUMMARY["simulate"] = (f"{ran} mutants that check simulated (limit {RUN_LIMIT:g} s each): "
-                           + ", ".join(f"exit {code}: {count}" for code, count in sorted(outcomes.items()))
-                           + f"; {len(problems)} problems")
+    SUMMARY["simulate"] = _tally(f"{ran} mutants that check simulated (limit {RUN_LIMIT:g} s each)", outcomes,
+                                 problems)
     assert ran >= min(RUNS, 5), "too few mutants passed check to simulate"
     assert not problems, "\n\n".join(problems[:5])
 
@@ -184,8 +189,6 @@ def test_mutants_that_check_are_linearised_and_printed_without_an_internal_error
             if code not in (0, 1, 2) or "Traceback" in err.getvalue() or "internal error" in err.getvalue():
                 problems.append(f"{source.relative_to(ROOT)} mutant {number}, {command[0]}: exit {code}\n"
                                 f"{err.getvalue()[-800:]}")
-    SUMMARY["linearize"] = (f"{ran} mutants that check linearised and printed: "
-                            + ", ".join(f"exit {code}: {count}" for code, count in sorted(outcomes.items()))
-                            + f"; {len(problems)} problems")
+    SUMMARY["linearize"] = _tally(f"{ran} mutants that check linearised and printed", outcomes, problems)
     assert ran >= min(RUNS, 5), "too few mutants passed check to linearise"
     assert not problems, "\n\n".join(problems[:5])

@@ -291,38 +291,35 @@ model Rectifier
 
 # ------------------------------------------------------------ hydraulics
 
-def test_orifice_fills_a_chamber_as_the_closed_form(tmp_path):
-    # dp/dt = beta/V*k*sqrt(p_s - p): sqrt(p_s - p) = sqrt(p_s) - beta*k/(2V)*t
-    text = '''import "std:hydraulics"
+_FILL = '''import "std:hydraulics"
 model Fill
   PressureSource pump : p = 100e5
-  Orifice valve : A = 1e-6, Cd = 0.6, rho = 870
+  %VALVE%, Cd = 0.6, rho = 870
   Chamber tank : V = 1 [L], beta = 1.5e9
   pump.a -> valve.a
   valve.b -> tank.a
 %TIGHT%end
 '''
-    result = _run(tmp_path, text, 0.02, 0.002)
+
+
+def _filled(t, opened=0.0):
+    """The chamber's pressure filled through the orifice from ``opened`` on (closed form):
+    dp/dt = beta/V*k*sqrt(p_s - p), so sqrt(p_s - p) = sqrt(p_s) - beta*k/(2V)*(t - opened)."""
     k = 0.6 * 1e-6 * math.sqrt(2 / 870)
-    root = np.maximum(math.sqrt(100e5) - 1.5e9 * k / (2 * 1e-3) * result.t, 0)
-    assert np.allclose(result.outputs["tank.p"], 100e5 - root ** 2, rtol=1e-7, atol=10)
+    root = np.maximum(math.sqrt(100e5) - 1.5e9 * k / (2 * 1e-3) * np.maximum(t - opened, 0), 0)
+    return 100e5 - root ** 2
+
+
+def test_orifice_fills_a_chamber_as_the_closed_form(tmp_path):
+    result = _run(tmp_path, _FILL.replace("%VALVE%", "Orifice valve : A = 1e-6"), 0.02, 0.002)
+    assert np.allclose(result.outputs["tank.p"], _filled(result.t), rtol=1e-7, atol=10)
 
 
 def test_a_variable_orifice_opened_at_5_ms_fills_a_chamber_as_the_closed_form(tmp_path):
     # closed (A <= 0) until 5 ms, then as the fixed orifice from there
-    text = '''import "std:hydraulics"
-model Fill
-  PressureSource pump : p = 100e5
-  VariableOrifice valve : A = 2e-6*step(t, 0.005) - 1e-6, Cd = 0.6, rho = 870
-  Chamber tank : V = 1 [L], beta = 1.5e9
-  pump.a -> valve.a
-  valve.b -> tank.a
-%TIGHT%end
-'''
-    result = _run(tmp_path, text, 0.02, 0.001)
-    k = 0.6 * 1e-6 * math.sqrt(2 / 870)
-    root = np.maximum(math.sqrt(100e5) - 1.5e9 * k / (2 * 1e-3) * np.maximum(result.t - 0.005, 0), 0)
-    assert np.allclose(result.outputs["tank.p"], 100e5 - root ** 2, rtol=1e-7, atol=10)
+    valve = "VariableOrifice valve : A = 2e-6*step(t, 0.005) - 1e-6"
+    result = _run(tmp_path, _FILL.replace("%VALVE%", valve), 0.02, 0.001)
+    assert np.allclose(result.outputs["tank.p"], _filled(result.t, 0.005), rtol=1e-7, atol=10)
     assert np.all(result.outputs["valve.Q"][result.t < 0.005] == 0)
 
 
