@@ -1816,13 +1816,16 @@ class _Run:
                         labels = {model.SWITCHES[k] for k in changed}
                         if breaks[break_index][1] not in labels:
                             self.note_event(breaks[break_index][0], breaks[break_index][1])
-                    if self.chattering_since is None:
-                        # after a sliding segment, the switches it held are its own business; any
-                        # other that changed (a step of time at a break) is an event like any: a
-                        # sliding span ends there (the energy account's spans end at the next event)
-                        for k in changed:
-                            if sliding is None or k not in sliding:
-                                self.note_event(t, f"{model.SWITCHES[k]} -> {int(modes[k]):+d}")
+                    # after a sliding segment, the switches it held are its own business; any other
+                    # that changed (a step of time at a break) is an event like any: a sliding span
+                    # ends there (the energy account's spans end at the next event). While switches
+                    # chatter their flips are not noted, but a break's own switch still is
+                    known_here = breaks[break_index][1].split("; ") if at_break else ()
+                    for k in changed:
+                        if sliding is not None and k in sliding:
+                            continue
+                        if self.chattering_since is None or model.SWITCHES[k] in known_here:
+                            self.note_event(t, f"{model.SWITCHES[k]} -> {int(modes[k]):+d}")
                     if changed:
                         self.stats["events"] += 1
                         if not at_break:            # changes at known times are no chattering
