@@ -2768,10 +2768,7 @@ class _Run:
         if getattr(self.model, "VECTORIZED", True):
             return np.asarray(np.broadcast_to(self.model.switches(t, x, self.p, modes),
                                               (self.switch_count, t.size)), dtype=float)
-        at_points = getattr(self.model.switches, "at_points", None)
-        if at_points is not None and t.size > 1:
-            return at_points(t, x, self.p, modes)
-        return np.column_stack([self.model.switches(t[j], x[:, j], self.p, modes) for j in range(t.size)])
+        return _evaluate_columns(self.model, self.p, self.model.switches, t, x, modes, self.switch_count)
 
     def point_modes(self, t, x, modes, relevant):
         """Modes at every point of a frozen segment: the segment's for the switches that were located,
