@@ -101,6 +101,7 @@ variable that first became nan or inf (in causal order) and its law.
 """
 
 import atexit
+import collections as _collections
 import csv as _csv
 import functools
 import importlib
@@ -185,6 +186,45 @@ def brentq(function, a, b, xtol, rtol):
         return value
 
     return kernel._brentq(checked, a, b, xtol, rtol, 100, (), False, True)
+
+
+def bracketed_roots(function, a, b, fa, fb, xtol, rtol):
+    """Roots of ``function`` in many brackets ``[a[i], b[i]]`` at once, by bisection of every
+    bracket together: ``function(times, rows)`` gives the values at ``times`` (one per bracket
+    of ``rows``, an index array), ``fa``/``fb`` its values at the ends. As :func:`brentq` (the
+    same tolerance ``xtol + rtol*|x|``; an end where the value is 0 is the root; a value that is
+    nan inside gives the right end), but one vectorised call per halving for all brackets, not
+    ten Python calls per bracket; a jump (a pwm edge) is found like a zero. The root returned is
+    the bracket's end on the far side of the change (where ``function`` has the sign of ``fb``).
+    """
+    a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+    fa, fb = np.asarray(fa, dtype=float), np.asarray(fb, dtype=float)
+    roots = b.copy()
+    roots[fa == 0] = a[fa == 0]
+    side = np.sign(fa)
+    active = np.flatnonzero((fa != 0) & (fb != 0) & (side * np.sign(fb) < 0))
+    lo, hi = a[active], b[active]
+    for _ in range(1100):       # halving the widest double interval down to one ulp takes < 1100
+        if not active.size:
+            break
+        middle = lo + 0.5 * (hi - lo)
+        done = (hi - lo <= xtol + rtol * np.abs(hi)) | (middle <= lo) | (middle >= hi)
+        if done.any():
+            roots[active[done]] = hi[done]
+            keep = ~done
+            active, lo, hi, middle = active[keep], lo[keep], hi[keep], middle[keep]
+            if not active.size:
+                break
+        with np.errstate(all="ignore"):
+            value = np.asarray(function(middle, active), dtype=float)
+        lost = np.isnan(value)
+        if lost.any():                  # brentq's ValueError: its caller takes the right end
+            keep = ~lost
+            active, lo, hi, middle, value = active[keep], lo[keep], hi[keep], middle[keep], value[keep]
+        before = side[active] * value > 0           # still on the side of a: the change is after
+        lo = np.where(before, middle, lo)
+        hi = np.where(before, hi, middle)
+    return roots
 
 
 def quad(function, a, b, epsabs, epsrel, limit):
@@ -1125,6 +1165,31 @@ class _NativeDriver:
         self.lib.bondc_driver_counts(self.handle, out)
         return int(out[0]), int(out[1]), int(out[2])
 
+    def pieces(self, t_stops, t0, y0, m0, floors, probe, rtol, atol, max_step, first_step):
+        """Known pieces in one call (``bondc_driver_pieces``): (pieces done, times, states, ends,
+        modes, counts), the arrays of the pieces done, the times and states copied."""
+        buffer, null = self.ffi.from_buffer, self.ffi.NULL
+        count, switches = len(t_stops), m0.size
+        t_stops = np.ascontiguousarray(t_stops, dtype=float)
+        ends = np.zeros(count, dtype=np.intc)
+        modes = np.zeros((count, max(switches, 1)))
+        counts = np.zeros((count, 3), dtype=np.int_)
+        done = self.lib.bondc_driver_pieces(
+            self.handle, count, buffer("double[]", t_stops), float(t0), buffer("double[]", np.array(y0, dtype=float)),
+            buffer("double[]", np.array(m0, dtype=float)) if switches else null,
+            buffer("int[]", floors) if switches else null, float(probe), float(rtol), float(atol), float(max_step),
+            float(first_step), self.capacity, buffer("double[]", self.ts), buffer("double[]", self.ys),
+            buffer("int[]", ends), buffer("double[]", modes), buffer("long[]", counts))
+        stored = int(ends[done - 1]) if done else 0
+        return (done, self.ts[:stored].copy(), self.ys[:stored].copy(), ends[:done], modes[:done, :switches],
+                counts[:done])
+
+
+#: A piece of a run integrated ahead (:meth:`_Run.queued_piece`): from (t0, y0) to t_stop with
+#: ``modes``, found at its start from the modes before (``guess``; None for the first of a call);
+#: its steps (``ts``, ``ys`` by rows) and the solver's counts.
+_Piece = _collections.namedtuple("_Piece", "t0 y0 t_stop modes guess ts ys counts")
+
 
 class _DriverStep:
     """The driver's last step seen as a solver by :meth:`_Run.crossing`: t_old, t, y, dense_output()."""
@@ -1372,6 +1437,9 @@ class _Run:
         self.extended = None           # modes of the last right-hand side taken beyond a switch
         self._dense = None
         self._driver = None            # the native CVODE driver: None (not tried yet), False (none)
+        self.break_times = np.zeros(0)  # the run's known breaks (times), for the pieces between them
+        self.queue = _collections.deque()   # pieces integrated ahead (see queued_piece)
+        self._pieces = None            # whether pieces can be integrated ahead: None (not decided yet)
 
     # -- evaluation helpers
 
@@ -1629,24 +1697,14 @@ class _Run:
                 continue            # not resolvable by sampling: left to event location
             label = model.SWITCHES[k]
 
-            def scalar(tt, k=k, cuts=cuts, modes_of=modes_of):
-                modes = modes_of[int(np.searchsorted(cuts, tt, side="right"))]
-                return float(np.ravel(switches(tt, np.zeros(n), self.p, modes))[row_of[k]])
-            found[k] = []
-            for i in changes(g, k):
-                a, b = grid[i], grid[i + 1]
-                if model.floor_switches[k]:
-                    level = np.floor(g[i + 1]) if g[i + 1] > g[i] else np.floor(g[i])
-                    function = lambda tt, lv=level, scalar=scalar: scalar(tt) - lv
-                else:
-                    function = scalar
-                with np.errstate(all="ignore"):
-                    try:
-                        root = brentq(function, a, b, 4 * _EPS, 4 * _EPS)
-                    except ValueError:
-                        root = b
-                roots.append((float(root), label))
-                found[k].append(float(root))
+            at = changes(g, k)
+            levels = np.zeros(at.size)
+            if model.floor_switches[k]:     # the level crossed: g - level changes sign there
+                levels = np.where(g[at + 1] > g[at], np.floor(g[at + 1]), np.floor(g[at]))
+            found[k] = [float(root) for root in bracketed_roots(
+                lambda times, rows, values=values, levels=levels: values(times) - levels[rows],
+                grid[at], grid[at + 1], g[at] - levels, g[at + 1] - levels, 4 * _EPS, 4 * _EPS)]
+            roots += [(root, label) for root in found[k]]
             located.add(k)
         if located:
             self.event_switches = np.array([k for k in self.event_switches if k not in located], dtype=int)
@@ -1702,6 +1760,11 @@ class _Run:
         """
         if self.switch_count == 0:
             return np.zeros(0), []
+        if self.queue and guess is not None:
+            piece = self.queue[0]       # a restart found with the pieces integrated ahead
+            if piece.t0 == t and piece.guess is not None and piece.guess.tobytes() == np.asarray(
+                    guess, dtype=float).tobytes():
+                return piece.modes.copy(), []
         modes = self.modes_at(t, y, guess)
         seen = [tuple(modes)]
         for _ in range(8):
@@ -1735,6 +1798,7 @@ class _Run:
         t, y = self.t_start, np.asarray(model.x0(self.p), dtype=float).reshape(-1)
         complete, failure = True, None
         breaks = self.breaks()
+        self.break_times = np.array([tb for tb, _ in breaks], dtype=float)
         break_index = 0
         modes, chattering = self.restart_modes(t, y, None)
         candidates = self.sliding_candidates(t, y, modes, chattering)
@@ -2091,6 +2155,112 @@ class _Run:
         finally:
             self.collect_driver(driver, "driver_segments")
 
+    #: Pieces integrated ahead in one native call (at most; fewer where the driver's buffer fills)
+    PIECES_AHEAD = 512
+
+    def pieces_apply(self) -> bool:
+        """Whether the pieces between known breaks can be integrated ahead (:meth:`queued_piece`):
+        a run with the native driver, reporting every step, of a model without a when clause or an
+        algebraic loop that has no switch left to locate as an event: every switch is of parameters
+        alone, or of time alone with its changes known (a step of time) or found before the run (a
+        pwm input, a staircase), so that nothing but time decides the modes after each break."""
+        if self._pieces is None:
+            model = self.model
+            self._pieces = bool(
+                self.t_eval is None and not model.WHEN_LABELS and getattr(model, "VECTORIZED", True)
+                and self.event_switches.size == 0
+                and self.driver_for(np.zeros(0, dtype=int), np.zeros(0)) is not None)
+        return self._pieces
+
+    def queued_piece(self, t, y, modes, t_stop, mode):
+        """The segment from (t, y) with ``modes`` to ``t_stop`` (a known break or the end), taken
+        from the pieces integrated ahead, integrating them first where none is queued: (t, y,
+        None) as :meth:`segment` returns, or None (the segment is integrated as any other).
+
+        For a model whose modes only time decides (:meth:`pieces_apply`), the segments between its
+        known breaks and the restarts at those breaks are done in one native call for many breaks
+        (``bondc_driver_pieces``): each piece started and stepped as :meth:`driver_segment` starts
+        and steps it, each restart's modes as :meth:`restart_modes` finds them, so the run is the
+        same to the bit; the run loop then takes each piece (here) and each restart (in
+        :meth:`restart_modes`) as it reaches them, with all its bookkeeping of events. A piece that
+        does not match where the run is (it went another way) empties the queue."""
+        queue = self.queue
+        if not queue:
+            if not self.pieces_apply():
+                return None
+            self.integrate_pieces(t, y, modes, t_stop)
+        if not queue:
+            return None
+        piece = queue[0]
+        # (their bytes: the run hands back the very modes and state of the queue; anything else,
+        # a -0.0 for a 0.0 included, only sends the segment the usual way)
+        if not (piece.t0 == t and piece.t_stop == t_stop and piece.modes.tobytes() == modes.tobytes()
+                and piece.y0.tobytes() == np.asarray(y, dtype=float).tobytes()):
+            queue.clear()
+            return None
+        queue.popleft()
+        self.extended = None
+        ts, ys = piece.ts, piece.ys
+        self.stats["steps"] += ts.size
+        self.blocks_t.append(ts)
+        self.blocks_x.append(ys.T)
+        self.blocks_mode.append(mode)
+        if self.progress is not None:
+            self.progress(float(ts[-1]))
+        nfev, njev, nlu = piece.counts
+        self.stats["nfev"] += int(nfev)
+        self.stats["njev"] += int(njev)
+        self.stats["nlu"] += int(nlu)
+        self.stats["linear_solver"] = self._driver.linear_solver
+        self.stats["driver_segments"] = self.stats.get("driver_segments", 0) + 1
+        self.stats["pieces_ahead"] = self.stats.get("pieces_ahead", 0) + 1
+        return float(ts[-1]), ys[-1].copy(), None
+
+    def integrate_pieces(self, t, y, modes, t_stop):
+        """Integrate the pieces from (t, y) with ``modes`` to ``t_stop`` and on, break after break
+        (up to PIECES_AHEAD, none shorter than the run loop's sliver), into the queue."""
+        times = self.break_times
+        stops = times[np.searchsorted(times, t_stop, side="left"):]
+        stops = np.concatenate((stops[stops < self.t_end], [self.t_end]))[:self.PIECES_AHEAD]
+        if stops[0] != t_stop:
+            return
+        starts = np.concatenate(([t], stops[:-1]))
+        slivers = np.flatnonzero(stops - starts <= 16 * _EPS * np.maximum(np.maximum(np.abs(starts), np.abs(stops)),
+                                                                            1.0))
+        if slivers.size:
+            stops, starts = stops[:slivers[0]], starts[:slivers[0]]
+        if not stops.size:
+            return
+        options = self.options
+        first_step = float(options.get("first_step") or 0.0)
+        max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
+        floors = np.ascontiguousarray(self.model.floor_switches, dtype=np.intc)
+        done, ts, ys, ends, piece_modes, counts = self._driver.pieces(
+            stops, t, y, np.asarray(modes, dtype=float), floors, self.probe, options["rtol"], options["atol"],
+            max_step, first_step)
+        if not done:
+            return
+        # a state growing without bound, or _CREEP_STEPS steps of rounding size in a row in one
+        # piece: from that piece on, the driver's own segment diagnoses them
+        bad = (ys.max(axis=1) >= DIVERGED) | (ys.min(axis=1) <= -DIVERGED)
+        tiny = np.diff(np.concatenate(([t], ts))) <= _CREEP * np.maximum(np.abs(ts), 1.0)
+        if tiny.any():
+            creeping, piece = 0, 0
+            for i in np.flatnonzero(tiny):
+                while ends[piece] <= i:
+                    piece += 1
+                start = ends[piece - 1] if piece else 0
+                creeping = creeping + 1 if i > start and tiny[i - 1] else 1
+                bad[i] |= creeping >= _CREEP_STEPS
+        if bad.any():
+            done = int(np.searchsorted(ends, np.flatnonzero(bad)[0], side="right"))
+        begin, y0 = 0, np.array(y, dtype=float)
+        for i in range(done):
+            end = int(ends[i])
+            self.queue.append(_Piece(float(starts[i]), y0, float(stops[i]), piece_modes[i],
+                                     piece_modes[i - 1] if i else None, ts[begin:end], ys[begin:end], counts[i]))
+            begin, y0 = end, ys[end - 1]
+
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
         self.stats["segments"] += 1
@@ -2101,6 +2271,10 @@ class _Run:
         fun = lambda tt, yy: self.rhs(tt, yy, modes)
         jac = lambda tt, yy: self.jac(tt, yy, modes)
         index = np.array([k for k in self.event_switches if relevant[k]], dtype=int)
+        if not index.size:
+            queued = self.queued_piece(t, y, modes, t_stop, mode)
+            if queued is not None:
+                return queued
         signs = modes[index] if index.size else np.zeros(0)
         values_old = self.switches_at(t, y, modes, index)
         # a restart may leave a switch a little on the far side of its surface (a sliding segment
@@ -3083,6 +3257,7 @@ typedef struct {
     const int *others;
     double *mp, *mm, *fp, *fm, *shifted, *extra;
     double probe, alpha;
+    double *scratch, *ahead;    /* modes being found (driver_modes_at), those a probe ahead */
 } bondc_driver;
 
 static int driver_finite(const double *v, int n)
@@ -3187,9 +3362,11 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
     d->fp = (double *)calloc(n + 1, sizeof(double));
     d->fm = (double *)calloc(n + 1, sizeof(double));
     d->shifted = (double *)calloc(n + 1, sizeof(double));
+    d->scratch = (double *)calloc(switches + 1, sizeof(double));
+    d->ahead = (double *)calloc(switches + 1, sizeof(double));
     d->slide = -1;
     if (!d->m || !d->g || !d->values || !d->extra || !d->mp || !d->mm || !d->fp || !d->fm || !d->shifted
-        || SUNContext_Create(0, &d->ctx) != 0) return NULL;
+        || !d->scratch || !d->ahead || SUNContext_Create(0, &d->ctx) != 0) return NULL;
     d->y = N_VNew_Serial(n, d->ctx);
     d->work = N_VNew_Serial(n, d->ctx);
     d->cvode = CVodeCreate(adams ? 1 : 2, d->ctx);
@@ -3266,6 +3443,71 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
         if (t >= d->t_stop) return 2;
     }
     return 0;
+}
+
+/* The modes of the unfrozen law at (t, y) into out, as the runtime's modes_at finds them: from
+   `guess`, m = sign(g(t, y, m)) (floor(g) for a floor switch, 0 where g is nan) until it repeats,
+   at most switches + 1 passes. */
+static void driver_modes_at(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                            double *out)
+{
+    for (int k = 0; k < d->switches; k++) out[k] = guess[k];
+    for (int pass = 0; pass <= d->switches; pass++) {
+        bondc_switches(t, y, d->p, out, d->g);
+        int same = 1;
+        for (int k = 0; k < d->switches; k++) {
+            double g = d->g[k];
+            double m = g != g ? 0.0 : (floors[k] ? floor(g) : (g > 0 ? 1.0 : (g < 0 ? -1.0 : 0.0)));
+            if (m != out[k]) same = 0;
+            d->scratch[k] = m;
+        }
+        if (same) return;
+        for (int k = 0; k < d->switches; k++) out[k] = d->scratch[k];
+    }
+}
+
+/* Known pieces of a run in one call, for a model whose switches are all of time alone: piece i
+   ends at t_stops[i] and starts where piece i - 1 ended (piece 0 at (t0, y0) with the modes m0).
+   At each start after the first the modes are found as the runtime's restart finds them at a
+   break: those at the break from the modes before (modes_at), which must be those a probe ahead
+   too (else that restart is left to the caller). Each piece is started as bondc_driver_start
+   starts a segment and stepped as bondc_driver_advance steps one that watches nothing: every
+   step stored in ts/ys (at most `capacity` in all), ends[i] the count stored when piece i ended,
+   modes + i*switches its modes, counts + 3*i its counts (bondc_driver_counts). Returns the
+   number of pieces done: it stops before a piece whose restart is not that simple, that does not
+   fit in what is left of the buffer, or that fails (a CVODE error, a law or the state not
+   finite: that piece's steps are not kept, the caller integrates it its own way). */
+void bondc_driver_counts(bondc_driver *d, long *out);
+
+int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
+                        const double *m0, const int *floors, double probe, double rtol, double atol,
+                        double max_step, double first_step, int capacity, double *ts, double *ys, int *ends,
+                        double *modes, long *counts)
+{
+    int stored = 0;
+    double t = t0;
+    const double *y = y0;
+    for (int k = 0; k < d->switches; k++) modes[k] = m0[k];
+    for (int i = 0; i < pieces; i++) {
+        double *m = modes + (long)i * d->switches;
+        if (i > 0) {
+            driver_modes_at(d, t, y, m - d->switches, floors, m);
+            driver_modes_at(d, t + probe, y, m, floors, d->ahead);
+            for (int k = 0; k < d->switches; k++)
+                if (d->ahead[k] != m[k]) return i;
+        }
+        double first = first_step > t_stops[i] - t ? 0.0 : first_step;
+        if (bondc_driver_start(d, t, y, m, t_stops[i], rtol, atol, max_step, first, 100000) != 0) return i;
+        int count = 0;
+        if (bondc_driver_advance(d, capacity - stored, 0, 0, 0, 0, 0, ts + stored, ys + (long)stored * d->n,
+                                 &count) != 2) return i;
+        bondc_driver_counts(d, counts + 3L * i);
+        stored += count;
+        ends[i] = stored;
+        t = ts[stored - 1];
+        y = ys + (long)(stored - 1) * d->n;
+    }
+    return pieces;
 }
 
 /* After bondc_driver_start (with the segment's modes): slide on switch k between the corners
@@ -3394,7 +3636,7 @@ void bondc_driver_free(bondc_driver *d)
     if (d->work) N_VDestroy(d->work);
     if (d->ctx) SUNContext_Free(&d->ctx);
     free(d->m); free(d->g); free(d->values); free(d->extra); free(d->mp); free(d->mm);
-    free(d->fp); free(d->fm); free(d->shifted); free(d);
+    free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead); free(d);
 }
 """
 
@@ -3417,6 +3659,10 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
                                double *ys, double *alphas, int *count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
 void bondc_driver_counts(bondc_driver *d, long *out);
+int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
+                        const double *m0, const int *floors, double probe, double rtol, double atol,
+                        double max_step, double first_step, int capacity, double *ts, double *ys, int *ends,
+                        double *modes, long *counts);
 void bondc_driver_free(bondc_driver *d);
 """
 _SUNDIALS_PARTS = ("core", "cvode", "nvecserial", "sunmatrixdense", "sunmatrixband", "sunlinsoldense",

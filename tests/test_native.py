@@ -453,6 +453,67 @@ def test_a_sliding_mode_on_one_switch_runs_in_the_driver_and_equals_the_step_loo
     np.testing.assert_allclose([t for t, _ in ours.events], [t for t, _ in loop.events], rtol=1e-12, atol=1e-15)
 
 
+PIECE_MODELS = {
+    "pwm_rl": (ROOT / "tests/fixtures/engine/pwm_rl.bg").read_text(encoding="utf-8"),
+    "pwm_sine_compare": (ROOT / "tests/fixtures/engine/pwm_sine_compare.bg").read_text(encoding="utf-8"),
+    # a pwm whose duty steps: nested switches of time, the inner one's mode read by the outer
+    "duty_step": ("model PwmDuty\n  input d [1] = 0.2 + 0.6*step(t, 0.05)\n  MSe src : e = 5*pwm(t, 1000, d)\n"
+                  "  R r : e = 10*f\n  C c : e = q/1e-3\n  1 j\n  src -> j\n  j -> r\n  j -> c\n"
+                  "  experiment run\n    t_end = 0.1 [s]\n  end\nend\n"),
+    # a staircase of time (a floor switch: integer modes)
+    "staircase": ("model Staircase\n  input u [V] = floor(t*200)/20\n  MSe src : e = u\n  R r : e = 10*f\n"
+                  "  C c : e = q/1e-3\n  1 j\n  src -> j\n  j -> r\n  j -> c\n"
+                  "  experiment run\n    t_end = 0.1 [s]\n  end\nend\n"),
+}
+
+
+@needs_cc
+@pytest.mark.parametrize("ahead", [512, 7])
+@pytest.mark.parametrize("name", sorted(PIECE_MODELS))
+def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segment_by_segment(
+        name, ahead, tmp_path, monkeypatch):
+    """A model whose switches are all of time (a pwm input, steps and staircases of time) has its
+    segments between breaks, and the restarts at the breaks, integrated ahead in one C call for
+    many breaks. The independent expectation is the run segment by segment (each segment one
+    driver call, each restart from Python: tested against closed forms in test_engine): the same
+    points, states, outputs, variables, events and solver counts, to the bit, with the queue
+    refilled every 512 pieces or every 7."""
+    path = tmp_path / f"{name}.bg"
+    path.write_text(PIECE_MODELS[name], encoding="utf-8")
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(path)
+    settings = {"t_end": experiment.t_end, "rtol": experiment.rtol, "atol": experiment.atol,
+                "max_step": experiment.max_step}
+    with monkeypatch.context() as patch:
+        patch.setattr(namespace["_Run"], "PIECES_AHEAD", ahead)
+        ours = namespace["simulate_model"](namespace["_MODEL"], **settings)
+        patch.setattr(namespace["_Run"], "pieces_apply", lambda self: False)
+        alone = namespace["simulate_model"](namespace["_MODEL"], **settings)
+    assert ours.complete and alone.complete
+    assert ours.stats["pieces_ahead"] == ours.stats["segments"] > 10 and "pieces_ahead" not in alone.stats
+    assert np.array_equal(ours.t, alone.t)
+    for group in ("states", "outputs", "variables"):
+        for key, values in getattr(alone, group).items():
+            assert np.array_equal(getattr(ours, group)[key], values), (group, key)
+    assert ours.events == alone.events and len(ours.events) > 10
+    for count in ("nfev", "njev", "nlu", "steps", "segments", "events", "driver_segments"):
+        assert ours.stats[count] == alone.stats[count], count
+
+
+@needs_cc
+@pytest.mark.parametrize("fixture", ["engine/chirp_count.bg", "sim/pwm_diode.bg", "engine/breakaway.bg"])
+def test_no_pieces_are_integrated_ahead_where_more_than_time_decides_the_modes(fixture):
+    """A when clause, a nonlinear algebraic loop or a switch of the state (a friction): the run
+    goes segment by segment."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(ROOT / "tests/fixtures" / fixture)
+    run = namespace["simulate_model"](namespace["_MODEL"], t_end=experiment.t_end, rtol=experiment.rtol,
+                                      atol=experiment.atol, max_step=experiment.max_step)
+    assert run.complete and "pieces_ahead" not in run.stats and run.stats["segments"] > 1
+
+
 @needs_cc
 @pytest.mark.slow
 def test_the_drivers_sliding_modes_equal_the_step_loops_over_random_flagship_designs(monkeypatch):

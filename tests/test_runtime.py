@@ -302,6 +302,38 @@ def test_brentq_refuses_a_bracket_without_a_sign_change_and_a_nan_as_scipy_does(
         runtime.brentq(lambda x: math.nan if 0.2 < x < 0.8 else x - 0.5, 0.0, 1.0, 4 * eps, 4 * eps)
 
 
+def test_bracketed_roots_finds_every_brackets_root_at_once_as_brentq_does():
+    """The switches of time are refined in all their brackets at once (a 20 kHz pwm has thousands):
+    each root within brentq's tolerance of scipy's root for the same bracket, on the far side of
+    the change (the function there has the sign of its value at the bracket's right end)."""
+    from scipy.optimize import brentq as scipy_brentq
+
+    eps = np.finfo(float).eps
+    functions = [function for function, _, _ in ROOT_FUNCTIONS]
+    a = np.array([a for _, a, _ in ROOT_FUNCTIONS])
+    b = np.array([b for _, _, b in ROOT_FUNCTIONS])
+
+    def values(times, rows):
+        return np.array([functions[row](time) for time, row in zip(times, rows)])
+
+    every = np.arange(len(functions))
+    roots = runtime.bracketed_roots(values, a, b, values(a, every), values(b, every), 4 * eps, 4 * eps)
+    for row, (function, lo, hi) in enumerate(ROOT_FUNCTIONS):
+        expected = scipy_brentq(function, lo, hi, xtol=4 * eps, rtol=4 * eps)
+        assert abs(roots[row] - expected) <= 2 * (4 * eps + 4 * eps * abs(expected)), row
+        assert lo <= roots[row] <= hi
+        assert np.sign(function(roots[row])) != np.sign(function(lo)), row
+
+
+def test_bracketed_roots_takes_an_end_where_the_value_is_zero_and_the_right_end_past_a_nan():
+    eps = np.finfo(float).eps
+    line = lambda times, rows: times - 0.5                 # noqa: E731
+    holed = lambda times, rows: np.where((times > 0.2) & (times < 0.8), np.nan, times - 0.5)     # noqa: E731
+    roots = runtime.bracketed_roots(line, [0.5, 0.0], [1.0, 0.5], [0.0, -0.5], [0.5, 0.0], 4 * eps, 4 * eps)
+    assert list(roots) == [0.5, 0.5]
+    assert list(runtime.bracketed_roots(holed, [0.0], [1.0], [-0.5], [0.5], 4 * eps, 4 * eps)) == [1.0]
+
+
 @pytest.mark.filterwarnings("ignore:The occurrence of roundoff error")      # scipy's, on sqrt(|x|)
 @pytest.mark.parametrize("law, a, b, exact", [
     (lambda x: 3.0 * x * x, 0.0, 2.0, 8.0),

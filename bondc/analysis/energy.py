@@ -1002,11 +1002,17 @@ def _at_solver_steps(result) -> bool:
     t = np.asarray(result.t, dtype=float)
     if steps is None or not (steps + 1 <= t.size <= steps + 1 + len(result.events) + 1):
         return False
-    scale = max(abs(float(t[-1])), 1.0) if t.size else 1.0
-    for time, _ in result.events:
-        if t.size and np.min(np.abs(t - time)) > 1e-9 * scale:
-            return False
-    return True
+    if not result.events or not t.size:
+        return True
+    scale = max(abs(float(t[-1])), 1.0)
+    times = np.array([time for time, _ in result.events], dtype=float)
+    if t.size > 1 and np.all(t[1:] >= t[:-1]):
+        # each event's nearest point among the sorted times: the one at or after it, or the one before
+        after = np.minimum(np.searchsorted(t, times), t.size - 1)
+        nearest = np.minimum(np.abs(t[after] - times), np.abs(t[np.maximum(after - 1, 0)] - times))
+    else:
+        nearest = np.array([np.min(np.abs(t - time)) for time in times])
+    return bool(np.all(nearest <= 1e-9 * scale))
 
 
 def _resimulate(ss, result):
