@@ -2254,12 +2254,12 @@ class _Run:
                 bad[i] |= creeping >= _CREEP_STEPS
         if bad.any():
             done = int(np.searchsorted(ends, np.flatnonzero(bad)[0], side="right"))
-        begin, y0 = 0, np.array(y, dtype=float)
-        for i in range(done):
+        begin, t0, y0 = 0, t, np.array(y, dtype=float)
+        for i in range(done):      # each piece starts where the one before ended, as in C
             end = int(ends[i])
-            self.queue.append(_Piece(float(starts[i]), y0, float(stops[i]), piece_modes[i],
-                                     piece_modes[i - 1] if i else None, ts[begin:end], ys[begin:end], counts[i]))
-            begin, y0 = end, ys[end - 1]
+            self.queue.append(_Piece(t0, y0, float(stops[i]), piece_modes[i], piece_modes[i - 1] if i else None,
+                                     ts[begin:end], ys[begin:end], counts[i]))
+            begin, t0, y0 = end, float(ts[end - 1]), ys[end - 1]
 
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
