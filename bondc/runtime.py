@@ -1165,30 +1165,34 @@ class _NativeDriver:
         self.lib.bondc_driver_counts(self.handle, out)
         return int(out[0]), int(out[1]), int(out[2])
 
-    def pieces(self, t_stops, t0, y0, m0, floors, probe, rtol, atol, max_step, first_step):
+    def pieces(self, t_stops, t0, y0, m0, floors, watch, held, probe, rtol, atol, max_step, first_step):
         """Known pieces in one call (``bondc_driver_pieces``): (pieces done, times, states, ends,
-        modes, counts), the arrays of the pieces done, the times and states copied."""
+        modes, counts, partial), the arrays of the pieces done (modes and times and states also of
+        the piece begun after them, of ``partial`` = (steps, code) where there is one), copied."""
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
-        count, switches = len(t_stops), m0.size
+        count, switches, watched = len(t_stops), m0.size, int(watch.size)
         t_stops = np.ascontiguousarray(t_stops, dtype=float)
         ends = np.zeros(count, dtype=np.intc)
         modes = np.zeros((count, max(switches, 1)))
         counts = np.zeros((count, 3), dtype=np.int_)
+        partial = np.zeros(2, dtype=np.intc)
         done = self.lib.bondc_driver_pieces(
             self.handle, count, buffer("double[]", t_stops), float(t0), buffer("double[]", np.array(y0, dtype=float)),
             buffer("double[]", np.array(m0, dtype=float)) if switches else null,
-            buffer("int[]", floors) if switches else null, float(probe), float(rtol), float(atol), float(max_step),
+            buffer("int[]", floors) if switches else null, watched, buffer("int[]", watch) if watched else null,
+            buffer("int[]", held) if watched else null, float(probe), float(rtol), float(atol), float(max_step),
             float(first_step), self.capacity, buffer("double[]", self.ts), buffer("double[]", self.ys),
-            buffer("int[]", ends), buffer("double[]", modes), buffer("long[]", counts))
-        stored = int(ends[done - 1]) if done else 0
-        return (done, self.ts[:stored].copy(), self.ys[:stored].copy(), ends[:done], modes[:done, :switches],
-                counts[:done])
+            buffer("int[]", ends), buffer("double[]", modes), buffer("long[]", counts), buffer("int[]", partial))
+        stored = (int(ends[done - 1]) if done else 0) + int(partial[0])
+        return (done, self.ts[:stored].copy(), self.ys[:stored].copy(), ends[:done], modes[:done + 1, :switches],
+                counts[:done], (int(partial[0]), int(partial[1])))
 
 
 #: A piece of a run integrated ahead (:meth:`_Run.queued_piece`): from (t0, y0) to t_stop with
 #: ``modes``, found at its start from the modes before (``guess``; None for the first of a call);
-#: its steps (``ts``, ``ys`` by rows) and the solver's counts.
-_Piece = _collections.namedtuple("_Piece", "t0 y0 t_stop modes guess ts ys counts")
+#: its steps (``ts``, ``ys`` by rows) and the solver's counts; or, with ``resume`` the driver's code
+#: (0 or 1) where the call stopped inside it, its first steps, the driver standing at the last.
+_Piece = _collections.namedtuple("_Piece", "t0 y0 t_stop modes guess ts ys counts resume")
 
 
 class _DriverStep:
@@ -1440,6 +1444,8 @@ class _Run:
         self.break_times = np.zeros(0)  # the run's known breaks (times), for the pieces between them
         self.queue = _collections.deque()   # pieces integrated ahead (see queued_piece)
         self._pieces = None            # whether pieces can be integrated ahead: None (not decided yet)
+        self.pieces_skip, self.pieces_backoff = 0, 1    # segments not to try it for, after calls that
+                                                        # ended inside their first piece (see queued_piece)
 
     # -- evaluation helpers
 
@@ -1762,8 +1768,9 @@ class _Run:
             return np.zeros(0), []
         if self.queue and guess is not None:
             piece = self.queue[0]       # a restart found with the pieces integrated ahead
-            if piece.t0 == t and piece.guess is not None and piece.guess.tobytes() == np.asarray(
-                    guess, dtype=float).tobytes():
+            if (piece.t0 == t and piece.guess is not None
+                    and piece.guess.tobytes() == np.asarray(guess, dtype=float).tobytes()
+                    and piece.y0.tobytes() == np.asarray(y, dtype=float).tobytes()):
                 return piece.modes.copy(), []
         modes = self.modes_at(t, y, guess)
         seen = [tuple(modes)]
@@ -2087,10 +2094,11 @@ class _Run:
         self.stats["linear_solver"] = driver.linear_solver
         self.stats[kind] = self.stats.get(kind, 0) + 1
 
-    def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband):
+    def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband, resumed=None):
         """Integrate one segment with the native driver: (t, y, event) as :meth:`segment` returns,
-        or ("handover", t, y) to go on step by step from there."""
-        if not self.start_driver(driver, t, y, modes, t_stop):
+        or ("handover", t, y) to go on step by step from there. ``resumed``: the piece the driver
+        began ahead (:meth:`integrate_pieces`) and stands in, its steps the first batch."""
+        if resumed is None and not self.start_driver(driver, t, y, modes, t_stop):
             return "handover", t, np.array(y, dtype=float)
         g_old = np.array(values_old, dtype=float)
         watch = index.astype(np.intc)
@@ -2101,7 +2109,16 @@ class _Run:
         self.extended = None
         try:
             while True:
-                code, ts, ys = driver.advance(watch, signs, band, g_old)
+                if resumed is not None:
+                    # a batch the driver made watching more switches (every one it locates): its last
+                    # step stands as a possible crossing (code 1) or not (0), and g_old is the values
+                    # this watch would have left: at the step before that one, or at the last
+                    code, ts, ys, resumed = resumed.resume, resumed.ts, resumed.ys, None
+                    last = len(ts) - (2 if code == 1 else 1)
+                    if last >= 0 and index.size:
+                        g_old[:] = self.switches_at(float(ts[last]), ys[last], modes, index)
+                else:
+                    code, ts, ys = driver.advance(watch, signs, band, g_old)
                 done = len(ts) - (1 if code in (1, 4) else 0)
                 grown = ()      # the batch's states are finite (code 4 ends it before the first that is not)
                 if done and (ys[:done].max() >= DIVERGED or ys[:done].min() <= -DIVERGED):   # no |ys| copy
@@ -2168,7 +2185,8 @@ class _Run:
             model = self.model
             self._pieces = bool(
                 self.t_eval is None and not model.WHEN_LABELS and getattr(model, "VECTORIZED", True)
-                and self.event_switches.size == 0
+                and not model.floor_switches[self.event_switches].any()
+                and np.ndim(self.options["atol"]) == 0 and np.ndim(self.options["rtol"]) == 0
                 and self.driver_for(np.zeros(0, dtype=int), np.zeros(0)) is not None)
         return self._pieces
 
@@ -2183,10 +2201,16 @@ class _Run:
         and steps it, each restart's modes as :meth:`restart_modes` finds them, so the run is the
         same to the bit; the run loop then takes each piece (here) and each restart (in
         :meth:`restart_modes`) as it reaches them, with all its bookkeeping of events. A piece that
-        does not match where the run is (it went another way) empties the queue."""
+        does not match where the run is (it went another way) empties the queue. Where the calls end
+        inside their first piece (a switch of the state crossing before the next break, as in most
+        segments of the flagship cycle), they are tried again after 2, 4, ... 64 segments only: they
+        save nothing there and cost a little."""
         queue = self.queue
         if not queue:
             if not self.pieces_apply():
+                return None
+            if self.pieces_skip:
+                self.pieces_skip -= 1
                 return None
             self.integrate_pieces(t, y, modes, t_stop)
         if not queue:
@@ -2199,6 +2223,9 @@ class _Run:
             queue.clear()
             return None
         queue.popleft()
+        self.stats["pieces_ahead"] = self.stats.get("pieces_ahead", 0) + 1
+        if piece.resume is not None:
+            return "resume", piece
         self.extended = None
         ts, ys = piece.ts, piece.ys
         self.stats["steps"] += ts.size
@@ -2213,7 +2240,6 @@ class _Run:
         self.stats["nlu"] += int(nlu)
         self.stats["linear_solver"] = self._driver.linear_solver
         self.stats["driver_segments"] = self.stats.get("driver_segments", 0) + 1
-        self.stats["pieces_ahead"] = self.stats.get("pieces_ahead", 0) + 1
         return float(ts[-1]), ys[-1].copy(), None
 
     def integrate_pieces(self, t, y, modes, t_stop):
@@ -2235,15 +2261,21 @@ class _Run:
         first_step = float(options.get("first_step") or 0.0)
         max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
         floors = np.ascontiguousarray(self.model.floor_switches, dtype=np.intc)
-        done, ts, ys, ends, piece_modes, counts = self._driver.pieces(
-            stops, t, y, np.asarray(modes, dtype=float), floors, self.probe, options["rtol"], options["atol"],
-            max_step, first_step)
-        if not done:
-            return
+        watch = np.ascontiguousarray(self.event_switches, dtype=np.intc)
+        held = np.ascontiguousarray(np.asarray(self.model.SWITCH_VERTICES, dtype=float)[watch] != 1.0, dtype=np.intc)
+        done, ts, ys, ends, piece_modes, counts, (partial, code) = self._driver.pieces(
+            stops, t, y, np.asarray(modes, dtype=float), floors, watch, held, self.probe, options["rtol"],
+            options["atol"], max_step, first_step)
+        whole = int(ends[done - 1]) if done else 0
+        if done:
+            self.pieces_backoff = 1
+        else:
+            self.pieces_backoff = self.pieces_skip = min(2 * self.pieces_backoff, 64)
         # a state growing without bound, or _CREEP_STEPS steps of rounding size in a row in one
         # piece: from that piece on, the driver's own segment diagnoses them
-        bad = (ys.max(axis=1) >= DIVERGED) | (ys.min(axis=1) <= -DIVERGED)
-        tiny = np.diff(np.concatenate(([t], ts))) <= _CREEP * np.maximum(np.abs(ts), 1.0)
+        bad = (ys[:whole].max(axis=1, initial=-np.inf) >= DIVERGED) | (ys[:whole].min(axis=1, initial=np.inf)
+                                                                      <= -DIVERGED)
+        tiny = np.diff(np.concatenate(([t], ts[:whole]))) <= _CREEP * np.maximum(np.abs(ts[:whole]), 1.0)
         if tiny.any():
             creeping, piece = 0, 0
             for i in np.flatnonzero(tiny):
@@ -2253,13 +2285,17 @@ class _Run:
                 creeping = creeping + 1 if i > start and tiny[i - 1] else 1
                 bad[i] |= creeping >= _CREEP_STEPS
         if bad.any():
-            done = int(np.searchsorted(ends, np.flatnonzero(bad)[0], side="right"))
+            done, partial = int(np.searchsorted(ends, np.flatnonzero(bad)[0], side="right")), 0
         begin, t0, y0 = 0, t, np.array(y, dtype=float)
         for i in range(done):      # each piece starts where the one before ended, as in C
             end = int(ends[i])
             self.queue.append(_Piece(t0, y0, float(stops[i]), piece_modes[i], piece_modes[i - 1] if i else None,
-                                     ts[begin:end], ys[begin:end], counts[i]))
+                                     ts[begin:end], ys[begin:end], counts[i], None))
             begin, t0, y0 = end, float(ts[end - 1]), ys[end - 1]
+        if partial:     # the piece begun after them, its first steps: the driver goes on from there
+            self.queue.append(_Piece(t0, y0, float(stops[done]), piece_modes[done],
+                                     piece_modes[done - 1] if done else None, ts[begin:begin + partial],
+                                     ys[begin:begin + partial], None, code))
 
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
@@ -2271,10 +2307,12 @@ class _Run:
         fun = lambda tt, yy: self.rhs(tt, yy, modes)
         jac = lambda tt, yy: self.jac(tt, yy, modes)
         index = np.array([k for k in self.event_switches if relevant[k]], dtype=int)
-        if not index.size:
-            queued = self.queued_piece(t, y, modes, t_stop, mode)
-            if queued is not None:
+        queued = self.queued_piece(t, y, modes, t_stop, mode)
+        resumed = None
+        if queued is not None:
+            if queued[0] != "resume":
                 return queued
+            resumed = queued[1]
         signs = modes[index] if index.size else np.zeros(0)
         values_old = self.switches_at(t, y, modes, index)
         # a restart may leave a switch a little on the far side of its surface (a sliding segment
@@ -2284,7 +2322,8 @@ class _Run:
         deadband = self.deadbands(t, y, modes, index) + drift
         driver = self.driver_for(index, signs)
         if driver is not None:
-            outcome = self.driver_segment(driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband)
+            outcome = self.driver_segment(driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband,
+                                          resumed)
             if outcome[0] != "handover":
                 return outcome
             # something the driver leaves to this loop (a law not finite at a trial point, a solver
@@ -3466,48 +3505,94 @@ static void driver_modes_at(bondc_driver *d, double t, const double *y, const do
     }
 }
 
-/* Known pieces of a run in one call, for a model whose switches are all of time alone: piece i
-   ends at t_stops[i] and starts where piece i - 1 ended (piece 0 at (t0, y0) with the modes m0).
-   At each start after the first the modes are found as the runtime's restart finds them at a
-   break: those at the break from the modes before (modes_at), which must be those a probe ahead
-   too (else that restart is left to the caller). Each piece is started as bondc_driver_start
-   starts a segment and stepped as bondc_driver_advance steps one that watches nothing: every
-   step stored in ts/ys (at most `capacity` in all), ends[i] the count stored when piece i ended,
-   modes + i*switches its modes, counts + 3*i its counts (bondc_driver_counts). Returns the
-   number of pieces done: it stops before a piece whose restart is not that simple, that does not
-   fit in what is left of the buffer, or that fails (a CVODE error, a law or the state not
-   finite: that piece's steps are not kept, the caller integrates it its own way). */
+/* Known pieces of a run in one call: piece i ends at the known break t_stops[i] (or the run's end)
+   and starts where piece i - 1 ended (piece 0 at (t0, y0) with the modes m0). Every start after the
+   first is a restart as the runtime's restart_modes and sliding_candidates make it, where it is that
+   simple: the modes at the break from those before (modes_at), the same a probe ahead along their
+   law (else the switches would chatter there), and none of the `watched` switches marked in `held`
+   (those that can stick: a coulomb friction) on its surface (|g| within its deadband); any other
+   restart is left to the caller. Each piece is then started as bondc_driver_start starts a segment
+   and stepped as bondc_driver_advance steps one watching the `watched` switches `watch` (every
+   switch the run locates as an event: a superset of those a segment watches), with their signs,
+   values and bands as the runtime's segment computes them. Every step is stored in ts/ys (at most
+   `capacity` in all), ends[i] the count stored when piece i ended, modes + i*switches its modes,
+   counts + 3*i its counts (bondc_driver_counts). Returns the number of pieces done: it stops before
+   a piece whose restart is not that simple or that fails (a CVODE error, a law or the state not
+   finite: its steps are not kept, the caller integrates it its own way), and inside one that does
+   not fit in what is left of the buffer or in which a watched switch may cross: then partial[0]
+   steps of it follow the pieces done in ts/ys, partial[1] is bondc_driver_advance's code (0 or 1),
+   and CVODE stands at its last step, for the caller to go on from there. */
 void bondc_driver_counts(bondc_driver *d, long *out);
+int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
+                    int count, const int *index, double *out);
 
 int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
-                        const double *m0, const int *floors, double probe, double rtol, double atol,
-                        double max_step, double first_step, int capacity, double *ts, double *ys, int *ends,
-                        double *modes, long *counts)
+                        const double *m0, const int *floors, int watched, const int *watch, const int *held,
+                        double probe, double rtol, double atol, double max_step, double first_step, int capacity,
+                        double *ts, double *ys, int *ends, double *modes, long *counts, int *partial)
 {
-    int stored = 0;
+    int stored = 0, done = 0, n = d->n, switches = d->switches;
+    partial[0] = 0;
+    partial[1] = -1;
     double t = t0;
     const double *y = y0;
-    for (int k = 0; k < d->switches; k++) modes[k] = m0[k];
-    for (int i = 0; i < pieces; i++) {
-        double *m = modes + (long)i * d->switches;
+    double *work = (double *)calloc(4 * (size_t)watched + 1, sizeof(double));
+    int *sticky = (int *)calloc((size_t)watched + 1, sizeof(int));
+    if (!work || !sticky) { free(work); free(sticky); return 0; }
+    double *signs = work, *band = work + watched, *g_old = work + 2 * watched, *near = work + 3 * watched;
+    int holding = 0;
+    for (int j = 0; j < watched; j++)
+        if (held[j]) sticky[holding++] = watch[j];
+    for (int k = 0; k < switches; k++) modes[k] = m0[k];
+    for (int i = 0; i < pieces; i++, done++) {
+        double *m = modes + (long)i * switches;
         if (i > 0) {
-            driver_modes_at(d, t, y, m - d->switches, floors, m);
-            driver_modes_at(d, t + probe, y, m, floors, d->ahead);
-            for (int k = 0; k < d->switches; k++)
-                if (d->ahead[k] != m[k]) return i;
+            driver_modes_at(d, t, y, m - switches, floors, m);
+            bondc_rhs(t, y, d->p, m, d->fp);
+            if (!driver_finite(d->fp, n)) break;
+            for (int q = 0; q < n; q++) d->shifted[q] = y[q] + probe * d->fp[q];
+            driver_modes_at(d, t + probe, d->shifted, m, floors, d->ahead);
+            int same = 1;
+            for (int k = 0; k < switches; k++)
+                if (d->ahead[k] != m[k]) same = 0;
+            if (!same) break;
+            if (holding) {
+                if (bondc_deadbands(d, t, y, m, rtol, atol, holding, sticky, near) != 0) break;
+                bondc_switches(t, y, d->p, m, d->g);
+                int surface = 0;
+                for (int j = 0; j < holding; j++)
+                    if (fabs(d->g[sticky[j]]) <= near[j]) surface = 1;
+                if (surface) break;
+            }
+        }
+        if (watched) {
+            if (bondc_deadbands(d, t, y, m, rtol, atol, watched, watch, band) != 0) break;
+            bondc_switches(t, y, d->p, m, d->g);
+            for (int j = 0; j < watched; j++) {
+                double g = d->g[watch[j]], drift = -m[watch[j]] * g;
+                signs[j] = m[watch[j]];
+                g_old[j] = g;
+                band[j] += drift != drift ? drift : (drift > 0.0 ? drift : 0.0);   /* np.maximum(0, drift) */
+            }
         }
         double first = first_step > t_stops[i] - t ? 0.0 : first_step;
-        if (bondc_driver_start(d, t, y, m, t_stops[i], rtol, atol, max_step, first, 100000) != 0) return i;
+        if (bondc_driver_start(d, t, y, m, t_stops[i], rtol, atol, max_step, first, 100000) != 0) break;
         int count = 0;
-        if (bondc_driver_advance(d, capacity - stored, 0, 0, 0, 0, 0, ts + stored, ys + (long)stored * d->n,
-                                 &count) != 2) return i;
+        int code = bondc_driver_advance(d, capacity - stored, watched, watch, signs, band, g_old, ts + stored,
+                                        ys + (long)stored * n, &count);
+        if (code != 2) {
+            if ((code == 0 || code == 1) && count > 0) { partial[0] = count; partial[1] = code; }
+            break;
+        }
         bondc_driver_counts(d, counts + 3L * i);
         stored += count;
         ends[i] = stored;
         t = ts[stored - 1];
-        y = ys + (long)(stored - 1) * d->n;
+        y = ys + (long)(stored - 1) * n;
     }
-    return pieces;
+    free(work);
+    free(sticky);
+    return done;
 }
 
 /* After bondc_driver_start (with the segment's modes): slide on switch k between the corners
@@ -3660,9 +3745,9 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
 void bondc_driver_counts(bondc_driver *d, long *out);
 int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
-                        const double *m0, const int *floors, double probe, double rtol, double atol,
-                        double max_step, double first_step, int capacity, double *ts, double *ys, int *ends,
-                        double *modes, long *counts);
+                        const double *m0, const int *floors, int watched, const int *watch, const int *held,
+                        double probe, double rtol, double atol, double max_step, double first_step, int capacity,
+                        double *ts, double *ys, int *ends, double *modes, long *counts, int *partial);
 void bondc_driver_free(bondc_driver *d);
 """
 _SUNDIALS_PARTS = ("core", "cvode", "nvecserial", "sunmatrixdense", "sunmatrixband", "sunlinsoldense",

@@ -464,22 +464,23 @@ PIECE_MODELS = {
     "staircase": ("model Staircase\n  input u [V] = floor(t*200)/20\n  MSe src : e = u\n  R r : e = 10*f\n"
                   "  C c : e = q/1e-3\n  1 j\n  src -> j\n  j -> r\n  j -> c\n"
                   "  experiment run\n    t_end = 0.1 [s]\n  end\nend\n"),
+    # switches of the state besides: a 20 kHz pwm on a DC motor whose load sticks by dry friction at
+    # first (sliding segments, left to the run), then turns (every edge a restart in C)
+    "motor_pwm": ("model MotorPwm\n  input u [V] = 24*pwm(t, 20000, 0.4)\n  MSe source : e = u\n"
+                  "  R winding : e = 1.2*f\n  I coil : f = p/2e-3\n  GY motor : r = 0.05\n  I rotor : f = p/2e-5\n"
+                  "  R fric : e = 1e-5*f + coulomb(f, 0.02, 0.03)\n  1 el\n  1 mech\n  source -> el\n"
+                  "  el -> winding\n  el -> coil\n  el -> motor\n  motor -> mech\n  mech -> rotor\n  mech -> fric\n"
+                  "  experiment run\n    t_end = 0.02 [s]\n  end\nend\n"),
+    # a reversing flow through a turbulent orifice: its sign switch crosses inside pieces
+    "orifice_reversing": (ROOT / "tests/fixtures/engine/orifice_reversing.bg").read_text(encoding="utf-8"),
 }
+#: the models above whose every segment is a known piece (all their switches of time)
+TIME_ALONE = {"pwm_rl", "pwm_sine_compare", "duty_step", "staircase"}
 
 
-@needs_cc
-@pytest.mark.parametrize("ahead", [512, 7])
-@pytest.mark.parametrize("name", sorted(PIECE_MODELS))
-def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segment_by_segment(
-        name, ahead, tmp_path, monkeypatch):
-    """A model whose switches are all of time (a pwm input, steps and staircases of time) has its
-    segments between breaks, and the restarts at the breaks, integrated ahead in one C call for
-    many breaks. The independent expectation is the run segment by segment (each segment one
-    driver call, each restart from Python: tested against closed forms in test_engine): the same
-    points, states, outputs, variables, events and solver counts, to the bit, with the queue
-    refilled every 512 pieces or every 7."""
-    path = tmp_path / f"{name}.bg"
-    path.write_text(PIECE_MODELS[name], encoding="utf-8")
+def _same_run_with_pieces_ahead(path, ahead, monkeypatch, every_segment):
+    """Run ``path``'s first experiment with the pieces between its known breaks integrated ahead
+    (``ahead`` at a time) and segment by segment, and check that the two runs are the same to the bit."""
     if runtime._sundials_link() is None:
         pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
     namespace, experiment = _compiled(path)
@@ -491,7 +492,11 @@ def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segme
         patch.setattr(namespace["_Run"], "pieces_apply", lambda self: False)
         alone = namespace["simulate_model"](namespace["_MODEL"], **settings)
     assert ours.complete and alone.complete
-    assert ours.stats["pieces_ahead"] == ours.stats["segments"] > 10 and "pieces_ahead" not in alone.stats
+    assert "pieces_ahead" not in alone.stats
+    if every_segment:
+        assert ours.stats["pieces_ahead"] == ours.stats["segments"] > 10
+    else:       # (a friction's sliding segments, the segments a crossing ends, are the run's own)
+        assert ours.stats["segments"] >= ours.stats["pieces_ahead"] >= 1
     assert np.array_equal(ours.t, alone.t)
     for group in ("states", "outputs", "variables"):
         for key, values in getattr(alone, group).items():
@@ -502,10 +507,37 @@ def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segme
 
 
 @needs_cc
-@pytest.mark.parametrize("fixture", ["engine/chirp_count.bg", "sim/pwm_diode.bg", "engine/breakaway.bg"])
-def test_no_pieces_are_integrated_ahead_where_more_than_time_decides_the_modes(fixture):
-    """A when clause, a nonlinear algebraic loop or a switch of the state (a friction): the run
-    goes segment by segment."""
+@pytest.mark.parametrize("ahead", [512, 7])
+@pytest.mark.parametrize("name", sorted(PIECE_MODELS))
+def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segment_by_segment(
+        name, ahead, tmp_path, monkeypatch):
+    """The segments between a run's known breaks (a pwm's edges, steps and staircases of time), and
+    the restarts at those breaks, are integrated ahead in one C call for many breaks; a restart that
+    is not simple (a friction on its surface, switches that chatter) and a piece in which a switch
+    of the state may cross are left to the run. The independent expectation is the run segment by
+    segment (each segment one driver call, each restart from Python: tested against closed forms
+    in test_engine): the same points, states, outputs, variables, events and solver counts, to the
+    bit, with the queue refilled every 512 pieces or every 7."""
+    path = tmp_path / f"{name}.bg"
+    path.write_text(PIECE_MODELS[name], encoding="utf-8")
+    _same_run_with_pieces_ahead(path, ahead, monkeypatch, every_segment=name in TIME_ALONE)
+
+
+@needs_cc
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["electro_pneumatic_hybrid.bg", "electro_pneumatic_hybrid_components.bg"])
+def test_the_flagships_pieces_ahead_equal_its_run_segment_by_segment(model, monkeypatch):
+    """The flagship cycle: its motion profile's corners are known breaks, its frictions and backlash
+    switches of the state (43 events, sliding segments): the pieces between breaks that no event
+    interrupts come from the queue, the rest from the run, and the cycle is the same to the bit."""
+    _same_run_with_pieces_ahead(ROOT / "models" / model, 512, monkeypatch, every_segment=False)
+
+
+@needs_cc
+@pytest.mark.parametrize("fixture", ["engine/chirp_count.bg", "sim/pwm_diode.bg"])
+def test_no_pieces_are_integrated_ahead_in_a_model_with_a_when_clause_or_an_algebraic_loop(fixture):
+    """A when clause (its statements change the state at a restart) or a nonlinear algebraic loop
+    (its switches evaluated with numpy where C's Newton fails): the run goes segment by segment."""
     if runtime._sundials_link() is None:
         pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
     namespace, experiment = _compiled(ROOT / "tests/fixtures" / fixture)
