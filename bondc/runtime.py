@@ -61,9 +61,12 @@ across a switch blindly:
    ``t``, ``t < t1``) from their parameter expressions; the others
    (``TIME_SWITCHES``: ``pwm(t, f, d)``, ``if sin(2*pi*f*t) > c``, ``floor(t*f)``)
    by sampling ``g`` on a grid refined until its number of sign changes is
-   stable, each refined by ``brentq``: a pulse shorter than a solver step is
-   never skipped. csv sample times are listed when there are at most 200; a
-   denser measured signal instead caps ``max_step`` at its median spacing.
+   stable, all refined at once by bisection (``bracketed_roots``, brentq's
+   tolerance): a pulse shorter than a solver step is never skipped. csv sample
+   times are listed when there are at most 200; a denser measured signal
+   instead caps ``max_step`` at its median spacing. With the native driver the
+   segments between these times and the simple restarts at them run hundreds
+   at a time in one C call (``_Run.queued_piece``), the same to the bit.
 4. At every restart the modes are chosen *just after* the restart point: the
    state is advanced by a probe ``h = 1e-8 * span`` along the frozen law and
    ``m = sign(g)`` is taken there, iterated until the modes agree with the law
@@ -1165,10 +1168,11 @@ class _NativeDriver:
         self.lib.bondc_driver_counts(self.handle, out)
         return int(out[0]), int(out[1]), int(out[2])
 
-    def pieces(self, t_stops, t0, y0, m0, floors, watch, held, probe, rtol, atol, max_step, first_step):
+    def pieces(self, t_stops, t0, y0, m0, floors, watch, held, strict, probe, rtol, atol, max_step, first_step):
         """Known pieces in one call (``bondc_driver_pieces``): (pieces done, times, states, ends,
         modes, counts, partial), the arrays of the pieces done (modes and times and states also of
-        the piece begun after them, of ``partial`` = (steps, code) where there is one), copied."""
+        the piece begun after them, of ``partial`` = (steps, code, values of the watched switches)
+        where there is one), copied."""
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
         count, switches, watched = len(t_stops), m0.size, int(watch.size)
         t_stops = np.ascontiguousarray(t_stops, dtype=float)
@@ -1176,23 +1180,27 @@ class _NativeDriver:
         modes = np.zeros((count, max(switches, 1)))
         counts = np.zeros((count, 3), dtype=np.int_)
         partial = np.zeros(2, dtype=np.intc)
+        g_left = np.zeros(max(watched, 1))
         done = self.lib.bondc_driver_pieces(
             self.handle, count, buffer("double[]", t_stops), float(t0), buffer("double[]", np.array(y0, dtype=float)),
             buffer("double[]", np.array(m0, dtype=float)) if switches else null,
             buffer("int[]", floors) if switches else null, watched, buffer("int[]", watch) if watched else null,
-            buffer("int[]", held) if watched else null, float(probe), float(rtol), float(atol), float(max_step),
+            buffer("int[]", held) if watched else null, int(bool(strict)), float(probe), float(rtol), float(atol),
+            float(max_step),
             float(first_step), self.capacity, buffer("double[]", self.ts), buffer("double[]", self.ys),
-            buffer("int[]", ends), buffer("double[]", modes), buffer("long[]", counts), buffer("int[]", partial))
+            buffer("int[]", ends), buffer("double[]", modes), buffer("long[]", counts), buffer("int[]", partial),
+            buffer("double[]", g_left))
         stored = (int(ends[done - 1]) if done else 0) + int(partial[0])
         return (done, self.ts[:stored].copy(), self.ys[:stored].copy(), ends[:done], modes[:done + 1, :switches],
-                counts[:done], (int(partial[0]), int(partial[1])))
+                counts[:done], (int(partial[0]), int(partial[1]), g_left[:watched]))
 
 
 #: A piece of a run integrated ahead (:meth:`_Run.queued_piece`): from (t0, y0) to t_stop with
 #: ``modes``, found at its start from the modes before (``guess``; None for the first of a call);
 #: its steps (``ts``, ``ys`` by rows) and the solver's counts; or, with ``resume`` the driver's code
-#: (0 or 1) where the call stopped inside it, its first steps, the driver standing at the last.
-_Piece = _collections.namedtuple("_Piece", "t0 y0 t_stop modes guess ts ys counts resume")
+#: (0 or 1) where the call stopped inside it, its first steps, the driver standing at the last, and
+#: ``left`` the values the driver left of each switch it watched (switch -> value).
+_Piece = _collections.namedtuple("_Piece", "t0 y0 t_stop modes guess ts ys counts resume left")
 
 
 class _DriverStep:
@@ -2111,12 +2119,10 @@ class _Run:
             while True:
                 if resumed is not None:
                     # a batch the driver made watching more switches (every one it locates): its last
-                    # step stands as a possible crossing (code 1) or not (0), and g_old is the values
-                    # this watch would have left: at the step before that one, or at the last
-                    code, ts, ys, resumed = resumed.resume, resumed.ts, resumed.ys, None
-                    last = len(ts) - (2 if code == 1 else 1)
-                    if last >= 0 and index.size:
-                        g_old[:] = self.switches_at(float(ts[last]), ys[last], modes, index)
+                    # step stands as a possible crossing (code 1) or not (0), and g_old takes the
+                    # values it left of those this segment watches
+                    code, ts, ys, left, resumed = resumed.resume, resumed.ts, resumed.ys, resumed.left, None
+                    g_old[:] = [left[k] for k in index.tolist()]
                 else:
                     code, ts, ys = driver.advance(watch, signs, band, g_old)
                 done = len(ts) - (1 if code in (1, 4) else 0)
@@ -2177,15 +2183,15 @@ class _Run:
 
     def pieces_apply(self) -> bool:
         """Whether the pieces between known breaks can be integrated ahead (:meth:`queued_piece`):
-        a run with the native driver, reporting every step, of a model without a when clause or an
-        algebraic loop that has no switch left to locate as an event: every switch is of parameters
-        alone, or of time alone with its changes known (a step of time) or found before the run (a
-        pwm input, a staircase), so that nothing but time decides the modes after each break."""
+        a run with the native driver, reporting every step, with scalar tolerances (the driver's
+        deadbands), of a model without a when clause (its statements at a restart) or a floor of the
+        state among the switches it locates as events (a segment watching one is stepped from
+        Python). With a nonlinear algebraic loop, a restart where C's Newton fails (numpy then
+        solves the loop) is left to the run."""
         if self._pieces is None:
             model = self.model
             self._pieces = bool(
-                self.t_eval is None and not model.WHEN_LABELS and getattr(model, "VECTORIZED", True)
-                and not model.floor_switches[self.event_switches].any()
+                self.t_eval is None and not model.WHEN_LABELS and not model.floor_switches[self.event_switches].any()
                 and np.ndim(self.options["atol"]) == 0 and np.ndim(self.options["rtol"]) == 0
                 and self.driver_for(np.zeros(0, dtype=int), np.zeros(0)) is not None)
         return self._pieces
@@ -2195,13 +2201,17 @@ class _Run:
         from the pieces integrated ahead, integrating them first where none is queued: (t, y,
         None) as :meth:`segment` returns, or None (the segment is integrated as any other).
 
-        For a model whose modes only time decides (:meth:`pieces_apply`), the segments between its
-        known breaks and the restarts at those breaks are done in one native call for many breaks
+        Where :meth:`pieces_apply`, the segments between the run's known breaks (a pwm's edges) and
+        the restarts at those breaks are done in one native call for many breaks
         (``bondc_driver_pieces``): each piece started and stepped as :meth:`driver_segment` starts
-        and steps it, each restart's modes as :meth:`restart_modes` finds them, so the run is the
-        same to the bit; the run loop then takes each piece (here) and each restart (in
-        :meth:`restart_modes`) as it reaches them, with all its bookkeeping of events. A piece that
-        does not match where the run is (it went another way) empties the queue. Where the calls end
+        and steps it, each restart as :meth:`restart_modes` and :meth:`sliding_candidates` make it,
+        so the run is the same to the bit. The call stops before a restart that is not that simple
+        (the modes probed ahead differ, a friction sits on its surface) and inside a piece in which a
+        switch of the state may cross or that fills its buffer: that piece is queued as begun
+        (``resume``), and :meth:`driver_segment` goes on from where CVODE stands. The run loop takes
+        each piece (here) and each restart (in :meth:`restart_modes`) as it reaches them, with all
+        its bookkeeping of events; a piece that does not match where the run is (it went another
+        way) empties the queue. Where the calls end
         inside their first piece (a switch of the state crossing before the next break, as in most
         segments of the flagship cycle), they are tried again after 2, 4, ... 64 segments only: they
         save nothing there and cost a little."""
@@ -2263,9 +2273,9 @@ class _Run:
         floors = np.ascontiguousarray(self.model.floor_switches, dtype=np.intc)
         watch = np.ascontiguousarray(self.event_switches, dtype=np.intc)
         held = np.ascontiguousarray(np.asarray(self.model.SWITCH_VERTICES, dtype=float)[watch] != 1.0, dtype=np.intc)
-        done, ts, ys, ends, piece_modes, counts, (partial, code) = self._driver.pieces(
-            stops, t, y, np.asarray(modes, dtype=float), floors, watch, held, self.probe, options["rtol"],
-            options["atol"], max_step, first_step)
+        done, ts, ys, ends, piece_modes, counts, (partial, code, g_left) = self._driver.pieces(
+            stops, t, y, np.asarray(modes, dtype=float), floors, watch, held, not getattr(self.model, "VECTORIZED", True),
+            self.probe, options["rtol"], options["atol"], max_step, first_step)
         whole = int(ends[done - 1]) if done else 0
         if done:
             self.pieces_backoff = 1
@@ -2290,12 +2300,12 @@ class _Run:
         for i in range(done):      # each piece starts where the one before ended, as in C
             end = int(ends[i])
             self.queue.append(_Piece(t0, y0, float(stops[i]), piece_modes[i], piece_modes[i - 1] if i else None,
-                                     ts[begin:end], ys[begin:end], counts[i], None))
+                                     ts[begin:end], ys[begin:end], counts[i], None, None))
             begin, t0, y0 = end, float(ts[end - 1]), ys[end - 1]
         if partial:     # the piece begun after them, its first steps: the driver goes on from there
             self.queue.append(_Piece(t0, y0, float(stops[done]), piece_modes[done],
                                      piece_modes[done - 1] if done else None, ts[begin:begin + partial],
-                                     ys[begin:begin + partial], None, code))
+                                     ys[begin:begin + partial], None, code, dict(zip(watch.tolist(), g_left))))
 
     def segment(self, t, y, modes, t_stop):
         """Integrate with frozen ``modes`` until ``t_stop`` or the first event; returns (t, y, event)."""
@@ -3486,13 +3496,15 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
 
 /* The modes of the unfrozen law at (t, y) into out, as the runtime's modes_at finds them: from
    `guess`, m = sign(g(t, y, m)) (floor(g) for a floor switch, 0 where g is nan) until it repeats,
-   at most switches + 1 passes. */
-static void driver_modes_at(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
-                            double *out)
+   at most switches + 1 passes. Returns 0 where a switching function was not finite in a pass. */
+static int driver_modes_at(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                           double *out)
 {
+    int finite = 1;
     for (int k = 0; k < d->switches; k++) out[k] = guess[k];
     for (int pass = 0; pass <= d->switches; pass++) {
         bondc_switches(t, y, d->p, out, d->g);
+        if (!driver_finite(d->g, d->switches)) finite = 0;
         int same = 1;
         for (int k = 0; k < d->switches; k++) {
             double g = d->g[k];
@@ -3500,9 +3512,10 @@ static void driver_modes_at(bondc_driver *d, double t, const double *y, const do
             if (m != out[k]) same = 0;
             d->scratch[k] = m;
         }
-        if (same) return;
+        if (same) return finite;
         for (int k = 0; k < d->switches; k++) out[k] = d->scratch[k];
     }
+    return finite;
 }
 
 /* Known pieces of a run in one call: piece i ends at the known break t_stops[i] (or the run's end)
@@ -3521,15 +3534,20 @@ static void driver_modes_at(bondc_driver *d, double t, const double *y, const do
    finite: its steps are not kept, the caller integrates it its own way), and inside one that does
    not fit in what is left of the buffer or in which a watched switch may cross: then partial[0]
    steps of it follow the pieces done in ts/ys, partial[1] is bondc_driver_advance's code (0 or 1),
-   and CVODE stands at its last step, for the caller to go on from there. */
+   g_left the values of the watched switches it left (before that last step for code 1, at it for
+   0), and CVODE stands at its last step, for the caller to go on from there. With `strict` (a model
+   with an algebraic loop, whose runtime takes numpy's values where C's are not finite) a restart
+   or a piece's start where a switching function or the right-hand side is not finite is left to
+   the caller too. */
 void bondc_driver_counts(bondc_driver *d, long *out);
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out);
 
 int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
                         const double *m0, const int *floors, int watched, const int *watch, const int *held,
-                        double probe, double rtol, double atol, double max_step, double first_step, int capacity,
-                        double *ts, double *ys, int *ends, double *modes, long *counts, int *partial)
+                        int strict, double probe, double rtol, double atol, double max_step, double first_step,
+                        int capacity, double *ts, double *ys, int *ends, double *modes, long *counts, int *partial,
+                        double *g_left)
 {
     int stored = 0, done = 0, n = d->n, switches = d->switches;
     partial[0] = 0;
@@ -3547,11 +3565,11 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
     for (int i = 0; i < pieces; i++, done++) {
         double *m = modes + (long)i * switches;
         if (i > 0) {
-            driver_modes_at(d, t, y, m - switches, floors, m);
+            if (!driver_modes_at(d, t, y, m - switches, floors, m) && strict) break;
             bondc_rhs(t, y, d->p, m, d->fp);
             if (!driver_finite(d->fp, n)) break;
             for (int q = 0; q < n; q++) d->shifted[q] = y[q] + probe * d->fp[q];
-            driver_modes_at(d, t + probe, d->shifted, m, floors, d->ahead);
+            if (!driver_modes_at(d, t + probe, d->shifted, m, floors, d->ahead) && strict) break;
             int same = 1;
             for (int k = 0; k < switches; k++)
                 if (d->ahead[k] != m[k]) same = 0;
@@ -3559,6 +3577,7 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
             if (holding) {
                 if (bondc_deadbands(d, t, y, m, rtol, atol, holding, sticky, near) != 0) break;
                 bondc_switches(t, y, d->p, m, d->g);
+                if (strict && !driver_finite(d->g, switches)) break;
                 int surface = 0;
                 for (int j = 0; j < holding; j++)
                     if (fabs(d->g[sticky[j]]) <= near[j]) surface = 1;
@@ -3568,6 +3587,7 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
         if (watched) {
             if (bondc_deadbands(d, t, y, m, rtol, atol, watched, watch, band) != 0) break;
             bondc_switches(t, y, d->p, m, d->g);
+            if (strict && !driver_finite(d->g, switches)) break;
             for (int j = 0; j < watched; j++) {
                 double g = d->g[watch[j]], drift = -m[watch[j]] * g;
                 signs[j] = m[watch[j]];
@@ -3581,7 +3601,11 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
         int code = bondc_driver_advance(d, capacity - stored, watched, watch, signs, band, g_old, ts + stored,
                                         ys + (long)stored * n, &count);
         if (code != 2) {
-            if ((code == 0 || code == 1) && count > 0) { partial[0] = count; partial[1] = code; }
+            if ((code == 0 || code == 1) && count > 0) {
+                partial[0] = count;
+                partial[1] = code;
+                for (int j = 0; j < watched; j++) g_left[j] = g_old[j];
+            }
             break;
         }
         bondc_driver_counts(d, counts + 3L * i);
@@ -3746,8 +3770,9 @@ void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
 void bondc_driver_counts(bondc_driver *d, long *out);
 int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
                         const double *m0, const int *floors, int watched, const int *watch, const int *held,
-                        double probe, double rtol, double atol, double max_step, double first_step, int capacity,
-                        double *ts, double *ys, int *ends, double *modes, long *counts, int *partial);
+                        int strict, double probe, double rtol, double atol, double max_step, double first_step,
+                        int capacity, double *ts, double *ys, int *ends, double *modes, long *counts, int *partial,
+                        double *g_left);
 void bondc_driver_free(bondc_driver *d);
 """
 _SUNDIALS_PARTS = ("core", "cvode", "nvecserial", "sunmatrixdense", "sunmatrixband", "sunlinsoldense",
