@@ -61,8 +61,10 @@ across a switch blindly:
    ``t``, ``t < t1``) from their parameter expressions; the others
    (``TIME_SWITCHES``: ``pwm(t, f, d)``, ``if sin(2*pi*f*t) > c``, ``floor(t*f)``)
    by sampling ``g`` on a grid refined until its number of sign changes is
-   stable, all refined at once by bisection (``bracketed_roots``, brentq's
-   tolerance): a pulse shorter than a solver step is never skipped. csv sample
+   stable, a cell the slope around it could carry across zero sampled finer
+   (``_hidden_changes``: a pulse narrower than the grid), all refined at once by
+   bisection (``bracketed_roots``, brentq's tolerance): a pulse shorter than a
+   solver step is not skipped. csv sample
    times are listed when there are at most 200; a denser measured signal
    instead caps ``max_step`` at its median spacing. With the native driver the
    segments between these times and the simple restarts at them run hundreds
@@ -228,6 +230,51 @@ def bracketed_roots(function, a, b, fa, fb, xtol, rtol):
         lo = np.where(before, middle, lo)
         hi = np.where(before, hi, middle)
     return roots
+
+
+#: Cells that may hide a pulse between two samples of a switch of time are sampled this many times
+#: finer, up to this many times over, at most this many values at a time (see _hidden_changes).
+_HIDDEN_SPLIT, _HIDDEN_LEVELS, _HIDDEN_VALUES = 64, 3, 1 << 22
+
+
+def _hidden_changes(values, grid, g, changes):
+    """Sign changes of ``g`` (a switch of time, sampled on ``grid``) that the grid's samples do not
+    show: a pulse narrower than a cell, whose two samples have the same sign. A cell is suspect
+    when its samples are no further from zero than the largest slope seen at it (its own and its
+    neighbours') could carry ``g`` across it: the V of ``abs(t - t0) < w``, a ramp that turns. A
+    suspect cell is sampled ``_HIDDEN_SPLIT`` times finer, and so are its suspect parts, up to
+    ``_HIDDEN_LEVELS`` times. Returns the brackets found (lo, hi, g(lo), g(hi)). A narrow smooth
+    bump whose slope the samples never see can still hide: a pulse whose times are known is best
+    written with ``step(t, t1) - step(t, t2)``."""
+    lo, hi, g_lo, g_hi = grid[:-1], grid[1:], g[:-1], g[1:]
+    found = [[], [], [], []]
+    fraction = np.linspace(0.0, 1.0, _HIDDEN_SPLIT + 1)
+    for _ in range(_HIDDEN_LEVELS):
+        with np.errstate(all="ignore"):
+            width = hi - lo
+            slope = np.abs(g_hi - g_lo) / width
+            bound = slope.copy()
+            joined = lo[1:] == hi[:-1]          # neighbours: cells that share an end
+            bound[1:] = np.where(joined, np.maximum(bound[1:], slope[:-1]), bound[1:])
+            bound[:-1] = np.where(joined, np.maximum(bound[:-1], slope[1:]), bound[:-1])
+            suspect = np.flatnonzero((np.sign(g_lo) * np.sign(g_hi) > 0)
+                                     & (np.abs(g_lo) + np.abs(g_hi) <= bound * width))
+        if not suspect.size or suspect.size * fraction.size > _HIDDEN_VALUES:
+            break
+        times = lo[suspect, None] + width[suspect, None] * fraction[None, :]
+        times[:, -1] = hi[suspect]
+        samples = values(times.ravel())
+        if not np.all(np.isfinite(samples)):
+            break
+        at = changes(samples)
+        at = at[at % fraction.size != fraction.size - 1]        # not across two cells' ends
+        flat = times.ravel()
+        for part, value in zip(found, (flat[at], flat[at + 1], samples[at], samples[at + 1])):
+            part.append(value)
+        cells = samples.reshape(times.shape)
+        lo, hi = times[:, :-1].ravel(), times[:, 1:].ravel()
+        g_lo, g_hi = cells[:, :-1].ravel(), cells[:, 1:].ravel()
+    return tuple(np.concatenate(part) if part else np.zeros(0) for part in found)
 
 
 def quad(function, a, b, epsabs, epsrel, limit):
@@ -1712,12 +1759,19 @@ class _Run:
             label = model.SWITCHES[k]
 
             at = changes(g, k)
+            lo, hi, g_lo, g_hi = grid[at], grid[at + 1], g[at], g[at + 1]
             levels = np.zeros(at.size)
             if model.floor_switches[k]:     # the level crossed: g - level changes sign there
                 levels = np.where(g[at + 1] > g[at], np.floor(g[at + 1]), np.floor(g[at]))
+            else:
+                hidden = _hidden_changes(values, grid, g, lambda samples, k=k: changes(samples, k))
+                if hidden[0].size:
+                    order = np.argsort(np.concatenate((lo, hidden[0])), kind="stable")
+                    lo, hi, g_lo, g_hi = (np.concatenate(pair)[order] for pair in zip((lo, hi, g_lo, g_hi), hidden))
+                    levels = np.zeros(lo.size)
             found[k] = [float(root) for root in bracketed_roots(
                 lambda times, rows, values=values, levels=levels: values(times) - levels[rows],
-                grid[at], grid[at + 1], g[at] - levels, g[at + 1] - levels, 4 * _EPS, 4 * _EPS)]
+                lo, hi, g_lo - levels, g_hi - levels, 4 * _EPS, 4 * _EPS)]
             roots += [(root, label) for root in found[k]]
             located.add(k)
         if located:

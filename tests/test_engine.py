@@ -375,6 +375,31 @@ def test_a_time_switch_that_is_exactly_zero_at_a_sample_of_the_search_grid_is_an
     assert len(edges) == 19 and min(abs(e - 0.1) for e in edges) < 1e-12
 
 
+@pytest.mark.parametrize("law, pulses", [
+    ("if abs(t - 5.001) < 1e-4 then 1000 else 0", [(5.0009, 5.0011)]),       # 0.2 ms in 10 s
+    ("if mod(t, 1) < 1e-4 then 1000 else 0", [(k, k + 1e-4) for k in range(10)]),    # on from t = 0
+])
+def test_a_pulse_narrower_than_the_search_grid_is_not_skipped(law, pulses, tmp_path):
+    """A force of 1000 N for 0.1-0.2 ms, once or every second, on a free 1 kg mass over 10 s: no
+    sample of the search's grids (spacing 2.4 ms, then 1.2 ms) falls inside a pulse, whose two
+    samples around it have the same sign. The cells whose samples the slope around them could
+    carry across zero (the V of the abs, the saw's jump) are sampled finer: every edge is an event
+    at its time, and the mass's final speed is the impulse, 1000 N times the pulses' length (it
+    was 0 when the pulses were skipped)."""
+    path = tmp_path / "pulse.bg"
+    path.write_text("model Pulse\n"
+                    f"  input F [N] = {law}\n"
+                    "  MSe push : e = F\n  I mass : f = p/1\n  1 j\n  push -> j\n  j -> mass\n"
+                    "  output v [m/s] = mass.f\n"
+                    "  experiment run\n    t_end = 10 [s]\n  end\nend\n")
+    result = run(path)
+    assert result.complete, result.message
+    edges = np.array(sorted(time for time, label in result.events if label.startswith("if ")))
+    np.testing.assert_allclose(edges, [edge for edge in np.ravel(pulses) if edge > 0], rtol=0, atol=1e-12)
+    impulse = 1000 * sum(end - start for start, end in pulses)
+    assert result.outputs["v"][-1] == pytest.approx(impulse, rel=1e-9)
+
+
 def shockley_bridge(vs, vc, Rs=1.0, RL=100.0, Is=1e-12, Vt=0.025):
     """Nodal analysis of diode_bridge_shockley.bg (node b = 0 V, v_p = v_n + vc): the capacitor
     current and (v_a, v_n). With I(v) = Is (exp(v/Vt) - 1) for d1 (a -> p), d2 (b -> p), d3
