@@ -510,7 +510,7 @@ def _same_run_with_pieces_ahead(path, ahead, monkeypatch, every_segment):
 
 
 @needs_cc
-@pytest.mark.parametrize("ahead", [512, 7])
+@pytest.mark.parametrize("ahead", [512, pytest.param(7, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", sorted(PIECE_MODELS))
 def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segment_by_segment(
         name, ahead, tmp_path, monkeypatch):
