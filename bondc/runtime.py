@@ -2289,6 +2289,7 @@ class _Run:
         queue.popleft()
         self.stats["pieces_ahead"] = self.stats.get("pieces_ahead", 0) + 1
         if piece.resume is not None:
+            self.stats["pieces_resumed"] = self.stats.get("pieces_resumed", 0) + 1
             return "resume", piece
         self.extended = None
         ts, ys = piece.ts, piece.ys
