@@ -2137,15 +2137,20 @@ class _Run:
             return None
         return self._driver
 
+    def driver_steps(self) -> tuple:
+        """(first step, largest step) as the native driver takes them: 0 for none (the driver
+        leaves out a first step longer than its segment)."""
+        options = self.options
+        first_step = float(options.get("first_step") or 0.0)
+        return first_step, float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
+
     def start_driver(self, driver, t, y, modes, t_stop) -> bool:
         """(Re)start the native driver at (t, y) with ``modes`` towards ``t_stop``, with the run's
         tolerances and step limits; False where CVODE refuses."""
-        options = self.options
-        first_step = float(options.get("first_step") or 0.0)
+        first_step, max_step = self.driver_steps()
         if first_step > t_stop - t:
             first_step = 0.0
-        max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
-        return driver.start(t, y, modes, t_stop, options["rtol"], options["atol"], max_step, first_step)
+        return driver.start(t, y, modes, t_stop, self.options["rtol"], self.options["atol"], max_step, first_step)
 
     def collect_driver(self, driver, kind):
         """Add the driver's counts since its start to the run's, and count one segment of ``kind``."""
@@ -2323,8 +2328,7 @@ class _Run:
         if not stops.size:
             return
         options = self.options
-        first_step = float(options.get("first_step") or 0.0)
-        max_step = float(options["max_step"]) if np.isfinite(options["max_step"]) else 0.0
+        first_step, max_step = self.driver_steps()      # (the first step per piece, in C)
         floors = np.ascontiguousarray(self.model.floor_switches, dtype=np.intc)
         watch = np.ascontiguousarray(self.event_switches, dtype=np.intc)
         held = np.ascontiguousarray(np.asarray(self.model.SWITCH_VERTICES, dtype=float)[watch] != 1.0, dtype=np.intc)
