@@ -541,6 +541,7 @@ def test_the_flagships_pieces_ahead_equal_its_run_segment_by_segment(model, monk
 
 
 @needs_cc
+@pytest.mark.slow
 def test_no_pieces_are_integrated_ahead_in_a_model_with_a_when_clause():
     """A when clause's statements change the state at a restart: the run goes segment by segment."""
     if runtime._sundials_link() is None:
