@@ -2152,9 +2152,10 @@ class _Run:
             first_step = 0.0
         return driver.start(t, y, modes, t_stop, self.options["rtol"], self.options["atol"], max_step, first_step)
 
-    def collect_driver(self, driver, kind):
-        """Add the driver's counts since its start to the run's, and count one segment of ``kind``."""
-        nfev, njev, nlu = driver.counts()
+    def collect_driver(self, driver, kind, counts=None):
+        """Add the driver's counts since its start (or ``counts``, a piece's) to the run's, and count
+        one segment of ``kind``."""
+        nfev, njev, nlu = driver.counts() if counts is None else (int(count) for count in counts)
         self.stats["nfev"] += nfev
         self.stats["njev"] += njev
         self.stats["nlu"] += nlu
@@ -2304,12 +2305,7 @@ class _Run:
         self.blocks_mode.append(mode)
         if self.progress is not None:
             self.progress(float(ts[-1]))
-        nfev, njev, nlu = piece.counts
-        self.stats["nfev"] += int(nfev)
-        self.stats["njev"] += int(njev)
-        self.stats["nlu"] += int(nlu)
-        self.stats["linear_solver"] = self._driver.linear_solver
-        self.stats["driver_segments"] = self.stats.get("driver_segments", 0) + 1
+        self.collect_driver(self._driver, "driver_segments", piece.counts)
         return float(ts[-1]), ys[-1].copy(), None
 
     def integrate_pieces(self, t, y, modes, t_stop):
