@@ -77,19 +77,24 @@ across a switch blindly:
    law pushes the state back across the surface, as friction does when it
    sticks), or a ``coulomb`` friction or a switch that slid until now sits on
    its surface, those switches are candidates for a sliding mode, any number
-   at once (at most ``_MAX_SLIDING``). The segment follows Filippov's
-   combination: the multilinear blend of the right-hand sides at the corners
-   of the candidates' modes (``+-1``; ``+-2`` for a ``coulomb`` friction, whose
-   frozen law gives its static limit there), with weights ``alpha`` solved by
-   Newton's method so that every sliding ``g`` stays put (rates by central
-   differences). A switch whose weight leaves [0, 1] cannot be held (the force
-   needed exceeds its limit) and leaves on that side; the others are solved
+   at once. The segment follows Filippov's combination: the multilinear blend
+   of the right-hand sides at the corners of the candidates' modes (``+-1``;
+   ``+-2`` for a ``coulomb`` friction, whose frozen law gives its static limit
+   there), with weights ``alpha`` solved by Newton's method so that every
+   sliding ``g`` stays put (rates by central differences). From three
+   switches on, where the right-hand side is affine in the weights (checked:
+   ``affine_holds``), the affine blend of k + 1 corners instead of 2**k; the
+   multilinear one takes at most ``_MAX_SLIDING`` switches. A switch whose
+   sides give the same right-hand side (a free clutch) is not held. A switch
+   whose weight leaves [0, 1] cannot be held (the force needed exceeds its
+   limit) and leaves on that side; the others are solved
    again (complementarity by active set). The segment ends when a weight
    reaches 0 or 1 (break-away), another switch crosses, or a known time;
    outputs are the same combination (the friction forces that hold). With the
    native CVODE driver, a sliding mode on one switch is integrated in C (the
    weight is then ``rate- / (rate- - rate+)``, the same formula), batches of
-   steps at a time; several switches at once are stepped from Python.
+   steps at a time; several switches too (Newton's method on their weights
+   with Gaussian elimination), handing over to Python where that is singular.
 6. Chattering. When events come faster than ``max_event_rate`` per 1/1000 of
    the run, or repeat without time advancing, the next short interval ``tau``
    is integrated with the *unfrozen* law (modes recomputed at every
@@ -894,7 +899,8 @@ _CREEP_STEPS = 200      # ... and this many of them in a row mean the run is stu
 _STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction of the run ...
 _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
 _UNFROZEN_STEPS = 3000   # steps in one short unfrozen interval: the solver is fighting a discontinuity
-_MAX_SLIDING = 8         # switches sliding at once (2**8 corners of the Filippov combination)
+_MAX_SLIDING = 8         # switches sliding at once in the multilinear combination (2**8 corners) ...
+_MAX_HELD = 4096         # ... and in the affine one (k + 1 corners), when the laws combine linearly
 _EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant
 _ZENO_FIRINGS = 16       # a when clause firing this often with ever shorter intervals ...
 _ZENO_INTERVAL = 1e-4    # ... the last shorter than this fraction of the run, accumulates (Zeno)
@@ -1163,16 +1169,34 @@ class _NativeDriver:
         count = self.count[0]
         return code, self.ts[:count], self.ys[:count]
 
-    def slide(self, k, plus, minus, alpha, probe, others):
+    def slide(self, k, plus, minus, alpha, probe, others, drift):
         """Make the segment just started a sliding mode on switch ``k`` (see ``bondc_driver_slide``)."""
         buffer = self.ffi.from_buffer
-        self.others = np.array(others, dtype=np.intc).reshape(-1)      # the C side keeps pointing to it
+        self.others = np.array(others, dtype=np.intc).reshape(-1)      # the C side keeps pointing to them
+        self.drift = np.array(drift, dtype=float).reshape(-1)
         self.alphas = np.empty(self.capacity)
         self.exits = np.empty(2 + self.others.size)
         self.lib.bondc_driver_slide(self.handle, int(k), buffer("double[]", np.array(plus, dtype=float)),
                                     buffer("double[]", np.array(minus, dtype=float)), float(alpha), float(probe),
                                     int(self.others.size),
-                                    buffer("int[]", self.others) if self.others.size else self.ffi.NULL)
+                                    buffer("int[]", self.others) if self.others.size else self.ffi.NULL,
+                                    buffer("double[]", self.drift) if self.others.size else self.ffi.NULL)
+
+    def slide_many(self, sliding, corners, affine, alphas, probe, others, drift):
+        """Make the segment just started a sliding mode on several switches (see
+        ``bondc_driver_slide_many``); False when out of memory."""
+        buffer = self.ffi.from_buffer
+        self.others = np.array(others, dtype=np.intc).reshape(-1)      # the C side keeps pointing to them
+        self.drift = np.array(drift, dtype=float).reshape(-1)
+        count = len(sliding)
+        self.alphas = np.empty(self.capacity * count)
+        self.exits = np.empty(2 * count + self.others.size)
+        corners = np.ascontiguousarray(corners, dtype=float)
+        return self.lib.bondc_driver_slide_many(
+            self.handle, count, buffer("int[]", np.array(sliding, dtype=np.intc)), len(corners), int(affine),
+            buffer("double[]", corners), buffer("double[]", np.array(alphas, dtype=float)), float(probe),
+            int(self.others.size), buffer("int[]", self.others) if self.others.size else self.ffi.NULL,
+            buffer("double[]", self.drift) if self.others.size else self.ffi.NULL) == 0
 
     def exits_at(self, t, y):
         """The sliding mode's exits at (t, y), evaluated in C (as ``exits`` of :meth:`_Run.sliding_segment`)."""
@@ -1190,7 +1214,8 @@ class _NativeDriver:
                                                    buffer("double[]", self.ys), buffer("double[]", self.alphas),
                                                    self.count)
         count = self.count[0]
-        return code, self.ts[:count], self.ys[:count], self.alphas[:count]
+        held = self.alphas.size // self.capacity
+        return code, self.ts[:count], self.ys[:count], self.alphas[:count * held].reshape(count, held)
 
     def deadbands(self, t, y, modes, index, rtol, atol):
         """:meth:`_Run.deadbands` in C (the same sums in the same order), or None where it cannot run."""
@@ -1491,6 +1516,8 @@ class _Run:
         self.relevant_by_modes = {}    # mode vector -> the switches its law's active branches read
         self.sliding_now = []          # the switches of the last sliding segment
         self.vertex_override = {}      # coulomb switches held between their sliding forces
+        self.affine_sets = set()       # sets of switches held in the affine combination ...
+        self.affine_checked = set()    # ... and those whose every pair of corners was checked once
         self.jumps = []                # (t, state before, state after) of every when clause that fired
         self.when_times = {}           # when clause -> its last firing times (Zeno detection)
         self.extended = None           # modes of the last right-hand side taken beyond a switch
@@ -1893,7 +1920,7 @@ class _Run:
                         t_new, y_new = t_stop, y + (t_stop - t) * slope
                         self.record(t, t_new, y_new, lambda tt, t0=t, y0=y, s=slope: y0 + (tt - t0) * s,
                                     self.mode_id(modes))
-                    elif candidates and zero_progress <= 8 and len(candidates) <= _MAX_SLIDING:
+                    elif candidates and zero_progress <= 8 and len(candidates) <= _MAX_HELD:
                         held, modes, alpha = self.consistent_sliding_set(t, y, modes, candidates)
                         if held:
                             sliding = held
@@ -2056,24 +2083,28 @@ class _Run:
             bands = np.maximum(100 * self.deadbands(t, y, modes, index), 1e-12)
             relevant = self.relevant(t, y, modes)
             near = [int(k) for k, value, band in zip(index, values, bands) if value <= band and relevant[k]]
-        if near and len(near) <= _MAX_SLIDING:
+        if near and len(near) <= _MAX_HELD:
             held, modes, alpha = self.consistent_sliding_set(t, y, modes, near)
             if held:
                 t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
                 return t_new, y_new, held
-        if len(near) > _MAX_SLIDING:
-            named = "; ".join(self.model.SWITCHES[k] for k in near[:4]) + ("; ..." if len(near) > 4 else "")
-            raise _Stop({**stalled.failure,
-                         "message": f"the simulation stalled at t={t:.6g}: {len(near)} switches are on their "
-                                    f"surfaces at once ({named}), more than the {_MAX_SLIDING} that can slide "
-                                    "(stick) together",
-                         "cause": f"holding {len(near)} switches at once (dry frictions that stick together) "
-                                  f"combines 2^{len(near)} laws; bondc holds at most {_MAX_SLIDING} "
-                                  f"({2 ** _MAX_SLIDING} laws) at a time",
-                         "hint": "give some of these laws a narrow linear band around zero velocity (for a "
-                                 "friction, e = if abs(f) < v_band then F_s*f/v_band else coulomb(f, F_c, F_s)), "
-                                 "or join parts that always move together into one mass"})
+        if len(near) > _MAX_HELD:
+            raise _Stop({**stalled.failure, **self.too_many_held(t, near, f"more than {_MAX_HELD}")})
         raise _Stop(stalled.failure)
+
+    def too_many_held(self, t, near, why):
+        """The failure of a run whose switches on their surfaces at (t, y) cannot be held together."""
+        named = "; ".join(self.model.SWITCHES[k] for k in near[:4]) + ("; ..." if len(near) > 4 else "")
+        return {"message": f"the simulation stalled at t={t:.6g}: {len(near)} switches are on their surfaces at "
+                           f"once ({named}), and {why}",
+                "time": float(t), "kind": "events", "law": None, "variable": self.model.SWITCH_OWNERS[near[0]],
+                "cause": f"holding {len(near)} switches at once (dry frictions that stick together) combines "
+                         f"2^{len(near)} laws; beyond {_MAX_SLIDING}, bondc holds them only where each one's law "
+                         "enters the motion linearly (a friction force added to sums of forces), at most "
+                         f"{_MAX_HELD} at a time",
+                "hint": "give some of these laws a narrow linear band around zero velocity (for a friction, "
+                        "e = if abs(f) < v_band then F_s*f/v_band else coulomb(f, F_c, F_s)), or join parts "
+                        "that always move together into one mass"}
 
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that
@@ -2630,38 +2661,104 @@ class _Run:
             self.stats["jacobian_fallbacks"] = self.stats.get("jacobian_fallbacks", 0) + fallbacks
 
     def switch_rate(self, t, y, slope, modes, k):
-        """d g_k / dt along ``slope`` with the modes frozen (central difference over the probe step)."""
+        """d g_k / dt along ``slope`` with the modes frozen (central difference over the probe step);
+        ``k`` an index or an array of them."""
         h = self.probe
         ahead = self.model.switches(t + h, y + h * slope, self.p, modes)[k]
         behind = self.model.switches(t - h, y - h * slope, self.p, modes)[k]
         return (ahead - behind) / (2 * h)
 
-    def sliding_corners(self, modes, sliding):
+    def sliding_corners(self, modes, sliding, affine=None):
         """The mode vectors at the corners of the sliding set and their sides (+1/-1 per switch).
 
         Each sliding switch takes its vertex value on each side: 1 for a sign or an if, 2 for a
-        ``coulomb`` friction (its frozen law gives the static limit there).
+        ``coulomb`` friction (its frozen law gives the static limit there). Either all 2**k corners
+        (the multilinear combination) or the k + 1 corners of the affine one: every switch on its
+        minus side, then each one alone on its plus side. ``affine`` None: the affine one where
+        :meth:`affine_holds` found that the laws combine so (the first corner, all minus, is the
+        same in both).
         """
         vertices = self.model.SWITCH_VERTICES
         vertices = [self.vertex_override.get(k, vertices[k]) for k in range(len(vertices))]
-        sides = np.array([[1.0 if (c >> i) & 1 else -1.0 for i in range(len(sliding))]
-                          for c in range(2 ** len(sliding))])
+        count = len(sliding)
+        base = np.array(modes, dtype=float)
+        for k in sliding:
+            base[k] = -vertices[k]
+        if affine is None:
+            affine = (base.tobytes(), tuple(sliding)) in self.affine_sets
+        if affine:
+            sides = np.vstack([-np.ones((1, count)), 2.0 * np.eye(count) - 1.0])
+        else:
+            sides = np.array([[1.0 if (c >> i) & 1 else -1.0 for i in range(count)] for c in range(2 ** count)])
         corners = np.repeat(np.asarray(modes, dtype=float)[None, :], len(sides), axis=0)
         for i, k in enumerate(sliding):
             corners[:, k] = sides[:, i] * vertices[k]
         return corners, sides
 
+    def held_corners(self, t, y, modes, sliding):
+        """The corners of the sliding set at (t, y) (:meth:`sliding_corners`), the right-hand side
+        and the sliding switches' rates at each: the affine combination for three switches or more
+        where the laws combine linearly (k + 1 corners instead of 2**k), else the multilinear one,
+        which holds at most ``_MAX_SLIDING`` switches."""
+        if len(sliding) > 2:
+            corners, sides = self.sliding_corners(modes, sliding, affine=True)
+            values, rates = self.sliding_rates(t, y, corners, sliding)
+            if self.affine_holds(t, y, corners, sides, values, sliding):
+                return corners, sides, values, rates
+            if len(sliding) > _MAX_SLIDING:
+                raise _Stop(self.too_many_held(t, sliding, "their laws do not combine linearly"))
+        corners, sides = self.sliding_corners(modes, sliding, affine=False)
+        values, rates = self.sliding_rates(t, y, corners, sliding)
+        return corners, sides, values, rates
+
     @staticmethod
     def corner_weights(alpha, sides):
-        """Multilinear weights of the corners: prod_i alpha_i (side +) or 1 - alpha_i (side -)."""
+        """Weights of the corners. Multilinear (2**k corners): prod_i alpha_i (side +) or
+        1 - alpha_i (side -). Affine (k + 1 corners): 1 - sum(alpha) for the all-minus corner and
+        alpha_i for the corner with switch i alone on its plus side (the same combination where the
+        right-hand side is affine in each switch's weight, as a friction force is)."""
+        if sides.shape[0] != 2 ** sides.shape[1]:
+            return np.concatenate(([1.0 - np.sum(alpha)], alpha))
         factors = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
         return np.prod(factors, axis=1)
+
+    def affine_holds(self, t, y, corners, sides, values, sliding):
+        """Whether the right-hand side at (t, y) is affine in the sliding switches' weights, as the
+        affine combination of :meth:`sliding_corners` takes it: the corners with every pair of
+        switches (at most 512 pairs, spread over all) and with every switch on its plus side give
+        what the k + 1 corners predict, to rounding. A friction force that only enters sums of
+        forces is affine; one that feeds a nonlinear law (a normal force, a product) is not. Once
+        a set of switches and the others' modes passed, only the all-plus corner is tested again.
+        Records the set in ``affine_sets`` (for :meth:`sliding_corners`) when it holds."""
+        count = sides.shape[1]
+        checked = self.affine_checked
+        base, delta = values[0], values[1:] - values[0]
+        key = (corners[0].tobytes(), tuple(sliding))
+        tests = [list(range(count))]
+        self.affine_sets.discard(key)
+        if key not in checked:
+            pairs = [(i, j) for i in range(count) for j in range(i + 1, count)]
+            if len(pairs) > 512:
+                pairs = pairs[:: -(-len(pairs) // 512)]
+            tests = [list(pair) for pair in pairs] + tests
+        scale = np.max(np.abs(values), axis=0) + np.max(np.abs(delta), axis=0) * count
+        for plus in tests:
+            corner = corners[0].copy()
+            corner[[sliding[i] for i in plus]] = corners[[i + 1 for i in plus], [sliding[i] for i in plus]]
+            predicted = base + delta[plus].sum(axis=0)
+            actual = self.rhs(t, y, corner)
+            if not np.all(np.abs(actual - predicted) <= 1e-9 * scale + 1e-300):
+                checked.discard(key)
+                return False
+        checked.add(key)
+        self.affine_sets.add(key)
+        return True
 
     def sliding_rates(self, t, y, corners, sliding):
         """Right-hand side at each corner and the rate of each sliding switch's g along it."""
         values = np.array([self.rhs(t, y, corner) for corner in corners])
-        rates = np.array([[self.switch_rate(t, y, values[c], corners[c], k) for k in sliding]
-                          for c in range(len(corners))])
+        index = np.asarray(sliding, dtype=int)
+        rates = np.array([self.switch_rate(t, y, values[c], corners[c], index) for c in range(len(corners))])
         return values, rates
 
     def solve_alpha(self, rates, sides, guess=None):
@@ -2674,6 +2771,17 @@ class _Run:
         """
         count = sides.shape[1]
         alpha = np.full(count, 0.5) if guess is None else np.clip(np.array(guess, dtype=float), 0.0, 1.0)
+        if sides.shape[0] != 2 ** count:   # affine: the rate is linear in alpha
+            jacobian = (rates[1:] - rates[0]).T
+            for _ in range(3):
+                residual = self.corner_weights(alpha, sides) @ rates
+                if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residual))):
+                    return np.full(count, np.nan)
+                delta = np.linalg.lstsq(jacobian, -residual, rcond=1e-12)[0]
+                alpha = alpha + delta
+                if np.max(np.abs(delta)) <= 1e-13:
+                    break
+            return alpha
         if count == 1:      # one switch: the rate is linear in alpha, alpha*r+ + (1 - alpha)*r- = 0
             plus, minus = rates[sides[:, 0] > 0, 0][0], rates[sides[:, 0] < 0, 0][0]
             if not (math.isfinite(plus) and math.isfinite(minus)):
@@ -2706,8 +2814,21 @@ class _Run:
         tolerance = 1e-9
         self.vertex_override = {}
         while sliding:
-            corners, sides = self.sliding_corners(modes, sliding)
-            values, rates = self.sliding_rates(t, y, corners, sliding)
+            corners, sides, values, rates = self.held_corners(t, y, modes, sliding)
+            if len(sliding) > 1:
+                # a switch whose sides give the same right-hand side (a free clutch: both its limits
+                # 0) holds nothing; among others it would only bend their weights' least squares
+                affine = sides.shape[0] != 2 ** sides.shape[1]
+                free = [i for i in range(len(sliding))
+                        if (np.array_equal(values[1 + i], values[0]) if affine else
+                            all(np.array_equal(values[c], values[c | (1 << i)])
+                                for c in range(len(values)) if not (c >> i) & 1))]
+                if free:
+                    k = sliding[free[0]]
+                    g = self.model.switches(t, y, self.p, modes)[k]
+                    modes[k] = 1.0 if g >= 0 else -1.0
+                    del sliding[free[0]]
+                    continue
             alpha = self.solve_alpha(rates, sides)
             if not np.all(np.isfinite(alpha)):
                 return [], modes, None
@@ -2757,7 +2878,9 @@ class _Run:
     def consistent_sliding_set(self, t, y, modes, candidates):
         """:meth:`sliding_set`, with the modes of the other switches chosen just after (t, y) along the
         sliding motion itself (not along either side's law): a switch that flips there takes its new
-        mode; one that flips back and forth joins the sliding set."""
+        mode; one that flips back and forth joins the sliding set. A candidate that is not held
+        keeps the side :meth:`sliding_set` found for it (it leaves its surface on that side, even
+        from a state a rounding error on the other)."""
         candidates, flipped = list(candidates), set()
         for _ in range(2 * _MAX_SLIDING):
             held, modes, alpha = self.sliding_set(t, y, modes, candidates)
@@ -2768,11 +2891,12 @@ class _Run:
             slope = self.corner_weights(alpha, sides) @ values
             ahead = self.modes_at(t + self.probe, y + self.probe * slope, modes)
             relevant = self.relevant(t, y, modes)
-            changed = [j for j in self.event_switches if j not in held and relevant[j] and ahead[j] != modes[j]]
+            changed = [j for j in self.event_switches
+                       if j not in candidates and relevant[j] and ahead[j] != modes[j]]
             if not changed:
                 return held, modes, alpha
             for j in changed:
-                if j in flipped and len(candidates) < _MAX_SLIDING:
+                if j in flipped and len(candidates) < _MAX_HELD:
                     candidates.append(j)
                 else:
                     modes[j] = ahead[j]
@@ -2794,6 +2918,12 @@ class _Run:
         labels = "; ".join(self.model.SWITCHES[k] for k in sliding)
         self.note_event(t, f"sliding on {labels}")
         others = np.array([j for j in self.event_switches if j not in sliding and modes[j] != 0], dtype=int)
+        # a switch that starts a little on the far side of its surface (a sliding mode drifts by the
+        # solver's tolerance, and a friction may leave from there): it exits from where it starts
+        drift = np.zeros(others.size)
+        if others.size:
+            start = modes[others] * self.model.switches(t, y, self.p, modes)[others]
+            drift = np.where(self.model.floor_switches[others], 0.0, np.maximum(0.0, -start))
         memory = {"alpha": np.array(alpha0, dtype=float)}
 
         def combination(tt, yy):
@@ -2816,7 +2946,7 @@ class _Run:
             _, alpha = combination(tt, yy)
             values = list(alpha) + list(1.0 - alpha)
             if others.size:
-                values += list(modes[others] * self.model.switches(tt, yy, self.p, modes)[others])
+                values += list(modes[others] * self.model.switches(tt, yy, self.p, modes)[others] + drift)
             return np.array(values, dtype=float)
 
         def weights_at(times, states):
@@ -2828,11 +2958,11 @@ class _Run:
             # the initial point: its outputs are those of the sliding combination too
             self.blocks_mode[0] = ("slide", tuple(corner_ids), weights_at(self.blocks_t[0], self.blocks_x[0]))
         driver = None
-        if len(sliding) == 1 and not self.model.floor_switches[sliding[0]]:
+        if not any(self.model.floor_switches[k] for k in sliding):
             driver = self.driver_for(others, ())
         if driver is not None:
-            outcome = self.driver_sliding(driver, t, y, modes, sliding[0], corners, sides, corner_ids, others,
-                                          memory, weights_at, labels, t_stop)
+            outcome = self.driver_sliding(driver, t, y, modes, sliding, corners, sides, corner_ids, others,
+                                          drift, memory, weights_at, labels, t_stop)
             if outcome[0] != "handover":
                 return outcome
             _, t, y = outcome       # a law not finite at a trial point: the step loop goes on and explains
@@ -2882,16 +3012,20 @@ class _Run:
             hit = root if hit is None else min(hit, root)
         return hit
 
-    def driver_sliding(self, driver, t, y, modes, k, corners, sides, corner_ids, others, memory, weights_at,
-                       labels, t_stop):
-        """:meth:`sliding_segment` on one switch ``k`` with the native driver: the combination of the
-        two corners, its Jacobian and the exits evaluated in C (the same formulas), each batch of
-        steps recorded at once. Returns (t, y), or ("handover", t, y) to go on with the step loop
-        from there."""
+    def driver_sliding(self, driver, t, y, modes, sliding, corners, sides, corner_ids, others, drift, memory,
+                       weights_at, labels, t_stop):
+        """:meth:`sliding_segment` with the native driver: the combination of the corners, its
+        Jacobian and the exits evaluated in C (the same formulas; for several switches, Newton's
+        method on the weights with Gaussian elimination), each batch of steps recorded at once.
+        Returns (t, y), or ("handover", t, y) to go on with the step loop from there."""
         if not self.start_driver(driver, t, y, modes, t_stop):
             return "handover", t, np.array(y, dtype=float)
-        plus, minus = corners[sides[:, 0] > 0][0], corners[sides[:, 0] < 0][0]
-        driver.slide(k, plus, minus, float(memory["alpha"][0]), self.probe, others)
+        if len(sliding) == 1:
+            plus, minus = corners[sides[:, 0] > 0][0], corners[sides[:, 0] < 0][0]
+            driver.slide(sliding[0], plus, minus, float(memory["alpha"][0]), self.probe, others, drift)
+        elif not driver.slide_many(sliding, corners, sides.shape[0] != 2 ** sides.shape[1], memory["alpha"],
+                                   self.probe, others, drift):
+            return "handover", t, np.array(y, dtype=float)
         old = np.maximum(driver.exits_at(t, y), 0.0)    # at the edge of the sliding region: leaving counts from here
         t_prev, y_prev = float(t), np.array(y, dtype=float)
         positive = sides[:, 0] > 0
@@ -2904,11 +3038,15 @@ class _Run:
                     weights = np.clip(alphas[:done], 0.0, 1.0)
                     self.blocks_t.append(ts[:done].copy())
                     self.blocks_x.append(ys[:done].T.copy())
-                    self.blocks_mode.append(("slide", tuple(corner_ids),
-                                             np.where(positive[:, None], weights[None, :], 1.0 - weights[None, :])))
+                    if len(sliding) == 1:
+                        weights = weights[:, 0]
+                        weights = np.where(positive[:, None], weights[None, :], 1.0 - weights[None, :])
+                    else:
+                        weights = np.array([self.corner_weights(w, sides) for w in weights]).T
+                    self.blocks_mode.append(("slide", tuple(corner_ids), weights))
                     t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
-                    if math.isfinite(alphas[done - 1]):
-                        memory["alpha"] = np.array([alphas[done - 1]])
+                    if np.all(np.isfinite(alphas[done - 1])):
+                        memory["alpha"] = alphas[done - 1].copy()
                     if self.progress is not None:
                         self.progress(t_prev)
                 if code == 0:
@@ -3359,9 +3497,15 @@ typedef struct {
        mm (side -): see bondc_driver_slide */
     int slide, exits;
     const int *others;
+    const double *drift;
     double *mp, *mm, *fp, *fm, *shifted, *extra;
     double probe, alpha;
     double *scratch, *ahead;    /* modes being found (driver_modes_at), those a probe ahead */
+    /* a sliding mode on `held` > 1 switches `sliding`: the `corners` mode vectors cm (each
+       d->switches long), affine (k + 1 corners) or multilinear (2^k): see bondc_driver_slide_many */
+    int held, corners, affine;
+    int *sliding;
+    double *cm, *cf, *rates, *alphas, *weights, *newton, *residual, *delta;
 } bondc_driver;
 
 static int driver_finite(const double *v, int n)
@@ -3401,6 +3545,127 @@ static double slide_alpha(bondc_driver *d, double t, const double *y)
 
 static double clip01(double a) { return a < 0 ? 0.0 : (a > 1 ? 1.0 : a); }
 
+/* The corners' weights for the sliding weights a (k of them), as _Run.corner_weights: affine,
+   1 - sum(a) and each a_i; multilinear, prod_i a_i (side +, bit i of the corner) or 1 - a_i. */
+static void many_weights(const bondc_driver *d, const double *a, double *w)
+{
+    int k = d->held;
+    if (d->affine) {
+        double sum = 0.0;
+        for (int i = 0; i < k; i++) sum += a[i];
+        w[0] = 1.0 - sum;
+        for (int i = 0; i < k; i++) w[1 + i] = a[i];
+        return;
+    }
+    for (int c = 0; c < d->corners; c++) {
+        double product = 1.0;
+        for (int i = 0; i < k; i++) product *= (c >> i) & 1 ? a[i] : 1.0 - a[i];
+        w[c] = product;
+    }
+}
+
+/* Solve the k x k system a x = b in place (b becomes x) by Gaussian elimination with partial
+   pivoting; -1 where a pivot is below 1e-12 of the largest entry (a switch whose own rate does not
+   depend on its weight: the step loop's least squares takes it). */
+static int many_solve(int k, double *a, double *b)
+{
+    double largest = 0.0;
+    for (int i = 0; i < k * k; i++) largest = fmax(largest, fabs(a[i]));
+    if (!(largest > 0)) return -1;
+    for (int col = 0; col < k; col++) {
+        int pivot = col;
+        for (int r = col + 1; r < k; r++)
+            if (fabs(a[r * k + col]) > fabs(a[pivot * k + col])) pivot = r;
+        if (!(fabs(a[pivot * k + col]) > 1e-12 * largest)) return -1;
+        if (pivot != col) {
+            for (int c = 0; c < k; c++) { double x = a[col * k + c]; a[col * k + c] = a[pivot * k + c]; a[pivot * k + c] = x; }
+            double x = b[col]; b[col] = b[pivot]; b[pivot] = x;
+        }
+        for (int r = col + 1; r < k; r++) {
+            double factor = a[r * k + col] / a[col * k + col];
+            if (factor == 0) continue;
+            for (int c = col; c < k; c++) a[r * k + c] -= factor * a[col * k + c];
+            b[r] -= factor * b[col];
+        }
+    }
+    for (int r = k - 1; r >= 0; r--) {
+        double sum = b[r];
+        for (int c = r + 1; c < k; c++) sum -= a[r * k + c] * b[c];
+        b[r] = sum / a[r * k + r];
+    }
+    return 0;
+}
+
+/* The sliding weights at (t, y) of a mode on several switches, as _Run.solve_alpha: Newton's
+   method from the last weights (clipped) on the rates of the sliding switches, multilinear in the
+   weights (exactly linear in the affine combination). Leaves the corners' right-hand sides in
+   d->cf and the weights of the corners (from the clipped alphas) in d->weights; d->alphas holds
+   the new weights when they are finite. 0 on success, -1 where a rate or a weight is not finite or
+   the system is singular. */
+static int many_alphas(bondc_driver *d, double t, const double *y)
+{
+    int k = d->held, n = d->n;
+    double h = d->probe;
+    for (int c = 0; c < d->corners; c++) {
+        const double *m = d->cm + (long)c * d->switches;
+        double *f = d->cf + (long)c * n;
+        bondc_rhs(t, y, d->p, m, f);
+        for (int i = 0; i < n; i++) d->shifted[i] = y[i] + h * f[i];
+        bondc_switches(t + h, d->shifted, d->p, m, d->g);
+        for (int j = 0; j < k; j++) d->rates[c * k + j] = d->g[d->sliding[j]];
+        for (int i = 0; i < n; i++) d->shifted[i] = y[i] - h * f[i];
+        bondc_switches(t - h, d->shifted, d->p, m, d->g);
+        for (int j = 0; j < k; j++) {
+            double rate = (d->rates[c * k + j] - d->g[d->sliding[j]]) / (2 * h);
+            if (!isfinite(rate)) return -1;
+            d->rates[c * k + j] = rate;
+        }
+    }
+    double *a = d->delta + k;       /* the weights being solved for */
+    for (int i = 0; i < k; i++) a[i] = clip01(d->alphas[i]);
+    int rounds = d->affine ? 3 : 20;
+    for (int round = 0; round < rounds; round++) {
+        many_weights(d, a, d->weights);
+        for (int j = 0; j < k; j++) {
+            double sum = 0.0;
+            for (int c = 0; c < d->corners; c++) sum += d->weights[c] * d->rates[c * k + j];
+            d->residual[j] = -sum;
+        }
+        /* d residual_j / d a_i: the weights' derivatives */
+        for (int i = 0; i < k; i++) {
+            for (int j = 0; j < k; j++) {
+                double sum = 0.0;
+                if (d->affine) {
+                    sum = d->rates[(1 + i) * k + j] - d->rates[j];
+                } else {
+                    for (int c = 0; c < d->corners; c++) {
+                        double product = (c >> i) & 1 ? 1.0 : -1.0;
+                        for (int q = 0; q < k; q++)
+                            if (q != i) product *= (c >> q) & 1 ? a[q] : 1.0 - a[q];
+                        sum += product * d->rates[c * k + j];
+                    }
+                }
+                d->newton[j * k + i] = sum;
+            }
+        }
+        for (int j = 0; j < k * k; j++)
+            if (!isfinite(d->newton[j])) return -1;
+        for (int j = 0; j < k; j++)
+            if (!isfinite(d->residual[j])) return -1;
+        if (many_solve(k, d->newton, d->residual) != 0) return -1;
+        double step = 0.0;
+        for (int i = 0; i < k; i++) { a[i] += d->residual[i]; step = fmax(step, fabs(d->residual[i])); }
+        if (step <= 1e-13) break;
+    }
+    for (int i = 0; i < k; i++) {
+        if (!isfinite(a[i])) return -1;
+        d->alphas[i] = a[i];
+        d->delta[i] = clip01(a[i]);
+    }
+    many_weights(d, d->delta, d->weights);
+    return 0;
+}
+
 static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
 {
     bondc_driver *d = (bondc_driver *)data;
@@ -3411,6 +3676,13 @@ static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
     if (d->slide >= 0) {
         double w = clip01(slide_alpha(d, t, N_VGetArrayPointer(y)));
         for (int i = 0; i < d->n; i++) out[i] = (1 - w) * d->fm[i] + w * d->fp[i];
+    } else if (d->held > 1) {
+        if (many_alphas(d, t, N_VGetArrayPointer(y)) != 0) { d->bad = 1; return -1; }
+        for (int i = 0; i < d->n; i++) {
+            double sum = 0.0;
+            for (int c = 0; c < d->corners; c++) sum += d->weights[c] * d->cf[(long)c * d->n + i];
+            out[i] = sum;
+        }
     } else {
         bondc_rhs(t, N_VGetArrayPointer(y), d->p, d->m, out);
     }
@@ -3435,6 +3707,14 @@ static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, voi
         if (w != 0) {
             bondc_jac(t, N_VGetArrayPointer(y), d->p, d->mp, d->extra);
             for (int k = 0; k < d->entries; k++) d->values[k] += w * d->extra[k];
+        }
+    } else if (d->held > 1) {
+        if (many_alphas(d, t, N_VGetArrayPointer(y)) != 0) { d->bad = 2; return -1; }
+        for (int k = 0; k < d->entries; k++) d->values[k] = 0.0;
+        for (int c = 0; c < d->corners; c++) {
+            if (d->weights[c] == 0) continue;
+            bondc_jac(t, N_VGetArrayPointer(y), d->p, d->cm + (long)c * d->switches, d->extra);
+            for (int k = 0; k < d->entries; k++) d->values[k] += d->weights[c] * d->extra[k];
         }
     } else {
         bondc_jac(t, N_VGetArrayPointer(y), d->p, d->m, d->values);
@@ -3491,6 +3771,7 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
     for (int k = 0; k < d->switches; k++) d->m[k] = m[k];
     d->bad = 0;
     d->slide = -1;
+    d->held = 0;
     d->t_stop = t_stop;
     int flag;
     if (!d->started) {
@@ -3677,22 +3958,67 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
 /* After bondc_driver_start (with the segment's modes): slide on switch k between the corners
    mp (its side +) and mm (side -), starting from the weight alpha (the last one, used where both
    rates are equal); probe: the step of the rates' central differences. The exits watched by
-   bondc_driver_slide_advance are alpha, 1 - alpha and m[j]*g[j] of the `count` switches `others`. */
+   bondc_driver_slide_advance are alpha, 1 - alpha and m[j]*g[j] + drift[j] of the `count` switches
+   `others` (drift: how far a switch starts on the far side of its surface). */
 void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
-                        int count, const int *others)
+                        int count, const int *others, const double *drift)
 {
     for (int j = 0; j < d->switches; j++) { d->mp[j] = mp[j]; d->mm[j] = mm[j]; }
-    d->slide = k; d->alpha = alpha; d->probe = probe; d->exits = count; d->others = others;
+    d->slide = k; d->alpha = alpha; d->probe = probe; d->exits = count; d->others = others; d->drift = drift;
+    d->held = 0;
 }
 
-/* The exits (2 + count values, see bondc_driver_slide) at (t, y); returns the weight alpha. */
+/* After bondc_driver_start (with the segment's modes): slide on the `k` > 1 switches `sliding`
+   between the `corners` mode vectors cm (corners x d->switches, in the order of _Run.sliding_corners:
+   affine, all minus then each switch alone on its plus side; else bit i of the corner's number the
+   side of switch i), starting from the weights alphas; probe, others and drift as for
+   bondc_driver_slide. The exits are the k alphas, the k (1 - alpha)s and those of `others`. 0 on
+   success, -1 when out of memory. */
+int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corners, int affine, const double *cm,
+                            const double *alphas, double probe, int count, const int *others, const double *drift)
+{
+    free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
+    free(d->newton); free(d->residual); free(d->delta);
+    d->sliding = (int *)calloc(k, sizeof(int));
+    d->cm = (double *)calloc((long)corners * d->switches + 1, sizeof(double));
+    d->cf = (double *)calloc((long)corners * d->n + 1, sizeof(double));
+    d->rates = (double *)calloc((long)corners * k, sizeof(double));
+    d->alphas = (double *)calloc(k, sizeof(double));
+    d->weights = (double *)calloc(corners, sizeof(double));
+    d->newton = (double *)calloc((long)k * k, sizeof(double));
+    d->residual = (double *)calloc(k, sizeof(double));
+    d->delta = (double *)calloc(2 * k, sizeof(double));
+    d->held = 0;
+    if (!d->sliding || !d->cm || !d->cf || !d->rates || !d->alphas || !d->weights || !d->newton || !d->residual
+        || !d->delta) return -1;
+    for (int i = 0; i < k; i++) { d->sliding[i] = sliding[i]; d->alphas[i] = alphas[i]; }
+    for (long i = 0; i < (long)corners * d->switches; i++) d->cm[i] = cm[i];
+    d->held = k; d->corners = corners; d->affine = affine;
+    d->slide = -1; d->probe = probe; d->exits = count; d->others = others; d->drift = drift;
+    return 0;
+}
+
+/* The exits (2k + count values, see bondc_driver_slide and bondc_driver_slide_many) at (t, y);
+   returns the weight alpha (one switch), or 0 (NaN where the weights are not found) for several,
+   whose weights are left in d->alphas. */
 static double slide_exits(bondc_driver *d, double t, const double *y, double *exits)
 {
-    double alpha = slide_alpha(d, t, y);
-    exits[0] = alpha; exits[1] = 1.0 - alpha;
+    int k = d->held > 1 ? d->held : 1;
+    double alpha = 0.0;
+    if (d->held > 1) {
+        if (many_alphas(d, t, y) != 0) alpha = NAN;
+        for (int i = 0; i < k; i++) {
+            exits[i] = alpha == alpha ? d->alphas[i] : NAN;
+            exits[k + i] = 1.0 - exits[i];
+        }
+    } else {
+        alpha = slide_alpha(d, t, y);
+        exits[0] = alpha; exits[1] = 1.0 - alpha;
+    }
     if (d->exits) {
         bondc_switches(t, y, d->p, d->m, d->g);
-        for (int j = 0; j < d->exits; j++) exits[2 + j] = d->m[d->others[j]] * d->g[d->others[j]];
+        for (int j = 0; j < d->exits; j++)
+            exits[2 * k + j] = d->m[d->others[j]] * d->g[d->others[j]] + d->drift[j];
     }
     return alpha;
 }
@@ -3713,7 +4039,8 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
                                double *ys, double *alphas, int *count)
 {
     double *y = N_VGetArrayPointer(d->y);
-    int watched = 2 + d->exits;
+    int held = d->held > 1 ? d->held : 1;
+    int watched = 2 * held + d->exits;
     *count = 0;
     for (int k = 0; k < capacity; k++) {
         double t;
@@ -3721,11 +4048,21 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
         if (flag < 0) return d->bad ? 3 : flag;
         if (!driver_finite(y, d->n)) return 4;
         double alpha = slide_exits(d, t, y, exits);
-        double w = clip01(alpha);
-        for (int i = 0; i < d->n; i++)
-            if (!isfinite((1 - w) * d->fm[i] + w * d->fp[i])) return 4;
+        if (d->held > 1) {
+            if (alpha != alpha) return 4;
+            for (int i = 0; i < d->n; i++) {
+                double sum = 0.0;
+                for (int c = 0; c < d->corners; c++) sum += d->weights[c] * d->cf[(long)c * d->n + i];
+                if (!isfinite(sum)) return 4;
+            }
+            for (int i = 0; i < held; i++) alphas[(long)k * held + i] = d->alphas[i];
+        } else {
+            double w = clip01(alpha);
+            for (int i = 0; i < d->n; i++)
+                if (!isfinite((1 - w) * d->fm[i] + w * d->fp[i])) return 4;
+            alphas[k] = alpha;
+        }
         ts[k] = t;
-        alphas[k] = alpha;
         for (int i = 0; i < d->n; i++) ys[(long)k * d->n + i] = y[i];
         *count = k + 1;
         for (int j = 0; j < watched; j++)
@@ -3800,7 +4137,9 @@ void bondc_driver_free(bondc_driver *d)
     if (d->work) N_VDestroy(d->work);
     if (d->ctx) SUNContext_Free(&d->ctx);
     free(d->m); free(d->g); free(d->values); free(d->extra); free(d->mp); free(d->mm);
-    free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead); free(d);
+    free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead);
+    free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
+    free(d->newton); free(d->residual); free(d->delta); free(d);
 }
 """
 
@@ -3818,7 +4157,9 @@ int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m,
 double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
                            const double *m, int k);
 void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
-                        int count, const int *others);
+                        int count, const int *others, const double *drift);
+int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corners, int affine, const double *cm,
+                            const double *alphas, double probe, int count, const int *others, const double *drift);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);

@@ -125,6 +125,28 @@ def test_negative_friction_limits_act_as_zero_a_free_clutch():
     np.testing.assert_allclose(free.outputs["Ff"], 0.0, atol=1e-12)
 
 
+def test_free_clutches_beside_a_stuck_one_hold_nothing_and_bend_nothing():
+    """Clutches 2 and 3 free (both limits below zero act as 0): only clutch 1 couples inertias 1
+    and 2, carrying half the drive, w = t^2/4, until t/2 reaches its 3 N*m static limit at
+    t = 6 s; then it slips at 2 N*m: w1 = 9 + (t^2 - 36)/2 - 2 (t - 6), w2 = 9 + 2 (t - 6).
+    Inertias 3 and 4 never move. At t = 0, with no drive yet, all three clutches sit on their
+    surfaces; a free one held beside the stuck one would bend the stuck one's weight."""
+    ss, experiment = _derive("coupled_clutches", sets=["Fs2=-1", "Fst2=-1", "Fs3=-1", "Fst3=-1"])
+    result = simulate(ss, experiment)
+    assert result.complete, result.message
+    t, out = result.t, result.outputs
+    before, after = t < 6.0 - 1e-6, t > 6.0 + 1e-6
+    for name in ("omega1", "omega2"):
+        np.testing.assert_allclose(out[name][before], t[before] ** 2 / 4, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(out["T1"][before], t[before] / 2, rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(out["omega1"][after], 9 + (t[after] ** 2 - 36) / 2 - 2 * (t[after] - 6), rtol=1e-7)
+    np.testing.assert_allclose(out["omega2"][after], 9 + 2 * (t[after] - 6), rtol=1e-7)
+    for name in ("omega3", "omega4", "T2", "T3"):
+        np.testing.assert_allclose(out[name], 0.0, atol=1e-12)
+    ends = [time for time, label in result.events if label.endswith("ends")]
+    assert ends == [pytest.approx(6.0, abs=1e-7)]
+
+
 def test_coulomb_static_limit_defaults_to_the_sliding_force(tmp_path):
     # coulomb(f, Fs) with Fs = 8 N: the 4 N/s ramp breaks it away at t = 2 s, not 3 s
     text = (ENGINE / "breakaway.bg").read_text().replace("coulomb(f, Fs, Fst)", "coulomb(f, Fs)")
@@ -836,22 +858,92 @@ def _friction_chain(n: int, law: str) -> str:
     return "\n".join(lines + ["  experiment run", "    t_end = 4 [s]", "  end", "end"]) + "\n"
 
 
-def test_more_dry_frictions_sticking_at_once_than_can_be_held_stop_and_say_so(tmp_path):
-    """Nine masses at rest on dry friction hold nine switches on their surfaces at once, one more
-    than a sliding mode takes (2^8 laws combined): the run stops (E812) saying how many and what
-    the limit is, not that switches "keep changing mode"; with the hint's linear band around zero
-    velocity the same chain runs to its end."""
+def test_nine_dry_frictions_stick_at_once_until_the_push_reaches_the_first_static_limit(tmp_path):
+    """Nine masses at rest on dry friction (static limit 3 N) hold nine switches on their surfaces
+    at once, more than the multilinear combination takes (2^8 laws): the affine one holds them. The
+    springs are at rest, so the first friction holds the whole push, 40 sin(pi t), and the others
+    nothing, until the push reaches 3 N at t = asin(3/40)/pi; then the first mass breaks away."""
+    path = tmp_path / "chain9.bg"
+    forces = "".join(f"  output F{i} [N] = fr{i}.e\n" for i in range(1, 10))
+    path.write_text(_friction_chain(9, "coulomb(f, 2, 3)").replace("  experiment run", forces + "  experiment run"))
+    result = run(path)
+    assert result.complete, result.message
+    breakaway = np.arcsin(3 / 40) / np.pi
+    ends = [time for time, label in result.events if label.endswith("ends")]
+    assert ends[0] == pytest.approx(breakaway, abs=1e-9)
+    t = result.t
+    stuck = t < breakaway - 1e-9
+    assert np.count_nonzero(stuck) > 3
+    for i in range(1, 10):
+        np.testing.assert_allclose(result.states[f"m{i}.p"][stuck], 0.0, atol=1e-12)
+    np.testing.assert_allclose(result.outputs["F1"][stuck], 40 * np.sin(np.pi * t[stuck]), rtol=1e-9, atol=1e-12)
+    for i in range(2, 10):
+        np.testing.assert_allclose(result.outputs[f"F{i}"][stuck], 0.0, atol=1e-9)
+    assert np.max(result.states["m9.p"]) > 0.1          # the last mass moves too
+
+
+def test_twelve_pushed_carts_stick_each_holding_its_own_push_until_the_first_breaks_away(tmp_path):
+    """Twelve carts on dry friction, joined by springs at rest, cart i pushed by i*t N against a
+    static limit of 5 + i N: all twelve stick at once, friction i holds i*t, and cart 12 breaks
+    away first, at t = 17/12 s (the others later: (5 + i)/i > 17/12)."""
+    lines = ["model Carts"]
+    for i in range(1, 13):
+        lines += [f"  MSe push{i} : e = {i}*t", f"  I m{i} : f = p/{1 + 0.1 * i}",
+                  f"  R fr{i} : e = coulomb(f, {4 + i}, {5 + i})", f"  1 v{i}",
+                  f"  push{i} -> v{i}", f"  v{i} -> m{i}", f"  v{i} -> fr{i}", f"  output F{i} [N] = fr{i}.e"]
+        if i < 12:
+            lines += [f"  C k{i} : e = 500*q", f"  0 n{i}", f"  1 r{i}", f"  v{i} -> n{i}", f"  n{i} -> v{i + 1}",
+                      f"  n{i} -> r{i}", f"  r{i} -> k{i}"]
+    path = tmp_path / "carts.bg"
+    path.write_text("\n".join(lines + ["  experiment run", "    t_end = 1.6 [s]", "  end", "end"]) + "\n")
+    result = run(path)
+    assert result.complete, result.message
+    ends = [time for time, label in result.events if label.endswith("ends")]
+    assert ends[0] == pytest.approx(17 / 12, abs=1e-9)
+    t = result.t
+    stuck = t < 17 / 12 - 1e-9
+    for i in range(1, 13):
+        np.testing.assert_allclose(result.states[f"m{i}.p"][stuck], 0.0, atol=1e-12)
+        np.testing.assert_allclose(result.outputs[f"F{i}"][stuck], i * t[stuck], rtol=1e-9, atol=1e-12)
+    assert result.states["m12.p"][-1] > 0 and abs(result.states["m1.p"][-1]) < 1e-12
+
+
+def test_more_than_eight_stuck_frictions_whose_forces_combine_nonlinearly_stop_and_say_so(tmp_path):
+    """Beyond eight switches held at once only the affine combination is taken, and it needs each
+    friction force to enter the motion linearly. A force on the last mass that is the product of
+    two friction forces breaks that: the run stops (E812) naming the reason and the remedy."""
     from bondc.errors import SimulationError
 
-    path = tmp_path / "chain9.bg"
-    path.write_text(_friction_chain(9, "coulomb(f, 2, 3)"))
+    text = _friction_chain(9, "coulomb(f, 2, 3)").replace(
+        "  push -> v1\n", "  push -> v1\n  MSe coupled : e = 0.01*fr1.e*fr2.e\n  coupled -> v9\n")
+    path = tmp_path / "chain9_product.bg"
+    path.write_text(text)
     with pytest.raises(SimulationError) as caught:
         run(path)
     (diagnostic,) = [d for d in caught.value.diagnostics if d.code == "E812"]
     assert "9 switches are on their surfaces at once" in diagnostic.message
-    assert "more than the 8" in diagnostic.message and "linear band" in diagnostic.hint
-    banded = tmp_path / "chain9_band.bg"
-    banded.write_text(_friction_chain(9, "if abs(f) < 1e-3 then 3*f/1e-3 else coulomb(f, 2, 3)"))
-    result = run(banded)
-    assert result.complete, result.message
-    assert np.max(result.states["m9.p"]) > 0.1          # the last mass moves too
+    assert "do not combine linearly" in diagnostic.message and "linear band" in diagnostic.hint
+
+
+def test_three_stuck_clutches_give_the_same_run_in_the_affine_and_the_multilinear_combination():
+    """From three switches held at once the affine combination (k + 1 corners) replaces the
+    multilinear one (2^k corners) where the laws combine linearly. Both are Filippov's combination
+    of the same laws, so the coupled clutches run the same with either, to rounding."""
+    from bondc.simulate import compile_model
+
+    ss, experiment = _derive("coupled_clutches")
+    settings = dict(t_end=experiment.t_end, method="CVODE", rtol=experiment.rtol, atol=experiment.atol)
+    namespace = compile_model(ss)
+    affine = namespace["simulate_model"](namespace["_MODEL"], **settings)
+    namespace["_Run"].affine_holds = lambda self, *args: False
+    multilinear = namespace["simulate_model"](namespace["_MODEL"], **settings)
+    assert affine.complete and multilinear.complete
+    assert [label for _, label in affine.events] == [label for _, label in multilinear.events]
+    np.testing.assert_allclose([time for time, _ in affine.events], [time for time, _ in multilinear.events],
+                               rtol=0, atol=1e-9)
+    # the combinations agree to rounding, which moves the solver's step sizes a little (the first
+    # step by 4e-13, the tenth by 5e-11, and the steps part later): the same first steps, events and end
+    np.testing.assert_allclose(affine.t[:10], multilinear.t[:10], rtol=1e-9)
+    for name, values in multilinear.outputs.items():
+        np.testing.assert_allclose(affine.outputs[name][:10], values[:10], rtol=1e-8, atol=1e-15)
+        assert affine.outputs[name][-1] == pytest.approx(values[-1], rel=1e-8, abs=1e-10)

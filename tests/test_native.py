@@ -431,12 +431,13 @@ def _driver_run(path, monkeypatch, *, sliding_in_c=True, truncate=None):
 
 @needs_cc
 @pytest.mark.parametrize("model", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/breakaway.bg",
-                                   "tests/fixtures/sim/friction_stick.bg"])
+                                   "tests/fixtures/sim/friction_stick.bg", "tests/fixtures/sim/stuck_two_frictions.bg",
+                                   "tests/fixtures/engine/twisting.bg"])
 def test_a_sliding_mode_on_one_switch_runs_in_the_driver_and_equals_the_step_loop(model, monkeypatch):
-    """A Filippov sliding mode on one switch (stuck friction) is integrated by the C driver: the
-    corners' combination, its Jacobian and the exits in C. The independent expectation is the step
-    loop (tested against analytic solutions in test_engine): the same CVODE on the same
-    combination, so the same steps, states, outputs and events, to rounding."""
+    """A Filippov sliding mode (stuck friction; two switches in the last two models) is integrated
+    by the C driver: the corners' combination, its Jacobian and the exits in C. The independent
+    expectation is the step loop (tested against analytic solutions in test_engine): the same
+    CVODE on the same combination, so the same steps, states, outputs and events, to rounding."""
     path = ROOT / model
     ours = _driver_run(path, monkeypatch)
     loop = _driver_run(path, monkeypatch, sliding_in_c=False)
@@ -451,6 +452,48 @@ def test_a_sliding_mode_on_one_switch_runs_in_the_driver_and_equals_the_step_loo
             np.testing.assert_allclose(getattr(ours, group)[name], values, rtol=0, atol=1e-10 * scale, err_msg=name)
     assert [label for _, label in ours.events] == [label for _, label in loop.events]
     np.testing.assert_allclose([t for t, _ in ours.events], [t for t, _ in loop.events], rtol=1e-12, atol=1e-15)
+
+
+def _carts(count: int) -> str:
+    """``count`` carts on dry friction joined by springs, cart i pushed by i*t N against a static
+    limit of 5 + i N (test_engine has the closed form of its first breakaway)."""
+    lines = ["model Carts"]
+    for i in range(1, count + 1):
+        lines += [f"  MSe push{i} : e = {i}*t", f"  I m{i} : f = p/{1 + 0.1 * i}",
+                  f"  R fr{i} : e = coulomb(f, {4 + i}, {5 + i})", f"  1 v{i}", f"  push{i} -> v{i}",
+                  f"  v{i} -> m{i}", f"  v{i} -> fr{i}", f"  output F{i} [N] = fr{i}.e"]
+        if i < count:
+            lines += [f"  C k{i} : e = 500*q", f"  0 n{i}", f"  1 r{i}", f"  v{i} -> n{i}", f"  n{i} -> v{i + 1}",
+                      f"  n{i} -> r{i}", f"  r{i} -> k{i}"]
+    return "\n".join(lines + ["  experiment run", "    t_end = 3 [s]", "  end", "end"]) + "\n"
+
+
+@needs_cc
+@pytest.mark.parametrize("model", ["coupled_clutches", "carts"])
+def test_a_sliding_mode_on_several_switches_runs_in_the_driver_and_agrees_with_the_step_loop(
+        model, monkeypatch, tmp_path):
+    """Three clutches stuck at once, and twelve carts (the affine combination of 13 corners), are
+    integrated by the C driver: Newton's method on the weights with Gaussian elimination where the
+    step loop takes numpy's least squares. The combinations agree to rounding, but where the
+    solution is a polynomial (or at rest) the solver's error estimate is rounding, so the steps
+    differ: the same events and end, to the tolerance, and every sliding segment in C."""
+    if model == "carts":
+        path = tmp_path / "carts.bg"
+        path.write_text(_carts(12), encoding="utf-8")
+    else:
+        path = ROOT / "tests/fixtures/engine/coupled_clutches.bg"
+    ours = _driver_run(path, monkeypatch)
+    loop = _driver_run(path, monkeypatch, sliding_in_c=False)
+    assert ours.complete and loop.complete
+    assert ours.stats["driver_sliding_segments"] == ours.stats["sliding_segments"] >= 2
+    assert "driver_sliding_segments" not in loop.stats
+    assert max(label.count(";") for _, label in ours.events) >= 2      # three switches or more held at once
+    assert [label for _, label in ours.events] == [label for _, label in loop.events]
+    # once the steps part, each run is as exact as the tolerance (rtol 1e-6) makes it
+    np.testing.assert_allclose([t for t, _ in ours.events], [t for t, _ in loop.events], rtol=1e-7, atol=1e-12)
+    for name, values in loop.outputs.items():
+        scale = max(float(np.ptp(values)), 1e-300)
+        assert abs(ours.outputs[name][-1] - values[-1]) <= 1e-6 * scale, name
 
 
 PIECE_MODELS = {
