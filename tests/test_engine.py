@@ -782,7 +782,7 @@ def test_a_branch_is_never_evaluated_outside_its_domain_beyond_its_switch():
     np.testing.assert_allclose(level, np.where(t < 1, (1 - t) ** 2, 0.0), rtol=0, atol=1e-5)
     np.testing.assert_allclose(level[t > 1.001], 0.0, atol=1e-12)
     # the tank reaches its switch at t = 1 s (and is held on it: both branches leave it at rest)
-    switched = [time for time, label in result.events if "if b2.e > 0" in label]
+    switched = [time for time, label in result.events if "if drain.e > 0" in label]     # bond b2, named by its element
     assert switched and switched[0] == pytest.approx(1.0, abs=1e-3)
 
 
@@ -923,6 +923,7 @@ def test_more_than_eight_stuck_frictions_whose_forces_combine_nonlinearly_stop_a
     (diagnostic,) = [d for d in caught.value.diagnostics if d.code == "E812"]
     assert "9 switches are on their surfaces at once" in diagnostic.message
     assert "do not combine linearly" in diagnostic.message and "linear band" in diagnostic.hint
+    assert "coulomb(fr1.f) in fr1.e" in diagnostic.message          # named by elements, not bonds
 
 
 def test_three_stuck_clutches_give_the_same_run_in_the_affine_and_the_multilinear_combination():

@@ -39,7 +39,7 @@ and the sample times of a ``csv`` signal are listed the same way.
 >>> freezer.freeze(sympy.Piecewise((f, sympy.Abs(f) < v0), (2*f, True)), "R.e")
 Piecewise((f, _m0 > 0), (2*f, True))
 >>> [(s.g, s.label) for s in freezer.switches]
-[(v0 - Abs(f), 'if v0 > Abs(f) in R.e')]
+[(v0 - Abs(f), 'if v0 > abs(f) in R.e')]
 """
 
 from __future__ import annotations
@@ -82,7 +82,10 @@ class TimeBreak:
 
 
 def _short(expr) -> str:
-    text = sympy.sstr(expr)
+    """A switch's expression for its label, as a model would write it (``abs(v)``, ``x^2``)."""
+    from bondc.equations import bg_text
+
+    text = bg_text(expr)
     return text if len(text) <= _LABEL_LIMIT else text[: _LABEL_LIMIT - 3] + "..."
 
 
