@@ -26,7 +26,7 @@ test: install
 
 # the inner loop: everything but the tests marked slow
 test-fast: install
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -m "not slow" -n auto
 
 clean:
 	rm -rf $(VENV) build *.egg-info
