@@ -250,8 +250,18 @@ def _hidden_changes(values, grid, g, changes):
     suspect cell is sampled ``_HIDDEN_SPLIT`` times finer, and so are its suspect parts, up to
     ``_HIDDEN_LEVELS`` times. Returns the brackets found (lo, hi, g(lo), g(hi)). A narrow smooth
     bump whose slope the samples never see can still hide: a pulse whose times are known is best
-    written with ``step(t, t1) - step(t, t2)``."""
+    written with ``step(t, t1) - step(t, t2)``.
+
+    A sample where ``g`` is exactly 0 between samples of one sign may be where a pulse narrower
+    than a cell begins or ends (a 50 ps ``pwm`` pulse whose edge falls on the grid): the two cells
+    around it are sampled finer as one (:func:`_zero_touches`), the zero in its middle again, so
+    that at the finest level the edge is the sample itself."""
     lo, hi, g_lo, g_hi = grid[:-1], grid[1:], g[:-1], g[1:]
+    ends = (grid[0], grid[-1])
+    spans = _zero_touches(grid[None, :], g[None, :], ends)
+    forced = np.zeros(lo.size + spans[0].size, dtype=bool)
+    forced[lo.size:] = True
+    lo, hi, g_lo, g_hi = (np.concatenate(pair) for pair in zip((lo, hi, g_lo, g_hi), spans))
     found = [[], [], [], []]
     fraction = np.linspace(0.0, 1.0, _HIDDEN_SPLIT + 1)
     for _ in range(_HIDDEN_LEVELS):
@@ -262,8 +272,8 @@ def _hidden_changes(values, grid, g, changes):
             joined = lo[1:] == hi[:-1]          # neighbours: cells that share an end
             bound[1:] = np.where(joined, np.maximum(bound[1:], slope[:-1]), bound[1:])
             bound[:-1] = np.where(joined, np.maximum(bound[:-1], slope[1:]), bound[:-1])
-            suspect = np.flatnonzero((np.sign(g_lo) * np.sign(g_hi) > 0)
-                                     & (np.abs(g_lo) + np.abs(g_hi) <= bound * width))
+            suspect = np.flatnonzero(((np.sign(g_lo) * np.sign(g_hi) > 0)
+                                      & (np.abs(g_lo) + np.abs(g_hi) <= bound * width)) | forced)
         if not suspect.size or suspect.size * fraction.size > _HIDDEN_VALUES:
             break
         times = lo[suspect, None] + width[suspect, None] * fraction[None, :]
@@ -279,7 +289,33 @@ def _hidden_changes(values, grid, g, changes):
         cells = samples.reshape(times.shape)
         lo, hi = times[:, :-1].ravel(), times[:, 1:].ravel()
         g_lo, g_hi = cells[:, :-1].ravel(), cells[:, 1:].ravel()
+        spans = _zero_touches(times, cells, ends)
+        forced = np.zeros(lo.size + spans[0].size, dtype=bool)
+        forced[lo.size:] = True
+        lo, hi, g_lo, g_hi = (np.concatenate(pair) for pair in zip((lo, hi, g_lo, g_hi), spans))
     return tuple(np.concatenate(part) if part else np.zeros(0) for part in found)
+
+
+def _zero_touches(times, samples, ends):
+    """Spans to sample finer around the zeros of ``samples`` (rows of samples of ``g`` at
+    ``times``) that a sign change does not count: a 0 inside a row between samples of one sign
+    gives the span of its two neighbours (the zero in its middle); a 0 at ``ends`` (the run's
+    first or last time) beside a non-zero sample gives the cell it ends. Returns (lo, hi, g(lo),
+    g(hi))."""
+    rows, columns = np.nonzero(samples == 0)
+    spans = []
+    last = samples.shape[1] - 1
+    for r, j in zip(rows.tolist(), columns.tolist()):
+        if 0 < j < last and np.sign(samples[r, j - 1]) * np.sign(samples[r, j + 1]) > 0:
+            spans.append((r, j - 1, j + 1))
+        elif j == 0 and times[r, 0] == ends[0] and samples[r, 1] != 0:
+            spans.append((r, 0, 1))
+        elif j == last and times[r, last] == ends[1] and samples[r, last - 1] != 0:
+            spans.append((r, last - 1, last))
+    if not spans:
+        return (np.zeros(0),) * 4
+    r, a, b = (np.array(column) for column in zip(*spans))
+    return times[r, a], times[r, b], samples[r, a], samples[r, b]
 
 
 def quad(function, a, b, epsabs, epsrel, limit):

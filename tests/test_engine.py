@@ -397,6 +397,27 @@ def test_a_time_switch_that_is_exactly_zero_at_a_sample_of_the_search_grid_is_an
     assert len(edges) == 19 and min(abs(e - 0.1) for e in edges) < 1e-12
 
 
+@pytest.mark.parametrize("duty", [1e-6, 0.999999])
+def test_pulses_of_50_ps_are_not_skipped_where_their_edges_fall_on_the_search_grid(duty, tmp_path):
+    """A 20 kHz pwm at duty 1e-6 (or 1 - 1e-6) over 5 ms: 100 pulses (gaps) of 50 ps, far below
+    any grid of the search. Its switch is exactly 0 at the edges k/f that fall on the grid's
+    samples (1.25, 2.5, 3.75 ms; t = 0), between samples of one sign: the cells around such a
+    zero are searched finer, so every one of the 199 edges, k/f and (k + d)/f, is an event to
+    1e-12 s (before, 7 were skipped: those four pulses' other edges and the first pulse's end)."""
+    text = (Path(__file__).parent / "fixtures" / "engine" / "pwm_rl.bg").read_text()
+    assert "param duty = 0.3    [1]" in text and "t_end = 5 [ms]" in text
+    path = tmp_path / "pwm_extreme.bg"
+    path.write_text(text.replace("param duty = 0.3    [1]", f"param duty = {duty!r} [1]"))
+    result = run(path)
+    assert result.complete, result.message
+    k = np.arange(101)
+    expected = np.sort(np.concatenate([k[1:] / 20000, (k + duty) / 20000]))
+    expected = expected[(expected > 0) & (expected < 5e-3 * (1 - 1e-12))]
+    edges = np.array(sorted(time for time, label in result.events if label.startswith("pwm")))
+    assert edges.size == expected.size == 199
+    np.testing.assert_allclose(edges, expected, rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("law, pulses", [
     ("if abs(t - 5.001) < 1e-4 then 1000 else 0", [(5.0009, 5.0011)]),       # 0.2 ms in 10 s
     ("if mod(t, 1) < 1e-4 then 1000 else 0", [(k, k + 1e-4) for k in range(10)]),    # on from t = 0
