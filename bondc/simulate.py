@@ -395,7 +395,7 @@ def _alias(graph, variable: str | None) -> str | None:
     return None
 
 
-_BOND_VARIABLE = re.compile(r"(?<![\w.'])([A-Za-z_]\w*)\.([ef])\b")
+_BOND_VARIABLE = re.compile(r"(?<![\w.'])(?:[A-Za-z_]\w*\.)*[A-Za-z_]\w*\.[ef]\b")
 
 
 def _readable_names(graph) -> dict:

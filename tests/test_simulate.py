@@ -442,3 +442,26 @@ def test_a_derivative_near_the_largest_float_stops_the_run_instead_of_hanging(tm
     assert "error[E811]" in done.stderr and "failed at t=0" in done.stderr and "step size became nan" in done.stderr
     assert "Traceback" not in done.stderr
     assert (tmp_path / "out.csv").read_text(encoding="utf-8").splitlines()[1] == "0.0,0.0"     # the start, kept
+
+
+def test_switch_labels_name_the_elements_inside_components_too(tmp_path):
+    """Events and messages name a bond variable by the element variable it is, inside an instance
+    too (``fr.friction.e``, not ``fr.b2.e``), and print the law as a model writes it."""
+    import re
+
+    path = tmp_path / "pushed.bg"
+    path.write_text('import "std:mechanics"\n'
+                    "model Pushed\n"
+                    "  Mass body : M = 2 [kg]\n"
+                    "  CoulombFriction fr : F_c = 4 [N], F_s = 6 [N]\n"
+                    "  Force push : F = 4*t\n"
+                    "  1 v\n"
+                    "  push.a -> v\n  v -> body.a\n  v -> fr.a\n"
+                    "  experiment run\n    t_end = 2 [s]\n  end\nend\n")
+    result = run(path)
+    assert result.complete, result.message
+    labels = [label for _, label in result.events]
+    assert labels and all("coulomb(fr.friction.f) in fr.friction.e" in label for label in labels)
+    assert not any(re.search(r"\bb\d+\.[ef]\b", label) for label in labels)
+    ends = [time for time, label in result.events if label.endswith("ends")]
+    assert ends == [pytest.approx(1.5, abs=1e-7)]          # 4 t reaches the 6 N static limit
