@@ -72,7 +72,9 @@ across a switch blindly:
 4. At every restart the modes are chosen *just after* the restart point: the
    state is advanced by a probe ``h = 1e-8 * span`` along the frozen law and
    ``m = sign(g)`` is taken there, iterated until the modes agree with the law
-   they select.
+   they select. With the native driver the first round is done in C
+   (``bondc_driver_restart``, the same modes to the bit); the runtime goes on
+   where the modes ahead differ.
 5. Sliding. When modes do not agree with themselves at a restart (each side's
    law pushes the state back across the surface, as friction does when it
    sticks), or a ``coulomb`` friction or a switch that slid until now sits on
@@ -1234,6 +1236,17 @@ class _NativeDriver:
             int(self.others.size), buffer("int[]", self.others) if self.others.size else self.ffi.NULL,
             buffer("double[]", self.drift) if self.others.size else self.ffi.NULL) == 0
 
+    def restart(self, t, y, guess, floors, probe, strict):
+        """``_Run.restart_modes`` in C where the restart is simple (``bondc_driver_restart``): the
+        modes, or None where the runtime decides."""
+        buffer = self.ffi.from_buffer
+        out = np.empty(max(guess.size, 1))
+        code = self.lib.bondc_driver_restart(self.handle, float(t), buffer("double[]", np.ascontiguousarray(y, dtype=float)),
+                                             buffer("double[]", np.ascontiguousarray(guess, dtype=float)),
+                                             buffer("int[]", floors), float(probe), int(bool(strict)),
+                                             buffer("double[]", out))
+        return out[:guess.size] if code == 1 else None
+
     def exits_at(self, t, y):
         """The sliding mode's exits at (t, y), evaluated in C (as ``exits`` of :meth:`_Run.sliding_segment`)."""
         out = np.empty(self.exits.size)
@@ -1554,6 +1567,7 @@ class _Run:
         self.vertex_override = {}      # coulomb switches held between their sliding forces
         self.affine_sets = set()       # sets of switches held in the affine combination ...
         self.affine_checked = set()    # ... and those whose every pair of corners was checked once
+        self.floors_c = np.ascontiguousarray(model.floor_switches, dtype=np.intc)   # for the native driver
         self.jumps = []                # (t, state before, state after) of every when clause that fired
         self.when_times = {}           # when clause -> its last firing times (Zeno detection)
         self.extended = None           # modes of the last right-hand side taken beyond a switch
@@ -1897,6 +1911,13 @@ class _Run:
                     and piece.guess.tobytes() == np.asarray(guess, dtype=float).tobytes()
                     and piece.y0.tobytes() == np.asarray(y, dtype=float).tobytes()):
                 return piece.modes.copy(), []
+        driver = self.driver_for(np.zeros(0, dtype=int), np.zeros(0))
+        if driver is not None:      # the same modes from C, where the restart is simple
+            modes = driver.restart(t, y, np.ones(self.switch_count) if guess is None else guess, self.floors_c,
+                                   self.probe, not getattr(self.model, "VECTORIZED", True))
+            if modes is not None:
+                self.stats["restarts_in_c"] = self.stats.get("restarts_in_c", 0) + 1
+                return modes, []
         modes = self.modes_at(t, y, guess)
         seen = [tuple(modes)]
         for _ in range(8):
@@ -3890,6 +3911,24 @@ static int driver_modes_at(bondc_driver *d, double t, const double *y, const dou
     return finite;
 }
 
+/* The runtime's restart_modes at (t, y) from `guess` where the restart is simple: the modes there
+   (driver_modes_at) into out, and the same modes a probe ahead along their law. Returns 1 then (or
+   where that law is not finite, as restart_modes does), 0 where the modes ahead differ (the
+   switches may chatter: the runtime decides), -1 with `strict` where a switching function or the
+   right-hand side is not finite (a model with an algebraic loop: numpy's values are taken there). */
+int bondc_driver_restart(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                         double probe, int strict, double *out)
+{
+    if (!driver_modes_at(d, t, y, guess, floors, out) && strict) return -1;
+    bondc_rhs(t, y, d->p, out, d->fp);
+    if (!driver_finite(d->fp, d->n)) return strict ? -1 : 1;
+    for (int q = 0; q < d->n; q++) d->shifted[q] = y[q] + probe * d->fp[q];
+    if (!driver_modes_at(d, t + probe, d->shifted, out, floors, d->ahead) && strict) return -1;
+    for (int k = 0; k < d->switches; k++)
+        if (d->ahead[k] != out[k]) return 0;
+    return 1;
+}
+
 /* Known pieces of a run in one call: piece i ends at the known break t_stops[i] (or the run's end)
    and starts where piece i - 1 ended (piece 0 at (t0, y0) with the modes m0). Every start after the
    first is a restart as the runtime's restart_modes and sliding_candidates make it, where it is that
@@ -4196,6 +4235,8 @@ void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *
                         int count, const int *others, const double *drift);
 int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corners, int affine, const double *cm,
                             const double *alphas, double probe, int count, const int *others, const double *drift);
+int bondc_driver_restart(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                         double probe, int strict, double *out);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);

@@ -496,6 +496,34 @@ def test_a_sliding_mode_on_several_switches_runs_in_the_driver_and_agrees_with_t
         assert abs(ours.outputs[name][-1] - values[-1]) <= 1e-6 * scale, name
 
 
+@needs_cc
+@pytest.mark.parametrize("model", ["tests/fixtures/engine/thermostat.bg", "tests/fixtures/engine/bouncing_ball.bg",
+                                   "tests/fixtures/engine/breakaway.bg", "tests/fixtures/engine/diode_bridge.bg",
+                                   "tests/fixtures/engine/orifice_reversing.bg", "tests/fixtures/engine/hard_stop.bg"])
+def test_restarts_found_in_c_are_the_runs_own_to_the_bit(model, monkeypatch):
+    """At a restart the modes just after it come from C (``bondc_driver_restart``: the modes at the
+    point, the same a probe ahead along their law) where that is simple, else from the runtime's
+    own loop, which also finds chattering. Runs with when clauses, sticking friction, a diode
+    bridge in an algebraic loop (C's values taken only where finite) and reversing flow are the
+    same to the bit as with every restart found by the runtime."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(ROOT / model)
+    settings = {"t_end": experiment.t_end, "rtol": experiment.rtol, "atol": experiment.atol,
+                "max_step": experiment.max_step}
+    ours = namespace["simulate_model"](namespace["_MODEL"], **settings)
+    with monkeypatch.context() as patch:
+        patch.setattr(namespace["_NativeDriver"], "restart", lambda self, *args: None)
+        theirs = namespace["simulate_model"](namespace["_MODEL"], **settings)
+    assert ours.complete and theirs.complete
+    assert ours.stats.get("restarts_in_c", 0) >= 1 and "restarts_in_c" not in theirs.stats
+    assert np.array_equal(ours.t, theirs.t)
+    for group in ("states", "outputs", "variables"):
+        for name, values in getattr(theirs, group).items():
+            assert np.array_equal(getattr(ours, group)[name], values, equal_nan=True), name
+    assert ours.events == theirs.events
+
+
 PIECE_MODELS = {
     "pwm_rl": (ROOT / "tests/fixtures/engine/pwm_rl.bg").read_text(encoding="utf-8"),
     "pwm_sine_compare": (ROOT / "tests/fixtures/engine/pwm_sine_compare.bg").read_text(encoding="utf-8"),
