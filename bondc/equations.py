@@ -865,6 +865,17 @@ class BgPrinter(StrPrinter):
     def _print_Exp1(self, expr):
         return "exp(1)"
 
+    def _print_Step(self, expr):
+        return f"step({', '.join(self._print(a) for a in expr.args)})"
+
+    def _print_Pwm(self, expr):
+        return f"pwm({', '.join(self._print(a) for a in expr.args)})"
+
+    def _print_Table(self, expr):
+        x, breakpoints, values = expr.args
+        return (f"table({self._print(x)}, [{', '.join(self._print(v) for v in breakpoints)}], "
+                f"[{', '.join(self._print(v) for v in values)}])")
+
     def _print_Piecewise(self, expr):
         parts = []
         for value, condition in expr.args[:-1]:

@@ -1289,13 +1289,21 @@ class _NativeDriver:
         self.lib.bondc_driver_counts(self.handle, out)
         return int(out[0]), int(out[1]), int(out[2])
 
-    def pieces(self, t_stops, t0, y0, m0, floors, watch, held, strict, probe, rtol, atol, max_step, first_step):
+    def pieces(self, t_stops, t0, y0, m0, floors, watch, held, strict, probe, rtol, atol, max_step, first_step,
+               whens=None):
         """Known pieces in one call (``bondc_driver_pieces``): (pieces done, times, states, ends,
-        modes, counts, partial), the arrays of the pieces done (modes and times and states also of
-        the piece begun after them, of ``partial`` = (steps, code, values of the watched switches)
-        where there is one), copied."""
+        modes, counts, partial, starts, guesses), the arrays of the pieces done (modes, starts and
+        guesses, times and states also of the piece begun after them, of ``partial`` = (steps,
+        code, values of the watched switches) where there is one), copied. ``whens``: (offsets,
+        targets) of the when clauses' targets (clause k sets targets[offsets[k]:offsets[k + 1]]),
+        for the restarts where a clause fires; each piece then starts from ``starts[i]``, its
+        restart found from the modes ``guesses[i]``."""
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
         count, switches, watched = len(t_stops), m0.size, int(watch.size)
+        offsets, targets = whens if whens is not None else (np.zeros(1, dtype=np.intc), np.zeros(1, dtype=np.intc))
+        n = np.size(y0)
+        starts = np.zeros((count, max(n, 1)))
+        guesses = np.zeros((count, max(switches, 1)))
         t_stops = np.ascontiguousarray(t_stops, dtype=float)
         ends = np.zeros(count, dtype=np.intc)
         modes = np.zeros((count, max(switches, 1)))
@@ -1310,10 +1318,12 @@ class _NativeDriver:
             float(max_step),
             float(first_step), self.capacity, buffer("double[]", self.ts), buffer("double[]", self.ys),
             buffer("int[]", ends), buffer("double[]", modes), buffer("long[]", counts), buffer("int[]", partial),
-            buffer("double[]", g_left))
+            buffer("double[]", g_left), int(offsets.size - 1), buffer("int[]", offsets), buffer("int[]", targets),
+            buffer("double[]", starts), buffer("double[]", guesses))
         stored = (int(ends[done - 1]) if done else 0) + int(partial[0])
         return (done, self.ts[:stored].copy(), self.ys[:stored].copy(), ends[:done], modes[:done + 1, :switches],
-                counts[:done], (int(partial[0]), int(partial[1]), g_left[:watched]))
+                counts[:done], (int(partial[0]), int(partial[1]), g_left[:watched]), starts[:done + 1, :n],
+                guesses[:done + 1, :switches])
 
 
 #: A piece of a run integrated ahead (:meth:`_Run.queued_piece`): from (t0, y0) to t_stop with
@@ -1568,6 +1578,18 @@ class _Run:
         self.affine_sets = set()       # sets of switches held in the affine combination ...
         self.affine_checked = set()    # ... and those whose every pair of corners was checked once
         self.floors_c = np.ascontiguousarray(model.floor_switches, dtype=np.intc)   # for the native driver
+        self.when_targets = None        # the when clauses' targets, where C runs their statements
+        library = getattr(model, "native_library", None)
+        if model.WHEN_LABELS and library is not None:
+            try:
+                native_when = library[1].bondc_when_native() == 1
+            except AttributeError:      # a library built before C had the when clauses
+                native_when = False
+            if native_when:
+                sizes = [len(targets) for targets in model.WHEN_TARGETS]
+                self.when_targets = (np.ascontiguousarray(np.concatenate(([0], np.cumsum(sizes))), dtype=np.intc),
+                                     np.ascontiguousarray([i for targets in model.WHEN_TARGETS for i in targets]
+                                                          or [0], dtype=np.intc))
         self.jumps = []                # (t, state before, state after) of every when clause that fired
         self.when_times = {}           # when clause -> its last firing times (Zeno detection)
         self.extended = None           # modes of the last right-hand side taken beyond a switch
@@ -2332,16 +2354,18 @@ class _Run:
     def pieces_apply(self) -> bool:
         """Whether the pieces between known breaks can be integrated ahead (:meth:`queued_piece`):
         a run with the native driver, reporting every step, with scalar tolerances (the driver's
-        deadbands), of a model without a when clause (its statements at a restart) or a floor of the
-        state among the switches it locates as events (a segment watching one is stepped from
-        Python). With a nonlinear algebraic loop, a restart where C's Newton fails (numpy then
-        solves the loop) is left to the run."""
+        deadbands), of a model without a floor of the state among the switches it locates as events
+        (a segment watching one is stepped from Python), and whose when clauses, if any, are in its
+        C code (``bondc_when_native``: their statements then run in the C call where a clause fires
+        at a break, one round). With a nonlinear algebraic loop, a restart where C's Newton fails
+        (numpy then solves the loop) is left to the run."""
         if self._pieces is None:
             model = self.model
             self._pieces = bool(
-                self.t_eval is None and not model.WHEN_LABELS and not model.floor_switches[self.event_switches].any()
+                self.t_eval is None and not model.floor_switches[self.event_switches].any()
                 and np.ndim(self.options["atol"]) == 0 and np.ndim(self.options["rtol"]) == 0
-                and self.driver_for(np.zeros(0, dtype=int), np.zeros(0)) is not None)
+                and self.driver_for(np.zeros(0, dtype=int), np.zeros(0)) is not None
+                and (not model.WHEN_LABELS or self.when_targets is not None))
         return self._pieces
 
     def queued_piece(self, t, y, modes, t_stop, mode):
@@ -2416,9 +2440,9 @@ class _Run:
         floors = np.ascontiguousarray(self.model.floor_switches, dtype=np.intc)
         watch = np.ascontiguousarray(self.event_switches, dtype=np.intc)
         held = np.ascontiguousarray(np.asarray(self.model.SWITCH_VERTICES, dtype=float)[watch] != 1.0, dtype=np.intc)
-        done, ts, ys, ends, piece_modes, counts, (partial, code, g_left) = self._driver.pieces(
+        done, ts, ys, ends, piece_modes, counts, (partial, code, g_left), starts, guesses = self._driver.pieces(
             stops, t, y, np.asarray(modes, dtype=float), floors, watch, held, not getattr(self.model, "VECTORIZED", True),
-            self.probe, options["rtol"], options["atol"], max_step, first_step)
+            self.probe, options["rtol"], options["atol"], max_step, first_step, self.when_targets)
         whole = int(ends[done - 1]) if done else 0
         if done:
             self.pieces_backoff = 1
@@ -2439,15 +2463,17 @@ class _Run:
                 bad[i] |= creeping >= _CREEP_STEPS
         if bad.any():
             done, partial = int(np.searchsorted(ends, np.flatnonzero(bad)[0], side="right")), 0
+        # each piece starts where the one before ended (after the statements of a when clause that
+        # fired there), its restart found from the modes guesses[i], as in C
         begin, t0, y0 = 0, t, np.array(y, dtype=float)
-        for i in range(done):      # each piece starts where the one before ended, as in C
+        for i in range(done):
             end = int(ends[i])
-            self.queue.append(_Piece(t0, y0, float(stops[i]), piece_modes[i], piece_modes[i - 1] if i else None,
+            self.queue.append(_Piece(t0, y0, float(stops[i]), piece_modes[i], guesses[i] if i else None,
                                      ts[begin:end], ys[begin:end], counts[i], None, None))
-            begin, t0, y0 = end, float(ts[end - 1]), ys[end - 1]
+            begin, t0, y0 = end, float(ts[end - 1]), starts[i + 1] if i + 1 < starts.shape[0] else ys[end - 1]
         if partial:     # the piece begun after them, its first steps: the driver goes on from there
             self.queue.append(_Piece(t0, y0, float(stops[done]), piece_modes[done],
-                                     piece_modes[done - 1] if done else None, ts[begin:begin + partial],
+                                     guesses[done] if done else None, ts[begin:begin + partial],
                                      ys[begin:begin + partial], None, code, dict(zip(watch.tolist(), g_left))))
 
     def segment(self, t, y, modes, t_stop):
@@ -3454,7 +3480,7 @@ def output_grid(t_start, t_end, dt):
 # ------------------------------------------------------------ native code
 
 #: The three C functions of ``NATIVE_SOURCE`` (see ``bondc.codegen.emit._NativeEmitter``).
-_NATIVE_FUNCTIONS = ("bondc_rhs", "bondc_jac", "bondc_switches")
+_NATIVE_FUNCTIONS = ("bondc_rhs", "bondc_jac", "bondc_switches", "bondc_when_conditions", "bondc_when_actions")
 #: a model with a nonlinear algebraic loop also has its outputs and variables in C (where C can print them)
 _NATIVE_POINT_FUNCTIONS = ("bondc_outputs", "bondc_variables")
 #: ... and each of its functions but the Jacobian over many points in one call (``<name>_at``)
@@ -3929,6 +3955,34 @@ int bondc_driver_restart(bondc_driver *d, double t, const double *y, const doubl
     return 1;
 }
 
+int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
+                    int count, const int *index, double *out);
+
+/* A restart of bondc_driver_pieces at (t, y) from the modes `guess`, into m: the modes there, the
+   same a probe ahead along their law, none of the `holding` switches `sticky` on its surface.
+   Returns 0 where it is that simple, 1 where the runtime makes it. */
+static int pieces_restart(bondc_driver *d, double t, const double *y, const double *guess, double *m,
+                          const int *floors, double probe, int strict, double rtol, double atol, int holding,
+                          const int *sticky, double *near)
+{
+    int n = d->n, switches = d->switches;
+    if (!driver_modes_at(d, t, y, guess, floors, m) && strict) return 1;
+    bondc_rhs(t, y, d->p, m, d->fp);
+    if (!driver_finite(d->fp, n)) return 1;
+    for (int q = 0; q < n; q++) d->shifted[q] = y[q] + probe * d->fp[q];
+    if (!driver_modes_at(d, t + probe, d->shifted, m, floors, d->ahead) && strict) return 1;
+    for (int k = 0; k < switches; k++)
+        if (d->ahead[k] != m[k]) return 1;
+    if (holding) {
+        if (bondc_deadbands(d, t, y, m, rtol, atol, holding, sticky, near) != 0) return 1;
+        bondc_switches(t, y, d->p, m, d->g);
+        if (strict && !driver_finite(d->g, switches)) return 1;
+        for (int j = 0; j < holding; j++)
+            if (fabs(d->g[sticky[j]]) <= near[j]) return 1;
+    }
+    return 0;
+}
+
 /* Known pieces of a run in one call: piece i ends at the known break t_stops[i] (or the run's end)
    and starts where piece i - 1 ended (piece 0 at (t0, y0) with the modes m0). Every start after the
    first is a restart as the runtime's restart_modes and sliding_candidates make it, where it is that
@@ -3958,7 +4012,8 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
                         const double *m0, const int *floors, int watched, const int *watch, const int *held,
                         int strict, double probe, double rtol, double atol, double max_step, double first_step,
                         int capacity, double *ts, double *ys, int *ends, double *modes, long *counts, int *partial,
-                        double *g_left)
+                        double *g_left, int whens, const int *target_start, const int *targets, double *starts,
+                        double *guesses)
 {
     int stored = 0, done = 0, n = d->n, switches = d->switches;
     partial[0] = 0;
@@ -3972,28 +4027,48 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
     int holding = 0;
     for (int j = 0; j < watched; j++)
         if (held[j]) sticky[holding++] = watch[j];
+    double *conditions = (double *)calloc(3 * (size_t)whens + 1, sizeof(double));
+    double *values = (double *)calloc((size_t)(whens ? target_start[whens] : 0) + 1, sizeof(double));
+    if (!conditions || !values) { free(work); free(sticky); free(conditions); free(values); return 0; }
+    double *before = conditions, *after = conditions + whens, *again = conditions + 2 * whens;
     for (int k = 0; k < switches; k++) modes[k] = m0[k];
+    for (int q = 0; q < n; q++) starts[q] = y0[q];
     for (int i = 0; i < pieces; i++, done++) {
         double *m = modes + (long)i * switches;
         if (i > 0) {
-            if (!driver_modes_at(d, t, y, m - switches, floors, m) && strict) break;
-            bondc_rhs(t, y, d->p, m, d->fp);
-            if (!driver_finite(d->fp, n)) break;
-            for (int q = 0; q < n; q++) d->shifted[q] = y[q] + probe * d->fp[q];
-            if (!driver_modes_at(d, t + probe, d->shifted, m, floors, d->ahead) && strict) break;
-            int same = 1;
-            for (int k = 0; k < switches; k++)
-                if (d->ahead[k] != m[k]) same = 0;
-            if (!same) break;
-            if (holding) {
-                if (bondc_deadbands(d, t, y, m, rtol, atol, holding, sticky, near) != 0) break;
-                bondc_switches(t, y, d->p, m, d->g);
-                if (strict && !driver_finite(d->g, switches)) break;
-                int surface = 0;
-                for (int j = 0; j < holding; j++)
-                    if (fabs(d->g[sticky[j]]) <= near[j]) surface = 1;
-                if (surface) break;
+            double *guess = guesses + (long)i * switches;
+            for (int k = 0; k < switches; k++) guess[k] = m[k - switches];
+            if (pieces_restart(d, t, y, guess, m, floors, probe, strict, rtol, atol, holding, sticky, near)) break;
+            if (whens) {
+                /* the when clauses whose condition became true here (_Run.fire_when_clauses): their
+                   statements from the values just before, then the restart after them, as the
+                   runtime makes it; a restart where a clause fires again is left to the runtime */
+                bondc_when_conditions(t, y, d->p, guess, before);
+                bondc_when_conditions(t, y, d->p, m, after);
+                int firing = 0;
+                for (int k = 0; k < whens; k++)
+                    if (after[k] != 0 && !(before[k] != 0)) firing = 1;
+                if (firing) {
+                    double *start = starts + (long)i * n;
+                    bondc_when_actions(t, y, d->p, m, values);
+                    for (int q = 0; q < n; q++) start[q] = y[q];
+                    for (int k = 0; k < whens; k++)
+                        if (after[k] != 0 && !(before[k] != 0))
+                            for (int j = target_start[k]; j < target_start[k + 1]; j++) start[targets[j]] = values[j];
+                    if (!driver_finite(start, n)) break;
+                    for (int k = 0; k < switches; k++) guess[k] = m[k];
+                    if (pieces_restart(d, t, start, guess, m, floors, probe, strict, rtol, atol, holding, sticky,
+                                       near)) break;
+                    bondc_when_conditions(t, start, d->p, m, again);
+                    int more = 0;
+                    for (int k = 0; k < whens; k++)
+                        if (again[k] != 0 && !(after[k] != 0)) more = 1;
+                    if (more) break;
+                    y = start;
+                }
             }
+            if (y != starts + (long)i * n)
+                for (int q = 0; q < n; q++) starts[(long)i * n + q] = y[q];
         }
         if (watched) {
             if (bondc_deadbands(d, t, y, m, rtol, atol, watched, watch, band) != 0) break;
@@ -4027,6 +4102,8 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
     }
     free(work);
     free(sticky);
+    free(conditions);
+    free(values);
     return done;
 }
 
@@ -4245,8 +4322,10 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
                         const double *m0, const int *floors, int watched, const int *watch, const int *held,
                         int strict, double probe, double rtol, double atol, double max_step, double first_step,
                         int capacity, double *ts, double *ys, int *ends, double *modes, long *counts, int *partial,
-                        double *g_left);
+                        double *g_left, int whens, const int *target_start, const int *targets, double *starts,
+                        double *guesses);
 void bondc_driver_free(bondc_driver *d);
+int bondc_when_native(void);
 """
 _SUNDIALS_PARTS = ("core", "cvode", "nvecserial", "sunmatrixdense", "sunmatrixband", "sunlinsoldense",
                    "sunlinsolband")

@@ -357,7 +357,7 @@ def test_the_library_is_built_once_per_text_and_reused_from_the_cache(tmp_path, 
     runtime._NATIVE_LIBRARIES.clear()
     source = PRELUDE + "".join(
         f"void {name}(double t, const double *x, const double *p, const double *m, double *out) {{ out[0] = 2*t; }}\n"
-        for name in ("bondc_rhs", "bondc_jac", "bondc_switches"))
+        for name in runtime._NATIVE_FUNCTIONS)      # (the driver calls all of them)
     ffi, lib = runtime.load_native(source)
     built = sorted((tmp_path / "native").glob("*.so"))
     assert len(built) == 1
@@ -548,9 +548,29 @@ PIECE_MODELS = {
     # Newton, numpy's MINPACK where that fails)
     "pwm_diode": (ROOT / "tests/fixtures/sim/pwm_diode.bg").read_text(encoding="utf-8"),
 }
+PIECE_MODELS.update({
+    # a PI controller sampled at 5 kHz by a when clause on a pwm's rising edges (zero-order hold):
+    # the clause's statements at every other break, run in C with the restart after them
+    "sampled_pi": ("model SampledPI\n  param Ts = 0.2 [ms]\n  param Kp = 0.5 [V*s/rad]\n  param Ki = 20 [V/rad]\n"
+                   "  param w_ref = 100 [rad/s]\n  discrete u_k [V] = 0\n  discrete i_k [V] = 0\n"
+                   "  MSe drive : e = u_k\n  R winding : e = 1*f\n  I coil : f = p/1e-3\n  GY emf : r = 0.05\n"
+                   "  I rotor : f = p/2e-4\n  R fric : e = 1e-4*f\n  1 el\n  1 mech\n  drive -> el\n"
+                   "  el -> winding\n  el -> coil\n  el -> emf\n  emf -> mech\n  mech -> rotor\n  mech -> fric\n"
+                   "  when pwm(t, 1/Ts, 0.5) > 0.5 then\n    i_k = i_k + Ki*Ts*(w_ref - rotor.f),\n"
+                   "    u_k = min(max(Kp*(w_ref - rotor.f) + i_k + Ki*Ts*(w_ref - rotor.f), -24), 24)\n  end\n"
+                   "  experiment run\n    t_end = 0.05 [s]\n  end\nend\n"),
+    # a when clause counting a chirp's zero crossings (a switch of time that is no pwm)
+    "chirp_count": (ROOT / "tests/fixtures/engine/chirp_count.bg").read_text(encoding="utf-8"),
+    # a clause whose statements make a second clause's condition true at the same instant: a
+    # second round, left to the run
+    "two_rounds": ("model TwoRounds\n  discrete a [1] = 0\n  discrete b [1] = 0\n  MSe src : e = a - b + 1\n"
+                   "  R r : e = 10*f\n  C c : e = q/1e-3\n  1 j\n  src -> j\n  j -> r\n  j -> c\n"
+                   "  when pwm(t, 1000, 0.5) > 0.5 then a = a + 1 end\n  when a > b + 0.5 then b = a end\n"
+                   "  experiment run\n    t_end = 0.02 [s]\n  end\nend\n"),
+})
 #: the models above whose every segment is a known piece (all their switches of time), and those
 #: in which a switch of the state crosses inside a piece
-TIME_ALONE = {"pwm_rl", "pwm_sine_compare", "duty_step", "staircase", "pwm_diode"}
+TIME_ALONE = {"pwm_rl", "pwm_sine_compare", "duty_step", "staircase", "pwm_diode", "sampled_pi", "chirp_count"}
 CROSSING = {"orifice_reversing"}
 
 
@@ -590,9 +610,10 @@ def _same_run_with_pieces_ahead(path, ahead, monkeypatch, every_segment, resumed
 def test_the_pieces_between_known_breaks_run_in_one_call_and_equal_the_run_segment_by_segment(
         name, ahead, tmp_path, monkeypatch):
     """The segments between a run's known breaks (a pwm's edges, steps and staircases of time), and
-    the restarts at those breaks, are integrated ahead in one C call for many breaks; a restart that
-    is not simple (a friction on its surface, switches that chatter) and a piece in which a switch
-    of the state may cross are left to the run. The independent expectation is the run segment by
+    the restarts at those breaks, are integrated ahead in one C call for many breaks, with the
+    statements of the when clauses that fire there; a restart that is not simple (a friction on
+    its surface, switches that chatter, a second round of when clauses) and a piece in which a
+    switch of the state may cross are left to the run. The independent expectation is the run segment by
     segment (each segment one driver call, each restart from Python: tested against closed forms
     in test_engine): the same points, states, outputs, variables, events and solver counts, to the
     bit, with the queue refilled every 512 pieces or every 7."""
@@ -609,18 +630,6 @@ def test_the_flagships_pieces_ahead_equal_its_run_segment_by_segment(model, monk
     switches of the state (43 events, sliding segments): the pieces between breaks that no event
     interrupts come from the queue, the rest from the run, and the cycle is the same to the bit."""
     _same_run_with_pieces_ahead(ROOT / "models" / model, 512, monkeypatch, every_segment=False, resumed=True)
-
-
-@needs_cc
-@pytest.mark.slow
-def test_no_pieces_are_integrated_ahead_in_a_model_with_a_when_clause():
-    """A when clause's statements change the state at a restart: the run goes segment by segment."""
-    if runtime._sundials_link() is None:
-        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
-    namespace, experiment = _compiled(ROOT / "tests/fixtures/engine/chirp_count.bg")
-    run = namespace["simulate_model"](namespace["_MODEL"], t_end=experiment.t_end, rtol=experiment.rtol,
-                                      atol=experiment.atol, max_step=experiment.max_step)
-    assert run.complete and "pieces_ahead" not in run.stats and run.stats["segments"] > 1
 
 
 @needs_cc
@@ -747,7 +756,9 @@ def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute
     whole_ffi, whole = runtime.load_native(source)
     monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
     units = runtime._native_units(source + "\n" + runtime.UNIT_MARK + "int bondc_unit_probe;\n")
-    assert len(units) == 4 and all(unit.startswith(source[:source.index(runtime.UNIT_MARK)]) for unit in units)
+    # its six functions (right-hand side, Jacobian, switches, when conditions, when statements and
+    # whether those are in C) and the probe
+    assert len(units) == 7 and all(unit.startswith(source[:source.index(runtime.UNIT_MARK)]) for unit in units)
     runtime._NATIVE_LIBRARIES.clear()
     split_ffi, split = runtime.load_native(source)
     assert split is not whole and len(list((tmp_path / "native").glob("*.so"))) == 2
@@ -895,7 +906,7 @@ def test_a_loaded_models_library_is_found_again_by_its_text_without_building(tmp
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
     source = (PRELUDE, "".join(
         f"void {name}(double t, const double *x, const double *p, const double *m, double *out) {{ out[0] = 3*t; }}\n"
-        for name in ("bondc_rhs", "bondc_jac", "bondc_switches")))
+        for name in runtime._NATIVE_FUNCTIONS))
     first = runtime.load_native(source)
     assert first[0] is not None
     real = runtime._build_native

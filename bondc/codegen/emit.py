@@ -1211,6 +1211,23 @@ class _NativeEmitter(_Emitter):
         out += [f"{_INDENT}out[{k}] = {text};" for k, text in enumerate(texts)]
         return "\n".join(out + ["}"])
 
+    def c_when_functions(self) -> list:
+        """``bondc_when_conditions`` (each when clause's condition with the modes m: held where not 0) and
+        ``bondc_when_actions`` (the new values of every clause's targets, clause after clause, from
+        the values at (t, x)), as the numpy module's ``_when_conditions`` and ``_when_action_k``;
+        ``bondc_when_native`` says whether they are (0: a statement C cannot print, or no clause)."""
+        plan = self.plan
+        conditions = [condition for _, condition, _ in plan.events]    # held where not 0 (bool())
+        values = [value for _, _, actions in plan.events for _, value in actions]
+        native = 1 if plan.events else 0
+        try:
+            parts = [self.c_function("bondc_when_conditions", plan.statements, conditions),
+                     self.c_function("bondc_when_actions", plan.statements, values)]
+        except UnsupportedExpression:
+            parts, native = [self.c_function("bondc_when_conditions", [], []),
+                             self.c_function("bondc_when_actions", [], [])], 0
+        return parts + [f"int bondc_when_native(void) {{ return {native}; }}"]
+
     @staticmethod
     def c_points(name: str, n: int, size: int) -> str:
         """``name`` at ``count`` points: ``x`` holds each point's ``n`` states in a row, ``out``
@@ -1240,6 +1257,7 @@ class _NativeEmitter(_Emitter):
                      + at("bondc_switches", len(switches))]
         except UnsupportedExpression as error:
             return "", str(error)
+        parts += self.c_when_functions()
         if plan.blocks:
             # its outputs and variables in C too (the loop solved there), where C can print them
             outputs, variables = [expr for _, expr in plan.outputs], [symbol for _, symbol, _ in plan.variables]
