@@ -4703,6 +4703,30 @@ def attach_native(model, native=None):
 
     model.rhs, model.jac = vector(c_rhs, numpy_rhs, n, loops), jac
     model.switches = vector(c_switches, numpy_switches, count, loops)
+    try:
+        when_native = bool(model.WHEN_LABELS) and lib.bondc_when_native() == 1
+    except AttributeError:      # a library built before C had the when clauses
+        when_native = False
+    if when_native:
+        # the when clauses' statements from C too: the pieces integrated ahead run them in C, and
+        # the run takes those pieces only where its own values are theirs to the bit (numpy's
+        # where C's are not finite)
+        offsets = np.concatenate(([0], np.cumsum([len(targets) for targets in model.WHEN_TARGETS]))).astype(int)
+        c_actions, numpy_actions = lib.bondc_when_actions, model.WHEN_ACTIONS
+
+        def clause(k):
+            def action(t, x, p, m):
+                arguments = arrays(t, x, p, m)
+                if arguments is None:
+                    return numpy_actions[k](t, x, p, m)
+                out = empty(max(int(offsets[-1]), 1))
+                c_actions(*arguments, buffer(doubles, out))
+                values = out[offsets[k]:offsets[k + 1]]
+                if not math.isfinite(values.sum()):
+                    return numpy_actions[k](t, x, p, m)
+                return tuple(values)
+            return action
+        model.WHEN_ACTIONS = tuple(clause(k) for k in range(len(numpy_actions)))
     if loops:
         # a model with a loop is evaluated point by point: its outputs and variables from C too,
         # where the library has them (C could not print them otherwise); where the library has

@@ -561,6 +561,12 @@ PIECE_MODELS.update({
                    "  experiment run\n    t_end = 0.05 [s]\n  end\nend\n"),
     # a when clause counting a chirp's zero crossings (a switch of time that is no pwm)
     "chirp_count": (ROOT / "tests/fixtures/engine/chirp_count.bg").read_text(encoding="utf-8"),
+    # statements with transcendental functions (C's libm and numpy may differ in the last bit: the
+    # run takes C's statements, so that every piece ahead is its own)
+    "held_exp_sin": ("model HeldExpSin\n  discrete u [V] = 0\n  MSe src : e = u\n  R r : e = 10*f\n"
+                     "  C c : e = q/1e-3\n  1 j\n  src -> j\n  j -> r\n  j -> c\n"
+                     "  when pwm(t, 2000, 0.5) > 0.5 then u = 5*exp(-30*c.q)*sin(2*pi*7*t) + tanh(c.q*1e3) end\n"
+                     "  experiment run\n    t_end = 0.05 [s]\n  end\nend\n"),
     # a clause whose statements make a second clause's condition true at the same instant: a
     # second round, left to the run
     "two_rounds": ("model TwoRounds\n  discrete a [1] = 0\n  discrete b [1] = 0\n  MSe src : e = a - b + 1\n"
@@ -570,7 +576,8 @@ PIECE_MODELS.update({
 })
 #: the models above whose every segment is a known piece (all their switches of time), and those
 #: in which a switch of the state crosses inside a piece
-TIME_ALONE = {"pwm_rl", "pwm_sine_compare", "duty_step", "staircase", "pwm_diode", "sampled_pi", "chirp_count"}
+TIME_ALONE = {"pwm_rl", "pwm_sine_compare", "duty_step", "staircase", "pwm_diode", "sampled_pi", "chirp_count",
+              "held_exp_sin"}
 CROSSING = {"orifice_reversing"}
 
 
