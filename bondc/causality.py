@@ -41,7 +41,7 @@ from typing import Iterable, Mapping
 
 from bondc import ast
 from bondc.errors import CausalityError, Diagnostic, Related, sort_key
-from bondc.model import BondGraph, ElementNode, JunctionNode
+from bondc.model import BondGraph, ElementNode, JunctionNode, readable_names
 from bondc.source import Span
 
 # ---------------------------------------------------------------- kinds as data
@@ -697,7 +697,8 @@ def _find_loops(graph: BondGraph, relations) -> tuple[AlgebraicLoop, ...]:
     return tuple(loops)
 
 
-def _loop_diagnostic(graph: BondGraph, loop: AlgebraicLoop) -> Diagnostic:
+def _loop_diagnostic(graph: BondGraph, loop: AlgebraicLoop, element_names: Mapping[str, str]) -> Diagnostic:
+    """I603 for ``loop``, its variables named by their elements (``element_names``: readable_names)."""
     parts = []
     if loop.resistors:
         parts.append(f"resistor{'s' if len(loop.resistors) > 1 else ''} "
@@ -719,7 +720,8 @@ def _loop_diagnostic(graph: BondGraph, loop: AlgebraicLoop) -> Diagnostic:
             related.append(Related(graph.junctions[name].span, f"{describe_node(graph, name)} is on the loop"))
     return Diagnostic(
         "info", "I603",
-        f"algebraic loop through {join_words(parts)}: {', '.join(loop.variables)} depend on each other "
+        f"algebraic loop through {join_words(parts)}: "
+        f"{', '.join(element_names.get(v, v) for v in loop.variables)} depend on each other "
         "with no storage element in between; the equations stage solves the loop",
         span, related=tuple(related),
         hint="a small storage element (or a resistor in the other causality) would break the loop")
@@ -806,7 +808,8 @@ def assign_causality(graph: BondGraph) -> CausalGraph:
     loops = _find_loops(graph, relations)
     dependencies = _dependencies(graph, relations, storage)
     diagnostics = [_derivative_diagnostic(graph, name, deps) for name, deps in dependencies.items()]
-    diagnostics += [_loop_diagnostic(graph, loop) for loop in loops]
+    element_names = readable_names(graph) if loops else {}     # b2.e -> r1.e
+    diagnostics += [_loop_diagnostic(graph, loop, element_names) for loop in loops]
     return CausalGraph(graph=graph, effort_setter=setter, storage=storage, resistors=resistors,
                        dependencies=dependencies, algebraic_loops=loops,
                        diagnostics=tuple(sorted(diagnostics, key=sort_key)))

@@ -38,6 +38,7 @@ that cannot be resolved, ``W604`` nonlinear algebraic loop solved numerically,
 from __future__ import annotations
 
 import dataclasses
+import functools
 import heapq
 import json
 import math
@@ -54,7 +55,7 @@ from bondc import ast
 from bondc.causality import (CONDUCTANCE, DERIVATIVE, ROLES, CausalGraph, describe_node, element_span, join_words,
                              strongly_connected)
 from bondc.errors import Diagnostic, EquationError, Related
-from bondc.model import ElementNode, JunctionNode
+from bondc.model import ElementNode, JunctionNode, readable_names
 from bondc.source import NO_SPAN
 from bondc.statespace import AlgebraicBlock, StateInfo, StateSpace
 from bondc.symbolic import (Csv, Step, Table, Translator, discontinuities, strip_impulses, as_sympy)
@@ -86,6 +87,11 @@ def _error(code: str, message: str, span=NO_SPAN, hint: str | None = None, relat
 
 
 class _Deriver:
+    @functools.cached_property
+    def element_names(self) -> dict:
+        """{bond variable: the element variable it is} for the messages (b2.e -> r1.e)."""
+        return readable_names(self.graph)
+
     def __init__(self, causal: CausalGraph):
         self.causal = causal
         graph = self.graph = causal.graph
@@ -486,7 +492,8 @@ class _Deriver:
         self.diagnostics.append(Diagnostic(
             "warning", "W604",
             f"nonlinear algebraic loop through {join_words([repr(n) for n in nodes])}: "
-            f"{', '.join(u.name for u in unknowns)} solved numerically at every evaluation",
+            f"{', '.join(self.element_names.get(u.name, u.name) for u in unknowns)} solved numerically at "
+            "every evaluation",
             spans[0] if spans else NO_SPAN,
             related=tuple(Related(span, "on the loop") for span in spans[1:]),
             hint="slower and may fail to converge; a small storage element would break the loop"))
@@ -514,7 +521,7 @@ class _Deriver:
             graph = self.graph
             spans = [element_span(graph.elements[n]) if n in graph.elements else graph.junctions[n].span
                      for n in nodes if n in graph.elements or n in graph.junctions]
-            names = ", ".join(u.name for u in unknowns)
+            names = ", ".join(self.element_names.get(u.name, u.name) for u in unknowns)
             raise _error("E702", f"the algebraic loop through {join_words([repr(n) for n in nodes])} is singular: "
                                  f"its equations do not determine {names}",
                          spans[0] if spans else NO_SPAN,

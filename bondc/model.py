@@ -15,6 +15,7 @@ Variable naming used throughout bondc (reports, CSV columns, JSON):
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -248,3 +249,53 @@ class BondGraph:
             "outputs": len(self.outputs),
             "experiments": len(self.experiments),
         }
+
+
+def bond_alias(graph, variable: str | None) -> str | None:
+    """``b3.e`` -> ``damper.e`` (or ``screw.p1.e``): the element variable a bond variable is (the
+    element that computes it, else every element at the bond's ends, joined by ", "); None for a
+    bond between two junctions or a name that is no bond variable."""
+    if graph is None or not variable:
+        return None
+    head, _, which = variable.rpartition(".")
+    if which not in ("e", "f"):
+        return None
+    for bond in getattr(graph, "bonds", ()):
+        if bond.name == head:
+            return _bond_alias(graph, bond, which)
+    return None
+
+
+def _bond_alias(graph, bond, which: str) -> str | None:
+    names, computing = [], []
+    for end, port in ((bond.head, bond.head_port), (bond.tail, bond.tail_port)):
+        if end in graph.elements:
+            names.append(f"{end}.{port}.{which}" if port else f"{end}.{which}")
+            if which in graph.elements[end].laws:
+                computing.append(names[-1])
+    return ", ".join(computing or names) or None
+
+
+_BOND_VARIABLE = re.compile(r"(?<![\w.'])(?:[A-Za-z_]\w*\.)*[A-Za-z_]\w*\.[ef]\b")
+
+
+def readable_names(graph) -> dict:
+    """{bond variable: the element variable it is} (``b14.e`` -> ``nut.e``, the element that computes
+    it), for :func:`readable`; bonds between two junctions have none."""
+    names = {}
+    for bond in getattr(graph, "bonds", ()):
+        for which in ("e", "f"):
+            alias = _bond_alias(graph, bond, which)
+            if alias:
+                names[f"{bond.name}.{which}"] = alias.split(", ")[0]
+    return names
+
+
+def readable(names: Mapping[str, str], text):
+    """``text`` (a switch's label, a message) with every bond variable not in quotes named by the
+    element variable it is (``names``, from :func:`readable_names`): ``coulomb(b5.f) in b5.e`` ->
+    ``coulomb(fr1.f) in fr1.e``. A bond between two junctions keeps its name; quoted names
+    (``'b3.e' (damper.e)``) stay as they are."""
+    if not names or not text:
+        return text
+    return _BOND_VARIABLE.sub(lambda match: names.get(match.group(0), match.group(0)), text)

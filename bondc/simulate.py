@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import difflib
 import math
-import re
 import io
 import sys
 import time
@@ -61,6 +60,7 @@ import numpy as np
 
 from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
 from bondc.io import atomic_write
+from bondc.model import bond_alias, readable, readable_names
 
 _COMPILED: dict = {}
 
@@ -307,19 +307,19 @@ def _all_finite(series) -> bool:
 def _result(ss, experiment, namespace, raw, settings) -> SimResult:
     bond_names = namespace["BOND_VARIABLES"]
     graph = getattr(ss, "graph", None)
-    readable = _readable_names(graph)
+    names = readable_names(graph)
     result = SimResult(
         t=raw.t, states=dict(raw.states), outputs=dict(raw.outputs),
         bonds={name: raw.variables[name] for name in bond_names},
-        variables=dict(raw.variables), complete=raw.complete, message=_readable(readable, raw.message),
-        events=[(time_, _readable(readable, label)) for time_, label in raw.events],
+        variables=dict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
+        events=[(time_, readable(names, label)) for time_, label in raw.events],
         stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
         model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
     )
     result.units = result_units(graph)
     if raw.failure is not None:
-        result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw, readable))
+        result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw, names))
     for group, values in (("output", result.outputs), ("bond variable", result.bonds)):
         if _all_finite(values.values()):
             continue
@@ -328,7 +328,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
                 continue
             bad = np.flatnonzero(~np.isfinite(series))
             if bad.size:
-                alias = _alias(graph, name) if group == "bond variable" else None
+                alias = bond_alias(graph, name) if group == "bond variable" else None
                 shown = f"{name} ({alias})" if alias else name
                 result.warnings.append(Diagnostic(
                     "warning", "W821", f"{group} '{shown}' is not finite from t={result.t[bad[0]]:.6g} s "
@@ -359,14 +359,14 @@ _CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted"
           "diverged": "E815"}
 
 
-def _failure_diagnostic(graph, failure, raw, readable=None) -> Diagnostic:
+def _failure_diagnostic(graph, failure, raw, names=None) -> Diagnostic:
     reached = float(raw.t[-1]) if raw.t.size else failure.get("time", 0.0)
     text = failure["message"]
     variable = failure.get("variable")
-    alias = _alias(graph, variable)
+    alias = bond_alias(graph, variable)
     if alias:
         text = text.replace(f"'{variable}'", f"'{variable}' ({alias})", 1)
-    text = _readable(readable, text)
+    text = readable(names, text)
     message = f"simulation stopped: {text.rstrip('. ')}; results up to t={reached:.6g} s were kept (incomplete)"
     if failure.get("cause"):
         message += f". Likely cause: {failure['cause']}"
@@ -374,49 +374,6 @@ def _failure_diagnostic(graph, failure, raw, readable=None) -> Diagnostic:
 
     span = _span_of(graph, failure.get("variable")) or _when_span(graph, failure.get("when")) or NO_SPAN
     return Diagnostic("error", _CODES.get(failure.get("kind"), "E811"), message, span, hint=failure.get("hint"))
-
-
-def _alias(graph, variable: str | None) -> str | None:
-    """``b3.e`` -> ``damper.e`` (or ``screw.p1.e``): the element variable a bond variable is."""
-    if graph is None or not variable:
-        return None
-    head, _, which = variable.rpartition(".")
-    if which not in ("e", "f"):
-        return None
-    for bond in getattr(graph, "bonds", ()):
-        if bond.name == head:
-            names, computing = [], []
-            for end, port in ((bond.head, bond.head_port), (bond.tail, bond.tail_port)):
-                if end in graph.elements:
-                    names.append(f"{end}.{port}.{which}" if port else f"{end}.{which}")
-                    if which in graph.elements[end].laws:
-                        computing.append(names[-1])
-            return ", ".join(computing or names) or None
-    return None
-
-
-_BOND_VARIABLE = re.compile(r"(?<![\w.'])(?:[A-Za-z_]\w*\.)*[A-Za-z_]\w*\.[ef]\b")
-
-
-def _readable_names(graph) -> dict:
-    """{bond variable: the element variable it is} (``b14.e`` -> ``nut.e``), for :func:`_readable`."""
-    names = {}
-    for bond in getattr(graph, "bonds", ()):
-        for which in ("e", "f"):
-            alias = _alias(graph, f"{bond.name}.{which}")
-            if alias:
-                names[f"{bond.name}.{which}"] = alias.split(", ")[0]
-    return names
-
-
-def _readable(names: dict, text):
-    """``text`` (a switch's label, a message) with every bond variable not in quotes named by the
-    element variable it is (``names``, from :func:`_readable_names`): ``coulomb(b5.f) in b5.e`` ->
-    ``coulomb(fr1.f) in fr1.e``. A bond between two junctions keeps its name; quoted names
-    (``'b3.e' (damper.e)``) stay as they are."""
-    if not names or not text:
-        return text
-    return _BOND_VARIABLE.sub(lambda match: names.get(match.group(0), match.group(0)), text)
 
 
 def _when_span(graph, label: str | None):
