@@ -688,6 +688,7 @@ class _Model:
         self.NATIVE_SOURCE = optional("NATIVE_SOURCE", lambda text: "".join(text), "")
         self.NATIVE_UNAVAILABLE = optional("NATIVE_UNAVAILABLE", str, "")
         self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
+        self.when_offsets = None        # clause k sets targets offsets[k]:offsets[k + 1], where C runs them
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
         # the modes some switching function reads (a nested switch's); None: not known
         self.modes_read_by_switches = None if self.SWITCH_DEPENDS is None else np.array(
@@ -1578,18 +1579,11 @@ class _Run:
         self.affine_sets = set()       # sets of switches held in the affine combination ...
         self.affine_checked = set()    # ... and those whose every pair of corners was checked once
         self.floors_c = np.ascontiguousarray(model.floor_switches, dtype=np.intc)   # for the native driver
-        self.when_targets = None        # the when clauses' targets, where C runs their statements
-        library = getattr(model, "native_library", None)
-        if model.WHEN_LABELS and library is not None:
-            try:
-                native_when = library[1].bondc_when_native() == 1
-            except AttributeError:      # a library built before C had the when clauses
-                native_when = False
-            if native_when:
-                sizes = [len(targets) for targets in model.WHEN_TARGETS]
-                self.when_targets = (np.ascontiguousarray(np.concatenate(([0], np.cumsum(sizes))), dtype=np.intc),
-                                     np.ascontiguousarray([i for targets in model.WHEN_TARGETS for i in targets]
-                                                          or [0], dtype=np.intc))
+        # the when clauses' targets (offsets, indices) where C runs their statements (attach_native)
+        offsets = model.when_offsets if getattr(model, "native_library", None) is not None else None
+        self.when_targets = None if offsets is None else (
+            offsets, np.ascontiguousarray([i for targets in model.WHEN_TARGETS for i in targets] or [0],
+                                          dtype=np.intc))
         self.jumps = []                # (t, state before, state after) of every when clause that fired
         self.when_times = {}           # when clause -> its last firing times (Zeno detection)
         self.extended = None           # modes of the last right-hand side taken beyond a switch
@@ -4703,7 +4697,8 @@ def attach_native(model, native=None):
         # the when clauses' statements from C too: the pieces integrated ahead run them in C, and
         # the run takes those pieces only where its own values are theirs to the bit (numpy's
         # where C's are not finite)
-        offsets = np.concatenate(([0], np.cumsum([len(targets) for targets in model.WHEN_TARGETS]))).astype(int)
+        offsets = np.ascontiguousarray(np.concatenate(([0], np.cumsum([len(targets) for targets in
+                                                                        model.WHEN_TARGETS]))), dtype=np.intc)
         c_actions, numpy_actions = lib.bondc_when_actions, model.WHEN_ACTIONS
 
         def clause(k):
@@ -4719,6 +4714,7 @@ def attach_native(model, native=None):
                 return tuple(values)
             return action
         model.WHEN_ACTIONS = tuple(clause(k) for k in range(len(numpy_actions)))
+        model.when_offsets = offsets
     if loops:
         # a model with a loop is evaluated point by point: its outputs and variables from C too,
         # where the library has them (C could not print them otherwise); where the library has
