@@ -734,3 +734,139 @@ def test_a_run_is_at_the_solver_steps_when_every_event_is_one_of_its_points():
     for case in (events, moved, events[:1], []):
         assert _at_solver_steps(result(case)) == by_definition(case)
     assert _at_solver_steps(result(events)) and not _at_solver_steps(result(moved))
+
+
+def test_the_21_point_gauss_kronrod_rules_are_exact_on_polynomials():
+    """The numeric energy functions' rule on [-1, 1]: QUADPACK's 21-point Kronrod rule integrates
+    x^k exactly for k <= 31 and its 10-point Gauss rule (on the odd-numbered nodes) for k <= 19;
+    the Gauss rule is not exact at k = 20."""
+    from bondc.analysis.energy import GAUSS_WEIGHTS, KRONROD_NODES, KRONROD_WEIGHTS
+
+    exact = lambda k: (1.0 - (-1.0) ** (k + 1)) / (k + 1)      # noqa: E731
+    assert KRONROD_NODES.size == KRONROD_WEIGHTS.size == GAUSS_WEIGHTS.size == 21
+    assert np.all(np.diff(KRONROD_NODES) > 0)
+    for k in range(32):
+        assert KRONROD_WEIGHTS @ KRONROD_NODES ** k == pytest.approx(exact(k), abs=1e-15), k
+    for k in range(20):
+        assert GAUSS_WEIGHTS @ KRONROD_NODES ** k == pytest.approx(exact(k), abs=1e-15), k
+    assert abs(GAUSS_WEIGHTS @ KRONROD_NODES ** 20 - exact(20)) > 1e-9
+    assert np.count_nonzero(GAUSS_WEIGHTS) == 10
+
+
+def test_a_numeric_energy_split_at_thousands_of_events_is_the_closed_form():
+    """A run with thousands of events splits a numeric energy function's integral at the state's
+    value at each of them. The pieces are integrated at once by the 21-point rule where its Gauss
+    half agrees, and by QUADPACK's adaptive rule where it does not (a kink inside a piece).
+    Closed forms: a hard stop k (q - gap)^2 / 2, and an accumulator's gas law p0 (V/(V - q))^n,
+    whose energy is p0 V^n ((V - q)^(1-n) - V^(1-n)) / (n - 1)."""
+    from bondc.analysis.energy import _StoredEnergy
+
+    calls = []
+
+    def numeric(function):
+        def law(x):
+            calls.append(x)
+            return float(function(x))
+        return _StoredEnergy("numeric", "x", law=law, law_of_arrays=function)
+
+    k, gap = 1e6, 0.05
+    stop = numeric(lambda q: np.where(q > gap, k * (q - gap), 0.0))
+    rng = np.random.default_rng(3)
+    breaks = np.concatenate([rng.uniform(-0.01, 0.06, 3000), [gap]])
+    for a, b in ((0.0, 0.06), (0.06, 0.0), (0.02, 0.055), (-0.01, 0.0)):
+        closed = 0.5 * k * (max(b - gap, 0.0) ** 2 - max(a - gap, 0.0) ** 2)
+        assert stop.change(a, b, breaks)[2] == pytest.approx(closed, rel=1e-12, abs=1e-15), (a, b)
+    assert len(calls) == 0              # every piece ends at the kink: the 21-point rule on all of them
+    without_kink = np.sort(breaks[np.abs(breaks - gap) > 1e-4])
+    assert stop.change(0.0, 0.06, without_kink)[2] == pytest.approx(0.5 * k * 0.01 ** 2, rel=1e-12)
+    # the piece over the kink, and only it, by the adaptive rule
+    below, above = without_kink[without_kink < gap][-1], without_kink[without_kink > gap][0]
+    assert calls and below <= min(calls) and max(calls) <= above
+
+    p0, volume, n = 60e5, 1e-3, 1.4
+    gas = numeric(lambda q: p0 * (volume / (volume - q)) ** n)
+    energy = lambda q: p0 * volume ** n * ((volume - q) ** (1 - n) - volume ** (1 - n)) / (n - 1)   # noqa: E731
+    levels = rng.uniform(0.0, 0.9e-3, 5000)
+    for a, b in ((0.0, 0.9e-3), (0.5e-3, 0.1e-3)):
+        assert gas.change(a, b, levels)[2] == pytest.approx(energy(b) - energy(a), rel=1e-11)
+
+
+PUMP_AND_CART = """
+model PumpAndCart "a pump stopped at t1 into a chamber with a relief valve, beside a cart on a spring"
+  param Q0 = 1e-4 [m^3/s]
+  param t1 = 0.5 [s]
+  param Cc = 1e-12 [m^3/Pa]
+  param pc = 50e5 [Pa]
+  param Kv = 1e-10 [m^3/(s*Pa)]
+  MSf pump : f = Q0*(1 - step(t, t1))
+  C chamber : e = q/Cc
+  R relief : f = if e > pc then Kv*(e - pc) else 0
+  0 n
+  pump -> n
+  n -> chamber
+  n -> relief
+  Se push : e = 10*(1 - step(t, t1))
+  I cart : f = p/2
+  C spring : e = 1000*q
+  R damper : e = 5*f
+  1 j
+  push -> j
+  j -> cart
+  j -> spring
+  j -> damper
+  experiment run
+    t_end = 1 [s]
+    atol = 1e-13
+  end
+end
+"""
+
+
+def test_a_rate_of_parameters_alone_is_evaluated_on_arrays_by_the_energy_account(tmp_path, monkeypatch):
+    """With the relief closed and before t1, the chamber's rate is Q0 alone: a number where the
+    cart's rates are rows over the steps. The account evaluates the model on all of a mode's points
+    at once all the same (the parameters given as rows), with the values the point-by-point
+    evaluation gives, and its balance closes: the pump supplies what the relief dissipates and the
+    chamber stores. The pump's 5e-5 m^3 would take the chamber to 500 bar: the relief holds it at
+    pc + Q0/Kv = 60 bar while the pump runs, and after t1 lets it down to pc, Cc pc = 5e-6 m^3
+    (time constant Cc/Kv = 10 ms); the pump's work is the closed form of that pressure."""
+    from bondc.analysis import energy as module
+
+    ss, experiment = load_text(tmp_path, PUMP_AND_CART)
+    result = simulate(ss, experiment)
+    calls = []
+    original = module._Model._columns
+
+    def counted(self, function, t, x, modes, rows):
+        def called(*arguments):
+            calls.append(np.size(arguments[0]))
+            return function(*arguments)
+        return original(self, called, t, x, modes, rows)
+
+    monkeypatch.setattr(module._Model, "_columns", counted)
+    account = energy_account(ss, result)
+    window = account.windows[0]
+    assert window.balance.relative_residual < 1e-6
+    pump, relief, chamber = (window.element(name) for name in ("pump", "relief", "chamber"))
+    held = result.states["chamber.q"][np.searchsorted(result.t, 0.45)]
+    assert held / 1e-12 == pytest.approx(50e5 + 1e-4 / 1e-10, rel=1e-6)
+    final_q = float(result.states["chamber.q"][-1])
+    assert final_q == pytest.approx(1e-12 * 50e5, rel=1e-6)
+    assert chamber.stored_change == pytest.approx(0.5 * final_q ** 2 / 1e-12, rel=1e-6)
+    # filling to pc in 50 ms at a pressure rising linearly, then pc + 10 bar (1 - exp(-t/10 ms))
+    assert pump.supplied == pytest.approx(1e-4 * (0.5 * 50e5 * 0.05 + 60e5 * 0.45 - 10e5 * 0.01), rel=1e-5)
+    assert pump.supplied == pytest.approx(relief.dissipated + chamber.stored_change, rel=1e-6)
+
+    # the arrays' values are the point-by-point ones
+    from bondc.simulate import compile_model
+
+    model = module._Model(compile_model(ss), {})
+    t = np.asarray(result.t, dtype=float)
+    x = np.array([result.states[name] for name in model.state_names])
+    modes = model.modes(t, x)
+    monkeypatch.setattr(module._Model, "_columns", original)
+    together = model.rhs(t, x, modes)
+    model.vectorized = False
+    one_by_one = model.rhs(t, x, modes)
+    assert np.array_equal(together, one_by_one)
+    assert result.t.size > 100 and len(calls) < 100 and max(calls) > 100     # per mode and sweep, not per point
