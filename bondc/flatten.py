@@ -474,7 +474,8 @@ class _Flattener:
                                     "on both)",
                                related=[Related(port.bond_span, f"the bond at port '{port_name}' inside "
                                                                 f"'{sub.model.name}'")]))
-            return None
+            # joined all the same, as the outside bond draws it: the element inside is bonded, and
+            # is not reported again as having no bond (the model does not compile either way)
         for name in port.names:
             self.aliases[name] = bond_name
         return dataclasses.replace(port.end, span=written.span)   # where it is written at this level

@@ -231,6 +231,17 @@ def test_an_instance_port_bonded_nowhere_is_one_error_at_the_instance(tmp_path):
                                                "port 'b' of instance 'p' is not bonded"]
 
 
+def test_a_port_drawn_the_wrong_way_is_one_error_and_its_element_inside_is_not_unbonded(tmp_path):
+    """std:mechanics' Gravity takes power in at its port; bonded from the port outward, the
+    model has one error, E342 at that bond: the weight inside is still bonded, so there is no
+    E401 "has no bond" in the library's file."""
+    text = ('import "std:mechanics"\nmodel Lift\n  Mass load : M = 3\n  Gravity weight : M = 3\n  1 j\n'
+            '  j -> load.a\n  weight.a -> j\nend\n')
+    diagnostics = _errors(tmp_path, text)
+    assert [(d.code, d.span.line, d.span.file.endswith("m.bg")) for d in diagnostics] == [("E342", 7, True)]
+    assert "'weight.a'" in diagnostics[0].message
+
+
 def test_an_error_inside_a_component_points_into_its_file_and_names_the_instance_path(tmp_path):
     library = PIPE.replace("e = R_h*f", "e = R_h*f + undefined_name")
     text = ('import "lib/pipes.bg"\n'
