@@ -1971,6 +1971,7 @@ class _Run:
         break_index = 0
         modes, chattering = self.restart_modes(t, y, None)
         candidates = self.sliding_candidates(t, y, modes, chattering)
+        self.passing = None
         self.record_start(t, y, self.mode_id(modes))
         zero_progress = 0
         # Time must advance: restarts that together move it less than this are a stall.
@@ -1995,6 +1996,7 @@ class _Run:
                                     self.mode_id(modes))
                     elif candidates and zero_progress <= 8 and len(candidates) <= _MAX_HELD:
                         held, modes, alpha = self.consistent_sliding_set(t, y, modes, candidates)
+                        self.note_passing(t, modes, held)
                         if held:
                             sliding = held
                             t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
@@ -2040,11 +2042,19 @@ class _Run:
                     if model.WHEN_LABELS:
                         y, modes, chattering = self.fire_when_clauses(t, y, old_modes, modes, chattering)
                     candidates = self.sliding_candidates(t, y, modes, chattering)
+                    only_candidates = set(candidates) - set(chattering)
                     chattering = sorted(set(chattering) | set(candidates))
                     relevant_now = self.relevant(t, y, modes) | self.last_relevant
                     self.last_relevant = np.ones(self.switch_count, dtype=bool)
                     changed = [k for k in range(self.switch_count) if modes[k] != old_modes[k]
                                and k not in chattering and relevant_now[k]]
+                    # a switch on its surface that does not chatter (a friction whose velocity
+                    # reaches 0) is a candidate for sliding, not a change: whether it changed is
+                    # known once the candidates are decided (note_passing); one that the segment
+                    # before held has its own events (its sliding span ends here)
+                    self.passing = (t, old_modes, [k for k in sorted(only_candidates) if relevant_now[k]
+                                                   and not (sliding is not None and k in sliding)],
+                                    bool(changed), self.chattering_since is None)
                     if at_break:
                         labels = {model.SWITCHES[k] for k in changed}
                         if breaks[break_index][1] not in labels:
@@ -2178,6 +2188,23 @@ class _Run:
                 "hint": "give some of these laws a narrow linear band around zero velocity (for a friction, "
                         "e = if abs(f) < v_band then F_s*f/v_band else coulomb(f, F_c, F_s)), or join parts "
                         "that always move together into one mass"}
+
+    def note_passing(self, t, modes, held):
+        """Note the switches that were candidates for sliding at the restart at ``t`` and are not
+        held, where their mode changed there: a friction whose velocity passes through 0 (the force
+        to hold it beyond its static limit) is an event like any switch's crossing. Only the event
+        list and its count: the run goes on as it would."""
+        if self.passing is None or self.passing[0] != t:
+            return
+        _, before, switches, counted, noting = self.passing
+        self.passing = None
+        flipped = [k for k in switches if k not in held and modes[k] != before[k]]
+        if not flipped or not noting:
+            return
+        for k in flipped:
+            self.note_event(t, f"{self.model.SWITCHES[k]} -> {int(modes[k]):+d}")
+        if not counted:
+            self.stats["events"] += 1
 
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that

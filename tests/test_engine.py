@@ -168,6 +168,51 @@ def test_two_masses_stick_at_once_and_the_first_friction_holds_the_push():
     np.testing.assert_allclose(result.outputs["F2"], 0.0, atol=1e-9)
 
 
+PASSING = """
+model Passing "a mass sliding up against a force beyond the static limit: it turns without sticking"
+  param m = 2 [kg]
+  param v0 = 3 [m/s]
+  param P = 10 [N]
+  param Fc = 4 [N]
+  param Fs = 6 [N]
+  Se push : e = -P
+  I mass : f = p/m, p(0) = m*v0
+  R friction : e = coulomb(f, Fc, Fs)
+  1 j
+  push -> j
+  j -> mass
+  j -> friction
+  output v [m/s] = mass.f
+  experiment run
+    t_end = 2 [s]
+  end
+end
+"""
+
+
+@pytest.mark.parametrize("native", ["1", "0"])
+def test_a_friction_whose_velocity_passes_through_zero_is_an_event(tmp_path, monkeypatch, native):
+    """The push P = 10 N is beyond the static limit Fs = 6 N, so the mass does not stick where its
+    velocity reaches 0: sliding forward it decelerates at (P + Fc)/m, so v = 0 at m v0/(P + Fc)
+    = 3/7 s, then back at (P - Fc)/m. The friction's turn is an event at that time, named by its
+    element, with the numpy code as with C; it was a candidate for sticking and went unnoted."""
+    monkeypatch.setenv("BONDC_NATIVE", native)
+    path = tmp_path / "passing.bg"
+    path.write_text(PASSING)
+    derived = derive_file(path, cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    assert result.complete, result.message
+    turn = 2 * 3 / (10 + 4)
+    turns = [(time, label) for time, label in result.events if label.startswith("coulomb(")]
+    assert len(turns) == 1 and turns[0][1].endswith("-> -1"), result.events
+    assert turns[0][0] == pytest.approx(turn, abs=1e-9)
+    assert "friction" in turns[0][1] and not [label for _, label in result.events if label.startswith("sliding")]
+    t, v = result.t, result.outputs["v"]
+    np.testing.assert_allclose(v[t <= turn], 3 - 7 * t[t <= turn], atol=1e-8)
+    np.testing.assert_allclose(v[t > turn], -3 * (t[t > turn] - turn), atol=1e-8)
+    assert result.stats["events"] == 1
+
+
 # ----------------------------------------------------------------------- PWM
 
 def _rl_closed_form(times, edges, levels, R, L):
