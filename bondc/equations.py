@@ -844,8 +844,10 @@ class BgPrinter(StrPrinter):
     ``if ... then ... else``, ``min``/``max``, ``and``/``or``/``not``, ``==``/``!=``.
 
     >>> x, y = sympy.symbols("x y", real=True)
-    >>> bg_text(sympy.Piecewise((sympy.Abs(x)**3, x < y), (sympy.Max(x, 1), True)))
-    '(if x < y then abs(x)^3 else max(1, x))'
+    >>> bg_text(sympy.Piecewise((sympy.Abs(x - y)**sympy.Rational(3, 2), x < y), (sympy.Max(x, 1), True)))
+    '(if x < y then abs(x - y)^(3/2) else max(1, x))'
+    >>> bg_text(sympy.Float("0.1") * x + sympy.Float("2.5e-7"))
+    '0.1*x + 2.5e-7'
     """
 
     def _print_Pow(self, expr, rational=False):
@@ -871,6 +873,17 @@ class BgPrinter(StrPrinter):
 
     def _print_Exp1(self, expr):
         return "exp(1)"
+
+    def _print_Float(self, expr):
+        # the shortest text that reads back as the same double (0.1, not sympy's 0.100000000000000)
+        value = float(expr)
+        if not math.isfinite(value):
+            return super()._print_Float(expr)
+        mantissa, _, exponent = repr(value).partition("e")
+        return f"{mantissa}e{int(exponent)}" if exponent else mantissa
+
+    def _print_Coulomb(self, expr):
+        return f"coulomb({', '.join(self._print(a) for a in expr.args)})"
 
     def _print_Step(self, expr):
         return f"step({', '.join(self._print(a) for a in expr.args)})"

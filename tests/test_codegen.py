@@ -390,7 +390,7 @@ def test_doctests():
 
     # importlib: bondc.codegen.emit as an attribute is the function the package re-exports
     for name in ("bondc.codegen.emit", "bondc.codegen.freeze", "bondc.codegen.printer", "bondc.runtime",
-                 "bondc.simulate"):
+                 "bondc.simulate", "bondc.equations"):
         result = doctest.testmod(importlib.import_module(name))
         assert result.attempted and not result.failed, name
 

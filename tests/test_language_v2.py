@@ -114,6 +114,24 @@ def test_equations_as_text_are_bg_expressions_that_mean_the_same(model):
             assert got == pytest.approx(expected, rel=1e-12, abs=1e-12, nan_ok=True), line
 
 
+def test_equations_as_text_print_coulomb_and_numbers_as_a_model_writes_them(tmp_path):
+    """``coulomb`` is the language's name (not sympy's class ``Coulomb``), and a number is the
+    shortest text that reads back as the same double (0.1, 2.5e-7; not 0.100000000000000); the
+    switches' labels, which events show (naming the bonds by their elements), the same."""
+    path = tmp_path / "slider.bg"
+    path.write_text("model Slider\n  Se push : e = 0.7*step(t, 0.1)\n  I mass : f = p/2\n"
+                    "  R friction : e = 2.5e-7*f + coulomb(f, 0.5, 0.6)\n  1 j\n  push -> j\n  j -> mass\n"
+                    "  j -> friction\nend\n")
+    ss = derive_file(path, cache=False).state_space
+    text = format_equations(ss, "text")
+    assert "coulomb(" in text and "Coulomb" not in text
+    assert "0.7*step(t, 0.1)" in text and "1.25e-7*mass.p" in text and "00000" not in text
+    from bondc.codegen.emit import emit
+
+    source = emit(ss)
+    assert "'step(t, 0.1) in b1.e'" in source and "'coulomb(b3.f) in b3.e'" in source
+
+
 def test_latex_keeps_table_breakpoints_and_multi_letter_names():
     ss = derive_file(FLAGSHIP, cache=False).state_space
     latex = format_equations(ss, "latex")
