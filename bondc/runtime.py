@@ -1208,6 +1208,26 @@ class _NativeDriver:
         count = self.count[0]
         return code, self.ts[:count], self.ys[:count]
 
+    def advance_reporting(self, watch, signs, band, g_old, t_eval, eval_next):
+        """One batch of a run reported at ``t_eval``, from its index ``eval_next`` on: (code, times,
+        states) of the steps as :meth:`advance` gives them, and (times, states, next index) of the
+        report points in the steps kept — see ``bondc_driver_advance_eval``."""
+        buffer, null = self.ffi.from_buffer, self.ffi.NULL
+        watched = int(watch.size)
+        if getattr(self, "et", None) is None:
+            self.et, self.ey = np.empty(self.capacity), np.empty((self.capacity, self.n))
+            self.eval_next, self.eval_count = self.ffi.new("int *"), self.ffi.new("int *")
+        self.eval_next[0] = int(eval_next)
+        code = self.lib.bondc_driver_advance_eval(
+            self.handle, self.capacity, watched, buffer("int[]", watch) if watched else null,
+            buffer("double[]", signs) if watched else null, buffer("double[]", band) if watched else null,
+            buffer("double[]", g_old) if watched else null, buffer("double[]", self.ts),
+            buffer("double[]", self.ys), self.count, buffer("double[]", t_eval), int(t_eval.size),
+            self.eval_next, self.capacity, buffer("double[]", self.et), buffer("double[]", self.ey),
+            self.eval_count)
+        count, reported = self.count[0], self.eval_count[0]
+        return code, self.ts[:count], self.ys[:count], (self.et[:reported], self.ey[:reported], self.eval_next[0])
+
     def slide(self, k, plus, minus, alpha, probe, others, drift):
         """Make the segment just started a sliding mode on switch ``k`` (see ``bondc_driver_slide``)."""
         buffer = self.ffi.from_buffer
@@ -2249,15 +2269,16 @@ class _Run:
     def driver_for(self, index, signs):
         """The native CVODE driver for a segment watching ``index`` in modes ``signs``, or None.
 
-        It serves CVODE runs that report every step (no ``t_eval``) of models whose C code
-        carries the driver, when every watched switch is a sign switch (floor switches keep the
-        step-by-step loop). It also serves sliding modes on one switch (:meth:`driver_sliding`)."""
+        It serves CVODE runs of models whose C code carries the driver, when every watched switch
+        is a sign switch (floor switches keep the step-by-step loop); a run reported at ``t_eval``
+        takes its report points from the driver's interpolant of each step (:meth:`record_reported`).
+        It also serves sliding modes (:meth:`driver_sliding`) of runs that report every step."""
         if self._driver is False:
             return None
         if self._driver is None:
             self._driver = False
             library = getattr(self.model, "native_library", None)
-            if (library is None or self.t_eval is not None or not isinstance(self.method, type)
+            if (library is None or not isinstance(self.method, type)
                     or not issubclass(self.method, CvodeSolver)):
                 return None
             driver = _NativeDriver.create(self.model, library, self.p, self.method.variant == "Adams")
@@ -2293,6 +2314,31 @@ class _Run:
         self.stats["linear_solver"] = driver.linear_solver
         self.stats[kind] = self.stats.get(kind, 0) + 1
 
+    def record_reported(self, driver, code, t_last, y_last, first, report_t, report_y, mode):
+        """Record the report points of a batch of the driver whose last kept step ends at
+        (``t_last``, ``y_last``), the run's report times from index ``first`` on: those the driver
+        stored, and those of its last step it had no room for (from CVODE's interpolant of that
+        step, which is still the driver's last). A batch cut short where a state grew without bound
+        (``code`` "diverged") keeps the points up to its last kept step."""
+        times, states = report_t, report_y
+        if code == "diverged":
+            kept = int(np.searchsorted(times, t_last, side="right"))
+            times, states = times[:kept], states[:kept]
+        stop = first + times.size
+        if code != "diverged":
+            more = int(np.searchsorted(self.t_eval, t_last, side="right"))
+            if more > stop:
+                extra = self.t_eval[stop:more]
+                times = np.concatenate([times, extra])
+                states = np.vstack([states] + [np.array(y_last, dtype=float) if te == t_last
+                                               else driver.interpolate(float(te)) for te in extra])
+                stop = more
+        self.eval_index = stop
+        if times.size:
+            self.blocks_t.append(times.copy())
+            self.blocks_x.append(states.T.copy())
+            self.blocks_mode.append(mode)
+
     def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband, resumed=None):
         """Integrate one segment with the native driver: (t, y, event) as :meth:`segment` returns,
         or ("handover", t, y) to go on step by step from there. ``resumed``: the piece the driver
@@ -2314,8 +2360,12 @@ class _Run:
                     # values it left of those this segment watches
                     code, ts, ys, left, resumed = resumed.resume, resumed.ts, resumed.ys, resumed.left, None
                     g_old[:] = [left[k] for k in index.tolist()]
-                else:
+                elif self.t_eval is None:
                     code, ts, ys = driver.advance(watch, signs, band, g_old)
+                else:
+                    first = self.eval_index
+                    code, ts, ys, (report_t, report_y, _) = driver.advance_reporting(
+                        watch, signs, band, g_old, self.t_eval, first)
                 done = len(ts) - (1 if code in (1, 4) else 0)
                 grown = ()      # the batch's states are finite (code 4 ends it before the first that is not)
                 if done and (ys[:done].max() >= DIVERGED or ys[:done].min() <= -DIVERGED):   # no |ys| copy
@@ -2334,9 +2384,13 @@ class _Run:
                                 return "handover", t_prev, y_prev    # the step loop diagnoses it
                     else:
                         creeping = 0        # the common batch, at once
-                    self.blocks_t.append(ts[:done].copy())
-                    self.blocks_x.append(ys[:done].T.copy())
-                    self.blocks_mode.append(mode)
+                    if self.t_eval is None:
+                        self.blocks_t.append(ts[:done].copy())
+                        self.blocks_x.append(ys[:done].T.copy())
+                        self.blocks_mode.append(mode)
+                    else:
+                        self.record_reported(driver, code, float(ts[done - 1]), ys[done - 1], first, report_t,
+                                             report_y, mode)
                     t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
                     if self.progress is not None:
                         self.progress(t_prev)
@@ -2361,7 +2415,7 @@ class _Run:
                     y_event = dense(t_event)
                     self.record(t_prev, t_event, y_event, dense, mode)
                     return t_event, y_event, k
-                self.record(t_prev, t_new, y_new, None, mode)
+                self.record(t_prev, t_new, y_new, None if self.t_eval is None else step.dense_output(), mode)
                 g_old[:] = values_new
                 t_prev, y_prev = t_new, y_new
                 if t_new >= t_stop:
@@ -3054,8 +3108,8 @@ class _Run:
             # the initial point: its outputs are those of the sliding combination too
             self.blocks_mode[0] = ("slide", tuple(corner_ids), weights_at(self.blocks_t[0], self.blocks_x[0]))
         driver = None
-        if not any(self.model.floor_switches[k] for k in sliding):
-            driver = self.driver_for(others, ())
+        if not any(self.model.floor_switches[k] for k in sliding) and self.t_eval is None:
+            driver = self.driver_for(others, ())       # (it records steps: a reported run slides in Python)
         if driver is not None:
             outcome = self.driver_sliding(driver, t, y, modes, sliding, corners, sides, corner_ids, others,
                                           drift, memory, weights_at, labels, t_stop)
@@ -3894,8 +3948,38 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
    Returns 0: capacity reached; 1: a possible crossing in the last stored step (g_old still holds
    the values before it); 2: t_stop reached; 3: a law was not finite at a trial point (nothing
    of the failed attempt is stored); 4: the state is not finite; < 0: CVODE's error flag. */
+static int driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
+                          const double *band, double *g_old, double *ts, double *ys, int *count,
+                          const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
+                          double *ey, int *eval_count);
+
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
                          const double *band, double *g_old, double *ts, double *ys, int *count)
+{
+    return driver_advance(d, capacity, watched, watch, signs, band, g_old, ts, ys, count, NULL, 0, NULL, 0,
+                          NULL, NULL, NULL);
+}
+
+/* bondc_driver_advance for a run reported at the times t_eval (n_eval of them, increasing): after
+   each step that is kept (no possible crossing in it, its state finite), the states at the report
+   times t_eval[*eval_next] <= t of that step, from CVODE's interpolant of the step (CVodeGetDky; the
+   step's own state at its end), into et/ey (*eval_count of them, at most eval_capacity). Where the
+   buffer fills, the batch ends after that step, and the report times of that step still left
+   (from *eval_next on) are the caller's to take from bondc_driver_dky before the next batch. */
+int bondc_driver_advance_eval(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
+                              const double *band, double *g_old, double *ts, double *ys, int *count,
+                              const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
+                              double *ey, int *eval_count)
+{
+    *eval_count = 0;
+    return driver_advance(d, capacity, watched, watch, signs, band, g_old, ts, ys, count, t_eval, n_eval,
+                          eval_next, eval_capacity, et, ey, eval_count);
+}
+
+static int driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
+                          const double *band, double *g_old, double *ts, double *ys, int *count,
+                          const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
+                          double *ey, int *eval_count)
 {
     double *y = N_VGetArrayPointer(d->y);
     *count = 0;
@@ -3921,7 +4005,22 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
             if (crossed) return 1;
             for (int j = 0; j < watched; j++) g_old[j] = d->g[watch[j]];
         }
+        int full = 0;
+        while (t_eval && *eval_next < n_eval && t_eval[*eval_next] <= t) {
+            if (*eval_count >= eval_capacity) { full = 1; break; }
+            double te = t_eval[*eval_next];
+            const double *source = y;
+            if (te != t) {
+                CVodeGetDky(d->cvode, te, 0, d->work);
+                source = N_VGetArrayPointer(d->work);
+            }
+            et[*eval_count] = te;
+            for (int i = 0; i < d->n; i++) ey[(long)*eval_count * d->n + i] = source[i];
+            (*eval_count)++;
+            (*eval_next)++;
+        }
         if (t >= d->t_stop) return 2;
+        if (full) return 0;
     }
     return 0;
 }
@@ -4316,6 +4415,10 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
                        double rtol, double atol, double max_step, double first_step, long max_steps);
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
                          const double *band, double *g_old, double *ts, double *ys, int *count);
+int bondc_driver_advance_eval(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
+                              const double *band, double *g_old, double *ts, double *ys, int *count,
+                              const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
+                              double *ey, int *eval_count);
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out);
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out);

@@ -396,6 +396,54 @@ def test_the_cvode_driver_integrates_whole_segments_in_c():
     assert run.stats["nfev"] > 0 and run.stats["steps"] == run.t.size - 1      # every step recorded once
 
 
+@needs_cc
+@pytest.mark.parametrize("model, points, capacity", [
+    ("models/mass_spring_damper.bg", 401, None),
+    ("models/mass_spring_damper.bg", 20_001, 16),          # many points per step: the buffer fills
+    ("models/electro_pneumatic_hybrid.bg", 2_001, None),   # friction sticking and sliding too
+    ("tests/fixtures/engine/pwm_rl.bg", 1_001, None),
+])
+def test_a_run_reported_on_a_grid_takes_its_points_from_the_driver_as_the_step_loop_does(
+        model, points, capacity, monkeypatch):
+    """A run with ``dt`` (the points at t_eval) is integrated by the C driver too, its report
+    points from CVODE's interpolant of each step (CVodeGetDky in C; where the batch's buffer is
+    full, the rest of that step's from Python through the same interpolant). It is the run the
+    step loop (scikit-sundae's CVODE stepped from Python, the only way before) gives, to the bit:
+    the same steps, events and points. The mass-spring-damper's points also equal the closed form."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(ROOT / model)
+    t_end = experiment.t_end
+    grid = np.linspace(0.0, t_end, points)
+
+    def run():
+        return namespace["simulate_model"](namespace["_MODEL"], t_eval=grid, t_end=t_end, rtol=experiment.rtol,
+                                           atol=experiment.atol, max_step=experiment.max_step)
+
+    with monkeypatch.context() as patch:
+        if capacity is not None:
+            patch.setattr(namespace["_NativeDriver"], "capacity_for", classmethod(lambda cls, n: capacity))
+        driven = run()
+    with monkeypatch.context() as patch:
+        patch.setattr(namespace["_Run"], "driver_segment",
+                      lambda self, driver, t, y, *rest, **named: ("handover", t, np.array(y, dtype=float)))
+        stepped = run()
+    assert driven.complete and stepped.complete
+    assert driven.stats["driver_segments"] >= 1 and "driver_segments" not in stepped.stats
+    np.testing.assert_array_equal(driven.t, grid)
+    np.testing.assert_array_equal(stepped.t, grid)
+    assert driven.events == stepped.events and driven.stats["steps"] == stepped.stats["steps"]
+    for name in driven.states:
+        np.testing.assert_array_equal(driven.states[name], stepped.states[name], err_msg=name)
+    if "mass_spring_damper" in model:
+        m, k, b, force, t0 = 2.0, 800.0, 12.0, 10.0, 0.1
+        wn, zeta = math.sqrt(k / m), b / (2 * math.sqrt(k * m))
+        wd, s = wn * math.sqrt(1 - zeta ** 2), grid - t0
+        expected = np.where(s >= 0, force / k * (1 - np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta / math.sqrt(
+            1 - zeta ** 2) * np.sin(wd * s))), 0.0)
+        np.testing.assert_allclose(driven.states["spring.q"], expected, rtol=0, atol=1e-4 * force / k)
+
+
 @functools.lru_cache(maxsize=None)
 def _compiled(path):
     """(generated module's namespace, first experiment) of a model, compiled once for this module."""
