@@ -476,6 +476,63 @@ model Fill
     assert np.all(np.diff(result.outputs["tank.p"]) >= 0) and result.outputs["tank.p"][-1] < 6e5 * (1 + 1e-9)
 
 
+def test_a_chamber_between_a_supply_and_the_atmosphere_settles_where_the_two_iso_valves_pass_the_same_mass_flow(
+        tmp_path):
+    """Supply (6 bar) -> ISO 6358 valve C1 -> chamber <- valve C2 <- the atmosphere (a supply at
+    1.01325 bar): each valve has the chamber at its port b, where its volume flow is measured, so
+    the bleed valve passes its flow backwards, from b to a. In steady state the two mass flows are
+    equal: C1 p_s phi(p/p_s) = C2 p phi(p_a/p), phi(r) = 1 for r <= b, sqrt(1 - ((r - b)/(1 - b))^2)
+    above (rho0 and sqrt(T0/T) cancel); the pressure is that equation's root."""
+    from scipy.optimize import brentq
+
+    text = '''import "std:pneumatics"
+model Bleed
+  PressureSupply supply : p_s = 6 [bar]
+  ISO6358Valve inlet : C = 2e-9, b_cr = 0.3
+  AdiabaticChamber chamber : V = 0.1 [L], p0 = 101325
+  ISO6358Valve bleed : C = 3e-9, b_cr = 0.3
+  PressureSupply atmosphere : p_s = 101325 [Pa]
+  0 node
+  supply.a -> inlet.a
+  inlet.b -> node
+  node -> chamber.a
+  atmosphere.a -> bleed.a
+  bleed.b -> node
+%TIGHT%end
+'''
+    result = _run(tmp_path, text, 3.0, 0.01)
+    phi = lambda r: 1.0 if r <= 0.3 else math.sqrt(1 - ((r - 0.3) / 0.7) ** 2)      # noqa: E731
+    p_s, p_a = 6e5, 101325.0
+    p = brentq(lambda x: 2e-9 * p_s * phi(x / p_s) - 3e-9 * x * phi(p_a / x), p_a * 1.001, p_s * 0.999,
+               xtol=1e-9, rtol=1e-15)
+    assert result.outputs["chamber.p"][-1] == pytest.approx(p, rel=1e-6)
+    assert -result.outputs["bleed.mdot"][-1] == pytest.approx(result.outputs["inlet.mdot"][-1], rel=1e-6)
+    assert -result.outputs["bleed.mdot"][-1] == pytest.approx(3e-9 * 1.185 * p * math.sqrt(293.15 / 293) *
+                                                              phi(p_a / p), rel=1e-6)
+
+
+def test_a_return_line_to_a_tank_holds_the_orifice_drop_above_the_tank_pressure(tmp_path):
+    """FlowSource Q -> chamber -> turbulent orifice -> Tank at p_t (power in at its port): the
+    chamber settles at p_t + (Q/(Cd A sqrt(2/rho)))^2."""
+    text = '''import "std:hydraulics"
+model Return
+  FlowSource pump : Q = 1e-4
+  Chamber line : V = 1e-4, p0 = 0
+  Orifice restrictor : Cd = 0.62, A = 1e-5, rho = 850
+  Tank tank : p_t = 2 [bar]
+  0 node
+  pump.a -> node
+  node -> line.a
+  node -> restrictor.a
+  restrictor.b -> tank.a
+%TIGHT%end
+'''
+    result = _run(tmp_path, text, 0.2, 0.01)
+    expected = 2e5 + (1e-4 / (0.62 * 1e-5 * math.sqrt(2 / 850))) ** 2
+    assert result.outputs["line.p"][-1] == pytest.approx(expected, rel=1e-6)
+    assert result.outputs["restrictor.Q"][-1] == pytest.approx(1e-4, rel=1e-6)
+
+
 # ------------------------------------------------------------ transmissions
 
 def test_gear_ball_screw_lead_screw_and_belt(tmp_path):
