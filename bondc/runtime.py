@@ -1214,9 +1214,7 @@ class _NativeDriver:
         report points in the steps kept — see ``bondc_driver_advance_eval``."""
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
         watched = int(watch.size)
-        if getattr(self, "et", None) is None:
-            self.et, self.ey = np.empty(self.capacity), np.empty((self.capacity, self.n))
-            self.eval_next, self.eval_count = self.ffi.new("int *"), self.ffi.new("int *")
+        self._report_buffers()
         self.eval_next[0] = int(eval_next)
         code = self.lib.bondc_driver_advance_eval(
             self.handle, self.capacity, watched, buffer("int[]", watch) if watched else null,
@@ -1286,6 +1284,29 @@ class _NativeDriver:
         count = self.count[0]
         held = self.alphas.size // self.capacity
         return code, self.ts[:count], self.ys[:count], self.alphas[:count * held].reshape(count, held)
+
+    def slide_advance_reporting(self, old, t_eval, eval_next):
+        """:meth:`slide_advance` of a run reported at ``t_eval`` from its index ``eval_next`` on, and
+        (times, states, next index) of the report points in the steps kept, as
+        :meth:`advance_reporting` gives them (``bondc_driver_slide_advance_eval``)."""
+        buffer = self.ffi.from_buffer
+        self._report_buffers()
+        self.eval_next[0] = int(eval_next)
+        code = self.lib.bondc_driver_slide_advance_eval(
+            self.handle, self.capacity, buffer("double[]", old), buffer("double[]", self.exits),
+            buffer("double[]", self.ts), buffer("double[]", self.ys), buffer("double[]", self.alphas), self.count,
+            buffer("double[]", t_eval), int(t_eval.size), self.eval_next, self.capacity,
+            buffer("double[]", self.et), buffer("double[]", self.ey), self.eval_count)
+        count, reported = self.count[0], self.eval_count[0]
+        held = self.alphas.size // self.capacity
+        return (code, self.ts[:count], self.ys[:count], self.alphas[:count * held].reshape(count, held),
+                (self.et[:reported], self.ey[:reported], self.eval_next[0]))
+
+    def _report_buffers(self):
+        """The buffers of a batch's report points (made at the first batch of a reported run)."""
+        if getattr(self, "et", None) is None:
+            self.et, self.ey = np.empty(self.capacity), np.empty((self.capacity, self.n))
+            self.eval_next, self.eval_count = self.ffi.new("int *"), self.ffi.new("int *")
 
     def deadbands(self, t, y, modes, index, rtol, atol):
         """:meth:`_Run.deadbands` in C (the same sums in the same order), or None where it cannot run."""
@@ -2272,7 +2293,7 @@ class _Run:
         It serves CVODE runs of models whose C code carries the driver, when every watched switch
         is a sign switch (floor switches keep the step-by-step loop); a run reported at ``t_eval``
         takes its report points from the driver's interpolant of each step (:meth:`record_reported`).
-        It also serves sliding modes (:meth:`driver_sliding`) of runs that report every step."""
+        It also serves sliding modes (:meth:`driver_sliding`)."""
         if self._driver is False:
             return None
         if self._driver is None:
@@ -2319,7 +2340,8 @@ class _Run:
         (``t_last``, ``y_last``), the run's report times from index ``first`` on: those the driver
         stored, and those of its last step it had no room for (from CVODE's interpolant of that
         step, which is still the driver's last). A batch cut short where a state grew without bound
-        (``code`` "diverged") keeps the points up to its last kept step."""
+        (``code`` "diverged") keeps the points up to its last kept step. ``mode``: the points' mode,
+        or a function of their (times, states) that gives it (a sliding mode's weights)."""
         times, states = report_t, report_y
         if code == "diverged":
             kept = int(np.searchsorted(times, t_last, side="right"))
@@ -2337,7 +2359,7 @@ class _Run:
         if times.size:
             self.blocks_t.append(times.copy())
             self.blocks_x.append(states.T.copy())
-            self.blocks_mode.append(mode)
+            self.blocks_mode.append(mode(self.blocks_t[-1], self.blocks_x[-1]) if callable(mode) else mode)
 
     def driver_segment(self, driver, t, y, modes, t_stop, mode, index, signs, values_old, deadband, resumed=None):
         """Integrate one segment with the native driver: (t, y, event) as :meth:`segment` returns,
@@ -3108,8 +3130,8 @@ class _Run:
             # the initial point: its outputs are those of the sliding combination too
             self.blocks_mode[0] = ("slide", tuple(corner_ids), weights_at(self.blocks_t[0], self.blocks_x[0]))
         driver = None
-        if not any(self.model.floor_switches[k] for k in sliding) and self.t_eval is None:
-            driver = self.driver_for(others, ())       # (it records steps: a reported run slides in Python)
+        if not any(self.model.floor_switches[k] for k in sliding):
+            driver = self.driver_for(others, ())
         if driver is not None:
             outcome = self.driver_sliding(driver, t, y, modes, sliding, corners, sides, corner_ids, others,
                                           drift, memory, weights_at, labels, t_stop)
@@ -3181,19 +3203,29 @@ class _Run:
         positive = sides[:, 0] > 0
         try:
             while True:
-                code, ts, ys, alphas = driver.slide_advance(old)
+                if self.t_eval is None:
+                    code, ts, ys, alphas = driver.slide_advance(old)
+                else:
+                    first = self.eval_index
+                    code, ts, ys, alphas, (report_t, report_y, _) = driver.slide_advance_reporting(
+                        old, self.t_eval, first)
                 done = len(ts) - (1 if code == 1 else 0)
                 if done > 0:
                     self.stats["steps"] += done
-                    weights = np.clip(alphas[:done], 0.0, 1.0)
-                    self.blocks_t.append(ts[:done].copy())
-                    self.blocks_x.append(ys[:done].T.copy())
-                    if len(sliding) == 1:
-                        weights = weights[:, 0]
-                        weights = np.where(positive[:, None], weights[None, :], 1.0 - weights[None, :])
+                    if self.t_eval is not None:     # the weights at the report points, as the step loop's
+                        self.record_reported(driver, code, float(ts[done - 1]), ys[done - 1], first, report_t,
+                                             report_y, lambda times, states: ("slide", tuple(corner_ids),
+                                                                              weights_at(times, states)))
                     else:
-                        weights = np.array([self.corner_weights(w, sides) for w in weights]).T
-                    self.blocks_mode.append(("slide", tuple(corner_ids), weights))
+                        weights = np.clip(alphas[:done], 0.0, 1.0)
+                        self.blocks_t.append(ts[:done].copy())
+                        self.blocks_x.append(ys[:done].T.copy())
+                        if len(sliding) == 1:
+                            weights = weights[:, 0]
+                            weights = np.where(positive[:, None], weights[None, :], 1.0 - weights[None, :])
+                        else:
+                            weights = np.array([self.corner_weights(w, sides) for w in weights]).T
+                        self.blocks_mode.append(("slide", tuple(corner_ids), weights))
                     t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
                     if np.all(np.isfinite(alphas[done - 1])):
                         memory["alpha"] = alphas[done - 1].copy()
@@ -3952,6 +3984,8 @@ static int driver_advance(bondc_driver *d, int capacity, int watched, const int 
                           const double *band, double *g_old, double *ts, double *ys, int *count,
                           const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
                           double *ey, int *eval_count);
+static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
+                       int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
                          const double *band, double *g_old, double *ts, double *ys, int *count)
@@ -4005,20 +4039,7 @@ static int driver_advance(bondc_driver *d, int capacity, int watched, const int 
             if (crossed) return 1;
             for (int j = 0; j < watched; j++) g_old[j] = d->g[watch[j]];
         }
-        int full = 0;
-        while (t_eval && *eval_next < n_eval && t_eval[*eval_next] <= t) {
-            if (*eval_count >= eval_capacity) { full = 1; break; }
-            double te = t_eval[*eval_next];
-            const double *source = y;
-            if (te != t) {
-                CVodeGetDky(d->cvode, te, 0, d->work);
-                source = N_VGetArrayPointer(d->work);
-            }
-            et[*eval_count] = te;
-            for (int i = 0; i < d->n; i++) ey[(long)*eval_count * d->n + i] = source[i];
-            (*eval_count)++;
-            (*eval_next)++;
-        }
+        int full = report_step(d, t, y, t_eval, n_eval, eval_next, eval_capacity, et, ey, eval_count);
         if (t >= d->t_stop) return 2;
         if (full) return 0;
     }
@@ -4299,8 +4320,51 @@ void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
    sliding mode. Returns 0: capacity reached; 1: a possible end in the last stored step (`old`
    still holds the values before it); 2: t_stop reached; 3: a law was not finite at a trial
    point; 4: the state or the combination at a step is not finite; < 0: CVODE's error flag. */
+static int slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts, double *ys,
+                         double *alphas, int *count, const double *t_eval, int n_eval, int *eval_next,
+                         int eval_capacity, double *et, double *ey, int *eval_count);
+
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count)
+{
+    return slide_advance(d, capacity, old, exits, ts, ys, alphas, count, NULL, 0, NULL, 0, NULL, NULL, NULL);
+}
+
+/* bondc_driver_slide_advance for a run reported at t_eval: the report points of each kept step as
+   bondc_driver_advance_eval stores them (the caller takes the weights of the combination there). */
+int bondc_driver_slide_advance_eval(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
+                                    double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
+                                    int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count)
+{
+    *eval_count = 0;
+    return slide_advance(d, capacity, old, exits, ts, ys, alphas, count, t_eval, n_eval, eval_next,
+                         eval_capacity, et, ey, eval_count);
+}
+
+/* The report points t_eval[*eval_next] <= t of the step just taken, into et/ey; 1 where the buffer
+   filled first (the rest of that step's are the caller's, from bondc_driver_dky). */
+static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
+                       int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count)
+{
+    while (t_eval && *eval_next < n_eval && t_eval[*eval_next] <= t) {
+        if (*eval_count >= eval_capacity) return 1;
+        double te = t_eval[*eval_next];
+        const double *source = y;
+        if (te != t) {
+            CVodeGetDky(d->cvode, te, 0, d->work);
+            source = N_VGetArrayPointer(d->work);
+        }
+        et[*eval_count] = te;
+        for (int i = 0; i < d->n; i++) ey[(long)*eval_count * d->n + i] = source[i];
+        (*eval_count)++;
+        (*eval_next)++;
+    }
+    return 0;
+}
+
+static int slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts, double *ys,
+                         double *alphas, int *count, const double *t_eval, int n_eval, int *eval_next,
+                         int eval_capacity, double *et, double *ey, int *eval_count)
 {
     double *y = N_VGetArrayPointer(d->y);
     int held = d->held > 1 ? d->held : 1;
@@ -4332,7 +4396,9 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
         for (int j = 0; j < watched; j++)
             if ((old[j] > 0 && exits[j] <= 0) || (old[j] >= 0 && exits[j] < 0)) return 1;
         for (int j = 0; j < watched; j++) old[j] = exits[j];
+        int full = report_step(d, t, y, t_eval, n_eval, eval_next, eval_capacity, et, ey, eval_count);
         if (t >= d->t_stop) return 2;
+        if (full) return 0;
     }
     return 0;
 }
@@ -4432,6 +4498,9 @@ int bondc_driver_restart(bondc_driver *d, double t, const double *y, const doubl
                          double probe, int strict, double *out);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count);
+int bondc_driver_slide_advance_eval(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
+                                    double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
+                                    int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
 void bondc_driver_counts(bondc_driver *d, long *out);
 int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,

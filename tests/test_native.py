@@ -409,7 +409,9 @@ def test_a_run_reported_on_a_grid_takes_its_points_from_the_driver_as_the_step_l
     points from CVODE's interpolant of each step (CVodeGetDky in C; where the batch's buffer is
     full, the rest of that step's from Python through the same interpolant). It is the run the
     step loop (scikit-sundae's CVODE stepped from Python, the only way before) gives, to the bit:
-    the same steps, events and points. The mass-spring-damper's points also equal the closed form."""
+    the same steps, events and points. A sliding mode's report points come from the driver too (the
+    weights of the combination taken there as the step loop takes them): the same as the step
+    loop's sliding to rounding. The mass-spring-damper's points also equal the closed form."""
     if runtime._sundials_link() is None:
         pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
     namespace, experiment = _compiled(ROOT / model)
@@ -424,17 +426,29 @@ def test_a_run_reported_on_a_grid_takes_its_points_from_the_driver_as_the_step_l
         if capacity is not None:
             patch.setattr(namespace["_NativeDriver"], "capacity_for", classmethod(lambda cls, n: capacity))
         driven = run()
+    handover = lambda self, driver, t, y, *rest, **named: ("handover", t, np.array(y, dtype=float))  # noqa: E731
     with monkeypatch.context() as patch:
-        patch.setattr(namespace["_Run"], "driver_segment",
-                      lambda self, driver, t, y, *rest, **named: ("handover", t, np.array(y, dtype=float)))
+        patch.setattr(namespace["_Run"], "driver_segment", handover)
         stepped = run()
-    assert driven.complete and stepped.complete
+        patch.setattr(namespace["_Run"], "driver_sliding", handover)
+        all_stepped = run()
+    assert driven.complete and stepped.complete and all_stepped.complete
     assert driven.stats["driver_segments"] >= 1 and "driver_segments" not in stepped.stats
     np.testing.assert_array_equal(driven.t, grid)
     np.testing.assert_array_equal(stepped.t, grid)
     assert driven.events == stepped.events and driven.stats["steps"] == stepped.stats["steps"]
     for name in driven.states:
         np.testing.assert_array_equal(driven.states[name], stepped.states[name], err_msg=name)
+    # sliding modes too: the driver's combination in C against the step loop's, to rounding
+    if driven.stats.get("sliding_segments"):
+        assert driven.stats["driver_sliding_segments"] == driven.stats["sliding_segments"]
+        assert "driver_sliding_segments" not in all_stepped.stats
+        for group in ("states", "outputs"):
+            for name, values in getattr(all_stepped, group).items():
+                scale = max(float(np.ptp(values)), 1e-300)
+                np.testing.assert_allclose(getattr(driven, group)[name], values, rtol=0, atol=1e-10 * scale,
+                                           err_msg=name)
+        assert [label for _, label in driven.events] == [label for _, label in all_stepped.events]
     if "mass_spring_damper" in model:
         m, k, b, force, t0 = 2.0, 800.0, 12.0, 10.0, 0.1
         wn, zeta = math.sqrt(k / m), b / (2 * math.sqrt(k * m))
