@@ -129,3 +129,32 @@ def test_incomplete_simulation_does_not_validate(simulated, tmp_path, capsys):
     assert code == 1 and results[0].passed
     assert results[0].t_end < 0.0101
     assert "E810" in capsys.readouterr().err
+
+
+def test_an_output_declared_in_millimetres_is_validated_in_millimetres(tmp_path):
+    """An output declared [mm] against a column measured in [mm] that is off by 0.5 mm everywhere: the
+    RMSE and the largest error are 0.5 (mm) in the table and the JUnit file, and an rmse tolerance
+    is read in millimetres too (0.4 fails, 0.6 passes). In SI, 5e-4 m, both would have passed."""
+    model = tmp_path / "msd.bg"
+    model.write_text((Path(__file__).parent.parent / "models" / "mass_spring_damper.bg").read_text()
+                     .replace("output x        [m]   = spring.q", "output x [mm] = spring.q"), encoding="utf-8")
+    assert "output x [mm] = spring.q" in model.read_text()
+    result = simulate_run(model)
+    lines = ["t [s],x_meas [mm]"] + [f"{float(t)!r},{float(x) * 1e3 + 0.5!r}"
+                                       for t, x in zip(result.t, result.outputs["x"])]
+    data = tmp_path / "bench.csv"
+    data.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    outcomes = {}
+    for limit in (0.4, 0.6):
+        stream = io.StringIO()
+        results, code = run_validate(model, data=data, compare=[f"x=x_meas:rmse={limit}"],
+                                     junit=tmp_path / f"junit{limit}.xml", stream=stream)
+        (signal,) = results
+        assert signal.rmse == pytest.approx(0.5, rel=1e-9) and signal.maxabs == pytest.approx(0.5, rel=1e-9)
+        outcomes[limit] = (code, signal.passed)
+        row = next(line for line in stream.getvalue().splitlines() if line.startswith("x "))
+        assert row.split()[2:5] == ["mm", str(result.t.size), "0.5"]
+        junit = ET.parse(tmp_path / f"junit{limit}.xml").getroot()
+        rmse = [p.get("value") for p in junit.iter("property") if p.get("name") == "rmse"]
+        assert [float(value) for value in rmse] == pytest.approx([0.5], rel=1e-6)
+    assert outcomes == {0.4: (1, False), 0.6: (0, True)}

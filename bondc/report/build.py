@@ -59,7 +59,7 @@ from bondc.report.render import (
     causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
 )
 from bondc.report.validate import (
-    CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
+    TIME_KEY, CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
 )
 from bondc.symbolic import Translator, as_sympy
 
@@ -295,11 +295,24 @@ def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> l
 
 def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
                 specs: Iterable[CompareSpec]) -> list[SignalResult]:
-    """:func:`~bondc.report.validate.compare` the run's signals with the measured columns."""
+    """:func:`~bondc.report.validate.compare` the run's signals with the measured columns, each pair
+    in the signal's display unit (an output declared ``[mm]`` is compared in millimetres): its RMSE,
+    largest error and the ``rmse``/``maxabs`` tolerances are in that unit, as the terminal table,
+    the JUnit file and the report show them (NRMSE and R² do not depend on the unit)."""
     if run.result is None:
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))
-    return compare(run.result.t, simulated_signals(run.result), measured, specs)
+    signals = simulated_signals(run.result)
+    results = []
+    for spec in specs:
+        _, factor = _signal_unit(run.graph, spec.output)
+        if spec.output not in signals or spec.column not in measured or factor == 1.0:
+            results += compare(run.result.t, signals, measured, [spec])     # (its own errors, if any)
+            continue
+        shown = {spec.output: np.asarray(signals[spec.output], dtype=float) / factor}
+        columns = {TIME_KEY: measured[TIME_KEY], spec.column: np.asarray(measured[spec.column], dtype=float) / factor}
+        results += compare(run.result.t, shown, columns, [spec])
+    return results
 
 
 def _signal_unit(graph: BondGraph, name: str) -> tuple[str | None, float]:
@@ -315,8 +328,8 @@ def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_f
     """The report's validation section: the metrics, and per signal the curves overlaid and the error."""
     plots = []
     for result in results:
-        unit, factor = _signal_unit(run.graph, result.output)
-        simulated, measured = result.simulated / factor, result.measured / factor
+        unit, _ = _signal_unit(run.graph, result.output)
+        simulated, measured = result.simulated, result.measured      # (in the signal's unit: compare_run)
         title = f"{result.output} simulated and {result.column} measured"
         plots.append(Plot(title, _time_plot(
             result.t, {f"{result.column} (measured)": measured, f"{result.output} (simulated)": simulated},
@@ -328,17 +341,19 @@ def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_f
         ylabel = "error" + (f" [{plot_unit(unit)}]" if unit else " (SI)")
         plots.append(Plot(title, _time_plot(result.t, {"error": simulated - measured}, title, ylabel, half=True,
                                             styles={"error": {"color": "#a40e26", "linewidth": 1.0}}),
-                          f"Largest |error| {result.maxabs / factor:.4g}{' ' + plot_unit(unit) if unit else ''}", True))
+                          f"Largest |error| {result.maxabs:.4g}{' ' + plot_unit(unit) if unit else ''}", True))
     return ValidationSection(results, str(data_file), plots, str(junit_file) if junit_file else None)
 
 
-def validation_table(results: Sequence[SignalResult]) -> str:
-    """The metrics of every compared signal as a text table, then what failed."""
-    header = ("signal", "measured", "samples", "RMSE", "NRMSE", "max |err|", "R²", "result")
-    rows = [(r.output, r.column, str(r.n_samples), f"{r.rmse:.4g}", f"{r.nrmse:.4g}", f"{r.maxabs:.4g}",
-             f"{r.r2:.4g}", "pass" if r.passed else "FAIL") for r in results]
+def validation_table(results: Sequence[SignalResult], units: Mapping[str, str | None] | None = None) -> str:
+    """The metrics of every compared signal as a text table, then what failed; ``units``: each
+    signal's display unit (RMSE and max |err| are in it; "SI" where it has none)."""
+    units = units or {}
+    header = ("signal", "measured", "unit", "samples", "RMSE", "NRMSE", "max |err|", "R²", "result")
+    rows = [(r.output, r.column, units.get(r.output) or "SI", str(r.n_samples), f"{r.rmse:.4g}", f"{r.nrmse:.4g}",
+             f"{r.maxabs:.4g}", f"{r.r2:.4g}", "pass" if r.passed else "FAIL") for r in results]
     widths = [max(len(cell) for cell in column) for column in zip(header, *rows)]
-    numeric = {2, 3, 4, 5, 6}
+    numeric = {3, 4, 5, 6, 7}
 
     def line(cells):
         return "  ".join(cell.rjust(w) if i in numeric else cell.ljust(w)
@@ -387,7 +402,7 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
         from bondc.errors import render_all
 
         print(render_all(assumed), file=errors)
-    print(validation_table(results), file=stream)
+    print(validation_table(results, {r.output: _signal_unit(run.graph, r.output)[0] for r in results}), file=stream)
     suite = run.graph.name + (f".{run.experiment.name}" if run.experiment is not None else "")
     if junit is not None:
         Path(junit).parent.mkdir(parents=True, exist_ok=True)
