@@ -664,6 +664,7 @@ class _Model:
         self.SWITCH_DEPENDS = optional("SWITCH_DEPENDS", lambda d: tuple(map(tuple, d)), None)
         self.SWITCH_VERTICES = optional("SWITCH_VERTICES", lambda v: tuple(map(float, v)), (1.0,) * count)
         self.SWITCH_KINDS = optional("SWITCH_KINDS", tuple, ("sign",) * count)
+        self.SWITCH_TRUTH = optional("SWITCH_TRUTH", lambda v: tuple(map(int, v)), (0,) * count)
         self.SWITCH_OWNERS = optional("SWITCH_OWNERS", tuple, ("",) * count)
         self.TIME_SWITCHES = optional("TIME_SWITCHES", lambda k: tuple(map(int, k)), ())
         # a model with an algebraic loop: its switches of time alone, over arrays of times
@@ -1999,6 +2000,14 @@ class _Run:
             relevant |= self.relevant(t, y, np.asarray(row, dtype=float))
         return [k for k in switches if relevant[k]]
 
+    def mode_label(self, k, mode) -> str:
+        """What an event says of switch ``k`` entering ``mode``: an ``if``'s condition becoming true
+        or false (``if h < 0.4 in pump.f -> false``), else the mode (``sign(v) in friction.e -> -1``)."""
+        truth = self.model.SWITCH_TRUTH[k]
+        if truth and mode != 0:
+            return f"{self.model.SWITCHES[k]} -> {'true' if mode * truth > 0 else 'false'}"
+        return f"{self.model.SWITCHES[k]} -> {int(mode):+d}"
+
     def note_event(self, t, label):
         self.events.append((float(t), label))
 
@@ -2109,7 +2118,7 @@ class _Run:
                         if sliding is not None and k in sliding:
                             continue
                         if self.chattering_since is None or model.SWITCHES[k] in known_here:
-                            self.note_event(t, f"{model.SWITCHES[k]} -> {int(modes[k]):+d}")
+                            self.note_event(t, self.mode_label(k, modes[k]))
                     if changed:
                         self.stats["events"] += 1
                         if not at_break:            # changes at known times are no chattering
@@ -2243,7 +2252,7 @@ class _Run:
         if not flipped or not noting:
             return
         for k in flipped:
-            self.note_event(t, f"{self.model.SWITCHES[k]} -> {int(modes[k]):+d}")
+            self.note_event(t, self.mode_label(k, modes[k]))
         if not counted:
             self.stats["events"] += 1
 

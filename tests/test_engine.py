@@ -213,6 +213,20 @@ def test_a_friction_whose_velocity_passes_through_zero_is_an_event(tmp_path, mon
     assert result.stats["events"] == 1
 
 
+def test_an_if_conditions_event_says_whether_it_became_true_or_false(tmp_path):
+    """A store filled at 1 unit/s passes 2 at t = 2 and 3 at t = 3: the event of ``if c.q < 2`` says
+    "false" there and that of ``if c.q > 3`` "true" (a mode of +1 meant false for the first and true
+    for the second)."""
+    path = tmp_path / "labels.bg"
+    path.write_text("model Labels\n  MSf src : f = 1\n  C c : e = q\n  R low : f = if c.q < 2 then 0 else 1e-9*e\n"
+                    "  R high : f = if c.q > 3 then 1e-9*e else 0\n  0 n\n  src -> n\n  n -> c\n  n -> low\n"
+                    "  n -> high\n  experiment run\n    t_end = 4 [s]\n  end\nend\n")
+    result = run(path)
+    assert result.complete, result.message
+    events = [(round(time, 6), label) for time, label in result.events]
+    assert events == [(2.0, "if c.q < 2 in low.f -> false"), (3.0, "if c.q > 3 in high.f -> true")], events
+
+
 # ----------------------------------------------------------------------- PWM
 
 def _rl_closed_form(times, edges, levels, R, L):

@@ -70,7 +70,7 @@ ARGUMENTS = ("t", "x", "p", "m")
 MODULE_NAMES = (
     "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "VARIABLE_ROWS", "BOND_VARIABLES",
     "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "SWITCH_VERTICES",
-    "SWITCH_KINDS", "SWITCH_OWNERS", "JACOBIAN_PATTERN", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
+    "SWITCH_KINDS", "SWITCH_TRUTH", "SWITCH_OWNERS", "JACOBIAN_PATTERN", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
     "_when_conditions", "DEFAULTS",
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
@@ -937,6 +937,7 @@ class _Emitter:
                                                   multiline=len(plan.switches) > 8))
         lines.append("SWITCH_VERTICES = " + _tuple(float(s.vertex) for s in plan.switches))
         lines.append("SWITCH_KINDS = " + _tuple(s.kind for s in plan.switches))
+        lines.append("SWITCH_TRUTH = " + _tuple(s.truth for s in plan.switches))
         # the Jacobian's structural non-zeros, column by column (the order of a CSC matrix)
         pattern = sorted(plan.jacobian_entries, key=lambda key: (key[1], key[0]))
         lines.append("JACOBIAN_PATTERN = (" + "".join(f"({i}, {j}), " for i, j in pattern).rstrip() + ")")

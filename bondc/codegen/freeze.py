@@ -69,6 +69,7 @@ class Switch:
     time_only: bool = False         # g is a function of time alone (no state, no mode): its zeros can be found ahead
     owner: str = ""                 # the variable whose law has it (for diagnostics: its line)
     breaks: list = field(default_factory=list)   # [(time expr, label)] when known in advance
+    truth: int = 0                  # an if's condition: the mode where it holds (+1 for a > b, -1 for a < b)
 
 
 @dataclass
@@ -136,12 +137,13 @@ class Freezer:
             return None
         return -offset / slope
 
-    def switch(self, g, label: str, kind: str, shared: bool = True):
+    def switch(self, g, label: str, kind: str, shared: bool = True, truth: int = 0):
         """The mode expression (``m`` or ``-m``) of switching function ``g``, registering it if new.
 
         ``shared=False`` gives a switch of its own even when another has the same ``g``
         (a ``coulomb`` friction, whose sliding sides are its static limits). ``kind="floor"``
-        makes an integer mode ``m = floor(g)``, shared only with other floors of ``g``.
+        makes an integer mode ``m = floor(g)``, shared only with other floors of ``g``. ``truth``:
+        for the condition of an ``if`` (its label), the mode in which it holds.
         """
         g = as_sympy(g)
         floor = kind == "floor"
@@ -158,7 +160,7 @@ class Freezer:
         index = len(self.switches)
         mode = sympy.Symbol(f"_m{index}", real=True)
         switch = Switch(index, g, mode, f"{label} in {self._owner}" if self._owner else label,
-                        kind="floor" if floor else "sign", owner=self._owner)
+                        kind="floor" if floor else "sign", owner=self._owner, truth=truth)
         # a floor of a linear function of time jumps at every integer: found ahead, not one root
         root = None if floor else self._linear_time_root(g)
         if not (g.free_symbols - self.parameters):
@@ -210,7 +212,9 @@ class Freezer:
             return cond
         if isinstance(cond, Relational):
             lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
-            mode = self.switch(lhs - rhs, f"if {_short(cond)}", "if")
+            truth = 1 if isinstance(cond, (sympy.StrictGreaterThan, sympy.GreaterThan)) else \
+                -1 if isinstance(cond, (sympy.StrictLessThan, sympy.LessThan)) else 0
+            mode = self.switch(lhs - rhs, f"if {_short(cond)}", "if", truth=truth)
             return type(cond)(mode, 0) if not isinstance(cond, (sympy.Eq, sympy.Ne)) else \
                 type(cond)(mode, 0, evaluate=False)
         if isinstance(cond, (sympy.And, sympy.Or, sympy.Not, sympy.Xor)):
