@@ -1303,6 +1303,29 @@ class _NativeDriver:
         return (code, self.ts[:count], self.ys[:count], self.alphas[:count * held].reshape(count, held),
                 (self.et[:reported], self.ey[:reported], self.eval_next[0]))
 
+    def unfrozen_advance(self, floors, t_eval=None, eval_next=0):
+        """One batch of the unfrozen law of the segment just started: (code, times, states, modes of
+        each step) and, with ``t_eval``, (times, states, next index) of the report points in it —
+        see ``bondc_driver_unfrozen_advance``. ``floors``: the floor switches (kept by the caller)."""
+        buffer, null = self.ffi.from_buffer, self.ffi.NULL
+        switches = max(self.modes.size, 1)
+        if getattr(self, "ms", None) is None or self.ms.shape[1] != switches:
+            self.ms = np.empty((self.capacity, switches))
+        reporting = t_eval is not None
+        if reporting:
+            self._report_buffers()
+            self.eval_next[0] = int(eval_next)
+        code = self.lib.bondc_driver_unfrozen_advance(
+            self.handle, self.capacity, buffer("int[]", floors), buffer("double[]", self.ts),
+            buffer("double[]", self.ys), buffer("double[]", self.ms), self.count,
+            buffer("double[]", t_eval) if reporting else null, int(t_eval.size) if reporting else 0,
+            self.eval_next if reporting else null, self.capacity if reporting else 0,
+            buffer("double[]", self.et) if reporting else null, buffer("double[]", self.ey) if reporting else null,
+            self.eval_count if reporting else null)
+        count = self.count[0]
+        report = (self.et[:self.eval_count[0]], self.ey[:self.eval_count[0]], self.eval_next[0]) if reporting else None
+        return code, self.ts[:count], self.ys[:count], self.ms[:count, :self.modes.size], report
+
     def _report_buffers(self):
         """The buffers of a batch's report points (made at the first batch of a reported run)."""
         if getattr(self, "et", None) is None:
@@ -3312,6 +3335,10 @@ class _Run:
             state["modes"] = self.modes_at(tt, yy, state["modes"])
             return state["modes"]
 
+        if method is None:
+            outcome = self.driver_unfrozen(t, y, modes, t_stop)
+            if outcome is not None:
+                return outcome
         fun = lambda tt, yy: self.rhs(tt, yy, current(tt, yy))
         jac = lambda tt, yy: self.jac(tt, yy, current(tt, yy))
         if method is None:
@@ -3328,18 +3355,7 @@ class _Run:
             steps_here = self.stats["steps"] - steps_before
             if creeping >= _CREEP_STEPS or steps_here > _UNFROZEN_STEPS:
                 self.collect(solver)
-                culprits = getattr(self, "chattering_switches", [])
-                named = "; ".join(self.model.SWITCHES[k] for k in culprits)
-                raise _Stalled({"message": f"the simulation stalled at t={solver.t:.6g}: "
-                                           + (f"{named} keep changing mode at every evaluation and " if named
-                                              else "switches keep changing mode at every evaluation and ")
-                                           + "the solver makes no headway",
-                                "time": float(solver.t), "kind": "events", "law": None,
-                                "variable": self.model.SWITCH_OWNERS[culprits[0]] if culprits else None,
-                                "cause": "several switches (sign, if, coulomb) keep changing mode together "
-                                         "where no sliding mode holds them",
-                                "hint": "smooth the laws near their switching surfaces (a small linear band "
-                                        "around zero velocity, for instance)"}, solver.t, solver.y)
+                raise self.unfrozen_stalled(solver.t, solver.y)
             if solver.status == "failed":
                 self.collect(solver)
                 if method is None:      # forget this attempt's points and retry explicitly
@@ -3369,6 +3385,103 @@ class _Run:
             if solver.status == "finished":
                 self.collect(solver)
                 return t_new, np.array(y_new)
+
+    def unfrozen_stalled(self, t, y) -> "_Stalled":
+        """The stop of an unfrozen interval that makes no headway (the solver creeps, or takes more
+        than _UNFROZEN_STEPS steps): the switches that chatter, named."""
+        culprits = getattr(self, "chattering_switches", [])
+        named = "; ".join(self.model.SWITCHES[k] for k in culprits)
+        return _Stalled({"message": f"the simulation stalled at t={t:.6g}: "
+                                    + (f"{named} keep changing mode at every evaluation and " if named
+                                       else "switches keep changing mode at every evaluation and ")
+                                    + "the solver makes no headway",
+                         "time": float(t), "kind": "events", "law": None,
+                         "variable": self.model.SWITCH_OWNERS[culprits[0]] if culprits else None,
+                         "cause": "several switches (sign, if, coulomb) keep changing mode together "
+                                  "where no sliding mode holds them",
+                         "hint": "smooth the laws near their switching surfaces (a small linear band "
+                                 "around zero velocity, for instance)"}, t, y)
+
+    def driver_unfrozen(self, t, y, modes, t_stop):
+        """:meth:`unfrozen_interval` in the C driver (the modes found again at every evaluation, in
+        C): (t, y) at its end, or None where the driver does not serve it or gives up (a law not
+        finite at a trial point, a failed step: nothing it did is kept, and the step loop integrates
+        the interval from its start, explaining or retrying as it does)."""
+        if not getattr(self.model, "VECTORIZED", True):
+            return None         # (a loop model's modes are found with its loops solved: numpy's)
+        driver = self.driver_for(np.zeros(0, dtype=int), np.zeros(0))
+        if driver is None or not self.start_driver(driver, t, y, modes, t_stop):
+            return None
+        floors = np.ascontiguousarray(self.model.floor_switches, dtype=np.intc)
+        blocks, eval_index, steps_before = len(self.blocks_t), self.eval_index, self.stats["steps"]
+        t_prev, creeping = float(t), 0
+
+        def undo():
+            del self.blocks_t[blocks:], self.blocks_x[blocks:], self.blocks_mode[blocks:]
+            self.eval_index = eval_index
+            self.stats["steps"] = steps_before
+
+        try:
+            while True:
+                code, ts, ys, ms, report = driver.unfrozen_advance(
+                    floors, self.t_eval, self.eval_index) if self.t_eval is not None else \
+                    driver.unfrozen_advance(floors)
+                done = len(ts)
+                if code not in (0, 2):
+                    undo()
+                    return None
+                if done == 0:
+                    continue
+                # the step loop's stop: the first step that creeps for the _CREEP_STEPS-th time in a
+                # row, or the one past _UNFROZEN_STEPS; the steps before it kept, it not
+                stalled = None
+                steps = np.diff(np.concatenate(([t_prev], ts)))
+                for i, tiny in enumerate(steps <= _CREEP * np.maximum(np.abs(ts), 1.0)):
+                    creeping = creeping + 1 if tiny else 0
+                    if creeping >= _CREEP_STEPS or self.stats["steps"] + i + 1 - steps_before > _UNFROZEN_STEPS:
+                        stalled = i
+                        break
+                if stalled is not None:
+                    self.stats["steps"] += stalled + 1
+                    done = stalled
+                else:
+                    self.stats["steps"] += done
+                if self.t_eval is None and done:
+                    # each run of steps with the same modes, one block
+                    changes = np.flatnonzero(np.any(ms[1:done] != ms[:done - 1], axis=1)) + 1
+                    bounds = [0, *changes.tolist(), done]
+                    for a, b in zip(bounds[:-1], bounds[1:]):
+                        self.blocks_t.append(ts[a:b].copy())
+                        self.blocks_x.append(ys[a:b].T.copy())
+                        self.blocks_mode.append(self.mode_id(ms[a]))
+                elif self.t_eval is not None and done:
+                    # each report point with the modes of its own state, from those of its step: those
+                    # the driver stored up to the last step kept, then the ones of the batch's last
+                    # step it had no room for (CVODE's interpolant of that step is still the driver's)
+                    times, states, _ = report
+                    kept = int(np.searchsorted(times, ts[done - 1], side="right"))
+                    points = list(zip(times[:kept], states[:kept]))
+                    last = self.eval_index + kept
+                    if done == len(ts):
+                        more = int(np.searchsorted(self.t_eval, ts[-1], side="right"))
+                        points += [(ti, ys[-1].copy() if ti == ts[-1] else driver.interpolate(float(ti)))
+                                   for ti in self.t_eval[last:more]]
+                        last = max(last, more)
+                    for ti, yi in points:
+                        guess = ms[min(int(np.searchsorted(ts[:done], ti, side="left")), done - 1)]
+                        self.blocks_t.append(np.array([ti]))
+                        self.blocks_x.append(np.asarray(yi, dtype=float).reshape(-1, 1).copy())
+                        self.blocks_mode.append(self.mode_id(self.modes_at(ti, yi, guess)))
+                    self.eval_index = last
+                if stalled is not None:
+                    raise self.unfrozen_stalled(float(ts[stalled]), ys[stalled].copy())
+                t_prev = float(ts[-1])
+                if self.progress is not None:
+                    self.progress(t_prev)
+                if code == 2:
+                    return t_prev, ys[-1].copy()
+        finally:
+            self.collect_driver(driver, "driver_unfrozen_segments")
 
     def switch_columns(self, t, x, modes):
         """Switching functions at many points with one mode vector: shape (switches, points)."""
@@ -3697,6 +3810,10 @@ typedef struct {
     int held, corners, affine;
     int *sliding;
     double *cm, *cf, *rates, *alphas, *weights, *newton, *residual, *delta;
+    /* the unfrozen law (a chattering interval): the modes found again, from the last ones, at every
+       evaluation (driver_modes_at with the floor switches `floors`): see bondc_driver_unfrozen_advance */
+    int unfrozen;
+    const int *floors;
 } bondc_driver;
 
 static int driver_finite(const double *v, int n)
@@ -3857,6 +3974,9 @@ static int many_alphas(bondc_driver *d, double t, const double *y)
     return 0;
 }
 
+static int driver_modes_at(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                           double *out);
+
 static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
 {
     bondc_driver *d = (bondc_driver *)data;
@@ -3875,6 +3995,7 @@ static int driver_rhs(sunrealtype t, N_Vector y, N_Vector ydot, void *data)
             out[i] = sum;
         }
     } else {
+        if (d->unfrozen) driver_modes_at(d, t, N_VGetArrayPointer(y), d->m, d->floors, d->m);
         bondc_rhs(t, N_VGetArrayPointer(y), d->p, d->m, out);
     }
     if (!driver_finite(out, d->n)) { d->bad = 1; return -1; }   /* numpy's runtime takes over */
@@ -3908,6 +4029,7 @@ static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, voi
             for (int k = 0; k < d->entries; k++) d->values[k] += d->weights[c] * d->extra[k];
         }
     } else {
+        if (d->unfrozen) driver_modes_at(d, t, N_VGetArrayPointer(y), d->m, d->floors, d->m);
         bondc_jac(t, N_VGetArrayPointer(y), d->p, d->m, d->values);
     }
     if (!driver_finite(d->values, d->entries)) { d->bad = 2; return -1; }
@@ -3963,6 +4085,7 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
     d->bad = 0;
     d->slide = -1;
     d->held = 0;
+    d->unfrozen = 0;
     d->t_stop = t_stop;
     int flag;
     if (!d->started) {
@@ -4412,6 +4535,41 @@ static int slide_advance(bondc_driver *d, int capacity, double *old, double *exi
     return 0;
 }
 
+/* Integrate the unfrozen law of the segment just started (bondc_driver_start): the modes found again
+   at every evaluation of the right-hand side and the Jacobian, from the last ones, as the runtime's
+   unfrozen_interval finds them. Up to `capacity` steps, each stored in ts/ys with its modes (found at
+   the step's end) in ms, and its report points (t_eval, as bondc_driver_advance_eval stores them).
+   Returns 0: capacity reached (or the report buffer full); 2: t_stop reached; 3: a law was not finite
+   at a trial point; 4: the state, or its rate at the step's end, is not finite (that step is not
+   stored); < 0: CVODE's error flag. */
+int bondc_driver_unfrozen_advance(bondc_driver *d, int capacity, const int *floors, double *ts, double *ys,
+                                  double *ms, int *count, const double *t_eval, int n_eval, int *eval_next,
+                                  int eval_capacity, double *et, double *ey, int *eval_count)
+{
+    double *y = N_VGetArrayPointer(d->y);
+    d->unfrozen = 1;
+    d->floors = floors;
+    *count = 0;
+    if (eval_count) *eval_count = 0;
+    for (int k = 0; k < capacity; k++) {
+        double t;
+        int flag = CVode(d->cvode, d->t_stop, d->y, &t, 2);
+        if (flag < 0) return d->bad ? 3 : flag;
+        if (!driver_finite(y, d->n)) return 4;
+        driver_modes_at(d, t, y, d->m, floors, d->m);
+        bondc_rhs(t, y, d->p, d->m, d->fp);
+        if (!driver_finite(d->fp, d->n)) return 4;
+        ts[k] = t;
+        for (int i = 0; i < d->n; i++) ys[(long)k * d->n + i] = y[i];
+        for (int j = 0; j < d->switches; j++) ms[(long)k * d->switches + j] = d->m[j];
+        *count = k + 1;
+        int full = report_step(d, t, y, t_eval, n_eval, eval_next, eval_capacity, et, ey, eval_count);
+        if (t >= d->t_stop) return 2;
+        if (full) return 0;
+    }
+    return 0;
+}
+
 /* Switching function k with modes m at t, on the state of the last step (t_old, t_new] there:
    y_new at t_new, else CVODE's interpolant at t clamped to the step (as _DriverStep.dense_output). */
 double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
@@ -4511,6 +4669,9 @@ int bondc_driver_slide_advance_eval(bondc_driver *d, int capacity, double *old, 
                                     double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
                                     int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
+int bondc_driver_unfrozen_advance(bondc_driver *d, int capacity, const int *floors, double *ts, double *ys,
+                                  double *ms, int *count, const double *t_eval, int n_eval, int *eval_next,
+                                  int eval_capacity, double *et, double *ey, int *eval_count);
 void bondc_driver_counts(bondc_driver *d, long *out);
 int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, double t0, const double *y0,
                         const double *m0, const int *floors, int watched, const int *watch, const int *held,

@@ -458,6 +458,129 @@ def test_a_run_reported_on_a_grid_takes_its_points_from_the_driver_as_the_step_l
         np.testing.assert_allclose(driven.states["spring.q"], expected, rtol=0, atol=1e-4 * force / k)
 
 
+HYDRAULIC_POWER_UNIT = """import "std:hydraulics"
+import "std:mechanics"
+import "std:rotational"
+
+model HPU "pump, check valve, accumulator, proportional valve, cylinder lifting a load"
+  param w_pump = 1500 [rpm]
+  param t_stop = 3 [s]
+  param M = 300 [kg]
+  param k_stop = 1e7 [N/m]
+  param x_max = 0.2 [m]
+  param p_check = 2 [bar]
+  param K_check = 1e-9 [m^3/(s*Pa)]
+  input spool [m^2] = table(t, [0, 0.5, 0.6, 4, 4.1], [0, 0, 2e-5, 2e-5, 0])
+
+  Speed motor : w = w_pump*(1 - step(t, t_stop))
+  Pump pump : D = 10e-6/(2*pi)
+  Chamber line : V = 0.2e-3 [m^3], p0 = 1e5
+  R check "check valve: opens above p_check" : f = if e > p_check then K_check*(e - p_check) else 0
+  Chamber rail : V = 0.5e-3 [m^3], p0 = 1e5
+  ReliefValve relief : p_crack = 150 [bar], K_v = 5e-9
+  Accumulator acc : p_pre = 60 [bar], V_gas = 1 [L]
+  VariableOrifice valve : A = spool
+  Cylinder cyl : A = 2e-3, V0 = 0.05e-3, p0 = 1e5
+  Mass load : M = M
+  Gravity weight : M = M
+  C endstop : e = if q > x_max then k_stop*(q - x_max) else 0
+  1 jc
+  0 nline, nrail, nport
+  1 jrod
+
+  motor.a -> pump.shaft
+  pump.a -> nline
+  nline -> line.a
+  nline -> jc
+  jc -> check
+  jc -> nrail
+  nrail -> rail.a
+  nrail -> relief.a
+  nrail -> acc.a
+  nrail -> valve.a
+  valve.b -> nport
+  nport -> cyl.a
+  cyl.rod -> jrod
+  jrod -> load.a
+  jrod -> weight.a
+  jrod -> endstop
+  output x [mm] = cyl.travel
+  output p_rail [bar] = rail.p
+  output p_acc [bar] = acc.p
+  output Q_relief [L/min] = relief.Q
+  experiment run
+    t_end = 60 [s]
+    dt = 10 [ms]
+  end
+end
+"""
+
+
+def _unfrozen_both_ways(path, monkeypatch):
+    """The model's first experiment with its chattering intervals (the unfrozen law) in the C driver,
+    then in the step loop (scikit-sundae's CVODE stepped from Python, the only way before); the
+    number of intervals that stalled in each."""
+    if runtime._sundials_link() is None:
+        pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
+    namespace, experiment = _compiled(path)
+    runs, stalls = [], []
+    for in_c in (True, False):
+        count = []
+        with monkeypatch.context() as patch:
+            original = namespace["_Run"].unfrozen_stalled
+            patch.setattr(namespace["_Run"], "unfrozen_stalled",
+                          lambda self, t, y: count.append(t) or original(self, t, y))
+            if not in_c:
+                patch.setattr(namespace["_Run"], "driver_unfrozen", lambda self, *rest: None)
+            runs.append(namespace["simulate_model"](namespace["_MODEL"], t_end=experiment.t_end,
+                                                    dt=experiment.settings.get("dt"),
+                                                    rtol=experiment.rtol, atol=experiment.atol,
+                                                    max_step=experiment.max_step))
+        stalls.append(count)
+    return runs, stalls
+
+
+def _same_to_the_bit(ours, loop):
+    np.testing.assert_array_equal(ours.t, loop.t)
+    for group in ("states", "outputs"):
+        for name, values in getattr(loop, group).items():
+            np.testing.assert_array_equal(getattr(ours, group)[name], values, err_msg=name)
+    assert ours.events == loop.events
+    for count in ("steps", "segments", "events", "chattering_intervals"):
+        assert ours.stats[count] == loop.stats[count], count
+
+
+@needs_cc
+def test_a_chattering_interval_runs_in_the_driver_and_is_the_step_loops_to_the_bit(monkeypatch):
+    """twisting.bg chatters: its unfrozen law (the modes found again at every evaluation) is
+    integrated in C, the modes found by the same fixed point from the last ones, each step recorded
+    with the modes at its end. The independent expectation is the step loop on the same law: the same
+    CVODE, so the same steps, points, states and events, to the bit."""
+    (ours, loop), _ = _unfrozen_both_ways(ROOT / "tests" / "fixtures" / "engine" / "twisting.bg", monkeypatch)
+    assert ours.complete and loop.complete
+    assert ours.stats["chattering_intervals"] >= 3
+    assert ours.stats["driver_unfrozen_segments"] == ours.stats["chattering_intervals"]
+    assert "driver_unfrozen_segments" not in loop.stats
+    _same_to_the_bit(ours, loop)
+
+
+@needs_cc
+@pytest.mark.slow
+def test_a_hydraulic_power_units_chattering_and_stalls_in_the_driver_are_the_step_loops(tmp_path, monkeypatch):
+    """A user's hydraulic power unit (a metering orifice whose flow chatters at an end stop), reported
+    every 10 ms over 60 s: its unfrozen intervals run in C, report points included, and three of them
+    stall (more than 3 000 steps): each stops at the step the step loop stops at, the steps before it
+    kept, and is held there as the step loop's is. The whole run is the step loop's to the bit."""
+    path = tmp_path / "hpu.bg"
+    path.write_text(HYDRAULIC_POWER_UNIT, encoding="utf-8")
+    (ours, loop), (stalls_c, stalls_loop) = _unfrozen_both_ways(path, monkeypatch)
+    assert ours.complete and loop.complete
+    assert ours.stats["driver_unfrozen_segments"] == ours.stats["chattering_intervals"] >= 10
+    assert len(stalls_c) >= 2 and stalls_c == stalls_loop
+    assert ours.t.size == 6001
+    _same_to_the_bit(ours, loop)
+
+
 @functools.lru_cache(maxsize=None)
 def _compiled(path):
     """(generated module's namespace, first experiment) of a model, compiled once for this module."""
