@@ -1308,6 +1308,7 @@ class _NativeDriver:
         each step) and, with ``t_eval``, (times, states, next index) of the report points in it —
         see ``bondc_driver_unfrozen_advance``. ``floors``: the floor switches (kept by the caller)."""
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
+        self.floors = floors            # the C side keeps pointing to them
         switches = max(self.modes.size, 1)
         if getattr(self, "ms", None) is None or self.ms.shape[1] != switches:
             self.ms = np.empty((self.capacity, switches))
