@@ -853,23 +853,9 @@ class BgPrinter(StrPrinter):
     def _print_Pow(self, expr, rational=False):
         return super()._print_Pow(expr, rational).replace("**", "^")
 
-    def _print_Abs(self, expr):
-        return f"abs({self._print(expr.args[0])})"
-
-    def _print_Min(self, expr):
-        return f"min({', '.join(self._print(a) for a in expr.args)})"
-
-    def _print_Max(self, expr):
-        return f"max({', '.join(self._print(a) for a in expr.args)})"
-
-    def _print_ceiling(self, expr):
-        return f"ceil({self._print(expr.args[0])})"
-
-    def _print_floor(self, expr):
-        return f"floor({self._print(expr.args[0])})"
-
-    def _print_Mod(self, expr):
-        return f"mod({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+    def _call(self, name, expr):
+        """``name(arguments)`` in the language's own names for sympy's functions."""
+        return f"{name}({', '.join(self._print(a) for a in expr.args)})"
 
     def _print_Exp1(self, expr):
         return "exp(1)"
@@ -881,15 +867,6 @@ class BgPrinter(StrPrinter):
             return super()._print_Float(expr)
         mantissa, _, exponent = repr(value).partition("e")
         return f"{mantissa}e{int(exponent)}" if exponent else mantissa
-
-    def _print_Coulomb(self, expr):
-        return f"coulomb({', '.join(self._print(a) for a in expr.args)})"
-
-    def _print_Step(self, expr):
-        return f"step({', '.join(self._print(a) for a in expr.args)})"
-
-    def _print_Pwm(self, expr):
-        return f"pwm({', '.join(self._print(a) for a in expr.args)})"
 
     def _print_Table(self, expr):
         x, breakpoints, values = expr.args
@@ -925,6 +902,13 @@ class BgPrinter(StrPrinter):
 
     def _print_BooleanFalse(self, expr):
         return "0"
+
+
+#: sympy's function -> the language's name for it, printed as ``name(arguments)``
+_BG_CALLS = {"Abs": "abs", "Min": "min", "Max": "max", "ceiling": "ceil", "floor": "floor", "Mod": "mod",
+             "Coulomb": "coulomb", "Step": "step", "Pwm": "pwm"}
+for _function, _name in _BG_CALLS.items():
+    setattr(BgPrinter, f"_print_{_function}", lambda self, expr, name=_name: self._call(name, expr))
 
 
 def bg_text(expr) -> str:
