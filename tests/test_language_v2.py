@@ -117,7 +117,8 @@ def test_equations_as_text_are_bg_expressions_that_mean_the_same(model):
 def test_equations_as_text_print_coulomb_and_numbers_as_a_model_writes_them(tmp_path):
     """``coulomb`` is the language's name (not sympy's class ``Coulomb``), and a number is the
     shortest text that reads back as the same double (0.1, 2.5e-7; not 0.100000000000000); the
-    switches' labels, which events show (naming the bonds by their elements), the same."""
+    switches' labels, which events show, the same, and they name each bond variable by its element
+    in the generated code itself (a module run on its own says what bondc simulate says)."""
     path = tmp_path / "slider.bg"
     path.write_text("model Slider\n  Se push : e = 0.7*step(t, 0.1)\n  I mass : f = p/2\n"
                     "  R friction : e = 2.5e-7*f + coulomb(f, 0.5, 0.6)\n  1 j\n  push -> j\n  j -> mass\n"
@@ -129,7 +130,7 @@ def test_equations_as_text_print_coulomb_and_numbers_as_a_model_writes_them(tmp_
     from bondc.codegen.emit import emit
 
     source = emit(ss)
-    assert "'step(t, 0.1) in b1.e'" in source and "'coulomb(b3.f) in b3.e'" in source
+    assert "'step(t, 0.1) in push.e'" in source and "'coulomb(friction.f) in friction.e'" in source
 
 
 def test_latex_keeps_table_breakpoints_and_multi_letter_names():

@@ -61,6 +61,7 @@ from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,
                                    relative_data_path)
+from bondc.model import readable, readable_names
 from bondc.runtime import LOOP_START_OFFSETS, UNIT_MARK
 from bondc.symbolic import as_sympy, partial_derivative
 
@@ -485,6 +486,10 @@ class _Emitter:
         self.source = source
         self.experiment = experiment
         ss = plan.ss
+        # a switch's label names bond variables by the elements they are (coulomb(fr1.f) in fr1.e),
+        # as the results of bondc simulate do, so that a module run on its own says the same
+        names_of = readable_names(getattr(ss, "graph", None))
+        self.label = lambda text: readable(names_of, text)
         reserved = set(ARGUMENTS) | set(MODULE_NAMES) | _top_level_names(runtime_source()) | set(dir(builtins))
         namer = Namer(reserved)
         names: dict = {ss.time: "t"}
@@ -931,7 +936,7 @@ class _Emitter:
         lines.append("DERIVED_PARAMETERS = " + _tuple(name for name, _ in plan.derived))
         lines.append("PARAMETERS = {" + "".join(f"\n    {name!r}: {value!r}," for name, _, value in plan.parameters)
                      + ("\n}" if plan.parameters else "}"))
-        lines.append("SWITCHES = " + _tuple((s.label for s in plan.switches), multiline=True))
+        lines.append("SWITCHES = " + _tuple((self.label(s.label) for s in plan.switches), multiline=True))
         lines.append("EVENT_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event))
         lines.append("SWITCH_DEPENDS = " + _tuple((tuple(d) for d in _switch_depends(plan)),
                                                   multiline=len(plan.switches) > 8))
@@ -980,13 +985,13 @@ class _Emitter:
                 csv = item.csv
                 path = self.data_paths.get(csv.path, csv.path)
                 scale = f", {csv.time_scale!r}" if csv.time_scale != 1.0 else ""
-                text = (f"[(time, {item.label!r}, 'csv') for time in csv_times(DATA_DIR, {path!r}, "
+                text = (f"[(time, {self.label(item.label)!r}, 'csv') for time in csv_times(DATA_DIR, {path!r}, "
                         f"{csv.column!r}{scale})]")
                 if text not in csvs:
                     csvs.append(text)
             else:
                 used |= item.time.free_symbols
-                entry = f"({printer.doprint(item.time)}, {item.label!r}, {item.kind!r})"
+                entry = f"({printer.doprint(item.time)}, {self.label(item.label)!r}, {item.kind!r})"
                 if entry not in items:
                     items.append(entry)
         lines = ["def _time_breaks(p):",
