@@ -1199,33 +1199,21 @@ class _NativeDriver:
 
     def advance(self, watch, signs, band, g_old):
         """One batch: (code, times, states) — see ``bondc_driver_advance``."""
+        return self.advance_reporting(watch, signs, band, g_old, None)[:3]
+
+    def advance_reporting(self, watch, signs, band, g_old, t_eval, eval_next=0):
+        """One batch of a run reported at ``t_eval`` (None: every step), from its index ``eval_next``
+        on: (code, times, states) of the steps as :meth:`advance` gives them, and (times, states,
+        next index) of the report points in the steps kept, or None — see ``bondc_driver_advance``."""
         buffer, null = self.ffi.from_buffer, self.ffi.NULL
         watched = int(watch.size)
         code = self.lib.bondc_driver_advance(
             self.handle, self.capacity, watched, buffer("int[]", watch) if watched else null,
             buffer("double[]", signs) if watched else null, buffer("double[]", band) if watched else null,
             buffer("double[]", g_old) if watched else null, buffer("double[]", self.ts),
-            buffer("double[]", self.ys), self.count)
+            buffer("double[]", self.ys), self.count, *self._report_arguments(t_eval, eval_next))
         count = self.count[0]
-        return code, self.ts[:count], self.ys[:count]
-
-    def advance_reporting(self, watch, signs, band, g_old, t_eval, eval_next):
-        """One batch of a run reported at ``t_eval``, from its index ``eval_next`` on: (code, times,
-        states) of the steps as :meth:`advance` gives them, and (times, states, next index) of the
-        report points in the steps kept — see ``bondc_driver_advance_eval``."""
-        buffer, null = self.ffi.from_buffer, self.ffi.NULL
-        watched = int(watch.size)
-        self._report_buffers()
-        self.eval_next[0] = int(eval_next)
-        code = self.lib.bondc_driver_advance_eval(
-            self.handle, self.capacity, watched, buffer("int[]", watch) if watched else null,
-            buffer("double[]", signs) if watched else null, buffer("double[]", band) if watched else null,
-            buffer("double[]", g_old) if watched else null, buffer("double[]", self.ts),
-            buffer("double[]", self.ys), self.count, buffer("double[]", t_eval), int(t_eval.size),
-            self.eval_next, self.capacity, buffer("double[]", self.et), buffer("double[]", self.ey),
-            self.eval_count)
-        count, reported = self.count[0], self.eval_count[0]
-        return code, self.ts[:count], self.ys[:count], (self.et[:reported], self.ey[:reported], self.eval_next[0])
+        return code, self.ts[:count], self.ys[:count], self._reported(t_eval)
 
     def slide(self, k, plus, minus, alpha, probe, others, drift):
         """Make the segment just started a sliding mode on switch ``k`` (see ``bondc_driver_slide``)."""
@@ -1277,61 +1265,57 @@ class _NativeDriver:
     def slide_advance(self, old):
         """One batch of a sliding mode: (code, times, states, alphas) — see ``bondc_driver_slide_advance``;
         ``old`` (the exits before the batch) is updated in place, ``self.exits`` holds the last step's."""
-        buffer = self.ffi.from_buffer
-        code = self.lib.bondc_driver_slide_advance(self.handle, self.capacity, buffer("double[]", old),
-                                                   buffer("double[]", self.exits), buffer("double[]", self.ts),
-                                                   buffer("double[]", self.ys), buffer("double[]", self.alphas),
-                                                   self.count)
-        count = self.count[0]
-        held = self.alphas.size // self.capacity
-        return code, self.ts[:count], self.ys[:count], self.alphas[:count * held].reshape(count, held)
+        return self.slide_advance_reporting(old, None)[:4]
 
-    def slide_advance_reporting(self, old, t_eval, eval_next):
+    def slide_advance_reporting(self, old, t_eval, eval_next=0):
         """:meth:`slide_advance` of a run reported at ``t_eval`` from its index ``eval_next`` on, and
-        (times, states, next index) of the report points in the steps kept, as
-        :meth:`advance_reporting` gives them (``bondc_driver_slide_advance_eval``)."""
+        the report points in the steps kept, as :meth:`advance_reporting` gives them."""
         buffer = self.ffi.from_buffer
-        self._report_buffers()
-        self.eval_next[0] = int(eval_next)
-        code = self.lib.bondc_driver_slide_advance_eval(
+        code = self.lib.bondc_driver_slide_advance(
             self.handle, self.capacity, buffer("double[]", old), buffer("double[]", self.exits),
             buffer("double[]", self.ts), buffer("double[]", self.ys), buffer("double[]", self.alphas), self.count,
-            buffer("double[]", t_eval), int(t_eval.size), self.eval_next, self.capacity,
-            buffer("double[]", self.et), buffer("double[]", self.ey), self.eval_count)
-        count, reported = self.count[0], self.eval_count[0]
+            *self._report_arguments(t_eval, eval_next))
+        count = self.count[0]
         held = self.alphas.size // self.capacity
         return (code, self.ts[:count], self.ys[:count], self.alphas[:count * held].reshape(count, held),
-                (self.et[:reported], self.ey[:reported], self.eval_next[0]))
+                self._reported(t_eval))
 
     def unfrozen_advance(self, floors, t_eval=None, eval_next=0):
         """One batch of the unfrozen law of the segment just started: (code, times, states, modes of
         each step) and, with ``t_eval``, (times, states, next index) of the report points in it —
         see ``bondc_driver_unfrozen_advance``. ``floors``: the floor switches (kept by the caller)."""
-        buffer, null = self.ffi.from_buffer, self.ffi.NULL
+        buffer = self.ffi.from_buffer
         self.floors = floors            # the C side keeps pointing to them
         switches = max(self.modes.size, 1)
         if getattr(self, "ms", None) is None or self.ms.shape[1] != switches:
             self.ms = np.empty((self.capacity, switches))
-        reporting = t_eval is not None
-        if reporting:
-            self._report_buffers()
-            self.eval_next[0] = int(eval_next)
         code = self.lib.bondc_driver_unfrozen_advance(
             self.handle, self.capacity, buffer("int[]", floors), buffer("double[]", self.ts),
             buffer("double[]", self.ys), buffer("double[]", self.ms), self.count,
-            buffer("double[]", t_eval) if reporting else null, int(t_eval.size) if reporting else 0,
-            self.eval_next if reporting else null, self.capacity if reporting else 0,
-            buffer("double[]", self.et) if reporting else null, buffer("double[]", self.ey) if reporting else null,
-            self.eval_count if reporting else null)
+            *self._report_arguments(t_eval, eval_next))
         count = self.count[0]
-        report = (self.et[:self.eval_count[0]], self.ey[:self.eval_count[0]], self.eval_next[0]) if reporting else None
-        return code, self.ts[:count], self.ys[:count], self.ms[:count, :self.modes.size], report
+        return code, self.ts[:count], self.ys[:count], self.ms[:count, :self.modes.size], self._reported(t_eval)
 
-    def _report_buffers(self):
-        """The buffers of a batch's report points (made at the first batch of a reported run)."""
-        if getattr(self, "et", None) is None:
+    def _report_arguments(self, t_eval, eval_next):
+        """The C arguments of a batch's report points (t_eval, its size, the next index, the buffers'
+        capacity, times, states, count), NULL where the run reports every step (``t_eval`` None)."""
+        null = self.ffi.NULL
+        if t_eval is None:
+            return null, 0, null, 0, null, null, null
+        if getattr(self, "et", None) is None:       # made at the first batch of a reported run
             self.et, self.ey = np.empty(self.capacity), np.empty((self.capacity, self.n))
             self.eval_next, self.eval_count = self.ffi.new("int *"), self.ffi.new("int *")
+        self.eval_next[0] = int(eval_next)
+        buffer = self.ffi.from_buffer
+        return (buffer("double[]", t_eval), int(t_eval.size), self.eval_next, self.capacity,
+                buffer("double[]", self.et), buffer("double[]", self.ey), self.eval_count)
+
+    def _reported(self, t_eval):
+        """(times, states, next index) of the report points the last batch stored, or None."""
+        if t_eval is None:
+            return None
+        reported = self.eval_count[0]
+        return self.et[:reported], self.ey[:reported], self.eval_next[0]
 
     def deadbands(self, t, y, modes, index, rtol, atol):
         """:meth:`_Run.deadbands` in C (the same sums in the same order), or None where it cannot run."""
@@ -2368,27 +2352,30 @@ class _Run:
         self.stats["linear_solver"] = driver.linear_solver
         self.stats[kind] = self.stats.get(kind, 0) + 1
 
-    def record_reported(self, driver, code, t_last, y_last, first, report_t, report_y, mode):
-        """Record the report points of a batch of the driver whose last kept step ends at
-        (``t_last``, ``y_last``), the run's report times from index ``first`` on: those the driver
-        stored, and those of its last step it had no room for (from CVODE's interpolant of that
-        step, which is still the driver's last). A batch cut short where a state grew without bound
-        (``code`` "diverged") keeps the points up to its last kept step. ``mode``: the points' mode,
-        or a function of their (times, states) that gives it (a sliding mode's weights)."""
-        times, states = report_t, report_y
-        if code == "diverged":
-            kept = int(np.searchsorted(times, t_last, side="right"))
-            times, states = times[:kept], states[:kept]
-        stop = first + times.size
-        if code in (0, 2):     # (a batch ends right after the step whose points filled the buffer)
-            more = int(np.searchsorted(self.t_eval, t_last, side="right"))
-            if more > stop:
-                extra = self.t_eval[stop:more]
-                times = np.concatenate([times, extra])
-                states = np.vstack([states] + [np.array(y_last, dtype=float) if te == t_last
-                                               else driver.interpolate(float(te)) for te in extra])
-                stop = more
-        self.eval_index = stop
+    def report_points(self, driver, whole, t_last, y_last, first, report):
+        """(times, states, next index) of the report points of a batch of the driver whose last kept
+        step ends at (``t_last``, ``y_last``), the run's report times from index ``first`` on: those
+        the driver stored up to that step and, where the batch ended there (``whole``: not at a
+        crossing, a failure or a cut), those of that step it had no room for, from CVODE's
+        interpolant of the step, which is still the driver's last (a batch ends right after the step
+        whose points filled the buffer)."""
+        times, states, _ = report
+        kept = int(np.searchsorted(times, t_last, side="right"))
+        times, states = times[:kept], states[:kept]
+        stop = first + kept
+        more = int(np.searchsorted(self.t_eval, t_last, side="right")) if whole else stop
+        if more > stop:
+            extra = self.t_eval[stop:more]
+            times = np.concatenate([times, extra])
+            states = np.vstack([states] + [np.array(y_last, dtype=float) if te == t_last
+                                           else driver.interpolate(float(te)) for te in extra])
+        return times, states, max(stop, more)
+
+    def record_reported(self, driver, code, t_last, y_last, first, report, mode):
+        """Record the report points (:meth:`report_points`) of a batch that ended with ``code`` as
+        one block. ``mode``: the points' mode, or a function of their (times, states) that gives it
+        (a sliding mode's weights)."""
+        times, states, self.eval_index = self.report_points(driver, code in (0, 2), t_last, y_last, first, report)
         if times.size:
             self.blocks_t.append(times.copy())
             self.blocks_x.append(states.T.copy())
@@ -2415,12 +2402,9 @@ class _Run:
                     # values it left of those this segment watches
                     code, ts, ys, left, resumed = resumed.resume, resumed.ts, resumed.ys, resumed.left, None
                     g_old[:] = [left[k] for k in index.tolist()]
-                elif self.t_eval is None:
-                    code, ts, ys = driver.advance(watch, signs, band, g_old)
                 else:
                     first = self.eval_index
-                    code, ts, ys, (report_t, report_y, _) = driver.advance_reporting(
-                        watch, signs, band, g_old, self.t_eval, first)
+                    code, ts, ys, report = driver.advance_reporting(watch, signs, band, g_old, self.t_eval, first)
                 done = len(ts) - (1 if code in (1, 4) else 0)
                 grown = ()      # the batch's states are finite (code 4 ends it before the first that is not)
                 if done and (ys[:done].max() >= DIVERGED or ys[:done].min() <= -DIVERGED):   # no |ys| copy
@@ -2444,8 +2428,7 @@ class _Run:
                         self.blocks_x.append(ys[:done].T.copy())
                         self.blocks_mode.append(mode)
                     else:
-                        self.record_reported(driver, code, float(ts[done - 1]), ys[done - 1], first, report_t,
-                                             report_y, mode)
+                        self.record_reported(driver, code, float(ts[done - 1]), ys[done - 1], first, report, mode)
                     t_prev, y_prev = float(ts[done - 1]), ys[done - 1].copy()
                     if self.progress is not None:
                         self.progress(t_prev)
@@ -3236,19 +3219,18 @@ class _Run:
         positive = sides[:, 0] > 0
         try:
             while True:
+                first = self.eval_index
                 if self.t_eval is None:
                     code, ts, ys, alphas = driver.slide_advance(old)
                 else:
-                    first = self.eval_index
-                    code, ts, ys, alphas, (report_t, report_y, _) = driver.slide_advance_reporting(
-                        old, self.t_eval, first)
+                    code, ts, ys, alphas, report = driver.slide_advance_reporting(old, self.t_eval, first)
                 done = len(ts) - (1 if code == 1 else 0)
                 if done > 0:
                     self.stats["steps"] += done
                     if self.t_eval is not None:     # the weights at the report points, as the step loop's
-                        self.record_reported(driver, code, float(ts[done - 1]), ys[done - 1], first, report_t,
-                                             report_y, lambda times, states: ("slide", tuple(corner_ids),
-                                                                              weights_at(times, states)))
+                        self.record_reported(driver, code, float(ts[done - 1]), ys[done - 1], first, report,
+                                             lambda times, states: ("slide", tuple(corner_ids),
+                                                                    weights_at(times, states)))
                     else:
                         weights = np.clip(alphas[:done], 0.0, 1.0)
                         self.blocks_t.append(ts[:done].copy())
@@ -3424,9 +3406,7 @@ class _Run:
 
         try:
             while True:
-                code, ts, ys, ms, report = driver.unfrozen_advance(
-                    floors, self.t_eval, self.eval_index) if self.t_eval is not None else \
-                    driver.unfrozen_advance(floors)
+                code, ts, ys, ms, report = driver.unfrozen_advance(floors, self.t_eval, self.eval_index)
                 done = len(ts)
                 if code not in (0, 2):
                     undo()
@@ -3456,24 +3436,14 @@ class _Run:
                         self.blocks_x.append(ys[a:b].T.copy())
                         self.blocks_mode.append(self.mode_id(ms[a]))
                 elif self.t_eval is not None and done:
-                    # each report point with the modes of its own state, from those of its step: those
-                    # the driver stored up to the last step kept, then the ones of the batch's last
-                    # step it had no room for (CVODE's interpolant of that step is still the driver's)
-                    times, states, _ = report
-                    kept = int(np.searchsorted(times, ts[done - 1], side="right"))
-                    points = list(zip(times[:kept], states[:kept]))
-                    last = self.eval_index + kept
-                    if done == len(ts):
-                        more = int(np.searchsorted(self.t_eval, ts[-1], side="right"))
-                        points += [(ti, ys[-1].copy() if ti == ts[-1] else driver.interpolate(float(ti)))
-                                   for ti in self.t_eval[last:more]]
-                        last = max(last, more)
-                    for ti, yi in points:
+                    # each report point with the modes of its own state, from those of its step
+                    times, states, self.eval_index = self.report_points(
+                        driver, stalled is None, float(ts[done - 1]), ys[done - 1], self.eval_index, report)
+                    for ti, yi in zip(times, states):
                         guess = ms[min(int(np.searchsorted(ts[:done], ti, side="left")), done - 1)]
                         self.blocks_t.append(np.array([ti]))
                         self.blocks_x.append(np.asarray(yi, dtype=float).reshape(-1, 1).copy())
                         self.blocks_mode.append(self.mode_id(self.modes_at(ti, yi, guess)))
-                    self.eval_index = last
                 if stalled is not None:
                     raise self.unfrozen_stalled(float(ts[stalled]), ys[stalled].copy())
                 t_prev = float(ts[-1])
@@ -4112,44 +4082,24 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
    |g| > band[j] (the step loop's own test then decides).
    Returns 0: capacity reached; 1: a possible crossing in the last stored step (g_old still holds
    the values before it); 2: t_stop reached; 3: a law was not finite at a trial point (nothing
-   of the failed attempt is stored); 4: the state is not finite; < 0: CVODE's error flag. */
-static int driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
-                          const double *band, double *g_old, double *ts, double *ys, int *count,
-                          const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
-                          double *ey, int *eval_count);
+   of the failed attempt is stored); 4: the state is not finite; < 0: CVODE's error flag.
+   A run reported at the times t_eval (n_eval of them, increasing; NULL: none) also stores, after
+   each step that is kept (no possible crossing in it, its state finite), the states at the report
+   times t_eval[*eval_next] <= t of that step, from CVODE's interpolant of the step (CVodeGetDky; the
+   step's own state at its end), into et/ey (*eval_count of them, at most eval_capacity). Where that
+   buffer fills, the batch ends after that step, and the report times of that step still left (from
+   *eval_next on) are the caller's to take from bondc_driver_dky before the next batch. */
 static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
                        int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
-                         const double *band, double *g_old, double *ts, double *ys, int *count)
-{
-    return driver_advance(d, capacity, watched, watch, signs, band, g_old, ts, ys, count, NULL, 0, NULL, 0,
-                          NULL, NULL, NULL);
-}
-
-/* bondc_driver_advance for a run reported at the times t_eval (n_eval of them, increasing): after
-   each step that is kept (no possible crossing in it, its state finite), the states at the report
-   times t_eval[*eval_next] <= t of that step, from CVODE's interpolant of the step (CVodeGetDky; the
-   step's own state at its end), into et/ey (*eval_count of them, at most eval_capacity). Where the
-   buffer fills, the batch ends after that step, and the report times of that step still left
-   (from *eval_next on) are the caller's to take from bondc_driver_dky before the next batch. */
-int bondc_driver_advance_eval(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
-                              const double *band, double *g_old, double *ts, double *ys, int *count,
-                              const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
-                              double *ey, int *eval_count)
-{
-    *eval_count = 0;
-    return driver_advance(d, capacity, watched, watch, signs, band, g_old, ts, ys, count, t_eval, n_eval,
-                          eval_next, eval_capacity, et, ey, eval_count);
-}
-
-static int driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
-                          const double *band, double *g_old, double *ts, double *ys, int *count,
-                          const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
-                          double *ey, int *eval_count)
+                         const double *band, double *g_old, double *ts, double *ys, int *count,
+                         const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
+                         double *ey, int *eval_count)
 {
     double *y = N_VGetArrayPointer(d->y);
     *count = 0;
+    if (eval_count) *eval_count = 0;
     for (int k = 0; k < capacity; k++) {
         double t;
         int flag = CVode(d->cvode, d->t_stop, d->y, &t, 2);
@@ -4351,7 +4301,7 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
         if (bondc_driver_start(d, t, y, m, t_stops[i], rtol, atol, max_step, first, 100000) != 0) break;
         int count = 0;
         int code = bondc_driver_advance(d, capacity - stored, watched, watch, signs, band, g_old, ts + stored,
-                                        ys + (long)stored * n, &count);
+                                        ys + (long)stored * n, &count, NULL, 0, NULL, 0, NULL, NULL, NULL);
         if (code != 2) {
             if ((code == 0 || code == 1) && count > 0) {
                 partial[0] = count;
@@ -4452,28 +4402,9 @@ void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
    place): an entry that went from > 0 to <= 0, or from >= 0 to < 0, is a possible end of the
    sliding mode. Returns 0: capacity reached; 1: a possible end in the last stored step (`old`
    still holds the values before it); 2: t_stop reached; 3: a law was not finite at a trial
-   point; 4: the state or the combination at a step is not finite; < 0: CVODE's error flag. */
-static int slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts, double *ys,
-                         double *alphas, int *count, const double *t_eval, int n_eval, int *eval_next,
-                         int eval_capacity, double *et, double *ey, int *eval_count);
-
-int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
-                               double *ys, double *alphas, int *count)
-{
-    return slide_advance(d, capacity, old, exits, ts, ys, alphas, count, NULL, 0, NULL, 0, NULL, NULL, NULL);
-}
-
-/* bondc_driver_slide_advance for a run reported at t_eval: the report points of each kept step as
-   bondc_driver_advance_eval stores them (the caller takes the weights of the combination there). */
-int bondc_driver_slide_advance_eval(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
-                                    double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
-                                    int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count)
-{
-    *eval_count = 0;
-    return slide_advance(d, capacity, old, exits, ts, ys, alphas, count, t_eval, n_eval, eval_next,
-                         eval_capacity, et, ey, eval_count);
-}
-
+   point; 4: the state or the combination at a step is not finite; < 0: CVODE's error flag. The
+   report points of a run reported at t_eval as bondc_driver_advance stores them (the caller takes
+   the weights of the combination there). */
 /* The report points t_eval[*eval_next] <= t of the step just taken, into et/ey; 1 where the buffer
    filled first (the rest of that step's are the caller's, from bondc_driver_dky). */
 static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
@@ -4495,11 +4426,12 @@ static int report_step(bondc_driver *d, double t, const double *y, const double 
     return 0;
 }
 
-static int slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts, double *ys,
-                         double *alphas, int *count, const double *t_eval, int n_eval, int *eval_next,
-                         int eval_capacity, double *et, double *ey, int *eval_count)
+int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
+                               double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
+                               int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count)
 {
     double *y = N_VGetArrayPointer(d->y);
+    if (eval_count) *eval_count = 0;
     int held = d->held > 1 ? d->held : 1;
     int watched = 2 * held + d->exits;
     *count = 0;
@@ -4539,7 +4471,7 @@ static int slide_advance(bondc_driver *d, int capacity, double *old, double *exi
 /* Integrate the unfrozen law of the segment just started (bondc_driver_start): the modes found again
    at every evaluation of the right-hand side and the Jacobian, from the last ones, as the runtime's
    unfrozen_interval finds them. Up to `capacity` steps, each stored in ts/ys with its modes (found at
-   the step's end) in ms, and its report points (t_eval, as bondc_driver_advance_eval stores them).
+   the step's end) in ms, and its report points (t_eval, as bondc_driver_advance stores them).
    Returns 0: capacity reached (or the report buffer full); 2: t_stop reached; 3: a law was not finite
    at a trial point; 4: the state, or its rate at the step's end, is not finite (that step is not
    stored); < 0: CVODE's error flag. */
@@ -4648,11 +4580,9 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
 int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const double *m, double t_stop,
                        double rtol, double atol, double max_step, double first_step, long max_steps);
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
-                         const double *band, double *g_old, double *ts, double *ys, int *count);
-int bondc_driver_advance_eval(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
-                              const double *band, double *g_old, double *ts, double *ys, int *count,
-                              const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
-                              double *ey, int *eval_count);
+                         const double *band, double *g_old, double *ts, double *ys, int *count,
+                         const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
+                         double *ey, int *eval_count);
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out);
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out);
@@ -4665,10 +4595,8 @@ int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corn
 int bondc_driver_restart(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
                          double probe, int strict, double *out);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
-                               double *ys, double *alphas, int *count);
-int bondc_driver_slide_advance_eval(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
-                                    double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
-                                    int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
+                               double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
+                               int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
 int bondc_driver_unfrozen_advance(bondc_driver *d, int capacity, const int *floors, double *ts, double *ys,
                                   double *ms, int *count, const double *t_eval, int n_eval, int *eval_next,
