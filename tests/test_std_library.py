@@ -476,11 +476,15 @@ model Fill
     assert np.all(np.diff(result.outputs["tank.p"]) >= 0) and result.outputs["tank.p"][-1] < 6e5 * (1 + 1e-9)
 
 
+@pytest.mark.parametrize("bleed", [
+    "atmosphere -> bleed.a\n  bleed.b -> node",          # chamber at the bleed's port b: flow from b to a
+    "node -> bleed.a\n  bleed.b -> atmosphere",          # chamber at its port a: flow from a to b
+])
 def test_a_chamber_between_a_supply_and_the_atmosphere_settles_where_the_two_iso_valves_pass_the_same_mass_flow(
-        tmp_path):
-    """Supply (6 bar) -> ISO 6358 valve C1 -> chamber <- valve C2 <- the atmosphere (a supply at
-    1.01325 bar): each valve has the chamber at its port b, where its volume flow is measured, so
-    the bleed valve passes its flow backwards, from b to a. In steady state the two mass flows are
+        tmp_path, bleed):
+    """Supply (6 bar) -> ISO 6358 valve C1 -> chamber -> valve C2 -> the atmosphere (1.01325 bar),
+    the bleed valve drawn either way round: each port's volume flow is taken at its own pressure,
+    so the chamber fills and empties by the same mass flows. In steady state the two mass flows are
     equal: C1 p_s phi(p/p_s) = C2 p phi(p_a/p), phi(r) = 1 for r <= b, sqrt(1 - ((r - b)/(1 - b))^2)
     above (rho0 and sqrt(T0/T) cancel); the pressure is that equation's root."""
     from scipy.optimize import brentq
@@ -491,24 +495,53 @@ model Bleed
   ISO6358Valve inlet : C = 2e-9, b_cr = 0.3
   AdiabaticChamber chamber : V = 0.1 [L], p0 = 101325
   ISO6358Valve bleed : C = 3e-9, b_cr = 0.3
-  PressureSupply atmosphere : p_s = 101325 [Pa]
+  Se atmosphere "ambient, power in" : e = 101325
   0 node
   supply.a -> inlet.a
   inlet.b -> node
   node -> chamber.a
-  atmosphere.a -> bleed.a
-  bleed.b -> node
+  %BLEED%
 %TIGHT%end
-'''
+'''.replace("%BLEED%", bleed)
     result = _run(tmp_path, text, 3.0, 0.01)
+    outward = 1.0 if bleed.startswith("node") else -1.0
     phi = lambda r: 1.0 if r <= 0.3 else math.sqrt(1 - ((r - 0.3) / 0.7) ** 2)      # noqa: E731
     p_s, p_a = 6e5, 101325.0
     p = brentq(lambda x: 2e-9 * p_s * phi(x / p_s) - 3e-9 * x * phi(p_a / x), p_a * 1.001, p_s * 0.999,
                xtol=1e-9, rtol=1e-15)
     assert result.outputs["chamber.p"][-1] == pytest.approx(p, rel=1e-6)
-    assert -result.outputs["bleed.mdot"][-1] == pytest.approx(result.outputs["inlet.mdot"][-1], rel=1e-6)
-    assert -result.outputs["bleed.mdot"][-1] == pytest.approx(3e-9 * 1.185 * p * math.sqrt(293.15 / 293) *
-                                                              phi(p_a / p), rel=1e-6)
+    assert outward * result.outputs["bleed.mdot"][-1] == pytest.approx(result.outputs["inlet.mdot"][-1], rel=1e-6)
+    assert outward * result.outputs["bleed.mdot"][-1] == pytest.approx(
+        3e-9 * 1.185 * p * math.sqrt(293.15 / 293) * phi(p_a / p), rel=1e-6)
+
+
+@pytest.mark.parametrize("valve", ["Nozzle valve : Ae = 1e-6", "ISO6358Valve valve : C = 3e-9, b_cr = 0.3"])
+@pytest.mark.parametrize("wiring", ["one -> valve.a\n  valve.b -> two", "two -> valve.a\n  valve.b -> one"])
+def test_two_closed_chambers_through_a_valve_keep_their_internal_energy_and_end_at_its_mean_pressure(
+        tmp_path, valve, wiring):
+    """Two adiabatic chambers (2 L at 6 bar, 0.5 L at 1 bar) joined by a valve, drawn either way:
+    the same mass flow leaves one and enters the other at the same temperature, so
+    d(p1 V1 + p2 V2)/dt = kappa R T (mdot_in1 + mdot_in2) = 0, and both end at
+    (p1 V1 + p2 V2)/(V1 + V2) = 5 bar. A valve that took both volume flows at one port's pressure
+    breaks the sum whenever the pressures differ."""
+    text = f'''import "std:pneumatics"
+model Pair
+  AdiabaticChamber high : V = 2 [L], p0 = 6 [bar]
+  AdiabaticChamber low : V = 0.5 [L], p0 = 1 [bar]
+  {valve}
+  0 one
+  0 two
+  one -> high.a
+  two -> low.a
+  {wiring}
+%TIGHT%end
+'''
+    result = _run(tmp_path, text, 3.0, 0.01)
+    p1, p2 = result.outputs["high.p"], result.outputs["low.p"]
+    energy = p1 * 2e-3 + p2 * 0.5e-3
+    assert np.max(np.abs(energy - 1250.0)) < 1e-6 * 1250.0
+    assert p2[1] > 1e5 and np.all(np.diff(p2) >= -1e-6 * 5e5)          # the small one fills ...
+    assert p1[-1] == pytest.approx(5e5, rel=1e-6) and p2[-1] == pytest.approx(5e5, rel=1e-6)
 
 
 def test_a_return_line_to_a_tank_holds_the_orifice_drop_above_the_tank_pressure(tmp_path):
