@@ -1605,6 +1605,10 @@ class _Run:
         self.max_events = max_events
         self.max_event_rate = max_event_rate
         self.switch_count = len(model.SWITCHES)
+        # the switches of when conditions: their edges are the clauses' own business (a firing is
+        # noted as such), not events of the model's laws
+        self.condition_switches = frozenset(k for k, owner in enumerate(model.SWITCH_OWNERS)
+                                            if owner.startswith("when "))
         self.event_switches = np.asarray(model.EVENT_SWITCHES, dtype=int)
         self.probe = 1e-8 * max(self.span, abs(self.t_end), 1e-300)
         self.tau_min = 1e-6 * self.span
@@ -2019,6 +2023,15 @@ class _Run:
     def note_event(self, t, label):
         self.events.append((float(t), label))
 
+    def note_break(self, t_break, label, changed=()):
+        """Note a known switching time, but of its labels only those not noted otherwise: neither
+        switches that changed there (``changed``, noted with their modes) nor switches of when
+        conditions."""
+        quiet = {self.model.SWITCHES[k] for k in (*changed, *self.condition_switches)}
+        rest = [part for part in label.split("; ") if part not in quiet]
+        if rest:
+            self.note_event(t_break, "; ".join(rest))
+
     def run(self):
         model = self.model
         started = _time_module.perf_counter()
@@ -2094,7 +2107,7 @@ class _Run:
                     at_break = break_index < len(breaks) and t >= breaks[break_index][0]
                     if t >= self.t_end:
                         if at_break:
-                            self.note_event(breaks[break_index][0], breaks[break_index][1])
+                            self.note_break(*breaks[break_index])
                         break
                     modes, chattering = self.restart_modes(t, y, old_modes)
                     if model.WHEN_LABELS:
@@ -2114,9 +2127,7 @@ class _Run:
                                                    and not (sliding is not None and k in sliding)],
                                     bool(changed), self.chattering_since is None)
                     if at_break:
-                        labels = {model.SWITCHES[k] for k in changed}
-                        if breaks[break_index][1] not in labels:
-                            self.note_event(breaks[break_index][0], breaks[break_index][1])
+                        self.note_break(*breaks[break_index], changed)
                     # after a sliding segment, the switches it held are its own business; any other
                     # that changed (a step of time at a break) is an event like any: a sliding span
                     # ends there (the energy account's spans end at the next event). While switches
@@ -2124,6 +2135,8 @@ class _Run:
                     known_here = breaks[break_index][1].split("; ") if at_break else ()
                     for k in changed:
                         if sliding is not None and k in sliding:
+                            continue
+                        if k in self.condition_switches:
                             continue
                         if self.chattering_since is None or model.SWITCHES[k] in known_here:
                             self.note_event(t, self.mode_label(k, modes[k]))

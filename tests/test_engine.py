@@ -698,6 +698,41 @@ def test_a_frequency_sweep_counted_by_a_when_clause_is_no_zeno_accumulation():
     assert result.outputs["cycles"][-1] == 1999
 
 
+def test_the_event_list_has_the_firings_of_when_clauses_and_the_laws_edges_not_the_conditions_edges(tmp_path):
+    """A 1 kHz bridge at 30 % duty into a coil, its periods counted by a when clause on a 50 % pwm: the events are the
+    bridge's edges at k/f (+1) and (k + 0.3)/f (-1) and the clause's firings at k/f, k >= 1 (its
+    condition is true from the start), nothing else: the condition's own edges (its pwm falling at
+    (k + 0.5)/f, its comparison turning false) are how the firing is found, not events."""
+    path = tmp_path / "bridge.bg"
+    path.write_text('''model Bridge
+  param fs = 1000 [Hz]
+  discrete periods [1] = 0
+  MSe bridge : e = 12*pwm(t, fs, 0.3)
+  R load : e = 4*f
+  I coil : f = p/0.01
+  1 loop
+  bridge -> loop
+  loop -> load
+  loop -> coil
+  when pwm(t, fs, 0.5) > 0.5 then periods = periods + 1 end
+  output n [1] = periods
+  experiment run
+    t_end = 3.7 [ms]
+  end
+end
+''')
+    result = run(path)
+    assert result.complete, result.message
+    k = np.arange(4)
+    rising = sorted((time, "pwm(t, fs, 0.3) in bridge.e -> +1") for time in k[1:] / 1000)
+    falling = [(time, "pwm(t, fs, 0.3) in bridge.e -> -1") for time in (k + 0.3) / 1000]
+    firings = [(time, "when pwm(t, fs, 0.5) > 0.5") for time in k[1:] / 1000]
+    expected = sorted(rising + falling + firings, key=lambda event: (round(event[0] * 1e9), event[1][0] != "w"))
+    assert [label for _, label in result.events] == [label for _, label in expected]
+    np.testing.assert_allclose([time for time, _ in result.events], [time for time, _ in expected], atol=1e-12)
+    assert result.outputs["n"][-1] == 3
+
+
 def test_the_zeno_detector_stops_geometric_firings_and_not_a_sweep(monkeypatch):
     """The detector alone, on firing times in closed form: a ball's impacts (intervals x 0.8) stop
     at their limit; a fast sweep's cycles (19 kHz rising at 2 MHz/s: intervals x 0.995, each
