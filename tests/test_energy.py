@@ -81,6 +81,43 @@ def test_rc_charging_energies_match_closed_form(tmp_path):
     assert window.balance.relative_residual < 1e-6
 
 
+def test_a_source_gated_by_when_clauses_supplies_the_closed_form_energy(tmp_path):
+    """A relay charger: the source (U) is switched off by a when clause at v_C = 3U/4 and on again at
+    U/4, through R into C (tau = RC = 1 s). While on it supplies U*C*(rise of v_C): 3/4 C U^2 for the
+    first charge, 1/2 C U^2 for each one after, off nothing. Run to the middle of the third
+    discharge (first charge tau ln 4, then tau ln 3 each way): three charges, 7/4 C U^2. The account starts the
+    step after each firing from the states the clause left (``on = 0``), not the point recorded
+    there."""
+    text = """
+model Relay
+  param U  = 10   [V]
+  param Rr = 1000 [Ohm]
+  param Cc = 1e-3 [F]
+  discrete on [1] = 1
+  MSe source : e = U*on
+  R resistor : e = Rr*f
+  C capacitor : e = q/Cc
+  1 loop
+  source -> loop
+  loop -> resistor
+  loop -> capacitor
+  when capacitor.e > 0.75*U then on = 0 end
+  when capacitor.e < 0.25*U then on = 1 end
+end
+"""
+    ss, _ = load_text(tmp_path, text)
+    U, C, tau = 10.0, 1e-3, 1.0
+    t_end = tau * (math.log(4) + 4.5 * math.log(3))
+    result = simulate(ss, None, t_end=t_end, rtol=1e-9, atol=1e-12)
+    assert result.complete, result.message
+    assert sum(label.startswith("when ") for _, label in result.events) == 5
+    window = energy_account(ss, result).windows[0]
+    assert window.element("source").supplied == pytest.approx(1.75 * C * U ** 2, rel=1e-7)
+    v_end = 0.75 * U * math.exp(-0.5 * math.log(3))
+    assert window.element("capacitor").stored_change == pytest.approx(C * v_end ** 2 / 2, rel=1e-7)
+    assert window.balance.relative_residual < 1e-7
+
+
 def test_rc_charging_per_window_matches_closed_form(tmp_path):
     """Windows of one time constant: their edges fall inside solver steps."""
     ss, _ = load_text(tmp_path, RC)

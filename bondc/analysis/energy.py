@@ -694,6 +694,7 @@ class _Trajectory:
         keep = np.flatnonzero(np.diff(t) > 0)          # zero-length steps carry no energy
         ta, tb = t[keep], t[keep + 1]
         xa, xb = x[:, keep], x[:, keep + 1]
+        self._after_jumps(ta, xa, getattr(result, "jumps", ()), model.state_names)
         mid = 0.5 * (ta + tb)
         modes = model.modes(mid, 0.5 * (xa + xb))
         groups = model.groups(modes)
@@ -708,6 +709,23 @@ class _Trajectory:
         self.scale = np.max(np.abs(x), axis=1) + 1e-300 if x.size else np.ones(x.shape[0])
         for boundary in boundaries:
             self._split(boundary)
+
+    @staticmethod
+    def _after_jumps(ta, xa, jumps, state_names) -> None:
+        """Start each step that begins where when clauses fired from the states they left: the run
+        records one point there, with the states from before (a current limit's ``enabled = 0``
+        would otherwise be interpolated from 1 to 0 across the next step, and the source it gates
+        counted as on)."""
+        if not len(jumps) or not ta.size:
+            return
+        rows = {name: i for i, name in enumerate(state_names)}
+        tolerance = 1e-12 * max(abs(float(ta[-1])), abs(float(ta[0])), 1.0)
+        for time, _, after in jumps:            # in firing order: the last round's states stand
+            k = int(np.searchsorted(ta, time - tolerance))
+            if k < ta.size and abs(ta[k] - time) <= tolerance:
+                for name, value in after.items():
+                    if name in rows:
+                        xa[rows[name], k] = value
 
     def state_at(self, k: int, time: float) -> np.ndarray:
         """The state inside step ``k`` at ``time``, from the corrected interpolant of that step."""
