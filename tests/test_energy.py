@@ -333,6 +333,28 @@ def test_a_balance_spoilt_by_atol_names_the_state_and_the_atol_that_closes_it():
 
 
 @pytest.mark.slow
+def test_a_balance_spoilt_by_a_store_drawn_outward_names_it_not_the_tolerances(tmp_path):
+    """A tank drawn with its bond leaving it (W304) fills while its orifice dissipates: energy from
+    nothing, dissipated = stored, so the residual is the whole throughput; the hint says why."""
+    result, account = _run_and_account(tmp_path, """
+model Drain
+  C tank : e = 1e4*q, q(0) = 0.05
+  R orifice : f = 1e-4*sign(e)*sqrt(abs(e))
+  0 n
+  tank -> n
+  n -> orifice
+  experiment drain
+    t_end = 20 [s]
+  end
+end
+""")
+    balance = account.windows[0].balance
+    assert balance.relative_residual == pytest.approx(1.0, rel=1e-5)
+    (warning,) = [d for d in account.diagnostics if d.code == "W930"]
+    assert "C 'tank' is drawn with the bond leaving it (W304)" in warning.hint
+    assert "tighten" not in warning.hint
+
+
 def test_a_models_algebraic_loop_is_evaluated_in_c_for_its_energy_account(monkeypatch):
     """The diode bridge is evaluated point by point (its loop is solved at every point): the energy
     account takes its right-hand side and switches from the C code (Newton inside C) where that is

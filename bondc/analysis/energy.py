@@ -1130,8 +1130,26 @@ def atol_limited(result, rtol, atol) -> list:
     return limited
 
 
-def _residual_hint(result, settings) -> str:
+def _drawn_outward(graph) -> list[str]:
+    """The R, C and I elements whose bond leaves them (W304): their laws deliver the power they
+    should dissipate or store, so no tolerance closes the balance."""
+    names = []
+    for element in graph.elements.values():
+        if element.kind in ("R", "C", "I") and len(element.bonds) == 1:
+            if graph.bond(element.bonds[0]).head != element.name:
+                names.append(f"{element.kind} '{element.name}'")
+    return names
+
+
+def _residual_hint(result, settings, graph=None) -> str:
     rtol, atol = settings.get("rtol"), settings.get("atol")
+    outward = _drawn_outward(graph) if graph is not None else []
+    if outward:
+        return (f"{', '.join(outward[:3])}{' and more' if len(outward) > 3 else ''} "
+                f"{'is' if len(outward) == 1 else 'are'} drawn with the bond leaving "
+                f"{'it' if len(outward) == 1 else 'them'} (W304): a law written for power in then delivers "
+                "the power it should dissipate or store, which no tolerance closes; draw the bond towards "
+                "the element")
     limited = atol_limited(result, rtol, atol)
     if not limited:
         return (f"the residual is the simulation's accumulated error (rtol={rtol}, atol={atol}); tighten the "
@@ -1287,7 +1305,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
                 "warning", "W930",
                 f"the energy balance of cycle {index + 1} does not close: residual {balance.residual:.3e}{unit}, "
                 f"{relative:.2e} of the throughput {balance.throughput:.6g}{unit}",
-                hint=_residual_hint(result, settings)))
+                hint=_residual_hint(result, settings, graph)))
     return EnergyAccount(
         model=getattr(graph, "name", ""), experiment=getattr(result, "experiment", None),
         cycle=cycle, windows=tuple(result_windows), complete=bool(result.complete), resimulated=resimulated,

@@ -409,8 +409,11 @@ d("W930", "energy balance does not close",
   "(`--json`: in `energy.diagnostics`, with the hint). Where a state spans so little over the run that "
   "`atol` resolves it more than ten times more coarsely than `rtol` asks (a hydraulic chamber's volume in m^3, "
   "about 1e-6, at the default atol of 1e-9), the hint names that state and the atol that resolves it: "
-  "tightening `rtol` alone changes nothing then.",
-  "Tighten `rtol` and `atol` in the experiment; `atol` to the value the hint gives where it names a state.")
+  "tightening `rtol` alone changes nothing then. Where an `R`, `C` or `I` element is drawn with its bond "
+  "leaving it ([W304](#w304-resistor-or-store-drawn-with-its-bond-leaving-it)), the hint names it instead: a "
+  "law written for power in then makes energy from nothing, and no tolerance closes the balance.",
+  "Tighten `rtol` and `atol` in the experiment; `atol` to the value the hint gives where it names a state; "
+  "draw the bond towards an element the hint names.")
 d("W931", "two-port does not conserve power",
   "A transformer's or gyrator's work in at its two ports does not sum to zero over a cycle. bondc writes the "
   "two-port equations so that p1.e*p1.f = p2.e*p2.f holds exactly, so this is an internal consistency check of "
