@@ -395,3 +395,40 @@ end
 """)
     lin = linearize(ss)
     assert lin.A.tolist() == [[0.0]] and lin.C.tolist() == [[1.0], [0.0], [1.0]]
+
+
+def test_discrete_variables_are_held_at_their_value_and_are_not_states_of_the_linear_model(tmp_path):
+    """An oven whose heater (P = 100 W) a thermostat's when clauses switch: heater = 1 at the start,
+    so the equilibrium is T_amb + P R_th = 343.15 K with one eigenvalue -1/(R_th C_th); the heater is
+    neither solved for (der = 0 holds for any value: an equilibrium with it at 0 is T_amb) nor a
+    state of the linear model (it would add an eigenvalue 0)."""
+    ss = state_space_of(tmp_path, """
+model Oven
+  param P = 100 [W]
+  param R_th = 0.5 [K/W]
+  param C_th = 2000 [J/K]
+  param T_amb = 293.15 [K]
+  discrete heater [1] = 1
+  Se ambient : e = T_amb
+  MSf element "heat flow in, pseudo bond graph (e = T, f = heat flow)" : f = P*heater
+  C air : state T [K], T(0) = T_amb, der(T) = f/C_th, e = T
+  R wall : f = e/R_th
+  0 node
+  1 loss
+  element -> node
+  node -> air
+  node -> loss
+  loss -> ambient
+  loss -> wall
+  output T [K] = air.T
+  when air.T > 350 then heater = 0 end
+  when air.T < 340 then heater = 1 end
+end
+""")
+    for at in ("initial", "equilibrium"):
+        lin = linearize(ss, at=at)
+        assert lin.states == ("air.T",) and lin.A.shape == (1, 1) and lin.C.shape == (1, 1)
+        assert any("heater = 1" in note for note in lin.notes)
+    lin = linearize(ss, at="equilibrium")
+    assert lin.x0[0] == pytest.approx(293.15 + 100 * 0.5, rel=1e-9)
+    assert lin.eigenvalues[0].real == pytest.approx(-1 / (0.5 * 2000), rel=1e-6)

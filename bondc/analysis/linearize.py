@@ -27,6 +27,11 @@ Operating point (``at``):
   (a constant force on a free mass) :class:`~bondc.errors.AnalysisError`
   ``E940`` is raised.
 
+Discrete variables (set only by ``when`` clauses) are constants between
+events: both operating points hold them at their initial value (a note says
+which), and they are not states of the linear model: A, B, C, D and the
+eigenvalues are those of the continuous states.
+
 The Jacobians are computed in forward mode over the assignment sequence: each
 assignment's symbolic partial derivatives (sympy), evaluated numerically at
 the operating point and chained, so sizes stay linear in the model; algebraic
@@ -297,15 +302,26 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
     held: tuple[str, ...] = ()
     notes: list[str] = []
     x = x0
+    # discrete variables are constants between the events that set them: held at their initial
+    # value, not unknowns of the equilibrium (der = 0 holds for any value), and not states of the
+    # linear model (each would add an eigenvalue 0, a pure integrator that is not there)
+    names = set(getattr(ss.graph, "discrete", None) or ())
+    discrete = [i for i, name in enumerate(ss.state_names) if name in names]
     if at == "equilibrium" and n:
-        x, held = _equilibrium(ss, numeric, jacobian, point, x0, time, inputs)
+        x, held = _equilibrium(ss, numeric, jacobian, point, x0, time, inputs, fixed=discrete)
+        held = tuple(name for name in held if name not in names)
         if held:
             notes.append(f"no state equation depends on {', '.join(held)}: held at the initial value")
+    if discrete:
+        notes.append("discrete variables held at their initial value, not states of the linear model: "
+                     + ", ".join(f"{ss.state_names[i]} = {x[i]:.6g}" for i in discrete))
     f_rows, g_rows = jacobian(point(x))
     _require_finite(f_rows, [f"der({name})" for name in ss.state_names], g_rows, list(ss.outputs),
                     list(ss.state_names) + list(ss.inputs), time)
-    A, B = f_rows[:, :n], f_rows[:, n:]
-    C, D = g_rows[:, :n], g_rows[:, n:]
+    keep = [i for i in range(n) if i not in discrete]
+    A, B = f_rows[keep][:, keep], f_rows[keep, n:]
+    C, D = g_rows[:, keep], g_rows[:, n:]
+    n = len(keep)
     eigenvalues = np.linalg.eigvals(A) if n else np.zeros(0, dtype=complex)
     if n:
         # Round-off-sized parts (a pure integrator's 1e-26) are zero: no spurious instability.
@@ -317,10 +333,10 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
     with np.errstate(divide="ignore", invalid="ignore"):
         damping = np.where(magnitude > 0, -eigenvalues.real / np.where(magnitude > 0, magnitude, 1), np.nan)
     return Linearization(
-        states=ss.state_names, inputs=tuple(ss.inputs), outputs=tuple(ss.outputs),
+        states=tuple(ss.state_names[i] for i in keep), inputs=tuple(ss.inputs), outputs=tuple(ss.outputs),
         A=A, B=B.reshape(n, m), C=C, D=D.reshape(len(ss.outputs), m),
         eigenvalues=eigenvalues, natural_frequencies=magnitude, damping_ratios=damping,
-        time=float(time), at=at, x0=np.asarray(x, dtype=float), u0=u0, held=held, notes=tuple(notes))
+        time=float(time), at=at, x0=np.asarray(x, dtype=float)[keep], u0=u0, held=held, notes=tuple(notes))
 
 
 def _staircases_flat(partial):
@@ -370,7 +386,9 @@ def _settle(rates, start):
     return z
 
 
-def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
+def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs, fixed=()):
+    """The equilibrium near ``x0`` and the states held there; the states ``fixed`` (discrete
+    variables) are never solved for."""
     from scipy.optimize import least_squares
 
     n = len(x0)
@@ -421,6 +439,7 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
 
     # States on which no derivative depends at the start (pure integrators) are held.
     columns = columns_at(x_start)
+    columns[list(fixed)] = False
     free = [i for i in range(n) if columns[i]]
     held = tuple(ss.state_names[i] for i in range(n) if i not in free)
     bad, rates = unbalanced(x_start)
@@ -437,6 +456,7 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs):
             with np.errstate(all="ignore"):
                 sample = jacobian(point(x_start + spread * rng.uniform(-1.0, 1.0, n)))[0][:, :n]
             wider |= np.any(np.nan_to_num(sample) != 0, axis=0)
+        wider[list(fixed)] = False
         retry = attempt([i for i in range(n) if wider[i]], settle=True) if wider.any() else None
         if retry is not None and not retry[1] and not retry[2].any():
             x, runaway, bad, rates = retry
