@@ -17,7 +17,8 @@ gyrator relates the two sides by the dimension of its ratio; a storage
 element's ``q`` is its flow times seconds and ``p`` its effort times seconds.
 Each law, sum, comparison and declared unit is an equation between
 dimensions, linear in the exponents. They are solved in tiers — sources and
-ratios first, then storage elements, then resistors, then the rest — each
+ratios first, then storage elements, then resistors, then the rest, and the
+statements of `when` clauses last (a reinit or an assignment only checks) — each
 equation with one unknown left fixing it, so that an inconsistent law is
 reported where it is written and not where the domain was first inferred.
 Whatever stays unknown is not checked. Every equation whose two sides are
@@ -471,8 +472,15 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
         declared = c.declared(item.unit)
         if declared is not None and item.value is not None:
             c.equal(declared, c.dim(item.value, {}), item.value.span, "input", f"input '{name}' [{item.unit.text}]")
+    c.tier = 4          # the statements of when clauses check, last: they decide no dimension
     for when in getattr(graph, "whens", ()):
         c.dim(when.condition, {})
+        for kind, target, value in when.actions:
+            # a discrete variable set, a state reinitialised: the value measures what it replaces
+            name = target.name if isinstance(target, ast.Name) else target.dotted
+            what = f"{name} = ..." if kind == "assign" else f"reinit({name}, ...)"
+            c.equal(c.dim(target, {}), c.dim(value, {}), value.span, "assign",
+                    f"{what} in '{when.text}'")
 
     source: dict[int, _Equation] = {}
     known = _solve(c.equations, source)
@@ -531,6 +539,9 @@ def _diagnostic(equation: _Equation, left, right, related=()) -> Diagnostic:
         message = f"the two sides of the law differ: {equation.what} is {a}, but the expression is {b}"
         hint = ("the bond's domain comes from the elements around it; check the units of the parameters in "
                 "the law")
+    elif kind == "assign":
+        message = f"{equation.what} sets {a} to {b}"
+        hint = "the new value must measure the same quantity as the variable or state it replaces"
     elif kind == "exponent":
         message = f"an exponent must be dimensionless, not {b}"
         hint = "divide by a reference quantity of the same unit"

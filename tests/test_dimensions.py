@@ -147,3 +147,31 @@ def test_no_false_positive_on_the_shipped_models_and_fixtures(path):
     except ModelError as error:
         codes = {d.code for d in error.diagnostics}
         assert "E210" not in codes, [d.message for d in error.diagnostics if d.code == "E210"]
+
+
+def test_the_statements_of_when_clauses_are_checked_against_what_they_replace(tmp_path):
+    """reinit(mass.p, x0) sets a momentum (kg*m/s, from the I law) to a length, F_brake = v1 sets a
+    force to a speed: an error at each value; the same statements in the right dimensions check."""
+    text = """model Drop
+  param m = 2 [kg]
+  param x0 = 10 [mm]
+  param v1 = 3 [m/s]
+  discrete F_brake [N] = 0
+  Se g : e = -m*9.81
+  I mass : f = p/m
+  1 j
+  g -> j -> mass
+  state h [m] : der(h) = mass.f, h(0) = 1
+  when h < 0 then reinit(mass.p, x0), F_brake = v1 end
+  output F [N] = F_brake
+end
+"""
+    errors = _e210(tmp_path, text)
+    assert [(d.span.line, d.span.column) for d in errors] == [(11, 34), (11, 49)]
+    assert "reinit(mass.p, ...) in 'when h < 0' sets kg*m/s to m" in errors[0].message
+    assert "F_brake = ... in 'when h < 0' sets kg*m/s^2 to m/s" in errors[1].message
+    fixed = text.replace("reinit(mass.p, x0)", "reinit(mass.p, -m*v1)").replace("F_brake = v1", "F_brake = m*9.81")
+    path = tmp_path / "fixed.bg"
+    path.write_text(fixed)
+    graph, diagnostics = load(path)
+    assert graph is not None and not [d for d in diagnostics if d.code == "E210"]
