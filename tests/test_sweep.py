@@ -196,6 +196,32 @@ def test_sets_apply_to_every_point():
         pytest.approx(20.0 / 400, rel=1e-5), pytest.approx(20.0 / 800, rel=1e-5)]
 
 
+def test_a_components_parameter_is_varied_by_its_dotted_name(tmp_path):
+    """--vary takes 'spring.k' as --set and --range do: the static deflection F0/k of a
+    std:mechanics spring at each value."""
+    path = tmp_path / "msd.bg"
+    path.write_text('''import "std:mechanics"
+model MSD
+  Force push : F = 10
+  Mass body : M = 2
+  Spring spring : k = 800
+  Damper damper : c = 12
+  1 v
+  push.a -> v
+  v -> body.a
+  v -> spring.a
+  v -> damper.a
+  output x [m] = spring.x
+end
+''')
+    result = run_sweep(path, vary=["spring.k=0.4,1.6 [kN/m]"], metrics=["x.final"], t_end=5.0)
+    assert [point.parameters for point in result.points] == [{"spring.k": 400.0}, {"spring.k": 1600.0}]
+    assert result.column("x.final") == [pytest.approx(10 / 400, rel=1e-5), pytest.approx(10 / 1600, rel=1e-5)]
+    with pytest.raises(UsageError) as caught:
+        run_sweep(path, vary=["spring.kk=1,2"], metrics=None, t_end=1.0)
+    assert caught.value.diagnostics[0].code == "E961"
+
+
 def test_a_model_file_edited_during_the_sweep_does_not_change_the_study(tmp_path):
     # late binding: every point runs the model as it was checked and compiled at the start
     model = tmp_path / "msd.bg"

@@ -163,7 +163,7 @@ class Axis:
 
 
 _VARY = re.compile(r"^\s*(?P<name>[^=\[\]]*?)\s*=\s*(?P<values>[^\[\]]*?)\s*(?:\[(?P<unit>[^\[\]]*)\])?\s*$")
-_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*$")      # dotted: a component's parameter
 
 
 def _number(text: str, spec: str) -> float:
