@@ -1623,7 +1623,7 @@ class _Run:
         self.points = 0
         self.mode_table = {}
         self.events = []
-        self.stats = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "segments": 0, "events": 0,
+        self.stats = {"nfev": 0, "njev": 0, "nlu": 0, "steps": 0, "segments": 0, "mode_changes": 0,
                       "chattering_intervals": 0}
         self.bad = None
         self.last_relevant = np.ones(self.switch_count, dtype=bool)
@@ -2141,11 +2141,11 @@ class _Run:
                         if self.chattering_since is None or model.SWITCHES[k] in known_here:
                             self.note_event(t, self.mode_label(k, modes[k]))
                     if changed:
-                        self.stats["events"] += 1
+                        self.stats["mode_changes"] += 1
                         if not at_break:            # changes at known times are no chattering
                             self.recent_events.append(t)
                             self.recent_switches = self.recent_switches[-200:] + [(t, k) for k in changed]
-                    if self.stats["events"] > self.max_events:
+                    if self.stats["mode_changes"] > self.max_events:
                         raise _Stop({"message": f"more than {self.max_events} events by t={t:.6g}",
                                      "time": float(t), "variable": None, "law": None, "kind": "events",
                                      "cause": "a switch keeps changing mode (chattering) faster than the "
@@ -2275,7 +2275,7 @@ class _Run:
         for k in flipped:
             self.note_event(t, self.mode_label(k, modes[k]))
         if not counted:
-            self.stats["events"] += 1
+            self.stats["mode_changes"] += 1
 
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that
@@ -3611,7 +3611,7 @@ class _Run:
         t.flags.writeable = x.flags.writeable = False
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
-            message = f"completed: {t.size} points to t={reached:.6g}, {self.stats['events']} events"
+            message = f"completed: {t.size} points to t={reached:.6g}, {len(self.events)} events"
         else:
             message = failure["message"]
         self.stats["points"] = int(t.size)

@@ -210,7 +210,7 @@ def test_a_friction_whose_velocity_passes_through_zero_is_an_event(tmp_path, mon
     t, v = result.t, result.outputs["v"]
     np.testing.assert_allclose(v[t <= turn], 3 - 7 * t[t <= turn], atol=1e-8)
     np.testing.assert_allclose(v[t > turn], -3 * (t[t > turn] - turn), atol=1e-8)
-    assert result.stats["events"] == 1
+    assert result.stats["mode_changes"] == 1
 
 
 def test_an_if_conditions_event_says_whether_it_became_true_or_false(tmp_path):
