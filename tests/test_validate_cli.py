@@ -158,3 +158,51 @@ def test_an_output_declared_in_millimetres_is_validated_in_millimetres(tmp_path)
         rmse = [p.get("value") for p in junit.iter("property") if p.get("name") == "rmse"]
         assert [float(value) for value in rmse] == pytest.approx([0.5], rel=1e-6)
     assert outcomes == {0.4: (1, False), 0.6: (0, True)}
+
+
+def test_a_measurement_sampled_more_coarsely_than_the_signal_changes_is_compared_sample_by_sample(tmp_path):
+    """A 100 Hz PWM (duty 0.3) into an RL circuit (tau = 1 ms): the current measured every 1.3 ms,
+    written from its closed form (exponentials between the edges). The model evaluated at those
+    samples equals them to the solver's tolerance; interpolating the samples onto the solver's
+    steps instead would miss the ripple between them (an NRMSE of several tenths)."""
+    U, R, L, f, duty = 12.0, 2.0, 2e-3, 100.0, 0.3
+    tau = L / R
+    model = tmp_path / "rl.bg"
+    model.write_text(f"""model PwmRL
+  MSe bridge : e = {U}*pwm(t, {f}, {duty})
+  R winding : e = {R}*f
+  I coil : f = p/{L}
+  1 loop
+  bridge -> loop
+  loop -> winding
+  loop -> coil
+  output i [A] = coil.f
+  experiment run
+    t_end = 50 [ms]
+    rtol = 1e-9
+    atol = 1e-12
+  end
+end
+""")
+
+    def current(time):
+        i, t0 = 0.0, 0.0
+        edges = sorted({k / f for k in range(6)} | {(k + duty) / f for k in range(5)})
+        for edge in edges[1:] + [np.inf]:
+            on = ((t0 * f) % 1.0) < duty - 1e-9
+            end = min(edge, time)
+            target = U / R if on else 0.0
+            i = target + (i - target) * np.exp(-(end - t0) / tau)
+            if end >= time:
+                return i
+            t0 = edge
+        return i
+
+    times = np.arange(0.0, 0.05, 1.3e-3)
+    data = tmp_path / "bench.csv"
+    data.write_text("t,i_meas\n" + "".join(f"{float(t)!r},{float(current(t))!r}\n" for t in times))
+    results, code = run_validate(model, data=data, compare=["i=i_meas:nrmse=1e-6"], stream=io.StringIO())
+    (result,) = results
+    assert code == 0 and result.n_samples == times.size
+    np.testing.assert_allclose(result.t, times)
+    assert result.maxabs < 1e-7 * U / R

@@ -298,21 +298,49 @@ def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
     """:func:`~bondc.report.validate.compare` the run's signals with the measured columns, each pair
     in the signal's display unit (an output declared ``[mm]`` is compared in millimetres): its RMSE,
     largest error and the ``rmse``/``maxabs`` tolerances are in that unit, as the terminal table,
-    the JUnit file and the report show them (NRMSE and R² do not depend on the unit)."""
+    the JUnit file and the report show them (NRMSE and R² do not depend on the unit). The
+    comparison is at the measured samples the run covers (:func:`_at_measured_times`)."""
     if run.result is None:
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))
-    signals = simulated_signals(run.result)
+    t, signals = _at_measured_times(run, measured)
     results = []
     for spec in specs:
         _, factor = _signal_unit(run.graph, spec.output)
         if spec.output not in signals or spec.column not in measured or factor == 1.0:
-            results += compare(run.result.t, signals, measured, [spec])     # (its own errors, if any)
+            results += compare(t, signals, measured, [spec])     # (its own errors, if any)
             continue
         shown = {spec.output: np.asarray(signals[spec.output], dtype=float) / factor}
         columns = {TIME_KEY: measured[TIME_KEY], spec.column: np.asarray(measured[spec.column], dtype=float) / factor}
-        results += compare(run.result.t, shown, columns, [spec])
+        results += compare(t, shown, columns, [spec])
     return results
+
+
+def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict]:
+    """(times, signals) to compare at: the measured samples the run covers, the model evaluated there
+    (the run repeated with those report times, from the solver's own interpolant), so that a
+    measurement sampled more coarsely than the solver steps is compared sample by sample and not
+    interpolated between them. The run's own points where that is not possible (fewer than two
+    samples inside the run, more than a run may record, or a repeat that does not reach as far)."""
+    from bondc.runtime import MAX_POINTS
+    from bondc.simulate import simulate
+
+    result = run.result
+    own = (np.asarray(result.t, dtype=float), simulated_signals(result))
+    times = np.asarray(measured.get(TIME_KEY, ()), dtype=float)
+    if not len(own[0]) or times.size < 2:
+        return own
+    inside = times[(times >= own[0][0]) & (times <= own[0][-1])]
+    if inside.size < 2 or inside.size > MAX_POINTS:
+        return own
+    settings = dict(getattr(result, "settings", {}) or {})
+    again = simulate(run.state_space, None, t_end=settings.get("t_end", float(own[0][-1])), t_eval=inside,
+                     method=settings.get("method"), rtol=settings.get("rtol"), atol=settings.get("atol"),
+                     max_step=settings.get("max_step"), overrides=dict(result.parameters))
+    reached = np.asarray(again.t, dtype=float)
+    if reached.size != inside.size or not np.array_equal(reached, inside):
+        return own
+    return reached, simulated_signals(again)
 
 
 def _signal_unit(graph: BondGraph, name: str) -> tuple[str | None, float]:
