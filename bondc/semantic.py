@@ -2167,10 +2167,17 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
 
 
 def _when_text(m: _Model, when: ast.When) -> str:
-    """``when CONDITION`` as written (one line), for event lists."""
-    source = m.sources.get(when.span.file) if when.span is not None else None
-    text = source.text[when.span.start:when.span.end] if source is not None else "when ..."
-    head = " ".join(text.split(" then")[0].split())
+    """``when CONDITION`` as written (one line), for event lists; inside a component, with the
+    names as the flat model has them (``when r2.air.e > r2.T_set + r2.hyst``), so that the firings
+    of two instances are told apart."""
+    if when.span is not None and when.span.instance:
+        from bondc.fmt import format_expr
+
+        head = "when " + " ".join(format_expr(when.condition).split())
+    else:
+        source = m.sources.get(when.span.file) if when.span is not None else None
+        text = source.text[when.span.start:when.span.end] if source is not None else "when ..."
+        head = " ".join(text.split(" then")[0].split())
     return head if len(head) <= 120 else head[:117] + "..."
 
 

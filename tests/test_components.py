@@ -369,3 +369,56 @@ def test_the_checked_model_keeps_every_declaration_and_use_of_its_names():
     column = circuit[line - 1].index("valve.Q") + 1
     assert scope.at(str(FIXTURES / "circuit.bg"), line, column + 6).name == "valve.Q"
     assert {u.span.line for u in scope.uses_of("p_s")} == {7}              # Se supply : e = p_s
+
+
+def test_the_firings_of_a_components_when_clauses_name_the_instance(tmp_path):
+    """Two thermostat rooms from one component (tau = R C = 500 s, T(0) = 290 K, ambient 280 K):
+    room r1 (100 W, T_set 300 K) first switches off at 301 K, 500 ln(40/29) s; r2 (120 W, 295 K) at
+    296 K, 500 ln(50/44) s. Each firing names its instance's own names."""
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "thermo.bg").write_text('''model Room "a room heated by an on/off heater"
+  port amb
+  param C_th = 1000 [J/K]
+  param P = 100 [W]
+  param T_set = 300 [K]
+  param hyst = 1 [K]
+  discrete on [1] = 1
+  MSf heater : f = P*on
+  C air : state T [K], T(0) = 290, der(T) = f/C_th, e = T
+  R wall : f = e/0.5
+  0 n
+  1 l
+  heater -> n
+  n -> air
+  n -> l
+  l -> wall
+  l -> amb
+  when air.e > T_set + hyst then on = 0 end
+  when air.e < T_set - hyst then on = 1 end
+end
+''')
+    path = tmp_path / "rooms.bg"
+    path.write_text('''import "lib/thermo.bg"
+model Rooms
+  Room r1 : P = 100
+  Room r2 : P = 120, T_set = 295
+  Se ambient : e = 280
+  0 a
+  r1.amb -> a
+  r2.amb -> a
+  a -> ambient
+  experiment day
+    t_end = 300 [s]
+    rtol = 1e-10
+    atol = 1e-8
+  end
+end
+''')
+    result = run(path)
+    assert result.complete, result.message
+    first = {}
+    for time, label in result.events:
+        first.setdefault(label, time)
+    assert first["when r1.air.e > r1.T_set + r1.hyst"] == pytest.approx(500 * math.log(40 / 29), rel=1e-7)
+    assert first["when r2.air.e > r2.T_set + r2.hyst"] == pytest.approx(500 * math.log(50 / 44), rel=1e-7)
+    assert {label.split(".")[0] for label in first if label.startswith("when ")} == {"when r1", "when r2"}
