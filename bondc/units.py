@@ -330,7 +330,17 @@ def suggest(name: str) -> str | None:
     return found[0] if found else None
 
 
+#: Temperature scales with an offset: not units a factor converts (20 degC is 293.15 K, not 20 K).
+_OFFSET_SCALES = {"degc": "°C", "°c": "°C", "celsius": "°C", "degf": "°F", "°f": "°F", "fahrenheit": "°F",
+                  "c°": "°C", "f°": "°F"}
+
+
 def _hint(name: str) -> str:
+    scale = _OFFSET_SCALES.get(name.lower())
+    if scale is not None:
+        example = "20 °C is 293.15 [K]" if scale == "°C" else "68 °F is 293.15 [K]"
+        return (f"{scale} is a temperature scale with an offset, which no unit factor converts: give "
+                f"temperatures in K ({example})")
     parts = []
     found = _suggestions(name)
     if found:

@@ -224,6 +224,14 @@ def test_unknown_unit_reports_e201_at_its_span_with_suggestion():
     assert d.hint == "did you mean 'kg'?"
 
 
+@pytest.mark.parametrize("name", ["degC", "celsius", "degF"])
+def test_a_temperature_scale_with_an_offset_is_refused_with_kelvin_not_deg_times_coulomb(name):
+    # 'deg*C' would read as degrees times coulombs: 20 [deg*C] is 0.349, silently
+    _, (diagnostic,) = resolve(unit(name, (name, 1)))
+    assert diagnostic.code == "E201" and "deg*C" not in diagnostic.hint
+    assert "temperature scale with an offset" in diagnostic.hint and "293.15 [K]" in diagnostic.hint
+
+
 def test_all_unknown_units_reported_together():
     u = unit("kgg*Mpa/sec", ("kgg", 1), ("m", 1), ("Mpa", 1), ("sec", -1))
     si, diagnostics = resolve(u)
