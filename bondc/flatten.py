@@ -60,6 +60,8 @@ from bondc.model import JUNCTION_KINDS, KINDS
 from bondc.source import Span
 
 _BOND_NUMBER = re.compile(r"b([0-9]+)")
+#: The codes of an instance's kind that names no model (E330) or two (E331): no E303 for it after them.
+KIND_CODES = ("E330", "E331")
 _ELEMENT_LOCALS = frozenset({"e", "f"})   # an element's own variables inside its laws (and its states)
 
 
@@ -197,9 +199,18 @@ class _Flattener:
             found = [m for f in self.files if library_name(f) == library for m in f.models if m.name == name]
             if not found:
                 known = sorted({library_name(f) for f in self.files if f is not self.files[0]})
-                self.report(_error("E330", f"no model '{name}' in an imported library '{library}'", span,
-                                   hint=f"imported libraries: {', '.join(known) or 'none'}; import the file or "
-                                        f"'std:{library}' at file level"))
+                if library in known:
+                    models = sorted({m.name for f in self.files if library_name(f) == library for m in f.models})
+                    close = difflib.get_close_matches(name, models, n=1)
+                    hint = _hints(f"did you mean '{library}.{close[0]}'?" if close else None,
+                                  f"'{library}' has: {', '.join(models[:12])}"
+                                  + (", ..." if len(models) > 12 else ""))
+                    self.report(_error("E330", f"no model '{name}' in the imported library '{library}'", span,
+                                       hint=hint))
+                else:
+                    self.report(_error("E330", f"no model '{name}' in an imported library '{library}'", span,
+                                       hint=f"imported libraries: {', '.join(known) or 'none'}; import the file "
+                                            f"or 'std:{library}' at file level"))
             return found[0] if found else None
         home = self.by_file.get(id(where))
         own = [m for m in (home.models if home is not None else ()) if m.name == kind]

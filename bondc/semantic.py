@@ -49,7 +49,7 @@ from bondc.model import (
     OutputDef, Parameter, Signal, StateVar, WhenDef,
 )
 from bondc.parse import parse_source
-from bondc.flatten import flatten, ports_of
+from bondc.flatten import KIND_CODES, flatten, ports_of
 from bondc.std import LIBRARIES as STD_LIBRARIES, path_of as std_path_of
 from bondc.source import Source, Span
 
@@ -303,10 +303,15 @@ def check_duplicate_names(m: _Model) -> None:
 def check_kinds(m: _Model) -> None:
     """E303 unknown element kind, E407 junction kind other than 0 or 1."""
     nodes = {d.name for d in m.all_decls if d.category in ("element", "junction")}
+    # a kind the flattener already reported (E330 no such model in a library, E331 defined twice)
+    reported = {(d.span.file, d.span.start) for d in m.diagnostics if d.code in KIND_CODES and d.span}
+    models = {model.name for file in m.files for model in file.models} - {m.model.name}
     for element in m.statements(ast.Element):
-        if element.kind in KINDS:
+        if element.kind in KINDS or (element.kind_span.file, element.kind_span.start) in reported:
             continue
-        hint = _join_hints(_did_you_mean(element.kind, KINDS), f"element kinds are: {' '.join(KINDS)}")
+        hint = _join_hints(_did_you_mean(element.kind, set(KINDS) | models),
+                           f"element kinds are: {' '.join(KINDS)}"
+                           + (", or a model defined or imported here" if models else ""))
         if element.kind in nodes:
             hint = f"to connect '{element.kind}' and '{element.name}' with a bond, write " \
                    f"'{element.kind} -> {element.name}'"

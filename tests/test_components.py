@@ -422,3 +422,19 @@ end
     assert first["when r1.air.e > r1.T_set + r1.hyst"] == pytest.approx(500 * math.log(40 / 29), rel=1e-7)
     assert first["when r2.air.e > r2.T_set + r2.hyst"] == pytest.approx(500 * math.log(50 / 44), rel=1e-7)
     assert {label.split(".")[0] for label in first if label.startswith("when ")} == {"when r1", "when r2"}
+
+
+def test_a_misspelt_or_ambiguous_component_kind_is_one_error_with_the_right_suggestion(tmp_path):
+    text = '''import "std:hydraulics"
+import "std:pneumatics"
+import "std:mechanics"
+model A
+  Cylinder cyl
+  Mas body : M = 2
+  mechanics.Mas body2 : M = 2
+end
+'''
+    errors = _errors(tmp_path, text)
+    assert [(d.code, d.span.line) for d in errors] == [("E331", 5), ("E303", 6), ("E330", 7)]
+    assert errors[1].hint.startswith("did you mean 'Mass'?")
+    assert errors[2].hint.startswith("did you mean 'mechanics.Mass'?") and "import" not in errors[2].hint
