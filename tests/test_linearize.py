@@ -432,3 +432,25 @@ end
     lin = linearize(ss, at="equilibrium")
     assert lin.x0[0] == pytest.approx(293.15 + 100 * 0.5, rel=1e-9)
     assert lin.eigenvalues[0].real == pytest.approx(-1 / (0.5 * 2000), rel=1e-6)
+
+
+def test_outputs_declared_in_other_units_are_rows_in_si_and_a_note_says_so(tmp_path):
+    """A rotor J = 1e-5 kg m^2: C of w = p/J is 1e5 per kg m^2/s in rad/s whichever unit w is
+    declared in; the note gives the factor of rpm (2 pi/60)."""
+    ss = state_space_of(tmp_path, """
+model Spin
+  Se torque : e = 0.1
+  I rotor : f = p/1e-5
+  R bearing : e = 1e-4*f
+  1 shaft
+  torque -> shaft
+  shaft -> rotor
+  shaft -> bearing
+  output w [rpm] = rotor.f
+  output w_si [rad/s] = rotor.f
+end
+""")
+    lin = linearize(ss)
+    assert lin.C[:, 0].tolist() == pytest.approx([1e5, 1e5])
+    (note,) = [note for note in lin.notes if "SI" in note]
+    assert "w (declared in rpm: 1 rpm = 0.10472 SI)" in note and "w_si" not in note

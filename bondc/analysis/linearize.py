@@ -32,6 +32,9 @@ events: both operating points hold them at their initial value (a note says
 which), and they are not states of the linear model: A, B, C, D and the
 eigenvalues are those of the continuous states.
 
+A, B, C and D are in SI units, outputs declared in other units included (a
+note names them with their factor).
+
 The Jacobians are computed in forward mode over the assignment sequence: each
 assignment's symbolic partial derivatives (sympy), evaluated numerically at
 the operating point and chained, so sizes stay linear in the model; algebraic
@@ -315,6 +318,13 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
     if discrete:
         notes.append("discrete variables held at their initial value, not states of the linear model: "
                      + ", ".join(f"{ss.state_names[i]} = {x[i]:.6g}" for i in discrete))
+    outputs = getattr(ss.graph, "outputs", None) or {}
+    scaled = [(name, outputs[name]) for name in ss.outputs
+              if name in outputs and abs((outputs[name].display_factor or 1.0) - 1.0) > 1e-12]
+    if scaled:
+        notes.append("A, B, C, D are in SI units; the rows of C and D of outputs declared in other units are "
+                     "SI values too: " + ", ".join(f"{name} (declared in {out.unit_text}: 1 {out.unit_text} = "
+                                                   f"{out.display_factor:.6g} SI)" for name, out in scaled))
     f_rows, g_rows = jacobian(point(x))
     _require_finite(f_rows, [f"der({name})" for name in ss.state_names], g_rows, list(ss.outputs),
                     list(ss.state_names) + list(ss.inputs), time)
