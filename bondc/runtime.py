@@ -451,7 +451,11 @@ def load_csv(path, column):
     here: the compiler scales the signal (see :func:`bondc.numeric.csv_scales`).
     """
     path = os.path.abspath(path)
-    key = (path, column)
+    try:
+        info = os.stat(path)
+        key = (path, column, info.st_mtime_ns, info.st_size)     # a file edited since is read again
+    except OSError:
+        key = (path, column)
     if key in _CSV_CACHE:
         return _CSV_CACHE[key]
     with open_data(path) as handle:
@@ -475,7 +479,9 @@ def load_csv(path, column):
     if times.size == 0:
         raise CsvError(f"{path}: no data rows")
     if np.any(np.diff(times) < 0):
-        raise CsvError(f"{path}: the time column must not decrease")
+        i = int(np.flatnonzero(np.diff(times) < 0)[0])
+        raise CsvError(f"{path}: the time column must not decrease: row {i + 3} has t = {times[i + 1]:g} "
+                       f"after {times[i]:g}")
     _CSV_CACHE[key] = (times, values)
     return times, values
 

@@ -1054,6 +1054,17 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
             report(_error("E310", f"CSV file '{path_arg.value}': {problem} in its header", column_arg.span,
                           hint="a header names a column's unit in brackets, e.g. 'omega [rpm]', 't [ms]'; "
                                "a column without one is SI"))
+            return
+        from bondc.runtime import CsvError, load_csv
+
+        try:
+            load_csv(path, column_arg.value)        # the data rows, as the simulation reads them
+        except CsvError as problem:
+            report(_error("E310", f"CSV file '{path_arg.value}': {str(problem).partition(': ')[2]}",
+                          path_arg.span, hint="rows (after the header, not counting blank lines and # comments) "
+                                              "are numbers, times in increasing order"))
+        except (OSError, UnicodeDecodeError, csv.Error):
+            report(_error("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span))
 
 
 def _check_expr(m: _Model, expr: ast.Expr, scope: _Scope) -> bool:

@@ -14,8 +14,8 @@ succeeded (``bondc check`` prints them with the errors). They are compared with 
 (rendered exactly as bondc prints them) and ``<same>.json`` (the ``Diagnostic.to_json()`` list);
 :func:`test_the_command_prints_the_golden_output` runs the real command line too.
 
-The absolute path of this folder, which bondc prints for a measured-data file that fails at run
-time (E804), is written ``/path/to/`` in the golden files.
+The absolute path of this folder, where bondc prints one, is written ``/path/to/`` in the golden
+files.
 
 ``pytest --update-golden`` rewrites the expected files; review them by eye (carets, notes,
 hints), then run ``python tests/golden/check/make_diagnostics_doc.py`` so that

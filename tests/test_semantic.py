@@ -543,6 +543,38 @@ def test_csv_inputs(tmp_path):
     assert diagnostic.code == "E310"
 
 
+@pytest.mark.parametrize("rows, words", [
+    ("0,0\n1,2\n0.5,3\n", "the time column must not decrease: row 4 has t = 0.5 after 1"),
+    ("0,0\n# a comment\n1,abc\n", "row 3 is not numeric: '1,abc'"),
+])
+def test_a_csv_files_bad_data_rows_are_found_by_the_check_at_the_call(tmp_path, rows, words):
+    # not only when a simulation reads them (E804, without a place in the model)
+    write(tmp_path, "time,omega\n" + rows, "data/w.csv")
+    (diagnostic,) = errors(tmp_path, model("""
+        input w [rad/s] = csv("data/w.csv", "omega")
+        Sf motor : f = w
+        R load : e = 2*f
+        motor -> load
+    """))
+    assert diagnostic.code == "E310" and words in diagnostic.message
+    assert diagnostic.span.line == 2 and "increasing order" in diagnostic.hint
+
+
+def test_a_csv_file_edited_between_two_checks_in_one_process_is_read_again(tmp_path):
+    # an editor's server checks the same model again and again: the data rows as the file has them now
+    text = model("""
+        input w [rad/s] = csv("data/w.csv", "omega")
+        Sf motor : f = w
+        R load : e = 2*f
+        motor -> load
+    """)
+    write(tmp_path, "time,omega\n0,1\n10,1\n", "data/w.csv")
+    graph, _ = load(tmp_path, text)
+    write(tmp_path, "time,omega\n0,1\n-1,1\n", "data/w.csv")
+    (diagnostic,) = errors(tmp_path, text)
+    assert diagnostic.code == "E310" and "must not decrease" in diagnostic.message
+
+
 def test_build_takes_a_parsed_file():
     graph, warnings = semantic.build(parse_text(MSD, "msd.bg"), {})
     assert graph.summary()["bonds"] == 4 and warnings == []

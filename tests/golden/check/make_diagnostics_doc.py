@@ -73,7 +73,7 @@ d("E306", "wrong arguments", "A call has the wrong number or shape of arguments:
 d("E307", "missing import", "`import \"path\"` names a file that does not exist (or cannot be read). The path is relative to the importing file.", "Fix the path; the hint shows where bondc looked.")
 d("E308", "cyclic import", "Files import each other, directly or through other files. The message names the chain.", "Move what both files need into a third file that both import.")
 d("E309", "model selection", "The file has no model, or several and no `--model` was given, or `--model` names a model the file (and its imports) does not have.", "Pass `--model NAME` with one of the listed models.")
-d("E310", "CSV file or column", "`csv(\"file\", \"column\")` names a file that cannot be read (paths are relative to the model file), a file without a header line, or a column that the header does not have. The first column (or the column `t` or `time`) is time.", "Fix the path or the column name; the hint lists the columns.")
+d("E310", "CSV file or column", "`csv(\"file\", \"column\")` names a file that cannot be read (paths are relative to the model file), a file without a header line, or a column that the header does not have, or data rows the simulation could not read: a cell that is not a number, a time before the one above it (the row is counted with the header as row 1, blank lines and `#` comments left out). The first column (or the column `t` or `time`) is time.", "Fix the path or the column name (the hint lists the columns), or the row the message names.")
 d("E311", "cannot evaluate", "A constant (parameter, override, setting, initial value, table breakpoint) has no value: a logarithm or square root of a negative number, a division by zero, a negative number to a fractional power, or a result too large for a float. Also a law, output or input that divides by parameters whose value is 0 (`f = p/m` with `m = 0`, outside an `if` that guards it): every evaluation would be inf or nan. The caret is under the sub-expression that failed; inside a function, a note points into its body.", "Fix the expression or the parameter values it uses. If the value comes from an experiment's overrides, a note names the experiment.")
 d("E312", "unknown variable of a graph node", "A dotted reference names a variable the node does not have: `X.q` on an element without a state `q`, `X.p1.e` on a one-port, `X.e` on a two-port (name the port), `J.f` on a 0-junction or `J.e` on a 1-junction (a 0-junction has one common effort, a 1-junction one common flow), `bN.e` with no bond N, or a dotted reference on a parameter or input.", "Use one of the variables the hint lists; for the flow at a 0-junction use one bond's flow (`b3.f` or a label).")
 d("E313", "string or list where a number is expected (or the reverse)", "A string appears in an arithmetic expression, a list outside `table(...)`, a `solver` that is not a string, `csv` arguments that are not strings, or `outputs` entries that are not names.", "Write numbers in expressions; quote the solver name (`solver = \"Radau\"`); write `outputs = [name1, name2]`.")
@@ -216,10 +216,10 @@ d("E803", "cannot start the simulation",
   "earlier, as E317.)",
   "Give a positive `--t-end`; the message says which setting is wrong.")
 d("E804", "measured signal unreadable at run time",
-  "A `csv(\"file\", \"column\")` signal passed the checks of `bondc check` (the file exists, the header has "
-  "the column, E310) but its rows cannot be used when the run reads them: a cell that is not a number, a time "
-  "column that goes backwards, no data rows, or a file changed since it was checked. The message gives the "
-  "file's absolute path and the row; it has no source location.",
+  "A `csv(\"file\", \"column\")` signal passed the checks (E310: the file, its header and its rows) but "
+  "cannot be used when the run reads it: the file was changed after the model was checked, as when a run "
+  "comes from the compile cache or, through the Python API, from a state space derived earlier. The message "
+  "gives the file's absolute path and the row; it has no source location.",
   "Fix the row the message names; the time column (`t`, `time`, or else the first) must not decrease.")
 d("E810", "a value became nan or inf",
   "The run stopped because a state, a variable or a state derivative became `nan` or `inf`. The message "
@@ -694,6 +694,18 @@ _SPIN_API = (_IMPORTS
              "result = simulate(ss, graph.experiments[\"run\"])\n")
 
 
+live("E804", Api(_IMPORTS
+                 + "graph, _ = semantic.load(\"replay.bg\")\n"
+                 "ss = derive(assign_causality(graph))\n"
+                 "with open(\"push.csv\", \"w\") as data:       # edited after the check\n"
+                 "    data.write(\"t,force\\n0,1\\n0.5,n/a\\n1,2\\n\")\n"
+                 "simulate(ss, graph.experiments[\"run\"])\n",
+                 {"replay.bg": "model Replay\n  input F [N] = csv(\"push.csv\", \"force\")\n  MSe push : e = F\n"
+                               "  I   mass : f = p/2\n  push -> mass\n  experiment run\n    t_end = 1 [s]\n"
+                               "  end\nend\n",
+                  "push.csv": "t,force\n0,1\n0.5,1.5\n1,2\n"}))
+
+
 def _with(imports: str, code: str) -> str:
     """``code`` with more import lines after the first ones."""
     return code.replace(_IMPORTS, _IMPORTS + imports, 1)
@@ -903,24 +915,30 @@ def _workspace(files: dict[str, str]):
 
 
 def _run(example) -> str:
-    """What the example shows: the command's output, or the diagnostics the code raises."""
-    with _workspace(example.files):
-        if isinstance(example, Cli):
-            from bondc.cli import main
+    """What the example shows: the command's output, or the diagnostics the code raises (the
+    temporary folder it ran in written ``/path/to/``)."""
+    with _workspace(example.files) as folder:
+        return _shown(example).replace(str(folder) + os.sep, "/path/to/")
 
-            out, err = io.StringIO(), io.StringIO()
-            with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-                main(shlex.split(example.command)[1:])
-            text = (err if example.stream == "stderr" else out).getvalue()
-            if example.lines is not None:
-                text = "\n".join(line for line in text.splitlines() if example.lines in line)
-            return text.rstrip()
-        namespace: dict = {}
-        try:
-            exec(compile(example.code, "<example>", "exec"), namespace)  # noqa: S102 - the page's own examples
-        except BondcError as error:
-            return render_all(error.diagnostics, error.sources)
-        return render_all(namespace["shown"])
+
+def _shown(example) -> str:
+    """The command's output, or the diagnostics the code raises, in the current folder."""
+    if isinstance(example, Cli):
+        from bondc.cli import main
+
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            main(shlex.split(example.command)[1:])
+        text = (err if example.stream == "stderr" else out).getvalue()
+        if example.lines is not None:
+            text = "\n".join(line for line in text.splitlines() if example.lines in line)
+        return text.rstrip()
+    namespace: dict = {}
+    try:
+        exec(compile(example.code, "<example>", "exec"), namespace)  # noqa: S102 - the page's own examples
+    except BondcError as error:
+        return render_all(error.diagnostics, error.sources)
+    return render_all(namespace["shown"])
 
 
 def _live_example(code: str, example, seen: dict) -> str:
