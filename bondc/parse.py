@@ -20,6 +20,7 @@ from __future__ import annotations
 import functools
 import re
 import sys
+from dataclasses import replace
 from fractions import Fraction
 from importlib import resources
 from pathlib import Path
@@ -28,7 +29,7 @@ from lark import Lark, Token, Transformer, v_args
 from lark.exceptions import GrammarError, UnexpectedCharacters, UnexpectedEOF, UnexpectedInput, VisitError
 
 from bondc import ast
-from bondc.errors import Diagnostic, ParseError
+from bondc.errors import Diagnostic, ParseError, Related
 from bondc.source import Source, Span
 
 #: Python's default of 1000 nested calls is reached by a sum of a few hundred terms: the parser,
@@ -549,6 +550,49 @@ def _statement_extent(text: str, offset: int) -> tuple[int, int]:
     return offset, len(text)
 
 
+def _open_bracket(text: str, offset: int) -> int | None:
+    """The offset of the innermost ``(`` or ``[`` still open at ``offset`` (strings and comments
+    skipped), or None."""
+    opened: list[int] = []
+    in_string = False
+    index = 0
+    while index < offset:
+        char = text[index]
+        if in_string:
+            if char == "\\":
+                index += 2
+                continue
+            if char == '"' or char == "\n":
+                in_string = False
+        elif char == "#":
+            end = text.find("\n", index)
+            index = len(text) if end < 0 else end
+            continue
+        elif char == '"':
+            in_string = True
+        elif char in "([":
+            opened.append(index)
+        elif char in ")]" and opened:
+            opened.pop()
+        index += 1
+    return opened[-1] if opened else None
+
+
+def _unclosed(diagnostic: Diagnostic, source: Source, offset: int) -> Diagnostic:
+    """``diagnostic`` about a token on a later line than a bracket still open there: the bracket
+    joined the lines (inside ( ) or [ ] a line break continues the statement), so say so and
+    point at it."""
+    opened = _open_bracket(source.text, offset)
+    if opened is None or "\n" not in source.text[opened:offset]:
+        return diagnostic
+    bracket = source.text[opened]
+    closing = ")" if bracket == "(" else "]"
+    where = source.span(opened, opened + 1)
+    return replace(diagnostic, hint=f"the '{bracket}' on line {where.line} is not closed: inside ( ) or [ ] the "
+                                    f"statement goes on over the line break; close it with '{closing}'",
+                   related=(Related(where, f"'{bracket}' opened here"),))
+
+
 def _blank(text: str, start: int, end: int, replacement: str = "") -> str:
     """Replace text[start:end] by ``replacement`` padded with spaces, keeping newlines."""
     chunk = "".join(c if c == "\n" else " " for c in text[start:end])
@@ -616,9 +660,10 @@ def parse_source(source: Source) -> ast.File:
             diagnostic, offset = _syntax_diagnostic(error, source)
             if diagnostics and diagnostics[-1].span == diagnostic.span:
                 break  # no progress: stop rather than report the same place twice
-            diagnostics.append(diagnostic)
-            if diagnostic.code == "E103" or len(diagnostics) >= MAX_SYNTAX_ERRORS:
-                break
+            explained = _unclosed(diagnostic, source, offset)
+            diagnostics.append(explained)
+            if diagnostic.code == "E103" or len(diagnostics) >= MAX_SYNTAX_ERRORS or explained is not diagnostic:
+                break   # (past an unclosed bracket the rest of the file is one statement: no more to say)
             start, end = _statement_extent(text, offset)
             header = text[start:end].lstrip()
             # Keep a block header's shape, so its body is not reported again statement by statement.

@@ -468,3 +468,20 @@ def test_spans_are_the_positions_of_their_ends():
                 before = text[:clamped].split("\n")
                 assert (line, column) == (len(before), len(before[-1]) + 1) == source.position(offset)
             assert (span.start, span.end) == (start, end) and len(lines) == len(source._line_starts)
+
+
+def test_an_unclosed_bracket_is_named_where_it_opened_and_nothing_after_it_is_reported():
+    # inside [ ] the statement goes on over the line break: the error is at the next line's first
+    # token, and every line after would be reported again
+    text = "model U\n  param m = 2 [kg\n  param k = 3\n  Se s : e = k\n  R r : e = m*f\n  s -> r\nend\n"
+    with pytest.raises(ParseError) as caught:
+        parse_text(text, "u.bg")
+    (diagnostic,) = caught.value.diagnostics
+    assert (diagnostic.code, diagnostic.span.line, diagnostic.span.column) == ("E100", 3, 3)
+    assert "the '[' on line 2 is not closed" in diagnostic.hint and "']'" in diagnostic.hint
+    (related,) = diagnostic.related
+    assert (related.span.line, related.span.column) == (2, 15)
+    # a bracket closed on its own line is not blamed
+    with pytest.raises(ParseError) as caught:
+        parse_text("model U\n  param m = (2 + 3]\nend\n", "u.bg")
+    assert all(not d.related for d in caught.value.diagnostics)
