@@ -273,6 +273,15 @@ class Entry:
                 digest = _file_hash(resolved)
                 if digest is not None:
                     depends[str(resolved)] = digest
+        # what was made from an earlier derivation in this folder (its imports changed since): the
+        # generated module carries that one's parameter values and laws
+        for stale in ("light.pickle", "module.py", *(path.name for path in self.folder.glob("module.*.code"))):
+            try:
+                (self.folder / stale).unlink()
+            except FileNotFoundError:
+                pass
+            except OSError:         # cannot remove it: no cache rather than a stale one
+                return
         try:
             data = pickle.dumps(derived, protocol=pickle.HIGHEST_PROTOCOL)
             self.folder.mkdir(parents=True, exist_ok=True)

@@ -144,6 +144,48 @@ def test_a_changed_import_is_a_miss(tmp_path, isolated):
     assert result.states["spring.q"].max() == pytest.approx((1 + overshoot) * 15 / 800, rel=0.01)
 
 
+def test_a_simulation_after_an_edit_of_an_import_runs_the_edited_model_not_the_cached_module(
+        tmp_path, isolated, capsys):
+    """A spring defined in an imported file: after a cached simulate, its stiffness (then its law)
+    is edited there. The entry is derived again; the module, its compiled code and the light entry
+    made from the old derivation must go with it. The static deflection is F/k each time."""
+    from bondc.cli import main
+
+    (tmp_path / "lib").mkdir()
+    library = tmp_path / "lib" / "spring.bg"
+    library.write_text("model Spring\n  port a\n  param k = 800 [N/m]\n  C s : e = k*q\n  a -> s\nend\n")
+    path = tmp_path / "imp.bg"
+    path.write_text('''import "lib/spring.bg"
+model Imp
+  Se F : e = 10
+  I m : f = p/2
+  R d : e = 40*f
+  Spring sp
+  1 j
+  F -> j
+  j -> m
+  j -> d
+  j -> sp.a
+  output x [m] = sp.s.q
+  experiment settle
+    t_end = 5 [s]
+  end
+end
+''')
+
+    def final_x():
+        assert main(["simulate", str(path), "--json"]) == 0
+        summary = json.loads(capsys.readouterr().out)
+        return summary["statistics"]["x"]["final"], summary["parameters"]["sp.k"]
+
+    assert final_x() == (pytest.approx(10 / 800, rel=1e-4), 800)
+    assert final_x() == (pytest.approx(10 / 800, rel=1e-4), 800)          # the cached module
+    library.write_text(library.read_text().replace("800", "3200"))
+    assert final_x() == (pytest.approx(10 / 3200, rel=1e-4), 3200)
+    library.write_text(library.read_text().replace("k*q", "4*k*q"))
+    assert final_x() == (pytest.approx(10 / 12800, rel=1e-4), 3200)
+
+
 def test_the_environment_turns_the_cache_off(tmp_path, isolated, monkeypatch):
     _, loads = isolated
     monkeypatch.setenv("BONDC_CACHE", "0")
