@@ -222,6 +222,30 @@ end
     assert caught.value.diagnostics[0].code == "E961"
 
 
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+def test_a_resume_after_the_model_or_an_option_changed_is_refused_not_mixed(tmp_path, suffix):
+    """Points computed with b = 12 must not be kept for a sweep of the model with b = 40 (nor with
+    another --set or t_end); the unchanged sweep still resumes without running anything."""
+    path = tmp_path / "msd.bg"
+    path.write_text(MSD.read_text())
+    output = tmp_path / f"study{suffix}"
+    first = run_sweep(path, vary=["k=400,800"], metrics=["x.max"], t_end=3.0, output=output, point_timeout=0)
+    again = run_sweep(path, vary=["k=400,800"], metrics=["x.max"], t_end=3.0, output=output, point_timeout=0)
+    assert again.column("x.max") == first.column("x.max")
+    for change in (dict(sets=["F0=20"]), dict(t_end=2.0)):
+        arguments = dict(vary=["k=400,800"], metrics=["x.max"], t_end=3.0, output=output, point_timeout=0)
+        with pytest.raises(UsageError) as caught:
+            run_sweep(path, **{**arguments, **change})
+        assert caught.value.diagnostics[0].code == "E970"
+    path.write_text(MSD.read_text().replace("b      = 12 ", "b      = 40 "))
+    with pytest.raises(UsageError) as caught:
+        run_sweep(path, vary=["k=400,800"], metrics=["x.max"], t_end=3.0, output=output, point_timeout=0)
+    assert "a different text of the model file" in caught.value.diagnostics[0].message
+    output.unlink()
+    fresh = run_sweep(path, vary=["k=400,800"], metrics=["x.max"], t_end=3.0, output=output, point_timeout=0)
+    assert fresh.column("x.max")[0] < first.column("x.max")[0]         # more damping, a lower peak
+
+
 def test_a_model_file_edited_during_the_sweep_does_not_change_the_study(tmp_path):
     # late binding: every point runs the model as it was checked and compiled at the start
     model = tmp_path / "msd.bg"

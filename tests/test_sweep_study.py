@@ -82,11 +82,19 @@ def test_a_point_that_hangs_is_timed_out_and_the_others_complete(tmp_path):
     path = tmp_path / "slow.bg"
     path.write_text(HANGING)
     started = time.monotonic()
-    study = run_sweep(path, vary=["h=10,1e-7,20"], metrics=["x.final"], point_timeout=3.0, jobs=2, dt=1.0)
+    out = tmp_path / "slow.csv"
+    study = run_sweep(path, vary=["h=10,1e-7,20"], metrics=["x.final"], point_timeout=3.0, jobs=2, dt=1.0,
+                      output=out)
     assert [p.status for p in study.points] == ["ok", "timed out", "ok"]
     assert "stopped after 3 s" in study.points[1].message and study.points[1].wall_time >= 3.0
     assert time.monotonic() - started < 60
     assert study.exit_code == 1
+    # the timed-out point keeps its value in the table (SI: 1e-7 ms), and the same sweep resumes
+    assert [float(row[1]) for row in _rows(out)[1:]] == [pytest.approx(v) for v in (1e-2, 1e-10, 2e-2)]
+    again = run_sweep(path, vary=["h=10,1e-7,20"], metrics=["x.final"], point_timeout=3.0, jobs=2, dt=1.0,
+                      output=out)
+    assert [p.status for p in again.points] == ["ok", "timed out", "ok"]
+    assert [p.parameters["h"] for p in again.points] == [pytest.approx(v) for v in (1e-2, 1e-10, 2e-2)]
     # undamped: the spring swings between 0 and twice the static deflection
     assert all(0 <= p.metrics["x.final"] <= 2 * 10 / 800 * (1 + 1e-6) for p in (study.points[0], study.points[2]))
 

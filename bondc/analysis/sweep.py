@@ -63,7 +63,11 @@ them one after the other in this process. ``executor="dask"`` runs them on a
 whichever process, so the result does not depend on ``jobs`` or the executor.
 Rows are appended to the csv as points finish (flushed), Ctrl-C and SIGTERM
 keep them, and running the same sweep again resumes: the points already in the
-file (matched by their parameter values) are not run again.
+file (matched by their parameter values) are not run again. What they were
+computed from (the text of the model file and its imports, the model,
+experiment, --set values, t_end, dt and motor catalogue) is recorded beside a
+csv table in ``<table>.csv.study`` and inside a json one; a resume with any of
+these changed is E970, not a table mixing two studies.
 
 **Statuses.** "ok"; "failed" (it did not load, or its run stopped early);
 "timed out"; "incomplete" (it ran, but a metric or the motor selection could
@@ -1052,6 +1056,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
                 "point_timeout": point_timeout, "executor": executor}
     if samples:
         settings.update(samples=samples, seed=seed)
+    settings["study"] = _study(graph, model, experiment, sets, settings["t_end"], dt, motors)
 
     def result_of(points) -> SweepResult:
         return SweepResult(
@@ -1067,6 +1072,8 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         template = SweepResult(graph.name, None, str(path), tuple(axes), tuple(shown_units), tuple(si_units),
                                chosen_metrics, (), motors=motors is not None)
         previous = _previous_points(output, template.csv_header(), axes, chosen_metrics, motors is not None)
+        if previous:
+            _check_study(output, settings["study"])
     done: dict[int, SweepPoint] = {}
     for index, (key, values) in enumerate(zip(keys, grid)):
         if key in previous:
@@ -1079,9 +1086,13 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     journal = None
     if output is not None and Path(output).suffix.lower() == ".csv":
         journal = _Journal(output, result_of(()).csv_header(), keep_rows=bool(previous))
+        _write_study(output, settings["study"])
     report = _progress_reporter(progress, len(tasks))
 
     def on_done(point: SweepPoint) -> None:
+        if not point.parameters:        # stopped before it loaded (timed out): its values in SI all the same
+            point = dataclasses.replace(point, parameters={
+                name: converter.to_si(value) for name, converter, value in zip(names, converters, point.values)})
         done[point.index] = point
         if journal is not None:
             journal.add(result_of(()).csv_row(point))
@@ -1452,7 +1463,10 @@ def _previous_points(path, result_header: list[str], axes, metrics, motors: bool
     for row in rows[1:]:
         if len(row) != width or row[columns["status"]] not in STATUSES:
             continue            # a row cut short by an interruption: that point runs again
-        parameters = {axis.name: float(row[1 + i]) for i, axis in enumerate(axes)}
+        try:
+            parameters = {axis.name: float(row[1 + i]) for i, axis in enumerate(axes)}
+        except ValueError:
+            continue            # a row without its values (written by an older bondc): that point runs again
         metrics_values = {m.name: _from_csv(row[1 + len(axes) + i]) for i, m in enumerate(metrics)}
         status = row[columns["status"]]
         point = SweepPoint(int(row[0]), (), status, row[columns["message"]] or None, None, parameters,
@@ -1461,6 +1475,61 @@ def _previous_points(path, result_header: list[str], axes, metrics, motors: bool
                            motors=tuple(m for m in row[columns["motors"]].split(";") if m) if motors else None)
         found[_key(parameters, names)] = point
     return found
+
+
+def _study(graph, model, experiment, sets, t_end, dt, motors) -> dict:
+    """What the points of a sweep were computed from besides their own values: the text of every
+    file the model read, the model and experiment chosen, the --set values, t_end, dt and the motor
+    catalogue. A resumed sweep keeps the points of an earlier run only where these are the same."""
+    import hashlib
+
+    texts = sorted((name, source.text) for name, source in graph.sources.items()
+                   if getattr(source, "path", None) is not None)
+    digest = lambda data: hashlib.sha256(data).hexdigest()      # noqa: E731
+    catalogue = None
+    if motors is not None:
+        try:
+            catalogue = digest(Path(motors).read_bytes())
+        except OSError:
+            catalogue = str(motors)
+    return {"model files": digest(json.dumps(texts).encode("utf-8")), "model": model, "experiment": experiment,
+            "--set": [item if isinstance(item, str) else getattr(getattr(item, "source", None), "text", repr(item))
+                      for item in sets or ()],
+            "t_end": t_end, "dt": dt, "motor catalogue": catalogue}
+
+
+def study_file(output) -> Path:
+    """Beside a sweep's csv table, what its points were computed from (:func:`_study`): ``x.csv.study``."""
+    return Path(str(output) + ".study")
+
+
+def _write_study(output, study: dict) -> None:
+    from bondc.io import atomic_write_text
+
+    atomic_write_text(study_file(output), json.dumps(study, indent=1) + "\n")
+
+
+def _check_study(output, study: dict) -> None:
+    """E970 where the points in ``output`` were computed from another model or other options
+    (a table written without the record of its study is resumed as before)."""
+    path = Path(output)
+    try:
+        if path.suffix.lower() == ".json":
+            recorded = json.loads(path.read_text(encoding="utf-8")).get("settings", {}).get("study")
+        else:
+            recorded = json.loads(study_file(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        recorded = None
+    if not isinstance(recorded, dict):
+        return
+    labels = {"model files": "a different text of the model file or its imports", "model": "another --model",
+              "experiment": "another --experiment", "--set": "other --set values", "t_end": "another t_end",
+              "dt": "another dt", "motor catalogue": "another motor catalogue"}
+    changed = [labels.get(key, key) for key in study if json.dumps(recorded.get(key)) != json.dumps(study[key])]
+    if changed:
+        raise _usage("E970", f"'{output}' holds points of this sweep computed with {', '.join(changed)}: "
+                             "resuming would mix them with points of this one",
+                     hint="write to another file, or delete it to start again")
 
 
 def _from_csv(text: str) -> float | None:

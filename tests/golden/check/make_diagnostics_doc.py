@@ -479,7 +479,9 @@ d("E969", "sweep output file",
 d("E970", "sweep output holds another sweep",
   "`bondc sweep -o FILE` resumes from the points already in FILE; FILE holds a table with other columns "
   "(other varied parameters or metrics) or cannot be read as a sweep table, so its rows cannot be the points of "
-  "this sweep.",
+  "this sweep; or its points were computed from something else than this sweep's: a model file or import whose "
+  "text changed since, or another model, experiment, `--set`, `t_end`, `dt` or motor catalogue (recorded in "
+  "`FILE.study` beside a csv table, inside a json one).",
   "Write to another file, or delete FILE to start the study again.")
 d("E972", "not a sweep table",
   "`bondc report --sweep FILE`: FILE cannot be read, or is not the csv `bondc sweep -o` wrote (its header "
