@@ -264,7 +264,7 @@ def _keep_light(derived, account) -> None:
 
 
 def _cmd_simulate(args) -> int:
-    from bondc.analysis.energy import energy_account
+    from bondc.analysis.energy import energy_account, steps_of
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
     from bondc.io import check_output
     from bondc.simulate import simulate, write
@@ -280,14 +280,16 @@ def _cmd_simulate(args) -> int:
     error = result.error()
     summary = result.summary()
     account = None
+    steps = result
     if result.t.size > 1:
-        summary["statistics"] = output_statistics(result)
+        steps = steps_of(state_space, result)      # a run on a grid: its statistics from the solver's steps
+        summary["statistics"] = output_statistics(steps)
         for name, row in summary["statistics"].items():         # each output in its declared unit
             unit, scale = result.units.get(name, (None, 1.0))
             if unit is not None:
                 row.update({key: value / scale for key, value in row.items()}, unit=unit)
         cycle = experiment.cycle if experiment is not None else None
-        summary["power"] = power_statistics(result, power_outputs(graph), cycle)
+        summary["power"] = power_statistics(steps, power_outputs(graph), cycle)
         try:
             account = energy_account(state_space, result, cycle=cycle)
             summary["energy"] = account.to_json()
@@ -299,7 +301,7 @@ def _cmd_simulate(args) -> int:
         from bondc.analysis.motor_report import motor_report
 
         try:
-            motors_text, summary["motors"] = motor_report(result, graph, Path(args.motors))
+            motors_text, summary["motors"] = motor_report(steps, graph, Path(args.motors))
         except BondcError as problem:
             _print_diagnostics(problem.diagnostics, graph.sources)
     if args.json:

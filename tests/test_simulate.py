@@ -6,6 +6,7 @@ crossing times, table breakpoints), never from an earlier run.
 
 import io
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -465,3 +466,40 @@ def test_switch_labels_name_the_elements_inside_components_too(tmp_path):
     assert not any(re.search(r"\bb\d+\.[ef]\b", label) for label in labels)
     ends = [time for time, label in result.events if label.endswith("ends")]
     assert ends == [pytest.approx(1.5, abs=1e-7)]          # 4 t reaches the 6 N static limit
+
+
+def test_a_run_on_a_grid_takes_its_statistics_and_motor_requirements_from_the_solvers_steps(tmp_path, capsys):
+    """A 2 N m torque pulse (Gaussian, 4 ms wide, at t = 0.333 s) on top of 0.5 N m: a 0.1 s grid
+    steps over it. simulate --dt gives the same peak torque, statistics and motor requirements as
+    the run without dt (computed from the solver's steps, which resolve the pulse), not the grid's
+    0.5 N m."""
+    from bondc.cli import main
+
+    path = tmp_path / "pulse.bg"
+    path.write_text("""model Pulse
+  input T [N*m] = 0.5 + 2*exp(-((t - 0.333)/0.004)^2)
+  MSe motor : e = T
+  I rotor : f = p/0.01
+  R drag : e = 0.05*f
+  1 shaft
+  motor -> shaft
+  shaft -> rotor
+  shaft -> drag
+  output torque [N*m] = motor.e
+  output omega [rad/s] = rotor.f
+  experiment run
+    t_end = 1 [s]
+  end
+end
+""")
+    catalogue = Path(__file__).parent.parent / "models" / "data" / "motors.csv"
+    summaries = []
+    for grid in ([], ["--dt", "0.1"]):
+        assert main(["simulate", str(path), "--json", "--motors", str(catalogue), *grid]) == 0
+        summaries.append(json.loads(capsys.readouterr().out))
+    plain, gridded = summaries
+    assert gridded["points"] == 11
+    peak = gridded["statistics"]["torque"]["max"]
+    assert peak == plain["statistics"]["torque"]["max"] and peak == pytest.approx(2.5, rel=5e-3)
+    assert gridded["motors"]["requirements"] == plain["motors"]["requirements"]
+    assert gridded["motors"]["requirements"]["peak_torque"] == pytest.approx(2.5, rel=5e-3)

@@ -1093,6 +1093,23 @@ def _at_solver_steps(result) -> bool:
     return bool(np.all(nearest <= 1e-9 * scale))
 
 
+def steps_of(ss, result):
+    """``result`` at the solver's own steps: itself, or for a run on a grid (``dt``, ``t_eval``) the
+    same run repeated without it (the same steps), once per result. What is computed from a run
+    rather than shown of it (the energy account, statistics, motor requirements) takes these: a
+    peak between two report points is not missed."""
+    if _at_solver_steps(result):
+        return result
+    steps = getattr(result, "_solver_steps", None)
+    if steps is None:
+        steps = _resimulate(ss, result)
+        try:
+            result._solver_steps = steps
+        except AttributeError:      # (a result that takes no attributes: repeated each time)
+            pass
+    return steps
+
+
 def _resimulate(ss, result):
     from bondc.simulate import simulate
 
@@ -1185,7 +1202,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
         cycle = experiment_cycle(ss, result)
     windows = cycle_windows(float(t[0]), float(t[-1]), cycle)
     resimulated = not _at_solver_steps(result)
-    steps = _resimulate(ss, result) if resimulated else result
+    steps = steps_of(ss, result)
 
     units = getattr(graph, "si_units", {}) or {}
     # values bound late (--set, an edit of values only): the base's module, given the run's values

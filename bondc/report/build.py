@@ -108,6 +108,14 @@ class PipelineRun:
     def complete(self) -> bool:
         return self.result is not None and bool(self.result.complete)
 
+    @property
+    def steps(self):
+        """The run at the solver's steps (:func:`~bondc.analysis.energy.steps_of`): statistics and
+        motor requirements are computed from it, plots show ``result``."""
+        from bondc.analysis.energy import steps_of
+
+        return steps_of(self.state_space, self.result)
+
 
 def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str | None = None,
                  sets: Sequence = (), t_end: float | None = None, progress: bool = False) -> PipelineRun:
@@ -1011,7 +1019,7 @@ def _motor_plot(run: PipelineRun, motors):
     from bondc.analysis.motors import load_catalogue, requirements
     from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, figure_svg
 
-    result = run.result
+    result = run.steps
     _, _, torque = find_signal(result, (MOTOR_TORQUE,), "torque")
     _, _, speed = find_signal(result, (MOTOR_SPEED,), "speed")
     window = cycle_window(result, run.graph)
@@ -1039,7 +1047,7 @@ def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | Non
     from bondc.analysis.motor_report import cycle_window, estimate_load_inertia, find_signal, motor_report
     from bondc.analysis.motors import requirements
 
-    result, graph = run.result, run.graph
+    result, graph = run.steps, run.graph
     try:
         torque = find_signal(result, (MOTOR_TORQUE,), "torque")
         speed = find_signal(result, (MOTOR_SPEED,), "speed")
@@ -1157,7 +1165,7 @@ def _result_tables(run: PipelineRun) -> list[Table]:
     """The outputs' minimum, maximum, time average, RMS and final value; the power outputs per cycle."""
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
 
-    graph, result = run.graph, run.result
+    graph, result = run.graph, run.steps
     statistics = output_statistics(result)
     rows = []
     for name, values in statistics.items():
