@@ -67,6 +67,15 @@ def unit_scale(text: str | None) -> float:
     """The SI factor of a unit written as text (``"kPa"`` -> 1000.0); None -> 1.0."""
     if text is None:
         return 1.0
+    resolved = unit_of(text)
+    if resolved is None:
+        raise ValueError(f"unknown unit [{text}]")
+    return float(resolved.factor)
+
+
+def unit_of(text: str):
+    """The :class:`~bondc.units.SIUnit` of a unit written as text (``"kPa"``, ``"kg*m/s"``), or None
+    where it is not one."""
     from bondc.errors import BondcError
     from bondc.parse import parse_set_value
     from bondc.units import resolve
@@ -74,11 +83,8 @@ def unit_scale(text: str | None) -> float:
     try:
         unit = parse_set_value(f"x = 1 [{text}]", "<header>").unit
     except BondcError:
-        unit = None
-    resolved = resolve(unit)[0] if unit is not None else None
-    if resolved is None:
-        raise ValueError(f"unknown unit [{text}]")
-    return float(resolved.factor)
+        return None
+    return resolve(unit)[0] if unit is not None else None
 
 
 #: What ``lambdify``/generated numpy code needs besides numpy for bondc's functions.

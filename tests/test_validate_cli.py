@@ -206,3 +206,19 @@ end
     assert code == 0 and result.n_samples == times.size
     np.testing.assert_allclose(result.t, times)
     assert result.maxabs < 1e-7 * U / R
+
+
+def test_a_measured_column_of_another_quantity_is_an_error_not_a_comparison(tmp_path):
+    """v_C [V] against a column in A, i [A] against a column in kg: E958 each; i against a column in mA
+    (the same quantity) is compared, in amperes."""
+    t = np.linspace(0.0, 0.01, 11)
+    for column, spec, code in (("v [A]", "v_C=v", "E958"), ("i_meas [kg]", "i=i_meas", "E958")):
+        data = tmp_path / "bench.csv"
+        data.write_text(f"t,{column}\n" + "".join(f"{float(x)!r},0.0\n" for x in t))
+        with pytest.raises(DataError) as caught:
+            run_validate(MODEL, data=data, compare=[spec], stream=io.StringIO())
+        assert caught.value.diagnostics[0].code == code
+        assert "measure different quantities" in caught.value.diagnostics[0].message
+    data.write_text("t,i_meas [mA]\n" + "".join(f"{float(x)!r},0.0\n" for x in t))
+    (result,), _ = run_validate(MODEL, data=data, compare=["i=i_meas"], stream=io.StringIO())
+    assert result.n_samples == t.size

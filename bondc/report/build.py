@@ -49,7 +49,7 @@ import numpy as np
 import sympy
 from markupsafe import Markup
 
-from bondc.errors import Diagnostic, UsageError, render as render_diagnostic
+from bondc.errors import DataError, Diagnostic, UsageError, render as render_diagnostic
 from bondc.io import atomic_write_text, check_output
 from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
@@ -314,6 +314,7 @@ def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
     t, signals = _at_measured_times(run, measured)
     results = []
     for spec in specs:
+        _check_quantity(run.graph, spec, getattr(measured, "units", {}).get(spec.column))
         _, factor = _signal_unit(run.graph, spec.output)
         if spec.output not in signals or spec.column not in measured or factor == 1.0:
             results += compare(t, signals, measured, [spec])     # (its own errors, if any)
@@ -322,6 +323,27 @@ def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
         columns = {TIME_KEY: measured[TIME_KEY], spec.column: np.asarray(measured[spec.column], dtype=float) / factor}
         results += compare(t, shown, columns, [spec])
     return results
+
+
+def _check_quantity(graph: BondGraph, spec: CompareSpec, unit: str | None) -> None:
+    """E958 where the measured column's unit and the signal's measure different quantities (a force
+    compared with a column in kg); nothing where either is unknown."""
+    from bondc.numeric import unit_of
+    from bondc.units import compatible
+
+    output = graph.outputs.get(spec.output)
+    declared = output.unit_text if output is not None and output.unit_text else \
+        (getattr(graph, "si_units", None) or {}).get(spec.output)
+    if unit is None or declared is None:
+        return
+    measured, simulated = unit_of(unit), unit_of(declared)
+    if measured is None or simulated is None or compatible(measured, simulated):
+        return
+    raise DataError(Diagnostic(
+        "error", "E958", f"comparison '{spec}': column '{spec.column}' is in [{unit}] and '{spec.output}' in "
+                         f"[{declared}]: they measure different quantities ({measured.dimension_text()} and "
+                         f"{simulated.dimension_text()})",
+        hint="compare the signal with the column that measures it, or fix the unit in the column's header"))
 
 
 def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict]:

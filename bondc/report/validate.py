@@ -22,6 +22,7 @@ E954   a signal named in a comparison was not simulated (did-you-mean)
 E955   a comparison spec is not ``OUT=COLUMN[:metric=value,...]``
 E956   simulated and measured times do not overlap (in >= 2 samples)
 E957   a CSV row has the wrong number of cells, or the header repeats a name
+E958   a measured column's unit measures another quantity than its signal
 ====== ==============================================================
 
 >>> spec = parse_compare_spec("x=x_meas:rmse=0.1")

@@ -526,6 +526,11 @@ d("E957", "measured data header or row shape",
   "The measured data's header has an empty or repeated column name, names a unit bondc does not know (`P [barr]`), or a row has more or fewer cells than the "
   "header.",
   "Give every column a unique name; look for a missing or extra comma in the row.")
+d("E958", "measured column of another quantity",
+  "A comparison pairs a signal with a measured column whose header gives a unit of another quantity: an output "
+  "declared in rad/s with a column in N*m, a force with a column in kg. (A column without a unit is taken as "
+  "SI: W954.)",
+  "Compare the signal with the column that measures it, or fix the unit in the column's header.")
 d("W954", "measured column without a unit", "`bondc validate` compares a measured column whose header gives no unit with an output declared in a unit that is not SI (`[kPa]`, `[bar]`, `[mm]`, `[rpm]`): the column is taken as SI, as the language reference says, but the data may well be in the output's unit.", "Give the column's unit in its header, e.g. `P [kPa]`; values are converted.")
 
 # -- command line and files
@@ -762,6 +767,7 @@ live("E954", Cli(_VALIDATE.replace("omega=", "speed="), {"spin.bg": SPIN, "measu
 live("E955", Cli(_VALIDATE + ":nrmse=5%", {"spin.bg": SPIN, "measured.csv": MEASURED}))
 live("E956", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": "t,omega_meas\n5,2300\n6,2310\n"}))
 live("E957", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": MEASURED.replace("0.5,1210", "0.5,1210,3")}))
+live("E958", Cli(_VALIDATE, {"spin.bg": SPIN, "measured.csv": MEASURED.replace("omega_meas", "omega_meas [N*m]")}))
 
 # -- simulation (what a model cannot show)
 
