@@ -271,6 +271,10 @@ def _cmd_simulate(args) -> int:
 
     if args.output:
         check_output(args.output)       # before any work
+    if args.motors:
+        from bondc.analysis.motors import load_catalogue
+
+        load_catalogue(args.motors)     # a catalogue that cannot be read is an error before the run
     derived = _derived(args, light=True)
     graph, state_space, experiment = derived.graph, derived.state_space, derived.experiment
     result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
@@ -297,6 +301,7 @@ def _cmd_simulate(args) -> int:
         except BondcError as problem:
             _print_diagnostics(problem.diagnostics, graph.sources)
     motors_text = None
+    failed = False                      # an analysis asked for (--motors) that could not be made
     if args.motors:
         from bondc.analysis.motor_report import motor_report
 
@@ -304,6 +309,8 @@ def _cmd_simulate(args) -> int:
             motors_text, summary["motors"] = motor_report(steps, graph, Path(args.motors))
         except BondcError as problem:
             _print_diagnostics(problem.diagnostics, graph.sources)
+            summary.setdefault("diagnostics", []).extend(d.to_json() for d in problem.diagnostics)
+            failed = any(d.is_error for d in problem.diagnostics)
     if args.json:
         _print_json(summary)
     else:
@@ -329,7 +336,7 @@ def _cmd_simulate(args) -> int:
     if error is not None:
         _print_diagnostics(error.diagnostics, graph.sources)
         return EXIT_ERRORS
-    return EXIT_OK
+    return EXIT_ERRORS if failed else EXIT_OK
 
 
 def _cmd_compile(args) -> int:

@@ -503,3 +503,21 @@ end
     assert peak == plain["statistics"]["torque"]["max"] and peak == pytest.approx(2.5, rel=5e-3)
     assert gridded["motors"]["requirements"] == plain["motors"]["requirements"]
     assert gridded["motors"]["requirements"]["peak_torque"] == pytest.approx(2.5, rel=5e-3)
+
+
+def test_simulate_with_a_motor_catalogue_that_cannot_be_used_exits_1(tmp_path, capsys, monkeypatch):
+    """A missing catalogue is an error before the run (nothing simulated); a model without a torque
+    output cannot be sized: the run is printed, the error too, exit 1 (not 0 as if all went well)."""
+    from bondc import simulate as simulate_module
+    from bondc.cli import main
+
+    ran = []
+    real = simulate_module.simulate
+    monkeypatch.setattr(simulate_module, "simulate", lambda *a, **k: ran.append(1) or real(*a, **k))
+    path = SIM / "msd.bg"
+    assert main(["simulate", str(path), "--motors", str(tmp_path / "absent.csv")]) == 1
+    assert "E905" in capsys.readouterr().err and not ran
+    catalogue = Path(__file__).parent.parent / "models" / "data" / "motors.csv"
+    assert main(["simulate", str(path), "--json", "--motors", str(catalogue)]) == 1
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["complete"] and [d["code"] for d in summary["diagnostics"]] == ["E927"]

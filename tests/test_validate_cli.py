@@ -92,11 +92,19 @@ def test_scaled_measurements_fail_with_exit_1(simulated, tmp_path):
     assert "i_meas (measured)" in section and "i (simulated)" in section
 
 
-def test_report_with_data_adds_the_section_without_failing(simulated, tmp_path):
+def test_report_with_data_adds_the_section_and_exits_1_when_a_signal_fails(simulated, tmp_path):
+    from bondc.report.build import run_report
+
     data = write_measured(tmp_path / "bench.csv", *noisy(simulated, scale=1.3))
     target = build_report(MODEL, data=data, compare=SPECS, output=tmp_path / "r.html", date="2024-05-01")
     html = target.read_text(encoding="utf-8")
     assert '<section id="validation">' in html and html.count("badge fail") == 2
+    errors = io.StringIO()
+    target, code = run_report(MODEL, data=data, compare=SPECS, output=tmp_path / "r2.html", errors=errors)
+    assert code == 1 and target.exists() and "validation failed: i=i_meas, v_C=v_C_meas" in errors.getvalue()
+    good = write_measured(tmp_path / "good.csv", *noisy(simulated))
+    _, code = run_report(MODEL, data=good, compare=SPECS, output=tmp_path / "r3.html", errors=io.StringIO())
+    assert code == 0
 
 
 @pytest.mark.parametrize("csv, spec, code, words", [

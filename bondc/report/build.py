@@ -178,16 +178,17 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     is simulated; a model error raises its stage's error. Either way nothing
     is written and an earlier report stays as it was.
     """
-    target, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
-                       motors=motors, output=output, t_end=t_end, date=date, progress=progress)
+    target, _, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
+                          motors=motors, output=output, t_end=t_end, date=date, progress=progress)
     return target
 
 
 def _build(path, *, model, experiment, sets, data, compare, motors, output, t_end, date,
-           progress) -> tuple[Path, PipelineRun]:
+           progress) -> tuple[Path, PipelineRun, list[SignalResult]]:
     specs, measured = _measured(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     target = Path(output) if output is not None else default_output(path, run)
+    results: list[SignalResult] = []
     try:
         validation = None
         if specs:
@@ -197,7 +198,7 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
     except KeyboardInterrupt as interrupt:
         _keep_simulation(run, target, interrupt)
         raise
-    return target, run
+    return target, run, results
 
 
 def _keep_simulation(run: PipelineRun, target: Path, interrupt: KeyboardInterrupt) -> None:
@@ -228,18 +229,21 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
 
     Prints the run's warnings (and an incomplete simulation's diagnostic)
     with their source context, then ``wrote PATH``, to ``errors`` (stderr).
-    The exit code is 0, or 1 when the simulation stopped early (the report
-    is written all the same, with its notice). Failing validation signals do
-    not change it: that is ``bondc validate``'s job.
+    The exit code is 0, or 1 when the simulation stopped early or a compared
+    signal fails its tolerances (the report is written all the same, with its
+    notice and the validation section), as ``bondc validate`` exits.
     """
     errors = errors if errors is not None else sys.stderr
     if output is not None:
         check_output(output, "the report", make_folder=True)
-    target, run = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
-                         motors=motors, output=output, t_end=t_end, date=date, progress=progress)
+    target, run, results = _build(path, model=model, experiment=experiment, sets=sets, data=data,
+                                  compare=compare, motors=motors, output=output, t_end=t_end, date=date,
+                                  progress=progress)
     _print_diagnostics(run, errors)
-    print(f"wrote {target}" + ("" if run.complete else " (incomplete simulation)"), file=errors)
-    return target, 0 if run.complete else 1
+    failing = [result.name for result in results if not result.passed]
+    print(f"wrote {target}" + ("" if run.complete else " (incomplete simulation)")
+          + (f"; validation failed: {', '.join(failing)}" if failing else ""), file=errors)
+    return target, 0 if run.complete and not failing else 1
 
 
 def _print_diagnostics(run: PipelineRun, stream: TextIO) -> None:
