@@ -18,6 +18,7 @@ It works on the editor's buffers, saved or not:
 from __future__ import annotations
 
 import asyncio
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,12 +43,75 @@ def path_of(uri: str) -> Path:
     return Path(unquote(parsed.path)) if parsed.scheme in ("file", "") else Path(uri)
 
 
+# -- positions: bondc counts columns in characters (code points); LSP clients count them in the
+# encoding negotiated at initialisation (UTF-16 code units unless the client offers another)
+
+_DISK_LINES: dict[str, tuple[float, list[str]]] = {}
+
+
+def _encoding() -> str:
+    try:
+        return str(getattr(server.workspace.position_encoding, "value", server.workspace.position_encoding))
+    except Exception:       # noqa: BLE001  (no workspace before initialisation: the protocol's default)
+        return "utf-16"
+
+
+def _units(text: str, encoding: str) -> int:
+    """The length of ``text`` in the client's units."""
+    if text.isascii() or encoding == "utf-32":
+        return len(text)
+    if encoding == "utf-8":
+        return len(text.encode("utf-8"))
+    return len(text.encode("utf-16-le", "surrogatepass")) // 2
+
+
+def _file_lines(file: str) -> list[str] | None:
+    """The lines of a file a span is in: an open document's buffer, else the file on disk."""
+    for document in getattr(server, "documents", {}).values():
+        if str(document.path) == file:
+            return document.text.splitlines()
+    try:
+        if file.startswith("std:"):
+            from bondc.std import path_of as std_path
+
+            file = str(std_path(file[4:]))
+        stamp = os.stat(file).st_mtime_ns
+        cached = _DISK_LINES.get(file)
+        if cached is None or cached[0] != stamp:
+            cached = _DISK_LINES[file] = (stamp, Path(file).read_text(encoding="utf-8").splitlines())
+        return cached[1]
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+
+
+def _client_column(lines: list[str] | None, line: int, column: int) -> int:
+    if lines is None or line >= len(lines):
+        return column
+    text = lines[line]
+    return _units(text[:column], _encoding()) + max(column - len(text), 0)
+
+
+def server_character(text: str, line: int, character: int) -> int:
+    """A client's column (in its units) on ``line`` of ``text`` as a column in characters."""
+    lines = text.splitlines()
+    if line >= len(lines) or lines[line].isascii():
+        return character
+    encoding, count = _encoding(), 0
+    for index, char in enumerate(lines[line]):
+        if count >= character:
+            return index
+        count += _units(char, encoding)
+    return len(lines[line]) + max(character - count, 0)
+
+
 def _range(span) -> lsp.Range:
     line, column = max(span.line - 1, 0), max(span.column - 1, 0)
     end_line, end_column = max(span.end_line - 1, 0), max(span.end_column - 1, 0)
     if (end_line, end_column) <= (line, column):
         end_line, end_column = line, column + 1
-    return lsp.Range(lsp.Position(line, column), lsp.Position(end_line, end_column))
+    lines = _file_lines(span.file) if span.file else None
+    return lsp.Range(lsp.Position(line, _client_column(lines, line, column)),
+                     lsp.Position(end_line, _client_column(lines, end_line, end_column)))
 
 
 def _contains(span, line: int, column: int) -> bool:
@@ -302,6 +366,7 @@ def _at(document: Document, position: lsp.Position):
     index = document.index
     if index is None:
         return None, None, 0
+    position = lsp.Position(position.line, server_character(document.text, position.line, position.character))
     here = str(document.path)
     for use in index.uses:
         if use.span.file != here:
@@ -362,7 +427,8 @@ def _scoped(ls: BondcServer, uri: str, position: lsp.Position):
     scope = getattr(document.graph, "scope", None) if document is not None else None
     if scope is None:
         return None, None
-    return scope, scope.at(str(document.path), position.line + 1, position.character + 1)
+    character = server_character(document.text, position.line, position.character)
+    return scope, scope.at(str(document.path), position.line + 1, character + 1)
 
 
 def _span_location(span) -> lsp.Location:
@@ -547,8 +613,10 @@ def completion(ls: BondcServer, params: lsp.CompletionParams):
     document = ls.documents.get(params.text_document.uri)
     if document is None:
         return []
-    lines = ls.workspace.get_text_document(params.text_document.uri).lines
-    line_text = lines[params.position.line][:params.position.character] if params.position.line < len(lines) else ""
+    buffer = ls.workspace.get_text_document(params.text_document.uri)
+    lines = buffer.lines
+    character = server_character(buffer.source, params.position.line, params.position.character)
+    line_text = lines[params.position.line][:character] if params.position.line < len(lines) else ""
     return lsp.CompletionList(is_incomplete=False,
                               items=completions(document, line_text, _model_at(document, params.position.line)))
 

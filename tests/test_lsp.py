@@ -210,3 +210,29 @@ def test_outline_completion_and_formatting(client, tmp_path):
     from bondc.fmt import fmt
 
     assert edits[0]["newText"] == fmt(text)
+
+
+def test_columns_are_in_utf16_code_units_as_the_server_announced(client, tmp_path):
+    """A description with two emoji (each two UTF-16 code units, one character) before an error on the
+    same line: the range starts where an editor counting UTF-16 puts it, and hover at that column
+    finds the name."""
+    path = tmp_path / "u.bg"
+    text = ('model U\n  param gain = 2\n  MSe force "\U0001F600\U0001F600 \u00fc" : e = 10 + sprung.e\n'
+            '  R r : e = gain*f\n  force -> r\nend\n')
+    uri = client.open(path, text)
+    (problem,) = [d for d in client.diagnostics(uri) if d["code"] == "E301"]
+    line = text.splitlines()[2]
+    characters = line.index("sprung")
+    utf16 = len(line[:characters].encode("utf-16-le")) // 2
+    assert utf16 == characters + 2
+    assert problem["range"]["start"] == {"line": 2, "character": utf16}
+    assert problem["range"]["end"] == {"line": 2, "character": utf16 + len("sprung.e")}
+    fixed = text.replace("10 + sprung.e", "10*gain")
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": fixed}]})
+    assert client.diagnostics(uri) == []
+    line = fixed.splitlines()[2]
+    at = len(line[:line.index("gain")].encode("utf-16-le")) // 2 + 1
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": {"line": 2, "character": at}})
+    assert hover is not None and "param gain" in hover["contents"]["value"]
