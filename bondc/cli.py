@@ -335,7 +335,7 @@ def _cmd_simulate(args) -> int:
             print(motors_text)
     if error is not None:
         _print_diagnostics(error.diagnostics, graph.sources)
-        return EXIT_ERRORS
+        return result.exit_status or EXIT_ERRORS
     return EXIT_ERRORS if failed else EXIT_OK
 
 

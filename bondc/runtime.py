@@ -2160,10 +2160,14 @@ class _Run:
                                              "around zero velocity, for instance) or raise max_events"})
         except _Stop as stop:
             complete, failure = False, stop.failure
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as interrupt:
             complete = False
+            # where the run got to: its last recorded point (t is where the current segment began)
+            self._consistent_blocks()
+            t = max([float(t)] + [float(block[-1]) for block in self.blocks_t[-1:] if block.size])
             failure = {"message": f"interrupted at t={t:.6g}", "time": float(t), "variable": None,
-                       "law": None, "cause": "interrupted by the user", "hint": "", "kind": "interrupted"}
+                       "law": None, "cause": "interrupted by the user", "hint": "", "kind": "interrupted",
+                       "terminated": type(interrupt).__name__ == "Terminated"}     # SIGTERM (bondc.cli)
         self.stats["wall_time"] = _time_module.perf_counter() - started
         return self.result(complete, failure)
 
@@ -3524,7 +3528,17 @@ class _Run:
             out[:, columns] = total
         return blend
 
+    def _consistent_blocks(self) -> None:
+        """Drop what an interruption (Ctrl-C lands between any two statements) left half recorded:
+        a block whose times, states or mode were not all appended, or whose times and states
+        differ in length."""
+        count = min(len(self.blocks_t), len(self.blocks_x), len(self.blocks_mode))
+        del self.blocks_t[count:], self.blocks_x[count:], self.blocks_mode[count:]
+        while self.blocks_t and np.shape(self.blocks_x[-1])[-1] != np.size(self.blocks_t[-1]):
+            self.blocks_t.pop(), self.blocks_x.pop(), self.blocks_mode.pop()
+
     def result(self, complete, failure):
+        self._consistent_blocks()
         model = self.model
         n = len(model.STATE_NAMES)
         n_out, n_var = len(model.OUTPUT_NAMES), len(model.VARIABLE_NAMES)

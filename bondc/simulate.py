@@ -100,6 +100,14 @@ class SimResult:
     def t_reached(self) -> float:
         return float(self.t[-1]) if self.t.size else float("nan")
 
+    @property
+    def exit_status(self) -> int | None:
+        """130 for a run stopped by Ctrl-C, 143 by SIGTERM (the shell's statuses), else None."""
+        failure = self.failure or {}
+        if failure.get("kind") != "interrupted":
+            return None
+        return 143 if failure.get("terminated") else 130
+
     def error(self) -> SimulationError | None:
         """The failure as a :class:`SimulationError` (carrying this result as ``.result``), or None."""
         if self.complete:

@@ -521,3 +521,75 @@ def test_simulate_with_a_motor_catalogue_that_cannot_be_used_exits_1(tmp_path, c
     assert main(["simulate", str(path), "--json", "--motors", str(catalogue)]) == 1
     summary = json.loads(capsys.readouterr().out)
     assert summary["complete"] and [d["code"] for d in summary["diagnostics"]] == ["E927"]
+
+
+@pytest.mark.parametrize("interrupt_at", [2, 3])
+def test_an_interruption_between_recording_a_batchs_times_and_its_states_keeps_a_consistent_run(
+        interrupt_at, monkeypatch):
+    """Ctrl-C lands between any two statements: here between appending a batch's times and its
+    states. The run keeps what it recorded before, every array the length of its times, stops with
+    'interrupted' at the time it got to, and its energy account can be made."""
+    from bondc.analysis.energy import energy_account
+    from bondc.simulate import compile_model
+
+    _, ss, experiment = derive("msd")
+    namespace = compile_model(ss)
+    run_class = namespace["_Run"]
+
+    class Interrupting(list):
+        calls = 0
+
+        def append(self, item):
+            Interrupting.calls += 1
+            if Interrupting.calls == interrupt_at:
+                raise KeyboardInterrupt
+            super().append(item)
+
+    original = run_class.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        self.blocks_x = Interrupting()
+
+    monkeypatch.setattr(run_class, "__init__", init)
+    result = simulate(ss, experiment)
+    assert not result.complete and result.failure["kind"] == "interrupted"
+    assert result.t.size >= 1 and all(len(values) == result.t.size for values in result.states.values())
+    assert all(len(values) == result.t.size for values in result.outputs.values())
+    assert f"interrupted at t={result.t[-1]:.6g}" in result.message
+    if result.t.size > 1 and result.t[-1] > result.t[0]:
+        energy_account(ss, result)
+
+
+def test_an_interrupted_simulate_keeps_what_it_computed_and_exits_130(tmp_path, monkeypatch, capsys):
+    """Ctrl-C during the run (here at its second batch): E813 with the time it got to, the file
+    written with what was computed, exit status 130 as the README says (143 for SIGTERM)."""
+    from bondc import simulate as module
+    from bondc.cli import main
+
+    class Interrupting(list):
+        def append(self, item):
+            if len(self) == 1:
+                raise KeyboardInterrupt
+            super().append(item)
+
+    real = module.compile_model
+
+    def compile_model(ss):
+        namespace = real(ss)
+        original = namespace["_Run"].__init__
+
+        def init(self, *args, **kwargs):
+            original(self, *args, **kwargs)
+            self.blocks_x = Interrupting()
+
+        monkeypatch.setattr(namespace["_Run"], "__init__", init)
+        return namespace
+
+    monkeypatch.setattr(module, "compile_model", compile_model)
+    out = tmp_path / "run.csv"
+    assert main(["simulate", str(SIM / "msd.bg"), "--no-cache", "-o", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert "E813" in err and "interrupted at t=" in err
+    rows = out.read_text().splitlines()
+    assert len(rows) >= 2 and rows[0].startswith("t [s],")

@@ -243,7 +243,8 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
     failing = [result.name for result in results if not result.passed]
     print(f"wrote {target}" + ("" if run.complete else " (incomplete simulation)")
           + (f"; validation failed: {', '.join(failing)}" if failing else ""), file=errors)
-    return target, 0 if run.complete and not failing else 1
+    interrupted = getattr(run.result, "exit_status", None) if run.result is not None else None
+    return target, interrupted or (0 if run.complete and not failing else 1)
 
 
 def _print_diagnostics(run: PipelineRun, stream: TextIO) -> None:
@@ -477,7 +478,8 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
             _keep_simulation(run, Path(output), interrupt)
             raise
     passed = all(result.passed for result in results) and run.complete
-    return results, 0 if passed else 1
+    interrupted = getattr(run.result, "exit_status", None)
+    return results, interrupted or (0 if passed else 1)
 
 
 def _failure(run: PipelineRun) -> Diagnostic:

@@ -252,9 +252,10 @@ d("E812", "too many events",
   "accumulation instant: a discrete variable that a `when` clause sets once the rebound is negligible and "
   "that holds the ball on the floor.")
 d("E813", "interrupted",
-  "The run was interrupted (Ctrl-C). It cannot be triggered from a model. What was computed is kept and "
-  "written with `-o`; the command exits with status 1. The example interrupts a run from its progress "
-  "callback.",
+  "The run was interrupted (Ctrl-C, or SIGTERM). It cannot be triggered from a model. What was computed is "
+  "kept and written with `-o`; the message gives the time the run got to; the command exits with status 130 "
+  "(143 for SIGTERM), as the shell reports a program it stopped. The example interrupts a run from its "
+  "progress callback.",
   "Nothing to fix; simulate a shorter time with `--t-end` if the run is too slow.")
 d("E814", "too many points",
   "A run keeps every state, output and bond variable at every point; it stops when its result would exceed "
