@@ -267,9 +267,10 @@ def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import energy_account, steps_of
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
     from bondc.io import check_output
-    from bondc.simulate import simulate, write
+    from bondc.simulate import check_result_path, simulate, write
 
     if args.output:
+        check_result_path(args.output)
         check_output(args.output)       # before any work
     if args.motors:
         from bondc.analysis.motors import load_catalogue

@@ -531,8 +531,24 @@ def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
     atomic_write(Path(path), lambda handle: np.savez_compressed(handle, **arrays))
 
 
+#: Suffixes of formats a result is not written in: a .json would otherwise get csv text.
+OTHER_FORMATS = (".json", ".xlsx", ".xls", ".mat", ".h5", ".hdf5", ".parquet", ".html", ".txt.gz", ".pkl")
+
+
+def check_result_path(path) -> None:
+    """E001 for an output file whose suffix names a format other than csv and npz (before any work)."""
+    name = str(path).lower()
+    other = next((suffix for suffix in OTHER_FORMATS if name.endswith(suffix)), None)
+    if other is not None:
+        raise UsageError(Diagnostic("error", "E001", f"cannot write '{path}' as {other[1:]}: a simulation "
+                                                     "is written as .csv (or .npz, numpy's arrays)",
+                                    hint="give -o run.csv (or run.npz); bondc simulate --json prints a "
+                                         "JSON summary on stdout"))
+
+
 def write(result: SimResult, path, all_bonds: bool = False) -> None:
-    """``.npz`` -> :func:`write_npz`, anything else -> :func:`write_csv`."""
+    """``.npz`` -> :func:`write_npz`, anything else -> :func:`write_csv` (see :func:`check_result_path`)."""
+    check_result_path(path)
     if str(path).lower().endswith(".npz"):
         write_npz(result, path)
     else:
@@ -558,6 +574,7 @@ def run(path, *, model: str | None = None, experiment: str | None = None, sets: 
     from bondc.pipeline import derive_file
 
     if output is not None:
+        check_result_path(output)
         check_output(output)        # before any work: a bad path is not found after the run
     derived = derive_file(path, model=model, experiment=experiment, sets=sets)
     result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress)

@@ -593,3 +593,11 @@ def test_an_interrupted_simulate_keeps_what_it_computed_and_exits_130(tmp_path, 
     assert "E813" in err and "interrupted at t=" in err
     rows = out.read_text().splitlines()
     assert len(rows) >= 2 and rows[0].startswith("t [s],")
+
+
+def test_an_output_file_named_for_another_format_is_refused_before_the_run(tmp_path, capsys):
+    from bondc.cli import main
+
+    assert main(["simulate", str(SIM / "msd.bg"), "-o", str(tmp_path / "run.json")]) == 2
+    assert "E001" in capsys.readouterr().err and not (tmp_path / "run.json").exists()
+    assert main(["simulate", str(SIM / "msd.bg"), "-o", str(tmp_path / "run.csv")]) == 0
