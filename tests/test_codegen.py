@@ -364,6 +364,17 @@ def test_generated_module_finds_its_csv_data_relative_to_itself(tmp_path):
     data = np.loadtxt(out.stdout.splitlines()[1:], delimiter=",")
     reference = simulate(ss, experiment, dt=0.25)
     np.testing.assert_allclose(data[:, 2], reference.states["mass.p"], rtol=1e-13, atol=1e-15)
+    # moved away from its data: a message and a hint, exit 2, no traceback; BONDC_DATA_DIR finds it again
+    moved = tmp_path / "moved" / "deeper"
+    moved.mkdir(parents=True)
+    (moved / "csv_gen.py").write_text(source, encoding="utf-8")
+    out = subprocess.run([sys.executable, "-I", str(moved / "csv_gen.py")], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    assert "cannot simulate" in out.stderr and "BONDC_DATA_DIR" in out.stderr
+    out = subprocess.run([sys.executable, "-I", str(moved / "csv_gen.py"), "--dt", "0.25"], cwd=tmp_path,
+                         env={**env, "BONDC_DATA_DIR": str(work)}, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
 
 
 def test_generated_module_copy_of_the_runtime_is_verbatim():

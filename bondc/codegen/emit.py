@@ -1369,13 +1369,31 @@ def main(argv=None):
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a parameter, in SI (repeatable)")
     parser.add_argument("--all", action="store_true", help="also write every assigned variable")
+    parser.add_argument("--method", help="solver: CVODE (needs scikit-sundae), LSODA, BDF, Radau, ... "
+                                         "(default: the experiment's)")
     parser.add_argument("-o", "--output", help="csv file to write (default: standard output)")
     args = parser.parse_args(argv)
     overrides = {}
     for item in args.set:
         name, _, value = item.partition("=")
-        overrides[name.strip()] = float(value)
-    result = simulate(args.t_end, overrides or None, dt=args.dt)
+        try:
+            overrides[name.strip()] = float(value)
+        except ValueError:
+            parser.error(f"--set {item!r}: write NAME=VALUE with VALUE a number in SI")
+    options = {"dt": args.dt, **({"method": args.method} if args.method else {})}
+    try:
+        result = simulate(args.t_end, overrides or None, **options)
+    except ImportError as error:
+        print(f"{MODEL_NAME}: cannot simulate: {error}", file=sys.stderr)
+        print("hint: install scikit-sundae (pip install scikit-sundae), or run with --method LSODA",
+              file=sys.stderr)
+        return 2
+    except (ValueError, OSError) as error:
+        print(f"{MODEL_NAME}: cannot simulate: {error}", file=sys.stderr)
+        if isinstance(error, (CsvError, OSError)):
+            print("hint: a measured signal's path is relative to the folder the module was compiled for; "
+                  "set BONDC_DATA_DIR to the folder it is relative to now", file=sys.stderr)
+        return 2
     write_csv(result, args.output or sys.stdout, variables=args.all)
     if not result.complete:
         print(f"{MODEL_NAME}: INCOMPLETE: {result.message}", file=sys.stderr)
