@@ -512,37 +512,45 @@ def _token_text(token: Token) -> str:
     return f"'{token}'"
 
 
-def _statement_extent(text: str, offset: int) -> tuple[int, int]:
-    """The [start, end) of the logical statement (line rules applied) holding offset."""
-    starts = [0]
-    depth = 0
+def _code_chars(text: str, end: int):
+    """``(index, character, quoted)`` of ``text[:end]`` outside comments, ``quoted`` for a string's
+    characters and quotes (a string ends at its closing quote or, unclosed, at the end of its line;
+    an escaped character is skipped with its backslash)."""
     in_string = False
-    last_significant = ""
     index = 0
-    while index < len(text):
+    while index < end:
         char = text[index]
         if in_string:
             if char == "\\":
                 index += 2
                 continue
-            if char == '"' or char == "\n":
-                in_string = False
+            in_string = char not in '"\n'
+            yield index, char, char != "\n"
         elif char == "#":
-            end = text.find("\n", index)
-            index = len(text) if end < 0 else end
+            newline = text.find("\n", index)
+            index = len(text) if newline < 0 else newline
             continue
-        elif char == '"':
-            in_string = True
-        elif char in "([":
+        else:
+            in_string = char == '"'
+            yield index, char, in_string
+        index += 1
+
+
+def _statement_extent(text: str, offset: int) -> tuple[int, int]:
+    """The [start, end) of the logical statement (line rules applied) holding offset."""
+    starts = [0]
+    depth = 0
+    last_significant = ""
+    for index, char, quoted in _code_chars(text, len(text)):
+        if not quoted and char in "([":
             depth += 1
-        elif char in ")]":
+        elif not quoted and char in ")]":
             depth = max(0, depth - 1)
-        if char == "\n" and not in_string:
+        if char == "\n" and not quoted:
             if depth == 0 and last_significant != ",":
                 starts.append(index + 1)
         elif not char.isspace():
             last_significant = char
-        index += 1
     starts.append(len(text) + 1)
     for start, end in zip(starts, starts[1:]):
         if start <= offset < end:
@@ -554,27 +562,13 @@ def _open_bracket(text: str, offset: int) -> int | None:
     """The offset of the innermost ``(`` or ``[`` still open at ``offset`` (strings and comments
     skipped), or None."""
     opened: list[int] = []
-    in_string = False
-    index = 0
-    while index < offset:
-        char = text[index]
-        if in_string:
-            if char == "\\":
-                index += 2
-                continue
-            if char == '"' or char == "\n":
-                in_string = False
-        elif char == "#":
-            end = text.find("\n", index)
-            index = len(text) if end < 0 else end
+    for index, char, quoted in _code_chars(text, offset):
+        if quoted:
             continue
-        elif char == '"':
-            in_string = True
-        elif char in "([":
+        if char in "([":
             opened.append(index)
         elif char in ")]" and opened:
             opened.pop()
-        index += 1
     return opened[-1] if opened else None
 
 
