@@ -563,3 +563,10 @@ def test_every_mass_from_20_to_45_kg_completes_with_the_hand_calculated_cruise_t
     need = requirements(result.t, result.outputs["torque"], result.variables["omega"])
     assert need.peak_torque >= max(abs(cruise_torque(V_MAX, mass=mass)[0]), abs(cruise_torque(-V_MAX, mass=mass)[0]))
     assert need.energy_net > 0
+    # every mass starts in static equilibrium (notes 7), the nut in contact on the side its force
+    # pushes (above 32.89 kg the weight is no longer over-carried by the air): nothing moves before
+    # the first ramp
+    f_n0 = mass * NOTES["g"] - (NOTES["P0"] - NOTES["P_atm"]) * NOTES["Ar"]
+    before = result.t < BREAKPOINTS[1]
+    assert np.max(np.abs(result.outputs["x"][before])) < 1e-12, f_n0
+    assert np.max(np.abs(result.outputs["torque"][before] - R_SCREW * f_n0)) < 1e-9 * abs(R_SCREW * f_n0), f_n0
