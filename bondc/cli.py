@@ -284,6 +284,10 @@ def _cmd_simulate(args) -> int:
         write(result, Path(args.output), args.all)
     error = result.error()
     summary = result.summary()
+    for name, value in summary["final"].items():        # each output in its declared unit, as the statistics
+        unit, scale = result.units.get(name, (None, 1.0))
+        if name in result.outputs and unit is not None and scale != 1.0 and isinstance(value, float):
+            summary["final"][name] = value / scale
     account = None
     steps = result
     if result.t.size > 1:

@@ -1568,7 +1568,8 @@ class _CountedBlocks(list):
         if run.points > run.max_points:
             t = float(run.blocks_t[-1][-1])
             raise _Stop({"message": f"the result reached {run.points} points at t={t:.6g}, more than the "
-                                    f"{run.max_points} that fit in memory for this model",
+                                    f"{run.max_points} a run of this model records (at most {MAX_VALUES:.0e} "
+                                    "numbers, about 1 GB with its analyses)",
                          "time": t, "variable": None, "law": None, "kind": "points",
                          "cause": "every point keeps every state, output and bond variable",
                          "hint": "report on a coarser grid (--dt or dt in the experiment) or simulate a "
@@ -5105,8 +5106,9 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
         count = (t_end - t_start) / float(dt)
         if count > max_points(width):       # before the grid is allocated
             raise ValueError(f"dt = {float(dt):g} s over {t_end - t_start:g} s gives {count:.3g} points, more than "
-                             f"the {max_points(width)} that fit in memory for this model "
-                             f"({width} numbers per point); give a larger dt or a shorter t_end")
+                             f"the {max_points(width)} a run of this model records ({width} numbers per point, "
+                             f"at most {MAX_VALUES:.0e} numbers: about 1 GB with its analyses); give a larger "
+                             "dt or a shorter t_end")
         t_eval = output_grid(t_start, t_end, float(dt))
     if t_eval is not None:
         t_eval = np.asarray(t_eval, dtype=float)

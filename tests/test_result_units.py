@@ -140,7 +140,10 @@ def test_a_measured_input_signal_is_read_in_the_units_of_its_header(tmp_path):
 @pytest.mark.slow
 def test_json_statistics_give_each_output_in_its_unit(model, capsys):
     assert main(["simulate", str(model), "--json"]) == 0
-    stats = json.loads(capsys.readouterr().out)["statistics"]
+    summary = json.loads(capsys.readouterr().out)
+    stats = summary["statistics"]
     assert stats["p_kPa"]["unit"] == "kPa" and stats["p_si"]["unit"] == "Pa"
     assert stats["p_kPa"]["final"] == pytest.approx(stats["p_si"]["final"] / 1e3, rel=1e-12)
     assert stats["p_bar"]["max"] == pytest.approx(stats["p_si"]["max"] / 1e5, rel=1e-12)
+    # the final values of the outputs too (states stay in SI)
+    assert summary["final"]["p_kPa"] == stats["p_kPa"]["final"] and summary["final"]["p_si"] == stats["p_si"]["final"]
