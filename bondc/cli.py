@@ -35,6 +35,13 @@ def _print_json(value) -> None:
     print(json.dumps(json_safe(value), indent=2, default=str, allow_nan=False))
 
 
+def _json_failure(args, error: BondcError) -> None:
+    """With --json, a command that stopped on an error still prints JSON on stdout: its diagnostics
+    (a program reading stdout gets an object to parse, not nothing)."""
+    if getattr(args, "json", False):
+        _print_json({"complete": False, "diagnostics": [d.to_json() for d in error.diagnostics]})
+
+
 def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
     if diagnostics:
         print(render_all(diagnostics, sources or {}), file=stream or sys.stderr)
@@ -605,6 +612,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _main(argv: list[str], debug: bool) -> int:
+    args = None
     try:
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -614,9 +622,11 @@ def _main(argv: list[str], debug: bool) -> int:
         return args.run(args)
     except UsageError as error:
         _print_diagnostics(error.diagnostics, error.sources)
+        _json_failure(args, error)
         return EXIT_USAGE
     except BondcError as error:
         _print_diagnostics(error.diagnostics, error.sources)
+        _json_failure(args, error)
         return EXIT_ERRORS
     except KeyboardInterrupt as interrupt:
         terminated = isinstance(interrupt, Terminated)

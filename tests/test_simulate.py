@@ -601,3 +601,13 @@ def test_an_output_file_named_for_another_format_is_refused_before_the_run(tmp_p
     assert main(["simulate", str(SIM / "msd.bg"), "-o", str(tmp_path / "run.json")]) == 2
     assert "E001" in capsys.readouterr().err and not (tmp_path / "run.json").exists()
     assert main(["simulate", str(SIM / "msd.bg"), "-o", str(tmp_path / "run.csv")]) == 0
+
+
+def test_with_json_a_command_stopped_by_an_error_still_prints_json(capsys):
+    from bondc.cli import main
+
+    assert main(["simulate", str(SIM / "msd.bg"), "--dt", "1e-9", "--json"]) == 2
+    captured = capsys.readouterr()
+    printed = json.loads(captured.out)
+    assert printed["complete"] is False and [d["code"] for d in printed["diagnostics"]] == ["E803"]
+    assert "E803" in captured.err
