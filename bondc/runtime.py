@@ -2078,6 +2078,7 @@ class _Run:
                         if held:
                             sliding = held
                             t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
+                            y_new = self.onto_surfaces(t_new, y_new, modes, held, alpha)
                         else:               # every side leaves its surface: a frozen segment
                             t_new, y_new, hit = self.segment(t, y, modes, t_stop)
                         held_now = held
@@ -2287,6 +2288,44 @@ class _Run:
             self.note_event(t, self.mode_label(k, modes[k]))
         if not counted:
             self.stats["mode_changes"] += 1
+
+    def onto_surfaces(self, t, y, modes, held, alpha):
+        """The state at the end of a sliding segment, back on the surfaces of the switches it held,
+        where they are still held there (the segment ended at another switch's event or a known
+        time, not at a break-away).
+
+        In the Filippov motion they stay at g = 0; the integration lets them drift (a stuck mass's
+        momentum by 1e-10 over 0.7 s, a hundred times its tolerance). Where that drift is more than
+        the switch's deadband, the restart would no longer see the switch on its surface, and a
+        friction held by its static limit would slide off at the next unrelated event. The
+        smallest correction, each state weighted by its tolerance, that makes every held g zero
+        (one Newton step; g is linear in the states for a velocity); only for a drift (at most 1e6
+        deadbands) and where every weight of the sliding combination is still inside (0, 1)."""
+        index = np.array([k for k in held if not self.model.floor_switches[k]], dtype=int)
+        if index.size == 0 or len(index) != len(held):
+            return y
+        g = self.switches_at(t, y, modes, index)
+        band = self.deadbands(t, y, modes, index)
+        if not np.all(np.isfinite(g)) or np.all(np.abs(g) <= band) or np.any(np.abs(g) > 1e6 * band):
+            return y
+        corners, sides = self.sliding_corners(modes, held)
+        _, rates = self.sliding_rates(t, y, corners, held)
+        weights_now = self.solve_alpha(rates, sides, alpha)
+        if not np.all(np.isfinite(weights_now)) or np.any(np.minimum(weights_now, 1.0 - weights_now) <= 1e-6):
+            return y            # at a break-away: the switch leaves its surface here
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        jacobian = np.empty((index.size, y.size))
+        for j in range(y.size):
+            shifted = np.array(y, dtype=float)
+            shifted[j] += scale[j]
+            jacobian[:, j] = (self.switches_at(t, shifted, modes, index) - g) / scale[j]
+        weights = scale ** 2
+        try:
+            multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, -g)
+        except np.linalg.LinAlgError:
+            return y
+        corrected = y + weights * (jacobian.T @ multipliers)
+        return corrected if np.all(np.isfinite(corrected)) else y
 
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that

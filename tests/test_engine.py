@@ -733,6 +733,46 @@ end
     assert result.outputs["n"][-1] == 3
 
 
+@pytest.mark.parametrize("solver", ["CVODE", "Radau"])
+def test_a_friction_held_by_its_static_limit_stays_held_across_an_unrelated_event(tmp_path, solver):
+    """A mass held by coulomb(f, 20, 30) against a push of 22 + 4*v_C N (v_C rising to 1 V): the push
+    never exceeds the 30 N static limit, so the mass never moves. An RC circuit's resistor law
+    switches at v_C = 1/2, t = ln 2, changing no force. The sliding segment's integration lets the
+    momentum drift off v = 0 (1e-10 over 0.7 s); the restart must still see the friction held,
+    not let it slide at 20 N."""
+    path = tmp_path / "stuck.bg"
+    path.write_text(f'''model Stuck
+  MSe push : e = 22 + 4*cap.e
+  I mass : f = p/5
+  R fric : e = coulomb(f, 20, 30)
+  1 j
+  push -> j
+  j -> mass
+  j -> fric
+  Se src : e = 1
+  C cap : e = q, q(0) = 0
+  R res : f = if e > 0.5 then e else 2*e
+  1 jr
+  src -> jr
+  jr -> cap
+  jr -> res
+  output v [m/s] = mass.f
+  state x [m] : der(x) = mass.f, x(0) = 0
+  experiment run
+    t_end = 3 [s]
+    solver = "{solver}"
+    rtol = 1e-9
+    atol = 1e-12
+  end
+end
+''')
+    result = run(path)
+    assert result.complete, result.message
+    switch = [time for time, label in result.events if label.startswith("if res.e > 0.5")]
+    assert switch == [pytest.approx(np.log(2), abs=1e-9)]
+    assert np.max(np.abs(result.outputs["v"])) < 1e-9 and np.max(np.abs(result.states["x"])) < 1e-9
+
+
 def test_the_zeno_detector_stops_geometric_firings_and_not_a_sweep(monkeypatch):
     """The detector alone, on firing times in closed form: a ball's impacts (intervals x 0.8) stop
     at their limit; a fast sweep's cycles (19 kHz rising at 2 MHz/s: intervals x 0.995, each
