@@ -1102,7 +1102,7 @@ def steps_of(ss, result):
         return result
     steps = getattr(result, "_solver_steps", None)
     if steps is None:
-        steps = _resimulate(ss, result)
+        steps = repeat_run(ss, result)
         try:
             result._solver_steps = steps
         except AttributeError:      # (a result that takes no attributes: repeated each time)
@@ -1110,13 +1110,15 @@ def steps_of(ss, result):
     return steps
 
 
-def _resimulate(ss, result):
+def repeat_run(ss, result, t_eval=None):
+    """``result``'s run again, with its settings and parameter values (the same solver steps),
+    reported at its steps or at ``t_eval``; an incomplete run is cut where it stopped."""
     from bondc.simulate import simulate
 
     settings = dict(result.settings)
     rerun = simulate(ss, None, t_end=settings.get("t_end", float(result.t[-1])), method=settings.get("method"),
                      rtol=settings.get("rtol"), atol=settings.get("atol"), max_step=settings.get("max_step"),
-                     overrides=dict(result.parameters))
+                     overrides=dict(result.parameters), t_eval=t_eval)
     if not result.complete:
         keep = rerun.t <= result.t[-1]
         rerun.t = rerun.t[keep]

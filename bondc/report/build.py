@@ -357,8 +357,8 @@ def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> 
     measurement sampled more coarsely than the solver steps is compared sample by sample and not
     interpolated between them. The run's own points where that is not possible (fewer than two
     samples inside the run, more than a run may record, or a repeat that does not reach as far)."""
+    from bondc.analysis.energy import repeat_run
     from bondc.runtime import MAX_POINTS
-    from bondc.simulate import simulate
 
     result = run.result
     own = (np.asarray(result.t, dtype=float), simulated_signals(result))
@@ -368,10 +368,7 @@ def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> 
     inside = times[(times >= own[0][0]) & (times <= own[0][-1])]
     if inside.size < 2 or inside.size > MAX_POINTS:
         return own
-    settings = dict(getattr(result, "settings", {}) or {})
-    again = simulate(run.state_space, None, t_end=settings.get("t_end", float(own[0][-1])), t_eval=inside,
-                     method=settings.get("method"), rtol=settings.get("rtol"), atol=settings.get("atol"),
-                     max_step=settings.get("max_step"), overrides=dict(result.parameters))
+    again = repeat_run(run.state_space, result, t_eval=inside)
     reached = np.asarray(again.t, dtype=float)
     if reached.size != inside.size or not np.array_equal(reached, inside):
         return own
