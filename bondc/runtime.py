@@ -2314,11 +2314,7 @@ class _Run:
         if not np.all(np.isfinite(weights_now)) or np.any(np.minimum(weights_now, 1.0 - weights_now) <= 1e-6):
             return y            # at a break-away: the switch leaves its surface here
         scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
-        jacobian = np.empty((index.size, y.size))
-        for j in range(y.size):
-            shifted = np.array(y, dtype=float)
-            shifted[j] += scale[j]
-            jacobian[:, j] = (self.switches_at(t, shifted, modes, index) - g) / scale[j]
+        jacobian = self.switch_differences(t, y, modes, index) / scale
         weights = scale ** 2
         try:
             multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, -g)
@@ -2825,15 +2821,24 @@ class _Run:
             total = driver.deadbands(t, y, modes, index, self.options["rtol"], self.options["atol"])
             if total is not None:
                 return total
+        differences = self.switch_differences(t, y, modes, index)
+        total = np.zeros(index.size)
+        for j in range(y.size):
+            total += np.abs(differences[:, j])
+        total[~np.isfinite(total)] = 0.0
+        return total
+
+    def switch_differences(self, t, y, modes, index):
+        """How each switching function of ``index`` changes when state j alone moves by its error
+        tolerance ``atol + rtol*|x_j|``: a matrix (switches, states)."""
         scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
         base = self.switches_at(t, y, modes, index)
-        total = np.zeros(index.size)
+        differences = np.empty((index.size, y.size))
         for j in range(y.size):
             shifted = np.array(y, dtype=float)
             shifted[j] += scale[j]
-            total += np.abs(self.switches_at(t, shifted, modes, index) - base)
-        total[~np.isfinite(total)] = 0.0
-        return total
+            differences[:, j] = self.switches_at(t, shifted, modes, index) - base
+        return differences
 
     def crossing(self, solver, modes, index, signs, old, new, deadband):
         """The earliest switch crossing in the last step: (time, switch index), or None.
