@@ -3172,7 +3172,13 @@ class _Run:
         corners, sides = self.sliding_corners(modes, sliding)
         corner_ids = [self.mode_id(corner) for corner in corners]
         labels = "; ".join(self.model.SWITCHES[k] for k in sliding)
-        self.note_event(t, f"sliding on {labels}")
+        ended = f"sliding on {labels} ends"
+        again = [i for i in range(len(self.events) - 1, -1, -1)
+                 if self.events[i] == (float(t), ended)]
+        if again:               # the same switches held again at once (another switch's event between):
+            del self.events[again[0]]       # one sliding span goes on, not an end and a start
+        else:
+            self.note_event(t, f"sliding on {labels}")
         others = np.array([j for j in self.event_switches if j not in sliding and modes[j] != 0], dtype=int)
         # a switch that starts a little on the far side of its surface (a sliding mode drifts by the
         # solver's tolerance, and a friction may leave from there): it exits from where it starts

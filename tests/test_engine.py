@@ -771,6 +771,8 @@ end
     switch = [time for time, label in result.events if label.startswith("if res.e > 0.5")]
     assert switch == [pytest.approx(np.log(2), abs=1e-9)]
     assert np.max(np.abs(result.outputs["v"])) < 1e-9 and np.max(np.abs(result.states["x"])) < 1e-9
+    # one sliding span over the whole run: held from t = 0, not released and held again at ln 2
+    assert [label for _, label in result.events if "fric" in label] == ["sliding on coulomb(fric.f) in fric.e"]
 
 
 def test_the_zeno_detector_stops_geometric_firings_and_not_a_sweep(monkeypatch):
