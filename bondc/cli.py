@@ -291,19 +291,22 @@ def _cmd_simulate(args) -> int:
         write(result, Path(args.output), args.all)
     error = result.error()
     summary = result.summary()
-    for name, value in summary["final"].items():        # each output in its declared unit, as the statistics
+
+    def shown(name, value):
+        """An output's value in its declared unit (the SI value of anything else)."""
         unit, scale = result.units.get(name, (None, 1.0))
-        if name in result.outputs and unit is not None and scale != 1.0 and isinstance(value, float):
-            summary["final"][name] = value / scale
+        return value / scale if name in result.outputs and unit is not None and isinstance(value, float) else value
+
+    summary["final"] = {name: shown(name, value) for name, value in summary["final"].items()}
     account = None
     steps = result
     if result.t.size > 1:
         steps = steps_of(state_space, result)      # a run on a grid: its statistics from the solver's steps
         summary["statistics"] = output_statistics(steps)
         for name, row in summary["statistics"].items():         # each output in its declared unit
-            unit, scale = result.units.get(name, (None, 1.0))
+            unit, _ = result.units.get(name, (None, 1.0))
             if unit is not None:
-                row.update({key: value / scale for key, value in row.items()}, unit=unit)
+                row.update({key: shown(name, value) for key, value in row.items()}, unit=unit)
         cycle = experiment.cycle if experiment is not None else None
         summary["power"] = power_statistics(steps, power_outputs(graph), cycle)
         try:
