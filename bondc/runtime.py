@@ -739,6 +739,52 @@ def mode_values(values, floors=None):
     return modes
 
 
+def corner_weights(alpha, sides):
+    """Weights of the corners. Multilinear (2**k corners): prod_i alpha_i (side +) or
+    1 - alpha_i (side -). Affine (k + 1 corners): 1 - sum(alpha) for the all-minus corner and
+    alpha_i for the corner with switch i alone on its plus side (the same combination where the
+    right-hand side is affine in each switch's weight, as a friction force is)."""
+    if sides.shape[0] != 2 ** sides.shape[1]:
+        return np.concatenate(([1.0 - np.sum(alpha)], alpha))
+    factors = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
+    return np.prod(factors, axis=1)
+
+
+def filippov_alpha(rates, sides, guess=None):
+    """The weights alpha (one per sliding switch) that make every sliding switch's rate zero.
+
+    The rate is multilinear in alpha (exactly the Filippov / equivalent-control combination;
+    linear in the affine one); Newton's method with least squares, so a switch whose rate does not depend on its own
+    weight (a free clutch) keeps its guess. The result is not clipped: a weight outside
+    [0, 1] means that switch cannot be held on its surface.
+    """
+    count = sides.shape[1]
+    alpha = np.full(count, 0.5) if guess is None else np.clip(np.array(guess, dtype=float), 0.0, 1.0)
+    affine = sides.shape[0] != 2 ** count      # the rate is linear in alpha: Newton converges at once
+    if count == 1:      # one switch: the rate is linear in alpha, alpha*r+ + (1 - alpha)*r- = 0
+        plus, minus = rates[sides[:, 0] > 0, 0][0], rates[sides[:, 0] < 0, 0][0]
+        if not (math.isfinite(plus) and math.isfinite(minus)):
+            return np.full(1, np.nan)
+        return alpha if minus == plus else np.array([minus / (minus - plus)])
+    for _ in range(3 if affine else 20):
+        residual = corner_weights(alpha, sides) @ rates
+        if affine:
+            jacobian = (rates[1:] - rates[0]).T
+        else:
+            jacobian = np.empty((count, count))
+            for j in range(count):
+                others = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
+                others[:, j] = sides[:, j]          # d/d alpha_j of alpha_j or 1 - alpha_j
+                jacobian[:, j] = np.prod(others, axis=1) @ rates
+        if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residual))):
+            return np.full(count, np.nan)
+        delta = np.linalg.lstsq(jacobian, -residual, rcond=1e-12)[0]
+        alpha = alpha + delta
+        if np.max(np.abs(delta)) <= 1e-13:
+            break
+    return alpha
+
+
 def modes_at(model, t, x, p, guess=None):
     """The mode vector of the unfrozen law at one point: ``m = sign(g(t, x, m))``.
 
@@ -888,7 +934,7 @@ class Result:
     """
 
     def __init__(self, t, states, outputs, variables, events, complete, message, failure, stats,
-                 parameters, jumps=()):
+                 parameters, jumps=(), sliding=()):
         self.t = t
         self.states = states
         self.outputs = outputs
@@ -900,6 +946,10 @@ class Result:
         self.stats = stats
         self.parameters = parameters
         self.jumps = list(jumps)        # (t, states before, states after) where a when clause fired
+        # (t0, t1, corners, times, weights) of each Filippov sliding mode: its points are those of
+        # (t0, t1], at `times`, each the combination of the right-hand sides at the corners (mode
+        # vectors, one per row) with the corners' `weights` there (one row per corner)
+        self.sliding = list(sliding)
 
     def __repr__(self):
         end = f"{self.t[-1]:.6g}" if self.t.size else "-"
@@ -947,6 +997,7 @@ _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
 _UNFROZEN_STEPS = 3000   # steps in one short unfrozen interval: the solver is fighting a discontinuity
 _MAX_SLIDING = 8         # switches sliding at once in the multilinear combination (2**8 corners) ...
 _MAX_HELD = 4096         # ... and in the affine one (k + 1 corners), when the laws combine linearly
+SLIDING_CHECKS = 1000    # a sliding mode's exits are tested at least this often over the run's span
 _EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant
 _ZENO_FIRINGS = 16       # a when clause firing this often with ever shorter intervals ...
 _ZENO_INTERVAL = 1e-4    # ... the last shorter than this fraction of the run, accumulates (Zeno)
@@ -1220,6 +1271,10 @@ class _NativeDriver:
             buffer("double[]", self.ys), self.count, *self._report_arguments(t_eval, eval_next))
         count = self.count[0]
         return code, self.ts[:count], self.ys[:count], self._reported(t_eval)
+
+    def check(self, longest):
+        """Sliding steps longer than ``longest`` end a batch (see ``bondc_driver_check``)."""
+        self.lib.bondc_driver_check(self.handle, float(longest) if np.isfinite(longest) else 0.0)
 
     def slide(self, k, plus, minus, alpha, probe, others, drift):
         """Make the segment just started a sliding mode on switch ``k`` (see ``bondc_driver_slide``)."""
@@ -2975,16 +3030,7 @@ class _Run:
         values, rates = self.sliding_rates(t, y, corners, sliding)
         return corners, sides, values, rates
 
-    @staticmethod
-    def corner_weights(alpha, sides):
-        """Weights of the corners. Multilinear (2**k corners): prod_i alpha_i (side +) or
-        1 - alpha_i (side -). Affine (k + 1 corners): 1 - sum(alpha) for the all-minus corner and
-        alpha_i for the corner with switch i alone on its plus side (the same combination where the
-        right-hand side is affine in each switch's weight, as a friction force is)."""
-        if sides.shape[0] != 2 ** sides.shape[1]:
-            return np.concatenate(([1.0 - np.sum(alpha)], alpha))
-        factors = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
-        return np.prod(factors, axis=1)
+    corner_weights = staticmethod(corner_weights)
 
     def affine_holds(self, t, y, corners, sides, values, sliding):
         """Whether the right-hand side at (t, y) is affine in the sliding switches' weights, as the
@@ -3025,39 +3071,7 @@ class _Run:
         rates = np.array([self.switch_rate(t, y, values[c], corners[c], index) for c in range(len(corners))])
         return values, rates
 
-    def solve_alpha(self, rates, sides, guess=None):
-        """The weights alpha (one per sliding switch) that make every sliding switch's rate zero.
-
-        The rate is multilinear in alpha (exactly the Filippov / equivalent-control combination;
-        linear in the affine one); Newton's method with least squares, so a switch whose rate does not depend on its own
-        weight (a free clutch) keeps its guess. The result is not clipped: a weight outside
-        [0, 1] means that switch cannot be held on its surface.
-        """
-        count = sides.shape[1]
-        alpha = np.full(count, 0.5) if guess is None else np.clip(np.array(guess, dtype=float), 0.0, 1.0)
-        affine = sides.shape[0] != 2 ** count      # the rate is linear in alpha: Newton converges at once
-        if count == 1:      # one switch: the rate is linear in alpha, alpha*r+ + (1 - alpha)*r- = 0
-            plus, minus = rates[sides[:, 0] > 0, 0][0], rates[sides[:, 0] < 0, 0][0]
-            if not (math.isfinite(plus) and math.isfinite(minus)):
-                return np.full(1, np.nan)
-            return alpha if minus == plus else np.array([minus / (minus - plus)])
-        for _ in range(3 if affine else 20):
-            residual = self.corner_weights(alpha, sides) @ rates
-            if affine:
-                jacobian = (rates[1:] - rates[0]).T
-            else:
-                jacobian = np.empty((count, count))
-                for j in range(count):
-                    others = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
-                    others[:, j] = sides[:, j]          # d/d alpha_j of alpha_j or 1 - alpha_j
-                    jacobian[:, j] = np.prod(others, axis=1) @ rates
-            if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residual))):
-                return np.full(count, np.nan)
-            delta = np.linalg.lstsq(jacobian, -residual, rcond=1e-12)[0]
-            alpha = alpha + delta
-            if np.max(np.abs(delta)) <= 1e-13:
-                break
-        return alpha
+    solve_alpha = staticmethod(filippov_alpha)
 
     def sliding_set(self, t, y, modes, candidates):
         """Which of ``candidates`` slide at (t, y) (complementarity by active set) and the modes of
@@ -3242,7 +3256,7 @@ class _Run:
                 self.stop_nonfinite(solver, fun, lambda tt, yy: corners[-1], corner_ids[-1])
             new = exits(t_new, y_new)
             dense = solver.dense_output()
-            hit = self.sliding_end(old, new, lambda tt: exits(tt, dense(tt)), solver.t_old, t_new)
+            hit = self.sliding_end_within(old, new, lambda tt: exits(tt, dense(tt)), solver.t_old, t_new)
             end = t_new if hit is None else hit
             y_end = y_new if hit is None else dense(hit)
             self.record_sliding(solver.t_old, end, y_end, dense, corner_ids, weights_at)
@@ -3254,6 +3268,30 @@ class _Run:
                     self.note_event(end, f"sliding on {labels} ends")
                 return end, np.array(y_end)
             old = new
+
+    def sliding_end_within(self, old, new, exits_at, t_old, t_new):
+        """:meth:`sliding_end` of a step, its exits also tested inside it every
+        :meth:`sliding_check`: a mode whose states stand still (a mass held at rest or at a speed)
+        gives the solver nothing to limit its steps by, while the force that holds it follows an input
+        that may pass the holding limit and come back within one step."""
+        longest = self.sliding_check()
+        count = int(min(math.ceil((t_new - t_old) / longest), 1e6)) if longest > 0 else 1
+        if count <= 1:
+            return self.sliding_end(old, new, exits_at, t_old, t_new)
+        times = np.linspace(t_old, t_new, count + 1)
+        before = old
+        for a, b in zip(times[:-1], times[1:]):
+            after = new if b == t_new else np.asarray(exits_at(b), dtype=float)
+            hit = self.sliding_end(before, after, exits_at, a, b)
+            if hit is not None:
+                return hit
+            before = after
+        return None
+
+    def sliding_check(self) -> float:
+        """The longest stretch of a sliding mode whose exits are tested only at its ends: the run's
+        span over SLIDING_CHECKS, or its max_step where that is shorter."""
+        return min(self.span / SLIDING_CHECKS, float(self.options.get("max_step", np.inf)))
 
     @staticmethod
     def sliding_end(old, new, exits_at, t_old, t_new):
@@ -3288,6 +3326,7 @@ class _Run:
         elif not driver.slide_many(sliding, corners, sides.shape[0] != 2 ** sides.shape[1], memory["alpha"],
                                    self.probe, others, drift):
             return "handover", t, np.array(y, dtype=float)
+        driver.check(self.sliding_check())
         old = np.maximum(driver.exits_at(t, y), 0.0)    # at the edge of the sliding region: leaving counts from here
         t_prev, y_prev = float(t), np.array(y, dtype=float)
         positive = sides[:, 0] > 0
@@ -3331,7 +3370,7 @@ class _Run:
                 self.stats["steps"] += 1
                 dense = _DriverStep(driver, t_prev, t_new, y_new).dense_output()
                 new = driver.exits.copy()
-                hit = self.sliding_end(old, new, lambda tt: driver.exits_at(tt, dense(tt)), t_prev, t_new)
+                hit = self.sliding_end_within(old, new, lambda tt: driver.exits_at(tt, dense(tt)), t_prev, t_new)
                 end = t_new if hit is None else hit
                 y_end = y_new if hit is None else dense(hit)
                 self.record_sliding(t_prev, end, y_end, dense, corner_ids, weights_at)
@@ -3634,6 +3673,7 @@ class _Run:
                                           at(tt, xx, p, m)[rows])
         groups = {}             # (mode id, relevant mask) -> column indices
         all_relevant = (True,) * self.switch_count
+        sliding = []            # (time before, last time, corners) of each sliding block
         start = 0
         with np.errstate(all="ignore"):
             blocks = []         # consecutive blocks of one sliding mode merged: one evaluation per corner
@@ -3650,6 +3690,9 @@ class _Run:
                 start += times.size
                 if isinstance(mode, tuple) and mode[0] == "slide":     # the Filippov combination
                     _, corner_ids, weights = mode
+                    before = t[columns[0] - 1] if columns[0] > 0 else times[0]
+                    sliding.append((float(before), float(times[-1]),
+                                    np.array([modes_by_id[c] for c in corner_ids], dtype=float), times, weights))
                     xx = x[:, start - times.size:start]
                     self._blend(model.outputs, self.p, times, xx, corner_ids, weights, modes_by_id, n_out,
                                 columns)(outputs)
@@ -3700,6 +3743,7 @@ class _Run:
             parameters={name: float(v) for name, v in zip(model.parameter_names, self.p)},
             jumps=[(time, dict(zip(model.STATE_NAMES, before)), dict(zip(model.STATE_NAMES, after)))
                    for time, before, after in self.jumps],
+            sliding=sliding,
         )
 
 
@@ -3837,6 +3881,7 @@ extern int CVodeSetLinearSolver(void *mem, SUNLinearSolver ls, SUNMatrix a);
 extern int CVodeSetJacFn(void *mem, CVLsJacFn jac);
 extern int CVode(void *mem, sunrealtype tout, N_Vector yout, sunrealtype *tret, int itask);
 extern int CVodeGetDky(void *mem, sunrealtype t, int k, N_Vector dky);
+extern int CVodeGetLastStep(void *mem, sunrealtype *hlast);
 extern int CVodeGetNumRhsEvals(void *mem, long *n);
 extern int CVodeGetNumJacEvals(void *mem, long *n);
 extern int CVodeGetNumLinSolvSetups(void *mem, long *n);
@@ -3849,6 +3894,7 @@ typedef struct {
     SUNMatrix a;
     SUNLinearSolver ls;
     int n, switches, entries, banded, lower, upper, started, bad;
+    double longest;     /* a sliding step longer than this goes back to the runtime (0: none) */
     const int *rows, *cols;
     double *p, *m, *g, *values;
     double t_stop;
@@ -4412,6 +4458,13 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
    rates are equal); probe: the step of the rates' central differences. The exits watched by
    bondc_driver_slide_advance are alpha, 1 - alpha and m[j]*g[j] + drift[j] of the `count` switches
    `others` (drift: how far a switch starts on the far side of its surface). */
+/* The longest sliding step whose exits are only tested at its end (0: every step): a longer one ends
+   bondc_driver_slide_advance as a possible exit (1), for the runtime to test inside it. */
+void bondc_driver_check(bondc_driver *d, double longest)
+{
+    d->longest = longest;
+}
+
 void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
                         int count, const int *others, const double *drift)
 {
@@ -4485,7 +4538,8 @@ void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
    clipped). After each step the exits are compared with `old` (2 + count values, updated in
    place): an entry that went from > 0 to <= 0, or from >= 0 to < 0, is a possible end of the
    sliding mode. Returns 0: capacity reached; 1: a possible end in the last stored step (`old`
-   still holds the values before it); 2: t_stop reached; 3: a law was not finite at a trial
+   still holds the values before it), or a step longer than d->longest (bondc_driver_check), in
+   which the runtime looks for one; 2: t_stop reached; 3: a law was not finite at a trial
    point; 4: the state or the combination at a step is not finite; < 0: CVODE's error flag. The
    report points of a run reported at t_eval as bondc_driver_advance stores them (the caller takes
    the weights of the combination there). */
@@ -4544,6 +4598,10 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
         *count = k + 1;
         for (int j = 0; j < watched; j++)
             if ((old[j] > 0 && exits[j] <= 0) || (old[j] >= 0 && exits[j] < 0)) return 1;
+        if (d->longest > 0) {       /* a long step: the runtime looks for an exit inside it too */
+            double h = 0.0;
+            if (CVodeGetLastStep(d->cvode, &h) == 0 && h > d->longest) return 1;
+        }
         for (int j = 0; j < watched; j++) old[j] = exits[j];
         int full = report_step(d, t, y, t_eval, n_eval, eval_next, eval_capacity, et, ey, eval_count);
         if (t >= d->t_stop) return 2;
@@ -4672,6 +4730,7 @@ int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m,
                     int count, const int *index, double *out);
 double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
                            const double *m, int k);
+void bondc_driver_check(bondc_driver *d, double longest);
 void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
                         int count, const int *others, const double *drift);
 int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corners, int affine, const double *cm,

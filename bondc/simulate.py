@@ -92,6 +92,9 @@ class SimResult:
     warnings: list = field(default_factory=list)
     settings: dict = field(default_factory=dict)
     jumps: list = field(default_factory=list)    # (t, states before, states after) of when clauses
+    # (t0, t1, corners, times, weights) of each Filippov sliding mode (see bondc.runtime.Result): the
+    # energy account evaluates the combination between the points from them
+    sliding: list = field(default_factory=list)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
     units: dict = field(default_factory=dict)
@@ -324,6 +327,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
         stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
         model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
+        sliding=list(getattr(raw, "sliding", ())),
     )
     result.units = result_units(graph)
     if raw.failure is not None:

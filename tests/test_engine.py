@@ -6,6 +6,7 @@ form, or the same physics written by hand here and integrated by scipy at a
 much tighter tolerance.
 """
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -211,6 +212,58 @@ def test_a_friction_whose_velocity_passes_through_zero_is_an_event(tmp_path, mon
     np.testing.assert_allclose(v[t <= turn], 3 - 7 * t[t <= turn], atol=1e-8)
     np.testing.assert_allclose(v[t > turn], -3 * (t[t > turn] - turn), atol=1e-8)
     assert result.stats["mode_changes"] == 1
+
+
+PERIODIC_PUSH = """
+model PeriodicPush "a mass held by dry friction; a periodic push passes the static limit for a moment"
+  param m = 1 [kg]
+  input F [N] = 15 + 10*sin(2*pi*t)
+  MSe push : e = F
+  I mass : f = p/m
+  R friction : e = coulomb(f, 20, 24.5)
+  1 j
+  push -> j
+  j -> mass
+  j -> friction
+  output v [m/s] = mass.f
+  experiment run
+    t_end = 3 [s]
+    rtol = 1e-9
+    atol = 1e-12
+  end
+end
+"""
+
+
+@pytest.mark.parametrize("native", ["1", "0"])
+def test_a_held_mass_breaks_away_where_a_periodic_push_passes_the_static_limit(tmp_path, monkeypatch, native):
+    """Held at rest, the mass's states stand still and give the solver nothing to limit its steps
+    by: it stepped over the whole run while the push F = 15 + 10 sin(2 pi t) passed the static limit
+    24.5 N each period. It breaks away where sin(2 pi t) = 0.95, slides with m v' = F - 20 N and
+    sticks again where v returns to 0 (F is then below 24.5 N), once per period."""
+    monkeypatch.setenv("BONDC_NATIVE", native)
+    path = tmp_path / "push.bg"
+    path.write_text(PERIODIC_PUSH)
+    derived = derive_file(path, cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    assert result.complete, result.message
+    w = 2 * math.pi
+    away = math.asin(0.95) / w
+
+    def speed(t, start):            # m v' = -5 + 10 sin(w t) from v(start) = 0
+        return -5 * (t - start) - 10 / w * (np.cos(w * t) - math.cos(w * start))
+
+    stick = brentq(lambda t: speed(t, away), away + 0.05, away + 0.9)
+    ends = [time for time, label in result.events if label.endswith("ends")]
+    starts = [time for time, label in result.events if label.startswith("sliding on") and not label.endswith("ends")]
+    np.testing.assert_allclose(ends, [away, away + 1, away + 2], atol=1e-8)
+    np.testing.assert_allclose(starts, [0.0, stick, stick + 1, stick + 2], atol=1e-8)
+    t, v = result.t, result.outputs["v"]
+    for k in range(3):
+        sliding = (t > away + k) & (t < stick + k)
+        np.testing.assert_allclose(v[sliding], speed(t[sliding] - k, away), atol=1e-7)
+        held = (t > stick + k + 1e-9) & (t < away + k + 1 - 1e-9)
+        np.testing.assert_allclose(v[held], 0.0, atol=1e-12)
 
 
 def test_an_if_conditions_event_says_whether_it_became_true_or_false(tmp_path):

@@ -1067,7 +1067,8 @@ def test_a_repeated_point_is_dropped_before_the_results_are_evaluated(name, monk
         kinds = set()
         for i, (times, mode) in enumerate(zip(self.blocks_t, self.blocks_mode)):
             sliding = isinstance(mode, tuple) and mode[0] == "slide"
-            if times.size < 3 or sliding in kinds:
+            # (a sliding mode's long steps are recorded one by one: bondc_driver_check)
+            if times.size < (1 if sliding else 3) or sliding in kinds:
                 continue
             kinds.add(sliding)
             k = times.size // 2

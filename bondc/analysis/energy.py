@@ -88,7 +88,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from bondc.errors import AnalysisError, Diagnostic
-from bondc.runtime import _unique_rows, mode_values
+from bondc.runtime import _unique_rows, corner_weights, filippov_alpha, mode_values
 
 # Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
 _LOBATTO_NODES = np.array([-1.0, -math.sqrt(3.0 / 7.0), 0.0, math.sqrt(3.0 / 7.0), 1.0])
@@ -542,6 +542,39 @@ class _Model:
     def variables(self, t, x, modes):
         return self.by_modes(self._variables, t, x, modes, len(self.variable_names))
 
+    def switches(self, t, x, modes):
+        return self.by_modes(self._switches, t, x, modes, self.switch_count)
+
+    def filippov(self, corners, t, x, guess, probe):
+        """The Filippov combination of a sliding mode at the columns (t, x): (its rate (n, k), the
+        corners' weights (corners, k)), as the run computes it (``bondc.runtime.filippov_alpha``): the
+        weights that hold every sliding switch's rate along the combination at zero, the rates by a
+        central difference over ``probe``. ``corners``: the mode vectors (rows); the sliding switches
+        are those in which they differ, each corner's side of one its sign there. ``guess``: the
+        sliding switches' weights (switches, k) where a rate does not depend on them."""
+        sliding = np.flatnonzero(np.any(corners != corners[0], axis=0))
+        sides = np.sign(corners[:, sliding])
+        count = t.size
+        values = np.empty((len(corners), len(self.state_names), count))
+        rates = np.empty((len(corners), sliding.size, count))
+        with np.errstate(all="ignore"):
+            for c, corner in enumerate(corners):
+                modes = np.broadcast_to(corner, (count, corner.size))
+                values[c] = self.rhs(t, x, modes)
+                ahead = self.switches(t + probe, x + probe * values[c], modes)[sliding]
+                behind = self.switches(t - probe, x - probe * values[c], modes)[sliding]
+                rates[c] = (ahead - behind) / (2 * probe)
+            if sliding.size == 1:       # one switch: alpha*rate+ + (1 - alpha)*rate- = 0
+                plus, minus = rates[sides[:, 0] > 0, 0][0], rates[sides[:, 0] < 0, 0][0]
+                alpha = np.where(minus == plus, guess[0], minus / (minus - plus))[None, :]
+            else:
+                alpha = np.array([filippov_alpha(rates[:, :, j], sides, guess[:, j]) for j in range(count)]).T
+            alpha = np.where(np.isfinite(alpha), np.clip(alpha, 0.0, 1.0), guess)
+            weights = np.array([corner_weights(alpha[:, j], sides) for j in range(count)]).T \
+                if sliding.size > 1 else np.where(sides[:, :1] > 0, alpha, 1.0 - alpha)
+            rate = np.einsum("ck,cnk->nk", weights, np.where(weights[:, None, :] != 0, values, 0.0))
+        return rate, weights
+
 
 def _hermite(tau, h, xa, xb, fa, fb):
     """Cubic Hermite interpolant at fractions ``tau`` of steps of length ``h`` (broadcast)."""
@@ -706,9 +739,47 @@ class _Trajectory:
             sliding[_inside(mid, increasing, start, end)] = True
         self.ta, self.tb, self.xa, self.xb, self.fa, self.fb = ta, tb, xa, xb, fa, fb
         self.modes, self.sliding = modes, sliding
+        # a sliding step whose mode the run recorded (result.sliding): its rates are the Filippov
+        # combination's, evaluated between its points as the run does (not a spline through them)
+        self.blocks = list(getattr(result, "sliding", ()) or ())
+        settings = getattr(result, "settings", {}) or {}
+        t_end = settings.get("t_end", float(t[-1]) if t.size else 1.0)
+        self.probe = 1e-8 * max(float(t[-1] - t[0]) if t.size else 0.0, abs(float(t_end)), 1e-300)
+        self.block = self._blocks_of(mid)
+        if self.blocks:     # the run's record of its sliding modes, whatever events fell inside them
+            self.sliding = sliding = self.block >= 0
+        for b in np.unique(self.block[self.block >= 0]):
+            rows = np.flatnonzero(self.block == b)
+            self.fa[:, rows] = self.combination(int(b), ta[rows], xa[:, rows])[0]
+            self.fb[:, rows] = self.combination(int(b), tb[rows], xb[:, rows])[0]
         self.scale = np.max(np.abs(x), axis=1) + 1e-300 if x.size else np.ones(x.shape[0])
         for boundary in boundaries:
             self._split(boundary)
+
+    def _blocks_of(self, mid) -> np.ndarray:
+        """Per step, the index of the recorded sliding mode (``self.blocks``) that holds it (its middle
+        in the mode's (t0, t1]), or -1: a step that is not sliding, or a result without the record."""
+        block = np.full(mid.size, -1, dtype=int)
+        if not self.blocks:
+            return block
+        order = sorted(range(len(self.blocks)), key=lambda b: self.blocks[b][1])
+        ends = np.array([self.blocks[b][1] for b in order])
+        starts = np.array([self.blocks[b][0] for b in order])
+        at = np.searchsorted(ends, mid, side="left")
+        inside = at < ends.size
+        inside[inside] &= starts[at[inside]] < mid[inside]
+        block[inside] = np.array(order, dtype=int)[at[inside]]
+        return block
+
+    def combination(self, b: int, times: np.ndarray, states: np.ndarray):
+        """(rate, corner weights) of the recorded sliding mode ``b`` at the columns (times, states):
+        :meth:`_Model.filippov`, from the weights the run recorded (interpolated) where a sliding
+        switch's rate does not depend on its own."""
+        _, _, corners, recorded_t, recorded_w = self.blocks[b]
+        sliding = np.flatnonzero(np.any(corners != corners[0], axis=0))
+        plus = np.asarray(recorded_w, dtype=float).T @ (corners[:, sliding] > 0)     # (points, switches)
+        guess = np.array([np.interp(times, recorded_t, plus[:, i]) for i in range(sliding.size)])
+        return self.model.filippov(corners, times, states, guess, self.probe)
 
     @staticmethod
     def _after_jumps(ta, xa, jumps, state_names) -> None:
@@ -733,6 +804,8 @@ class _Trajectory:
         tau = (time - self.ta[k]) / h
         xa, xb = self.xa[:, k], self.xb[:, k]
         if self.sliding[k]:
+            if self.block[k] >= 0:      # the combination's rates at its ends
+                return _hermite(tau, h, xa, xb, self.fa[:, k], self.fb[:, k])
             return (1 - tau) * xa + tau * xb
         one = slice(k, k + 1)
         _, rates, corrected = _corrected_nodes(self.model, self.ta[one], self.tb[one], self.xa[:, one],
@@ -753,7 +826,10 @@ class _Trajectory:
             return
         k = int(inside[0])
         x_mid = self.state_at(k, time)
-        f_mid = self.model.rhs(np.array([time]), x_mid.reshape(-1, 1), self.modes[k:k + 1])[:, 0]
+        if self.block[k] >= 0:
+            f_mid = self.combination(int(self.block[k]), np.array([time]), x_mid.reshape(-1, 1))[0][:, 0]
+        else:
+            f_mid = self.model.rhs(np.array([time]), x_mid.reshape(-1, 1), self.modes[k:k + 1])[:, 0]
         insert = lambda array, left, right: np.concatenate(
             [array[..., :k], left[..., None], right[..., None], array[..., k + 1:]], axis=-1)
         self.ta = np.concatenate([self.ta[:k], [self.ta[k], time], self.ta[k + 1:]])
@@ -765,6 +841,7 @@ class _Trajectory:
         self.modes = np.concatenate([self.modes[:k], self.modes[k:k + 1], self.modes[k:k + 1],
                                      self.modes[k + 1:]], axis=0)
         self.sliding = np.concatenate([self.sliding[:k], [self.sliding[k]] * 2, self.sliding[k + 1:]])
+        self.block = np.concatenate([self.block[:k], [self.block[k]] * 2, self.block[k + 1:]])
 
     def samples(self) -> tuple[np.ndarray, dict]:
         """Times (steps, 5) of the Lobatto nodes and every variable there: name -> (steps, 5)."""
@@ -779,7 +856,30 @@ class _Trajectory:
         flat_modes = np.repeat(self.modes, 5, axis=0)
         values = self.model.variables(times.ravel(), states.reshape(n, steps * 5), flat_modes)
         values = values.reshape(len(self.model.variable_names), steps, 5)
-        if np.any(self.sliding):
+        for b in np.unique(self.block[self.block >= 0]):
+            # a recorded sliding mode: its combination at the nodes, the states there from the cubic
+            # Hermite interpolant of its rates
+            rows = np.flatnonzero(self.block == b)
+            inner = times[rows, 1:4].ravel()
+            nodes = _hermite(np.tile(tau[1:4], rows.size)[None, :], np.repeat(h[rows], 3)[None, :],
+                             np.repeat(self.xa[:, rows], 3, axis=1), np.repeat(self.xb[:, rows], 3, axis=1),
+                             np.repeat(self.fa[:, rows], 3, axis=1), np.repeat(self.fb[:, rows], 3, axis=1))
+            node_t = np.concatenate([self.ta[rows], inner, self.tb[rows]])
+            node_x = np.concatenate([self.xa[:, rows], nodes, self.xb[:, rows]], axis=1)
+            _, weights = self.combination(int(b), node_t, node_x)
+            corners = self.blocks[int(b)][2]
+            blended = np.zeros((len(self.model.variable_names), node_t.size))
+            with np.errstate(all="ignore"):
+                for c, corner in enumerate(corners):
+                    if np.any(weights[c] != 0):
+                        corner_values = self.model.variables(node_t, node_x, np.broadcast_to(corner, (node_t.size,
+                                                                                                     corner.size)))
+                        blended += weights[c] * np.where(weights[c] != 0, corner_values, 0.0)
+            m = rows.size
+            values[:, rows, 0] = blended[:, :m]
+            values[:, rows, 1:4] = blended[:, m:4 * m].reshape(-1, m, 3)
+            values[:, rows, 4] = blended[:, 4 * m:]
+        if np.any(self.sliding & (self.block < 0)):
             # the Filippov combination is the runtime's: interpolate its recorded values, by a cubic
             # spline through the points of each sliding span (the motion is smooth there)
             recorded_t = np.asarray(self.result.t, dtype=float)
@@ -789,7 +889,7 @@ class _Trajectory:
             increasing = (bool(np.all(np.diff(mid) > 0)), bool(np.all(np.diff(recorded_t) > 0)))
             for start, end in _sliding_spans(self.result.events, float(recorded_t[-1])):
                 rows = _inside(mid, increasing[0], start, end)
-                rows = rows[self.sliding[rows]]
+                rows = rows[self.sliding[rows] & (self.block[rows] < 0)]
                 # the points of (start, end]: the one recorded at the span's start holds the values
                 # from before its event (a restart keeps a repeated time's first record), which a
                 # pwm source's effort, for one, does not share with the span
