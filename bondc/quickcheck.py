@@ -272,6 +272,10 @@ def _combine(function, *values: _Value) -> _Value:
             at.append(DOMAIN)
         else:
             at.append(function(*args))
+    if all(a is DOMAIN for a in at) and all(len(set(v.at)) == 1 for v in values):
+        # arguments alike at every point (a constant, or names that cancel) with no real value: the
+        # translator rejects a constant that has none (E701)
+        raise _Unsure("a constant with no real value (E701)")
     return _Value(at, any(v.opaque for v in values))
 
 

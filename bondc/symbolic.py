@@ -290,6 +290,18 @@ def _require_finite(value, node) -> None:
                     hint="a division by zero, or a value beyond a double's range (about 1.8e308)")
 
 
+def _require_real(value, node):
+    """``value``, unless it is a constant with no real value (``sqrt(-1)``, ``log(-2)``,
+    ``(-8)^(1/3)``: sympy's principal values are complex), an error at ``node``: laws are
+    evaluated as real numbers, and such a constant has none."""
+    if isinstance(value, sympy.Expr) and value.is_number and value.is_extended_real is False:
+        raise _fail(node, "this constant has no real value",
+                    hint="it is a square root or a log of a negative number, or a negative number raised to a "
+                         "fractional power, and laws are evaluated as real numbers (an odd root of x that keeps "
+                         "its sign is sign(x)*abs(x)^(1/3))")
+    return value
+
+
 def _short_number(value) -> str:
     if value is sympy.zoo:
         return "a division by zero"
@@ -427,7 +439,7 @@ class Translator:
             value = sympy.Pow(left, right)
             if value.has(sympy.zoo, sympy.nan):
                 raise _fail(node, "0 raised to a negative power", hint="the base is 0 for every value")
-            return value
+            return _require_real(value, node)
         raise _fail(node, f"unsupported operator '{op}'")
 
     def _If(self, node: ast.If):
@@ -451,7 +463,7 @@ class Translator:
                                   f"got {len(node.args)}")
             if name in ("min", "max") and len(node.args) < 2:
                 raise _fail(node, f"{name}() takes at least 2 arguments")
-            return BUILTINS[name](*[self(arg) for arg in node.args])
+            return _require_real(BUILTINS[name](*[self(arg) for arg in node.args]), node)
         raise _fail(node, f"unknown function '{name}'")
 
     def _inline(self, node: ast.Call, function):
