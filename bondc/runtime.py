@@ -2078,9 +2078,13 @@ class _Run:
         """What an event says of switch ``k`` entering ``mode``: an ``if``'s condition becoming true
         or false (``if h < 0.4 in pump.f -> false``), else the mode (``sign(v) in friction.e -> -1``)."""
         truth = self.model.SWITCH_TRUTH[k]
-        if truth and mode != 0:
-            return f"{self.model.SWITCHES[k]} -> {'true' if mode * truth > 0 else 'false'}"
-        return f"{self.model.SWITCHES[k]} -> {int(mode):+d}"
+        if truth in (3, -3):            # == and !=: the condition holds at g = 0 and off it
+            holds = (mode == 0) == (truth == 3)
+        elif truth:                     # > >= < <=: on the side of its sign, and at g = 0 where not strict
+            holds = mode * truth > 0 if mode != 0 else abs(truth) == 2
+        else:
+            return f"{self.model.SWITCHES[k]} -> {int(mode):+d}"
+        return f"{self.model.SWITCHES[k]} -> {'true' if holds else 'false'}"
 
     def note_event(self, t, label):
         self.events.append((float(t), label))
@@ -2304,6 +2308,24 @@ class _Run:
             bands = np.maximum(100 * self.deadbands(t, y, modes, index), 1e-12)
             relevant = self.relevant(t, y, modes)
             near = [int(k) for k, value, band in zip(index, values, bands) if value <= band and relevant[k]]
+        # a law continuous across its surface holds nothing there (its two sides' laws agree): it
+        # may only be held where the motion keeps to the surface anyway (a valve at rest between
+        # equal pressures), not where it crosses (a pressure drop changing sign)
+        steep = [k for k in near if self.continuous_across(t, y, modes, k) and not self.keeps_to(t, y, modes, k)]
+        near = [k for k in near if k not in steep]
+        if steep and not near:
+            # a law continuous across its surface but too steep there for the solver (a square
+            # root at 0): it is crossed, never held, and cannot be integrated as written
+            named = "; ".join(self.model.SWITCHES[k] for k in steep)
+            raise _Stop({**stalled.failure,
+                         "message": f"the simulation stalled at t={t:.6g}: the law of {named} is continuous "
+                                    f"there but infinitely steep (a square root at 0), and the solver makes "
+                                    f"no headway through it",
+                         "variable": self.model.SWITCH_OWNERS[steep[0]],
+                         "cause": "a law like sign(dp)*sqrt(abs(dp)) has an infinite slope at dp = 0: near it "
+                                  "the time constant of what it feeds goes to zero",
+                         "hint": "give the law a laminar band around 0, as real orifices have: "
+                                 "if abs(dp) < dp_l then K*dp/sqrt(dp_l) else K*sign(dp)*sqrt(abs(dp))"})
         if near and len(near) <= _MAX_HELD:
             held, modes, alpha = self.consistent_sliding_set(t, y, modes, near)
             if held:
@@ -2394,7 +2416,66 @@ class _Run:
                 # on the surface: |g| within its deadband (the integration noise of the state)
                 on_surface = np.abs(self.switches_at(t, y, modes, index)) <= self.deadbands(t, y, modes, index)
                 candidates.update(int(k) for k in index[on_surface])
-        return sorted(candidates)
+        return sorted(k for k in candidates if not self.continuous_across(t, y, modes, k))
+
+    def keeps_to(self, t, y, modes, k) -> bool:
+        """Whether the motion keeps to switch ``k``'s surface near (t, y): on the surface (where a
+        continuous law's two sides agree), g moves by less than its deadband over a thousandth of
+        the run."""
+        near = self.near_surface(t, y, modes, k)
+        if near is None:
+            return False
+        on, band, plus, minus = near
+        with np.errstate(all="ignore"):
+            at = on(0.0)
+            rate = float(self.switch_rate(t, at, self.rhs(t, at, plus), plus, k))
+        return bool(np.isfinite(rate) and abs(rate) * 1e-3 * self.span <= band)
+
+    def continuous_across(self, t, y, modes, k) -> bool:
+        """Whether the law is continuous across switch ``k``'s surface near (t, y), as a turbulent
+        orifice's sign(dp)*sqrt(abs(dp)) is at dp = 0: such a switch is crossed, never held, whatever
+        its frozen laws extended past the surface say (each side's law there gives the flow of the
+        other direction, and from a state a little off the surface the two seemed to push towards
+        it: a false sliding mode held the pressure drop away from 0 at a flow near none).
+
+        The jump between the two sides' right-hand sides (each state by its error tolerance), on
+        the side g > 0 at the distance of the switch's deadband (the integration noise of g) and at
+        100 times it: a discontinuity (a friction's) keeps its size as the surface nears, a
+        continuous law's jump vanishes there (as the square root of the distance for the orifice,
+        linearly for a kink). A switch whose modes give one right-hand side is left as it was."""
+        near = self.near_surface(t, y, modes, k)
+        if near is None:
+            return False
+        on, band, plus, minus = near
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        with np.errstate(all="ignore"):
+            def jump(level):
+                at = on(level)
+                return float(np.max(np.abs(self.rhs(t, at, plus) - self.rhs(t, at, minus)) / scale))
+
+            near_jump, far_jump = jump(band), jump(100.0 * band)
+        return bool(np.isfinite(near_jump) and np.isfinite(far_jump) and far_jump > 0
+                    and near_jump <= 0.3 * far_jump)
+
+    def near_surface(self, t, y, modes, k):
+        """For a sign switch ``k`` whose g moves with the state: (the state moved along g's gradient
+        to where g has a given value, g's deadband there, the modes with k on its plus side, on its
+        minus side), or None."""
+        vertex = self.vertex_override.get(k, self.model.SWITCH_VERTICES[k])
+        if vertex != 1.0 or self.model.floor_switches[k]:
+            return None
+        index = np.array([k])
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        with np.errstate(all="ignore"):
+            gradient = self.switch_differences(t, y, modes, index)[0] / scale
+            norm = float(gradient @ gradient)
+            g0 = float(self.switches_at(t, y, modes, index)[0])
+            band = float(self.deadbands(t, y, modes, index)[0])
+        if not (np.isfinite(norm) and norm > 0 and np.isfinite(g0) and np.isfinite(band) and band > 0):
+            return None
+        plus, minus = np.array(modes, dtype=float), np.array(modes, dtype=float)
+        plus[k], minus[k] = 1.0, -1.0
+        return (lambda level: y + (level - g0) * gradient / norm), band, plus, minus
 
     def too_many_events(self, t):
         window = self.span / 1000.0

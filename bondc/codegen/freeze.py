@@ -55,6 +55,12 @@ from bondc.symbolic import Csv, Table, as_sympy
 _LABEL_LIMIT = 120
 
 
+#: An ``if`` condition's comparison, for its events' labels: the sign of the mode where it holds
+#: (g = a - b), 2 where it also holds at g = 0 (a non-strict comparison); 3 for ``==``, -3 for ``!=``.
+_TRUTH = {sympy.StrictGreaterThan: 1, sympy.GreaterThan: 2, sympy.StrictLessThan: -1, sympy.LessThan: -2,
+          sympy.Eq: 3, sympy.Ne: -3}
+
+
 @dataclass
 class Switch:
     """One switching function ``g`` and the mode symbol that freezes it."""
@@ -69,7 +75,7 @@ class Switch:
     time_only: bool = False         # g is a function of time alone (no state, no mode): its zeros can be found ahead
     owner: str = ""                 # the variable whose law has it (for diagnostics: its line)
     breaks: list = field(default_factory=list)   # [(time expr, label)] when known in advance
-    truth: int = 0                  # an if's condition: the mode where it holds (+1 for a > b, -1 for a < b)
+    truth: int = 0                  # an if's condition: _TRUTH of its comparison (the mode where it holds)
 
 
 @dataclass
@@ -212,8 +218,7 @@ class Freezer:
             return cond
         if isinstance(cond, Relational):
             lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
-            truth = 1 if isinstance(cond, (sympy.StrictGreaterThan, sympy.GreaterThan)) else \
-                -1 if isinstance(cond, (sympy.StrictLessThan, sympy.LessThan)) else 0
+            truth = _TRUTH.get(type(cond), 0)
             mode = self.switch(lhs - rhs, f"if {_short(cond)}", "if", truth=truth)
             return type(cond)(mode, 0) if not isinstance(cond, (sympy.Eq, sympy.Ne)) else \
                 type(cond)(mode, 0, evaluate=False)
