@@ -630,7 +630,7 @@ def _main(argv: list[str], debug: bool) -> int:
     except BondcError as error:
         _print_diagnostics(error.diagnostics, error.sources)
         _json_failure(args, error)
-        return EXIT_ERRORS
+        return EXIT_USAGE if getattr(error, "io", False) else EXIT_ERRORS    # (a file that cannot be read)
     except KeyboardInterrupt as interrupt:
         terminated = isinstance(interrupt, Terminated)
         print(f"bondc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)

@@ -230,3 +230,19 @@ def test_a_measured_column_of_another_quantity_is_an_error_not_a_comparison(tmp_
     data.write_text("t,i_meas [mA]\n" + "".join(f"{float(x)!r},0.0\n" for x in t))
     (result,), _ = run_validate(MODEL, data=data, compare=["i=i_meas"], stream=io.StringIO())
     assert result.n_samples == t.size
+
+
+@pytest.mark.parametrize("name, text, status", [
+    ("missing.csv", None, 2),           # a file that cannot be read: an I/O error, as the README says
+    ("folder", "", 2),
+    ("empty.csv", "time,i_meas\n", 1),  # a file read whose data is wrong: an error of the data
+])
+def test_validate_exits_2_for_a_data_file_it_cannot_read_and_1_for_bad_data(tmp_path, name, text, status):
+    from bondc.cli import main
+
+    data = tmp_path / name
+    if name == "folder":
+        data.mkdir()
+    elif text is not None:
+        data.write_text(text, encoding="utf-8")
+    assert main(["validate", str(MODEL), "--data", str(data), "--compare", "i=i_meas"]) == status

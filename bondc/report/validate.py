@@ -70,6 +70,14 @@ def _error(code: str, message: str, span: Span = NO_SPAN, hint: str | None = Non
     return DataError(Diagnostic("error", code, message, span, hint=hint))
 
 
+def _io_error(message: str) -> DataError:
+    """E950 for a data file that cannot be read at all: an I/O error (the command exits 2, as for a
+    model file that cannot be read), where an empty file or a bad cell is an error of the data (1)."""
+    error = _error("E950", message)
+    error.io = True
+    return error
+
+
 def _did_you_mean(name: str, choices: Iterable[str]) -> str | None:
     choices = list(choices)
     close = difflib.get_close_matches(name, choices, n=1, cutoff=0.6)
@@ -123,11 +131,11 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
         with open_data(path, encoding="utf-8-sig") as handle:
             text = handle.read()
     except FileNotFoundError:
-        raise _error("E950", f"measured data file '{name}' does not exist") from None
+        raise _io_error(f"measured data file '{name}' does not exist") from None
     except CsvError as exc:
-        raise _error("E950", f"cannot read measured data file '{name}': {str(exc).rpartition(': ')[2]}") from None
+        raise _io_error(f"cannot read measured data file '{name}': {str(exc).rpartition(': ')[2]}") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise _error("E950", f"cannot read measured data file '{name}': {exc}") from None
+        raise _io_error(f"cannot read measured data file '{name}': {exc}") from None
 
     lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
              if line.strip() and not line.lstrip().startswith("#")]
