@@ -52,6 +52,8 @@ class Source:
     _line_starts: tuple[int, ...] = field(default=(), compare=False, repr=False)
 
     def __post_init__(self) -> None:
+        if self.text.startswith("\ufeff"):     # a byte-order mark (Windows editors write one) is not text
+            object.__setattr__(self, "text", self.text[1:])
         starts = [0]
         find, index = self.text.find, self.text.find("\n")
         while index >= 0:

@@ -485,3 +485,23 @@ def test_an_unclosed_bracket_is_named_where_it_opened_and_nothing_after_it_is_re
     with pytest.raises(ParseError) as caught:
         parse_text("model U\n  param m = (2 + 3]\nend\n", "u.bg")
     assert all(not d.related for d in caught.value.diagnostics)
+
+
+def test_a_byte_order_mark_at_the_start_of_a_file_is_not_text(tmp_path):
+    """Windows editors save UTF-8 with a byte-order mark; it was E101 'unexpected character' and four
+    E100 on valid lines after it. The file is the same model as without it, its columns too."""
+    from bondc.cli import main
+
+    text = "model M\n  Se s : e = 1\n  I m : f = p\n  s -> m\nend\n"
+    marked, plain = tmp_path / "marked.bg", tmp_path / "plain.bg"
+    marked.write_bytes(b"\xef\xbb\xbf" + text.encode("utf-8"))
+    plain.write_text(text, encoding="utf-8")
+    assert main(["check", str(marked)]) == 0
+    broken = text.replace("= 1", "= 1 +")
+    spans = []
+    for version in ("\ufeff" + broken, broken):
+        with pytest.raises(ParseError) as excinfo:
+            parse_text(version, "marked.bg")
+        [diagnostic] = excinfo.value.diagnostics
+        spans.append((diagnostic.code, diagnostic.span.line, diagnostic.span.column))
+    assert spans[0] == spans[1] == ("E100", 2, 17)
