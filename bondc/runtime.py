@@ -1150,16 +1150,8 @@ class CvodeSolver:
 
     def difference_jacobian(self, t, y, f0):
         """Forward differences of ``fun``; a column that is not finite is taken as zero."""
-        matrix = np.empty((self.n, self.n))
-        for j in range(self.n):
-            h = 1.5e-8 * max(abs(y[j]), 1e-6)
-            shifted = y.copy()
-            shifted[j] += h
-            with np.errstate(all="ignore"):
-                column = (np.asarray(self.fun(t, shifted), dtype=float) - f0) / h
-            self.nfev += 1
-            matrix[:, j] = np.where(np.isfinite(column), column, 0.0)
-        return matrix
+        self.nfev += self.n
+        return difference_jacobian(self.fun, t, y, f0)
 
     def step(self):
         """One internal step towards ``t_bound``; None, or the solver's message when it failed."""
@@ -1576,6 +1568,42 @@ class IDA:
                 self.first_fallback = float(t)
             self.jacobian_fallbacks += 1
         JJ[:, :] = cj * np.eye(self.n) - matrix
+
+
+def difference_jacobian(fun, t, y, f0):
+    """Forward differences of ``fun`` at (t, y), whose value there is ``f0``; a column that is not
+    finite is taken as zero."""
+    y = np.asarray(y, dtype=float)
+    matrix = np.empty((y.size, y.size))
+    for j in range(y.size):
+        h = 1.5e-8 * max(abs(y[j]), 1e-6)
+        shifted = y.copy()
+        shifted[j] += h
+        with np.errstate(all="ignore"):
+            column = (np.asarray(fun(t, shifted), dtype=float) - f0) / h
+        matrix[:, j] = np.where(np.isfinite(column), column, 0.0)
+    return matrix
+
+
+class _FiniteJacobian:
+    """The analytic Jacobian for scipy's implicit solvers, replaced by forward differences where it
+    is not finite (a law with an infinite slope, like sqrt at 0), as the SUNDIALS solvers do: scipy
+    would stop with its own 'array must not contain infs or NaNs'. Counts the replacements
+    (``jacobian_fallbacks``, from ``first_fallback`` on), as the SUNDIALS solvers do."""
+
+    def __init__(self, fun, jac):
+        self.fun, self.jac = fun, jac
+        self.jacobian_fallbacks, self.first_fallback = 0, None
+
+    def __call__(self, t, y):
+        matrix = np.asarray(self.jac(t, y), dtype=float)
+        if np.all(np.isfinite(matrix)):
+            return matrix
+        if not self.jacobian_fallbacks:
+            self.first_fallback = float(t)
+        self.jacobian_fallbacks += 1
+        with np.errstate(all="ignore"):
+            return difference_jacobian(self.fun, t, y, np.asarray(self.fun(t, y), dtype=float))
 
 
 def solver_class(method):
@@ -2497,7 +2525,13 @@ class _Run:
             options["pattern"] = self.model.JACOBIAN_PATTERN
         if "first_step" in options and options["first_step"] > t_stop - t:
             del options["first_step"]
-        return self.method(fun, t, y, t_stop, **options)
+        finite = None
+        if self.implicit and not (self.method is IDA or issubclass(self.method, CvodeSolver)):
+            options["jac"] = finite = _FiniteJacobian(fun, jac)
+        solver = self.method(fun, t, y, t_stop, **options)
+        if finite is not None:
+            solver.finite_jacobian = finite
+        return solver
 
     def driver_for(self, index, signs):
         """The native CVODE driver for a segment watching ``index`` in modes ``signs``, or None.
@@ -3053,6 +3087,7 @@ class _Run:
         self.stats["nlu"] += int(getattr(solver, "nlu", 0) or 0)
         if getattr(solver, "linear_solver", None):
             self.stats["linear_solver"] = solver.linear_solver
+        solver = getattr(solver, "finite_jacobian", solver)     # (scipy's: counted by its Jacobian)
         fallbacks = int(getattr(solver, "jacobian_fallbacks", 0) or 0)
         if fallbacks:
             if not self.stats.get("jacobian_fallbacks"):
