@@ -140,6 +140,29 @@ def to_lsp(diagnostic: Diagnostic, path: Path) -> lsp.Diagnostic:
                           related_information=related or None)
 
 
+def _resolved(file: str, document: Path) -> Path:
+    """The path of a diagnostic's file (as the loader names it: relative to the working directory, or
+    absolute)."""
+    path = Path(file)
+    return path.resolve() if path.is_absolute() or path.exists() else (document.parent / path).resolve()
+
+
+def _at_import(diagnostic: Diagnostic, document: "Document") -> lsp.Diagnostic:
+    """A diagnostic of an imported file, shown on the open document: on the import that brings that
+    file in (the first import where it comes through another), its own place as related information."""
+    target = _resolved(diagnostic.span.file, document.path)
+    imports = [item for file in document.files[:1] for item in file.imports if not item.path.startswith("std:")]
+    anchor = next((item.span for item in imports if (document.path.parent / item.path).resolve() == target),
+                  imports[0].span if imports else None)
+    shown = to_lsp(diagnostic, target)
+    where = f"{diagnostic.span.file}:{diagnostic.span.line}:{diagnostic.span.column}"
+    shown.message = f"{where}: {shown.message}"
+    shown.related_information = [lsp.DiagnosticRelatedInformation(lsp.Location(target.as_uri(), shown.range),
+                                                                   "here")] + list(shown.related_information or [])
+    shown.range = _range(anchor) if anchor is not None else lsp.Range(lsp.Position(0, 0), lsp.Position(0, 0))
+    return shown
+
+
 def check_text(path: Path, text: str) -> tuple[list[Diagnostic], object]:
     """Every diagnostic of the buffer (all its models), and the graph of its runnable model (or None)."""
     from bondc import semantic
@@ -317,6 +340,7 @@ class BondcServer(LanguageServer):
     def __init__(self):
         super().__init__("bondc", __version__)
         self.documents: dict[str, Document] = {}
+        self.published: dict[str, set] = {}     # an open document -> the imported files' URIs it reported on
 
     def analyse(self, uri: str, text: str, version: int) -> None:
         from bondc import semantic
@@ -332,8 +356,22 @@ class BondcServer(LanguageServer):
         self.documents[uri] = document
         mine = [d for d in diagnostics if not d.span.file or Path(d.span.file) == document.path
                 or d.span.file == str(document.path) or d.span.line == 0]
+        others = [d for d in diagnostics if d not in mine and not d.span.file.startswith("std:")]
+        shown = [to_lsp(d, document.path) for d in mine] + [_at_import(d, document) for d in others]
         self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(
-            uri=uri, diagnostics=[to_lsp(d, document.path) for d in mine], version=version))
+            uri=uri, diagnostics=shown, version=version))
+        # and in the imported files themselves (cleared there once they are fixed)
+        by_file: dict[str, list] = {}
+        for diagnostic in others:
+            target = _resolved(diagnostic.span.file, document.path)
+            by_file.setdefault(target.as_uri(), []).append(to_lsp(diagnostic, target))
+        for other_uri in self.published.get(uri, set()) - set(by_file):
+            if other_uri not in self.documents:
+                self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(uri=other_uri, diagnostics=[]))
+        for other_uri, items in by_file.items():
+            if other_uri not in self.documents:
+                self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(uri=other_uri, diagnostics=items))
+        self.published[uri] = set(by_file)
 
 
 server = BondcServer()
@@ -353,6 +391,17 @@ async def did_change(ls: BondcServer, params: lsp.DidChangeTextDocumentParams):
     if document.version != version:
         return
     ls.analyse(uri, document.source, version)
+
+
+@server.feature(lsp.TEXT_DOCUMENT_DID_CLOSE)
+def did_close(ls: BondcServer, params: lsp.DidCloseTextDocumentParams):
+    """A closed file's problems leave the editor's list (a file not open is not checked), with
+    those it reported in the files it imports."""
+    uri = params.text_document.uri
+    ls.documents.pop(uri, None)
+    for other in {uri} | ls.published.pop(uri, set()):
+        if other not in ls.documents:
+            ls.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(uri=other, diagnostics=[]))
 
 
 @server.feature(lsp.TEXT_DOCUMENT_DID_SAVE)
@@ -650,8 +699,8 @@ def formatting(ls: BondcServer, params: lsp.DocumentFormattingParams):
     document = ls.workspace.get_text_document(params.text_document.uri)
     try:
         formatted = fmt(document.source, str(path_of(document.uri)))
-    except BondcError:
-        return None                     # a syntax error: diagnostics say where; nothing to format
+    except (BondcError, OSError):
+        return None                     # a syntax error (diagnostics say where), or a file never opened
     if formatted == document.source:
         return []
     lines = document.source.splitlines()

@@ -236,3 +236,39 @@ def test_columns_are_in_utf16_code_units_as_the_server_announced(client, tmp_pat
     hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
                                                   "position": {"line": 2, "character": at}})
     assert hover is not None and "param gain" in hover["contents"]["value"]
+
+
+def test_an_error_inside_an_imported_file_is_shown_on_the_import_and_in_that_file(client, tmp_path):
+    """`bondc check` reports an undefined name inside an imported component at its place; the editor
+    showed the model as clean (only the open file's diagnostics were published)."""
+    (tmp_path / "lib").mkdir()
+    library = tmp_path / "lib" / "parts.bg"
+    library.write_text("model Spring\n  port a\n  param k = 1\n  C c : e = k*q + zz\n  a -> c\nend\n", encoding="utf-8")
+    path = tmp_path / "top.bg"
+    text = 'import "lib/parts.bg"\nmodel Top\n  Sf s : f = 1\n  Spring sp : k = 3\n  s -> sp.a\nend\n'
+    uri = client.open(path, text)
+    (shown,) = client.diagnostics(uri)
+    assert shown["code"] == "E301" and "zz" in shown["message"]
+    assert shown["range"]["start"] == {"line": 0, "character": 0}          # on the import line
+    (related,) = shown["relatedInformation"]
+    assert related["location"]["uri"] == library.resolve().as_uri()
+    assert related["location"]["range"]["start"] == {"line": 3, "character": 18}
+    (own,) = client.diagnostics(library.resolve().as_uri())
+    assert own["code"] == "E301" and own["range"]["start"] == {"line": 3, "character": 18}
+    # fixed: cleared in both
+    library.write_text("model Spring\n  port a\n  param k = 1\n  C c : e = k*q\n  a -> c\nend\n", encoding="utf-8")
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": text}]})
+    assert client.diagnostics(uri) == []
+    assert client.diagnostics(library.resolve().as_uri()) == []
+
+
+def test_a_closed_file_leaves_the_problem_list_and_formatting_an_unopened_one_is_no_error(client, tmp_path):
+    path = tmp_path / "closed.bg"
+    uri = client.open(path, "model M\n  Sf s : f = 1\n  C c : e = q/k\n  s -> c\nend\n")
+    assert [d["code"] for d in client.diagnostics(uri)] == ["E301"]
+    client.notify("textDocument/didClose", {"textDocument": {"uri": uri}})
+    assert client.diagnostics(uri) == []
+    missing = (tmp_path / "never_written.bg").resolve().as_uri()
+    assert client.request("textDocument/formatting", {"textDocument": {"uri": missing},
+                                                       "options": {"tabSize": 2, "insertSpaces": True}}) is None
