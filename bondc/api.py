@@ -19,22 +19,56 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from bondc.errors import BondcError, Diagnostic
+from bondc.errors import BondcError, Diagnostic, UsageError
 
 __all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation"]
 
 
+def _usage(message: str, hint: str | None = None) -> UsageError:
+    """A misused argument of the API: a bondc error naming it (E001), not Python's own."""
+    return UsageError(Diagnostic("error", "E001", message, hint=hint))
+
+
+def _number(value, what: str) -> float:
+    """``value`` as a finite float; a bool, a non-number or nan/inf is an error naming ``what``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise _usage(f"{what} must be a number, not {type(value).__name__} ({value!r})")
+    if not math.isfinite(float(value)):
+        raise _usage(f"{what} must be a finite number, not {float(value)!r}")
+    return float(value)
+
+
 def _sets(overrides: Mapping[str, Any] | None) -> list[str]:
+    if overrides is None:
+        return []
+    if not isinstance(overrides, Mapping):
+        raise _usage(f"overrides must be a dict {{name: value}}, not {type(overrides).__name__}",
+                     hint='e.g. overrides={"k": 1600, "m": "2 [kg]", "lead": (5, "mm")}')
     texts = []
-    for name, value in (overrides or {}).items():
+    for name, value in overrides.items():
+        if not isinstance(name, str):
+            raise _usage(f"an override's name must be a string, not {type(name).__name__} ({name!r})")
+        what = f"overrides[{name!r}]"
         if isinstance(value, tuple):
-            number, unit = value
-            texts.append(f"{name}={float(number)!r} [{unit}]")
+            if len(value) != 2 or not isinstance(value[1], str):
+                raise _usage(f"{what} must be a (number, unit) pair, not {value!r}", hint='e.g. (5, "mm")')
+            texts.append(f"{name}={_number(value[0], what)!r} [{value[1]}]")
         elif isinstance(value, str):
             texts.append(f"{name}={value}")
         else:
-            texts.append(f"{name}={float(value)!r}")
+            if not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating)):
+                texts.append(f"{name}={_number(value, what)!r}")
+            else:
+                raise _usage(f"{what} must be a number, a string with a unit or a (number, unit) pair, not "
+                             f"{type(value).__name__} ({value!r})", hint='e.g. 1600, "1.6 [kN/m]" or (1.6, "kN/m")')
     return texts
+
+
+def _text(text):
+    if text is not None and not isinstance(text, str):
+        raise _usage(f"text must be a str (the model's text), not {type(text).__name__}",
+                     hint="decode bytes first: text=data.decode('utf-8')")
+    return text
 
 
 def _source(path, text):
@@ -149,6 +183,10 @@ def check(path=None, *, text: str | None = None, model: str | None = None) -> Ch
 def _derived(path, text, model, experiment, overrides):
     from bondc.pipeline import derive_file
 
+    text = _text(text)
+    if path is None and text is None:
+        raise _usage("give the model: a file (path) or its text (text=...)")
+
     if text is None:
         return derive_file(Path(path), model=model, experiment=experiment, sets=_sets(overrides))
     from bondc import semantic
@@ -172,8 +210,10 @@ def equations(path=None, *, text: str | None = None, model: str | None = None, e
     >>> [line.strip() for line in text.split("state equations")[1].split("outputs")[0].strip().splitlines()]
     ['der(mass.p) = F - b*mass.p/m - k*spring.q', 'der(spring.q) = mass.p/m']
     """
-    from bondc.equations import format_equations
+    from bondc.equations import FORMATS, format_equations
 
+    if format not in FORMATS:
+        raise _usage(f"format must be one of {', '.join(FORMATS)}, not {format!r}")
     return format_equations(_derived(path, text, model, experiment, overrides).state_space, format)
 
 
@@ -185,8 +225,11 @@ def linearize(path=None, *, text: str | None = None, model: str | None = None, e
     >>> [round(float(abs(e)), 6) for e in lin.eigenvalues]    # sqrt(k/m) = 20 rad/s
     [20.0, 20.0]
     """
-    from bondc.analysis.linearize import linearize as linearise
+    from bondc.analysis.linearize import AT, linearize as linearise
 
+    if at not in AT:
+        raise _usage(f"at must be one of {', '.join(AT)}, not {at!r}")
+    time = _number(time, "time")
     return linearise(_derived(path, text, model, experiment, overrides).state_space, time=time, at=at)
 
 
@@ -234,10 +277,18 @@ class Simulation:
         return self.result.units
 
     def __getitem__(self, name: str) -> np.ndarray:
-        for group in (self.result.outputs, self.result.states, self.result.bonds, self.result.variables):
+        if name == "t":
+            return self.result.t
+        groups = (self.result.outputs, self.result.states, self.result.bonds, self.result.variables)
+        for group in groups:
             if name in group:
                 return group[name]
-        raise KeyError(name)
+        import difflib
+
+        shown = [*self.result.outputs, *self.result.states]
+        close = difflib.get_close_matches(str(name), [n for group in groups for n in group], n=1)
+        raise KeyError(f"{name!r} is not a signal of this run" + (f"; did you mean {close[0]!r}?" if close else "")
+                       + f" (outputs and states: {', '.join(shown)}; bond variables too, as b3.e or element.f)")
 
     def in_unit(self, name: str) -> np.ndarray:
         """A column in the unit result files show it in (an output in its declared unit)."""
@@ -314,6 +365,8 @@ def simulate(path=None, *, text: str | None = None, model: str | None = None, ex
     """
     from bondc.simulate import simulate as run_simulation
 
+    t_end = None if t_end is None else _number(t_end, "t_end")
+    dt = None if dt is None else _number(dt, "dt")
     derived = _derived(path, text, model, experiment, overrides)
     result = run_simulation(derived.state_space, derived.experiment, t_end=t_end, dt=dt)
     error = result.error()

@@ -1985,7 +1985,7 @@ def check_sets(m: _Model, sets: Sequence[ast.SetValue]) -> list[ast.SetValue]:
     for item in sets:
         name_span = Span(item.span.file, item.span.line, item.span.column, item.span.line,
                          item.span.column + len(item.name), item.span.start, item.span.start + len(item.name))
-        if _check_override(m, item.name, name_span, item.value, item.unit, "--set"):
+        if _check_override(m, item.name, name_span, item.value, item.unit, "an override (--set)"):
             good.append(item)
     return good
 

@@ -10,6 +10,7 @@ import pytest
 import bondc
 
 ROOT = Path(__file__).resolve().parent.parent
+MSD_PATH = ROOT / "models" / "mass_spring_damper.bg"
 
 
 def test_the_api_page_examples_run_as_written(monkeypatch):
@@ -79,3 +80,32 @@ def test_the_example_notebook_runs(tmp_path):
     assert not [o for o in outputs if o.output_type == "error"]
     assert any("text/html" in o.get("data", {}) for o in outputs)           # the summary tables
     assert any("image/png" in o.get("data", {}) or "image/svg+xml" in o.get("data", {}) for o in outputs)
+
+
+@pytest.mark.parametrize("call, words", [
+    (lambda: bondc.simulate(MSD_PATH, overrides={"k": None}), "overrides['k'] must be a number"),
+    (lambda: bondc.simulate(MSD_PATH, overrides={"k": [1, 2]}), "overrides['k'] must be a number"),
+    (lambda: bondc.simulate(MSD_PATH, overrides={"k": float("nan")}), "must be a finite number"),
+    (lambda: bondc.simulate(MSD_PATH, overrides={"k": True}), "not bool"),
+    (lambda: bondc.simulate(MSD_PATH, overrides=[("k", 1)]), "overrides must be a dict"),
+    (lambda: bondc.simulate(MSD_PATH, overrides={"k": (1, 2, 3)}), "(number, unit) pair"),
+    (lambda: bondc.simulate(MSD_PATH, t_end="2 [s]"), "t_end must be a number"),
+    (lambda: bondc.simulate(text=b"model M\nend\n"), "text must be a str"),
+    (lambda: bondc.simulate(), "give the model"),
+    (lambda: bondc.equations(MSD_PATH, format="html"), "format must be one of text, latex, json"),
+    (lambda: bondc.linearize(MSD_PATH, at="steady"), "at must be one of initial, equilibrium"),
+])
+def test_misused_arguments_are_bondc_errors_that_name_them(call, words):
+    """The API raised Python's own TypeError, AttributeError or ValueError for these (and took True as
+    1); docs/api.md promises bondc errors with diagnostics."""
+    with pytest.raises(bondc.errors.UsageError) as excinfo:
+        call()
+    (diagnostic,) = excinfo.value.diagnostics
+    assert diagnostic.code == "E001" and words in diagnostic.message
+
+
+def test_a_simulations_time_and_unknown_names_are_answered():
+    sim = bondc.simulate(MSD_PATH, dt=0.5)
+    np.testing.assert_array_equal(sim["t"], sim.t)
+    with pytest.raises(KeyError, match="did you mean 'spring.q'"):
+        sim["spring.qq"]
