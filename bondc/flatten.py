@@ -152,6 +152,30 @@ class _Expansion:
     bonds: list[ast.BondChain] = field(default_factory=list)
 
 
+def _signal(x: _Expansion, node) -> bool:
+    """Whether an expression of model ``x`` is a signal of time: it names only time, ``x``'s parameters
+    and inputs (and functions); not its states, discrete variables, outputs or graph variables."""
+    if isinstance(node, ast.Ref):
+        return False
+    if isinstance(node, ast.Name):
+        return node.name not in x.values or node.name in x.params or node.name in x.inputs
+    return all(_signal(x, child) for child in _children(node))
+
+
+def _children(node) -> tuple:
+    if isinstance(node, ast.Call):
+        return tuple(node.args)
+    if isinstance(node, ast.ListExpr):
+        return tuple(node.items)
+    if isinstance(node, ast.Unary):
+        return (node.operand,)
+    if isinstance(node, ast.Binary):
+        return (node.left, node.right)
+    if isinstance(node, ast.If):
+        return (node.cond, node.then, node.orelse)
+    return ()
+
+
 # ------------------------------------------------------------------- spans
 
 def _relocate(node, instance: str):
@@ -363,8 +387,16 @@ class _Flattener:
                                        law.unit.span, hint="inputs are computed in SI: write the expression "
                                                            "in SI units"))
                 flat_name = sub.prefix + name
-                sub.statements = [dataclasses.replace(s, value=value) if isinstance(s, ast.Input)
-                                  and s.name == flat_name else s for s in sub.statements]
+                if _signal(x, law.value):
+                    sub.statements = [dataclasses.replace(s, value=value) if isinstance(s, ast.Input)
+                                      and s.name == flat_name else s for s in sub.statements]
+                else:
+                    # a signal of the outer model's states, discrete variables, outputs or graph
+                    # variables (a controller's held output driving a voltage source): no function of
+                    # time alone, so the instance's input is a named expression, as an output is
+                    sub.statements = [ast.Output(s.name, s.unit, value, s.description, s.span, s.name_span)
+                                      if isinstance(s, ast.Input) and s.name == flat_name else s
+                                      for s in sub.statements]
             else:
                 kinds = sorted(sub.params | set(sub.inputs))
                 self.report(_error("E337", f"model '{sub.model.name}' has no parameter or input '{name}'",

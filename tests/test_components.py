@@ -438,3 +438,52 @@ end
     assert [(d.code, d.span.line) for d in errors] == [("E331", 5), ("E303", 6), ("E330", 7)]
     assert errors[1].hint.startswith("did you mean 'Mass'?")
     assert errors[2].hint.startswith("did you mean 'mechanics.Mass'?") and "import" not in errors[2].hint
+
+
+RELAY_CHARGER = """import "std:electrical"
+model RelayCharger "a relay switches the supply of an RC circuit between 10 V and 0 V at 6 V and 3 V"
+  discrete u [V] = 10
+  SOURCE
+  Resistor r : R = 1000 [Ohm]
+  Capacitor c : C = 1e-3 [F]
+  1 loop
+  OUT -> loop
+  loop -> r.a
+  loop -> c.a
+  when c.v > 6 then u = 0 end
+  when c.v < 3 then u = 10 end
+  output v [V] = c.v
+  experiment run
+    t_end = 5 [s]
+  end
+end
+"""
+
+
+def _relay(tmp_path, source, out):
+    path = tmp_path / f"relay_{out.replace('.', '_')}.bg"
+    path.write_text(RELAY_CHARGER.replace("SOURCE", source).replace("OUT", out))
+    return path
+
+
+def test_a_component_input_bound_to_a_discrete_variable_is_the_bare_source_to_the_bit(tmp_path):
+    """Section 11 of the reference: an instance's input takes any signal expression of the outer
+    model, and section 12: discrete variables may be used in any expression. Binding a controller's
+    held output to VoltageSource was E316 ('an input cannot use discrete variable'); the instance's
+    input is now a named expression of the outer model, and the run is the one with a bare Se."""
+    ours = run(_relay(tmp_path, "VoltageSource src : u = u", "src.a"))
+    bare = run(_relay(tmp_path, "Se src : e = u", "src"))
+    assert ours.complete and bare.complete
+    np.testing.assert_array_equal(ours.t, bare.t)
+    np.testing.assert_array_equal(ours.outputs["v"], bare.outputs["v"])
+    assert set(np.unique(ours.outputs["src.u"])) == {0.0, 10.0}
+    # the relay: charging through RC = 1 s from 0 to 6 V, then discharging from 6 to 3 V
+    firings = [time for time, label in ours.events if label.startswith("when")]
+    assert firings[0] == pytest.approx(-math.log(1 - 0.6), abs=1e-5)
+    assert firings[1] - firings[0] == pytest.approx(math.log(2), abs=1e-5)
+
+
+def test_a_component_input_bound_to_a_current_instead_of_a_voltage_is_a_dimension_error(tmp_path):
+    with pytest.raises(ModelError) as excinfo:
+        derive_file(_relay(tmp_path, "VoltageSource src : u = r.i", "src.a"), cache=False)
+    assert any(d.code == "E210" for d in excinfo.value.diagnostics), excinfo.value.diagnostics
