@@ -342,11 +342,16 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
             if bad.size:
                 alias = bond_alias(graph, name) if group == "bond variable" else None
                 shown = f"{name} ({alias})" if alias else name
+                first = int(bad[0])
+                # the recorded points bracket where it stops being finite, not the instant itself
+                before = f" (the point before it, at t={result.t[first - 1]:.6g} s, is finite)" if first > 0 else ""
                 result.warnings.append(Diagnostic(
-                    "warning", "W821", f"{group} '{shown}' is not finite from t={result.t[bad[0]]:.6g} s "
-                                       f"({bad.size} of {series.size} points)",
+                    "warning", "W821", f"{group} '{shown}' is not finite at {bad.size} of {series.size} recorded "
+                                       f"points, the first at t={result.t[first]:.6g} s{before}",
                     _span_of(graph, name) or _no_span(),
-                    hint="its law is evaluated outside its domain there; the states are unaffected"))
+                    hint="its law is evaluated outside its domain there; " + (
+                        "the states are unaffected (none of their rates reads it)" if result.complete else
+                        "the run stopped (the error says where and why)")))
                 break
     chattering = [(time, label) for time, label in result.events if label.startswith("chattering")]
     if chattering:

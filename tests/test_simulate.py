@@ -611,3 +611,32 @@ def test_with_json_a_command_stopped_by_an_error_still_prints_json(capsys):
     printed = json.loads(captured.out)
     assert printed["complete"] is False and [d["code"] for d in printed["diagnostics"]] == ["E803"]
     assert "E803" in captured.err
+
+
+def test_w821_brackets_where_a_quantity_stops_being_finite_and_claims_nothing_of_a_stopped_run(tmp_path):
+    """A store drained at 1 unit/s from q = 1 makes sqrt(q) nan at t = 1 s; the run only records a
+    few points, and W821 said 'from t=2 s'. It now names the first point that is not finite and the
+    finite one before it, which bracket the instant. Where the run stopped on that quantity (E810),
+    its hint no longer says that the states are unaffected."""
+    from bondc.pipeline import derive_file
+
+    drain = tmp_path / "drain.bg"
+    drain.write_text("model Drain\n  Sf s : f = -1\n  C c : e = sqrt(q), q(0) = 1\n  s -> c\n  output E = c.e\n"
+                     "  experiment run\n    t_end = 2 [s]\n  end\nend\n")
+    derived = derive_file(drain, cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    assert result.complete
+    (warning,) = [w for w in result.warnings if w.code == "W821" and "'E'" in w.message]
+    bad = np.flatnonzero(~np.isfinite(result.outputs["E"]))[0]
+    assert result.t[bad - 1] < 1.0 <= result.t[bad]
+    assert f"the first at t={result.t[bad]:.6g} s" in warning.message
+    assert f"the point before it, at t={result.t[bad - 1]:.6g} s, is finite" in warning.message
+    assert "unaffected" in warning.hint
+    stopped = tmp_path / "stopped.bg"
+    stopped.write_text("model L\n  param a = -1\n  Se s : e = log(a)\n  I m : f = p\n  s -> m\n"
+                       "  experiment run\n    t_end = 1 [s]\n  end\nend\n")
+    derived = derive_file(stopped, cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    assert not result.complete
+    assert [w for w in result.warnings if w.code == "W821"] and \
+        all("unaffected" not in w.hint for w in result.warnings if w.code == "W821")
