@@ -558,6 +558,18 @@ def _statement_extent(text: str, offset: int) -> tuple[int, int]:
     return offset, len(text)
 
 
+def _inside_when_block(text: str, start: int) -> bool:
+    """Whether the statement starting at ``start`` is in the body of a ``when ... then`` block (its
+    header on an earlier line, no ``end`` line since)."""
+    for line in reversed(text[:start].split("\n")):
+        code = line.split("#", 1)[0].strip()
+        if code == "end" or code.startswith(("model ", "experiment ")):
+            return False
+        if code.startswith("when ") and code.endswith(" then"):
+            return True
+    return False
+
+
 def _open_bracket(text: str, offset: int) -> int | None:
     """The offset of the innermost ``(`` or ``[`` still open at ``offset`` (strings and comments
     skipped), or None."""
@@ -626,10 +638,15 @@ def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnost
         return Diagnostic("error", "E104", f"'{token}' is a keyword and cannot be used as a name", span,
                           hint=f"choose another name, e.g. '{token}_'"), offset
     hint = None
+    line_start = source.text.rfind("\n", 0, offset) + 1
+    statement = source.text[line_start:offset].lstrip()
     if token.type == "_NL":
         hint = "a statement ends at the end of its line; continue it after a trailing ',' or inside ( )"
     elif token.type == "EQUAL" and "COLON" in expected:
         hint = "element laws follow a ':' (e.g. R damper : e = b*f)"
+    elif token.type == "EQUAL" and statement.startswith(("when ", "if ")) or " if " in statement and \
+            token.type == "EQUAL":
+        hint = "a comparison is written '==' ('=' assigns)"
     return Diagnostic("error", "E100", f"unexpected {_token_text(token)}; expected {_describe_expected(expected)}",
                       span, hint=hint), offset
 
@@ -652,8 +669,9 @@ def parse_source(source: Source) -> ast.File:
             break
         except UnexpectedInput as error:
             diagnostic, offset = _syntax_diagnostic(error, source)
-            if diagnostics and diagnostics[-1].span == diagnostic.span:
-                break  # no progress: stop rather than report the same place twice
+            if diagnostics and (diagnostics[-1].span == diagnostic.span or (
+                    diagnostics[-1].span.line == diagnostic.span.line and diagnostics[-1].message == diagnostic.message)):
+                break  # no progress: stop rather than report the same place (or line) twice
             explained = _unclosed(diagnostic, source, offset)
             diagnostics.append(explained)
             if diagnostic.code == "E103" or len(diagnostics) >= MAX_SYNTAX_ERRORS or explained is not diagnostic:
@@ -665,6 +683,11 @@ def parse_source(source: Source) -> ast.File:
             for keyword in ("model", "experiment"):
                 if header.startswith(keyword + " ") or header == keyword:
                     replacement = keyword + " _"
+            code = header.split("#", 1)[0].rstrip()
+            if header.startswith("when ") and not code.endswith(" end"):
+                replacement = "when _ then"     # a when block's header: its statements and 'end' follow
+            elif _inside_when_block(text, start):
+                replacement = "_ = 0"           # a when block's statements: the block keeps one
             text = _blank(text, start, end, replacement)
     if diagnostics:
         raise ParseError(diagnostics, {source.name: source})

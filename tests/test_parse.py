@@ -505,3 +505,36 @@ def test_a_byte_order_mark_at_the_start_of_a_file_is_not_text(tmp_path):
         [diagnostic] = excinfo.value.diagnostics
         spans.append((diagnostic.code, diagnostic.span.line, diagnostic.span.column))
     assert spans[0] == spans[1] == ("E100", 2, 17)
+
+
+WHEN_BLOCK = """model M
+  discrete u [1] = 0
+  Se s : e = u
+  I m : f = p
+  s -> m
+  HEADER
+    u = 1,
+    BODY
+  end
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+@pytest.mark.parametrize("header, body, line, column, words", [
+    ("when t = 0.5 then", "u = 2", 6, 10, "'=='"),            # = for == in the condition
+    ("when t > 0.5", "u = 2", 6, 15, "expected 'then'"),      # no then
+    ("when t > 0.5 then", "u = if t > 1 then 2", 8, 24, "expected 'else'"),
+    ("when t > 0.5 then", "u = 5 [V]", 8, 11, "unexpected '['"),
+    ("when t > 0.5 then", "u + 1", 8, 7, "unexpected '+'"),
+])
+def test_one_slip_in_a_when_block_is_one_error(header, body, line, column, words):
+    """An error in a when block's header or statements was followed by three more: its statements
+    read as elements, its 'end' closing the model, then 'experiment' outside any model, twice."""
+    with pytest.raises(ParseError) as excinfo:
+        parse_text(WHEN_BLOCK.replace("HEADER", header).replace("BODY", body), "when.bg")
+    (diagnostic,) = excinfo.value.diagnostics
+    assert (diagnostic.span.line, diagnostic.span.column) == (line, column)
+    assert words in diagnostic.message + (diagnostic.hint or "")
