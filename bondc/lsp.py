@@ -210,6 +210,7 @@ class Use:
     model: str | None
     parts: tuple[str, ...] = ()
     part_spans: tuple = ()
+    call: bool = False        # a function called by this name: an fn (or a built-in), nothing else
 
 
 @dataclass
@@ -265,7 +266,7 @@ def _index_model(index: Index, model: ast.Model, path: str) -> None:
             elif isinstance(node, ast.Ref):
                 index.uses.append(Use(node.parts[0], node.span, name, node.parts, _ref_parts(node)))
             elif isinstance(node, ast.Call):
-                index.uses.append(Use(node.func, node.func_span, name))
+                index.uses.append(Use(node.func, node.func_span, name, call=True))
 
     for statement in model.body:
         if isinstance(statement, (ast.Param, ast.Input, ast.Output, ast.Discrete)):
@@ -436,6 +437,9 @@ def resolve(document: Document, use: Use, part: int = 0) -> Symbol | None:
     """The declaration a use names; through instances for a dotted name."""
     index = document.index
     model = use.model
+    if use.call:        # step(...) is the built-in even where an experiment or a parameter is named step
+        return next((symbol for owner in (model, None) for symbol in index.symbols
+                     if symbol.name == use.name and symbol.model == owner and symbol.category == "function"), None)
     if part == 0 or not use.parts:
         found = index.declared(use.name, model)
         if found is None and use.model is None:
@@ -490,6 +494,12 @@ def _span_location(span) -> lsp.Location:
 
 @server.feature(lsp.TEXT_DOCUMENT_DEFINITION)
 def definition(ls: BondcServer, params: lsp.DefinitionParams):
+    document = ls.documents.get(params.text_document.uri)
+    if document is not None and document.index is not None:
+        _, use, _ = _at(document, params.position)
+        if use is not None and use.call:        # a call: an fn, or a built-in (no definition to go to)
+            symbol = resolve(document, use)
+            return _location(symbol) if symbol is not None else None
     _, declaration = _scoped(ls, params.text_document.uri, params.position)
     if declaration is not None:
         return _span_location(declaration.span)
@@ -595,7 +605,13 @@ def _causality(document: Document, name: str) -> str | None:
 def hover(ls: BondcServer, params: lsp.HoverParams):
     document = ls.documents.get(params.text_document.uri)
     symbol = _symbol_at(ls, params.text_document.uri, params.position)
-    if document is None or symbol is None:
+    if document is None:
+        return None
+    if symbol is None:
+        _, use, _ = _at(document, params.position) if document.index is not None else (None, None, 0)
+        if use is not None and use.call and use.name in BUILTINS:
+            return lsp.Hover(contents=lsp.MarkupContent(
+                kind=lsp.MarkupKind.Markdown, value=f"**{use.name}** (built-in): {BUILTINS[use.name].summary}"))
         return None
     return lsp.Hover(contents=lsp.MarkupContent(kind=lsp.MarkupKind.Markdown, value=hover_text(document, symbol)))
 
@@ -607,10 +623,16 @@ def completions(document: Document, line_text: str, model: str | None) -> list[l
     from bondc.units import unit_names
 
     index = document.index
-    if index is None:
-        return []
     if re.search(r"\[[^\]]*$", line_text):                        # inside a unit
         return [lsp.CompletionItem(label=name, kind=lsp.CompletionItemKind.Unit) for name in unit_names()]
+    if index is None:       # a file that never parsed (a new one being written): what needs no index
+        words = set(re.findall(r"\b(?:param|input|output|state|discrete)\s+([A-Za-z_]\w*)", document.text))
+        return ([lsp.CompletionItem(label=name, kind=lsp.CompletionItemKind.Variable) for name in sorted(words)]
+                + [lsp.CompletionItem(label=kind, kind=lsp.CompletionItemKind.Class, detail=KINDS[kind].description)
+                   for kind in KINDS]
+                + [lsp.CompletionItem(label=name, kind=lsp.CompletionItemKind.Function, detail=b.summary)
+                   for name, b in BUILTINS.items()]
+                + [lsp.CompletionItem(label=word, kind=lsp.CompletionItemKind.Keyword) for word in KEYWORDS])
     member = _MEMBER.search(line_text)
     if member:
         parts = member.group(1).split(".")

@@ -272,3 +272,39 @@ def test_a_closed_file_leaves_the_problem_list_and_formatting_an_unopened_one_is
     missing = (tmp_path / "never_written.bg").resolve().as_uri()
     assert client.request("textDocument/formatting", {"textDocument": {"uri": missing},
                                                        "options": {"tabSize": 2, "insertSpaces": True}}) is None
+
+
+def test_a_new_file_that_never_parsed_still_gets_completion(client, tmp_path):
+    """Writing a new model, the file does not parse until its 'end': completion returned nothing,
+    not even units inside '['."""
+    path = tmp_path / "new.bg"
+    text = "model A\n  param stiffness = 800 [N/m]\n  C c : e = sti"
+    uri = client.open(path, text)
+    client.diagnostics(uri)
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": {"line": 2, "character": len("  C c : e = sti")}})
+    labels = {item["label"] for item in items["items"]}
+    assert {"stiffness", "sqrt", "table", "Se"} <= labels
+    unit = text + "\n  param m = 2 [k"
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": unit}]})
+    client.diagnostics(uri)
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": {"line": 3, "character": len("  param m = 2 [k")}})
+    assert "kg" in {item["label"] for item in items["items"]}
+
+
+def test_a_call_of_step_is_the_built_in_even_beside_a_parameter_named_step(client, tmp_path):
+    path = tmp_path / "steps.bg"
+    text = ("model S\n  param step = 3\n  Se s : e = step*step(t, 0.1)\n  I m : f = p\n  s -> m\n"
+            "  experiment step\n    t_end = 1 [s]\n  end\nend\n")
+    uri = client.open(path, text)
+    client.diagnostics(uri)
+    call = {"line": 2, "character": text.splitlines()[2].index("step(") + 1}
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": call})
+    assert "built-in" in hover["contents"]["value"] and "0 before t0" in hover["contents"]["value"]
+    assert client.request("textDocument/definition", {"textDocument": {"uri": uri}, "position": call}) is None
+    name = {"line": 2, "character": text.splitlines()[2].index("step*") + 1}
+    (found,) = [client.request("textDocument/definition", {"textDocument": {"uri": uri}, "position": name})]
+    found = found[0] if isinstance(found, list) else found
+    assert found["range"]["start"] == {"line": 1, "character": 8}          # the parameter
