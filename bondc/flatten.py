@@ -155,25 +155,8 @@ class _Expansion:
 def _signal(x: _Expansion, node) -> bool:
     """Whether an expression of model ``x`` is a signal of time: it names only time, ``x``'s parameters
     and inputs (and functions); not its states, discrete variables, outputs or graph variables."""
-    if isinstance(node, ast.Ref):
-        return False
-    if isinstance(node, ast.Name):
-        return node.name not in x.values or node.name in x.params or node.name in x.inputs
-    return all(_signal(x, child) for child in _children(node))
-
-
-def _children(node) -> tuple:
-    if isinstance(node, ast.Call):
-        return tuple(node.args)
-    if isinstance(node, ast.ListExpr):
-        return tuple(node.items)
-    if isinstance(node, ast.Unary):
-        return (node.operand,)
-    if isinstance(node, ast.Binary):
-        return (node.left, node.right)
-    if isinstance(node, ast.If):
-        return (node.cond, node.then, node.orelse)
-    return ()
+    return not any(isinstance(n, ast.Ref) or isinstance(n, ast.Name) and n.name in x.values
+                   and n.name not in x.params and n.name not in x.inputs for n in ast.walk(node))
 
 
 # ------------------------------------------------------------------- spans
