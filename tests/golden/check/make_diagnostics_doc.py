@@ -248,9 +248,13 @@ d("E812", "too many events",
   "(W820). Reaching the limit takes a long run; the example lowers it through the runtime's `max_events` "
   "argument to show the message. E812 also stops a run whose `when` clause fires ever faster towards an "
   "instant (Zeno behaviour: a bouncing ball coming to rest): the message gives the instant the firings "
-  "accumulate at, the diagnostic points at the clause, and the bounces before it are kept.",
+  "accumulate at, the diagnostic points at the clause, and the bounces before it are kept. It also stops a "
+  "run that stalls on a law continuous across its switch but infinitely steep there (a turbulent orifice's "
+  "`sign(dp)*sqrt(abs(dp))` while the drop changes sign): such a switch is crossed, never held in a "
+  "sliding mode, and the message names the law.",
   "Smooth the law near its switching surface (a narrow linear band around zero speed instead of "
-  "`sign(v)`), or simulate a shorter time. For Zeno behaviour, say in the model what happens after the "
+  "`sign(v)`; a laminar band for an orifice: `if abs(dp) < dp_l then K*dp/sqrt(dp_l) else "
+  "K*sign(dp)*sqrt(abs(dp))`), or simulate a shorter time. For Zeno behaviour, say in the model what happens after the "
   "accumulation instant: a discrete variable that a `when` clause sets once the rebound is negligible and "
   "that holds the ball on the floor.")
 d("E813", "interrupted",
