@@ -376,10 +376,19 @@ class _Flattener:
                 else:
                     # a signal of the outer model's states, discrete variables, outputs or graph
                     # variables (a controller's held output driving a voltage source): no function of
-                    # time alone, so the instance's input is a named expression, as an output is
-                    sub.statements = [ast.Output(s.name, s.unit, value, s.description, s.span, s.name_span)
-                                      if isinstance(s, ast.Input) and s.name == flat_name else s
-                                      for s in sub.statements]
+                    # time alone, so the instance's input is a named expression, as an output is, and
+                    # so is every input inside it bound to that one (a source in a nested component)
+                    named = {flat_name}
+                    changed = True
+                    while changed:
+                        changed = False
+                        for i, s in enumerate(sub.statements):
+                            if isinstance(s, ast.Input) and (s.name in named or s.value is not None and any(
+                                    isinstance(n, ast.Name) and n.name in named for n in ast.walk(s.value))):
+                                sub.statements[i] = ast.Output(s.name, s.unit, value if s.name == flat_name
+                                                               else s.value, s.description, s.span, s.name_span)
+                                named.add(s.name)
+                                changed = True
             else:
                 kinds = sorted(sub.params | set(sub.inputs))
                 self.report(_error("E337", f"model '{sub.model.name}' has no parameter or input '{name}'",

@@ -3399,10 +3399,39 @@ class _Run:
         for a, b in zip(times[:-1], times[1:]):
             after = new if b == t_new else np.asarray(exits_at(b), dtype=float)
             hit = self.sliding_end(before, after, exits_at, a, b)
+            if hit is None:
+                hit = self.sliding_dip(before, after, exits_at, a, b)
             if hit is not None:
                 return hit
             before = after
         return None
+
+    def sliding_dip(self, left, right, exits_at, a, b, depth=30):
+        """The end of a sliding mode inside (a, b) where its exits are positive at both ends, or None:
+        an exit that dips below 0 and comes back between them (a push passing a static limit for less
+        than the spacing of the tests). Each exit's parabola through a, the middle and b is looked at;
+        where its vertex is inside and below 0, the halves are searched in turn."""
+        middle_t = 0.5 * (a + b)
+        if depth == 0 or not a < middle_t < b:
+            return None
+        middle = np.asarray(exits_at(middle_t), dtype=float)
+        hit = self.sliding_end(left, middle, exits_at, a, middle_t)
+        if hit is not None:
+            return hit
+        hit = self.sliding_end(middle, right, exits_at, middle_t, b)
+        if hit is not None:
+            return hit
+        with np.errstate(all="ignore"):
+            curve = 2 * left + 2 * right - 4 * middle      # p(u) = left + slope*u + curve*u^2, u in [0, 1]
+            slope = 4 * middle - 3 * left - right
+            vertex = -slope / (2 * curve)
+            lowest = left + slope * vertex + curve * vertex * vertex
+        if not np.any((curve > 0) & (vertex > 0) & (vertex < 1) & (lowest < 0)):
+            return None
+        hit = self.sliding_dip(left, middle, exits_at, a, middle_t, depth - 1)
+        if hit is not None:
+            return hit
+        return self.sliding_dip(middle, right, exits_at, middle_t, b, depth - 1)
 
     def sliding_check(self) -> float:
         """The longest stretch of a sliding mode whose exits are tested only at its ends: the run's

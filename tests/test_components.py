@@ -487,3 +487,42 @@ def test_a_component_input_bound_to_a_current_instead_of_a_voltage_is_a_dimensio
     with pytest.raises(ModelError) as excinfo:
         derive_file(_relay(tmp_path, "VoltageSource src : u = r.i", "src.a"), cache=False)
     assert any(d.code == "E210" for d in excinfo.value.diagnostics), excinfo.value.diagnostics
+
+
+NESTED_DRIVER = """import "std:electrical"
+model Driver "a voltage source inside a component, driven through the component's own input"
+  port out
+  input v_cmd [V]
+  VoltageSource vs : u = v_cmd
+  vs.a -> out
+end
+
+model Nested "the outer model binds the component's input to a discrete variable"
+  discrete cmd [V] = 10
+  Driver drv : v_cmd = cmd
+  Resistor r : R = 1000 [Ohm]
+  Capacitor c : C = 1e-3 [F]
+  1 loop
+  drv.out -> loop
+  loop -> r.a
+  loop -> c.a
+  when c.v > 6 then cmd = 0 end
+  when c.v < 3 then cmd = 10 end
+  output v [V] = c.v
+  experiment run
+    t_end = 5 [s]
+  end
+end
+"""
+
+
+def test_an_input_bound_to_a_discrete_variable_reaches_a_source_inside_a_nested_component(tmp_path):
+    """The outer binding made the Driver's input a named expression, but the VoltageSource inside it,
+    bound to that input, stayed an input and was E316 ('an input cannot use output drv.v_cmd')."""
+    path = tmp_path / "nested.bg"
+    path.write_text(NESTED_DRIVER)
+    ours = run(path)
+    bare = run(_relay(tmp_path, "Se src : e = u", "src"))
+    assert ours.complete and bare.complete
+    np.testing.assert_array_equal(ours.t, bare.t)
+    np.testing.assert_array_equal(ours.outputs["v"], bare.outputs["v"])

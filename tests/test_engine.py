@@ -338,6 +338,26 @@ def test_an_if_conditions_event_says_whether_it_became_true_or_false(tmp_path):
     assert events == [(2.0, "if c.q < 2 in low.f -> false"), (3.0, "if c.q > 3 in high.f -> true")], events
 
 
+@pytest.mark.parametrize("native", ["1", "0"])
+def test_a_breakaway_shorter_than_the_spacing_of_the_exit_tests_is_found(tmp_path, monkeypatch, native):
+    """A push of 3.001 sin(2t) N passes the static limit 3 N for 26 ms each half period. Over a 50 s run
+    the exits were tested every 50 ms inside a long sliding step, and 19 of the 32 breakaways were
+    stepped over (whether one was caught depended on t_end). A dip of an exit between two tests is
+    now looked for (the parabola through the ends and the middle)."""
+    monkeypatch.setenv("BONDC_NATIVE", native)
+    path = tmp_path / "brief.bg"
+    path.write_text(PERIODIC_PUSH.replace("15 + 10*sin(2*pi*t)", "3.001*sin(2*t)")
+                    .replace("coulomb(f, 20, 24.5)", "coulomb(f, 2, 3)").replace("t_end = 3 [s]", "t_end = 50 [s]"))
+    derived = derive_file(path, cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    assert result.complete, result.message
+    ends = [time for time, label in result.events if label.endswith("ends")]
+    away = math.asin(3 / 3.001) / 2
+    expected = [away + k * math.pi / 2 for k in range(40) if away + k * math.pi / 2 < 50]
+    assert len(ends) == len(expected) == 32
+    np.testing.assert_allclose(ends, expected, atol=1e-6)
+
+
 @pytest.mark.parametrize("condition, after", [("d < 1", "false"), ("d <= 1", "true"), ("d >= 1", "true"),
                                               ("d > 1", "false"), ("d == 1", "true"), ("d != 1", "false")])
 def test_an_if_condition_that_lands_on_its_boundary_says_true_or_false_as_its_comparison_does(
