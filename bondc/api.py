@@ -29,9 +29,13 @@ def _usage(message: str, hint: str | None = None) -> UsageError:
     return UsageError(Diagnostic("error", "E001", message, hint=hint))
 
 
+def _is_number(value) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating))
+
+
 def _number(value, what: str) -> float:
     """``value`` as a finite float; a bool, a non-number or nan/inf is an error naming ``what``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+    if not _is_number(value):
         raise _usage(f"{what} must be a number, not {type(value).__name__} ({value!r})")
     if not math.isfinite(float(value)):
         raise _usage(f"{what} must be a finite number, not {float(value)!r}")
@@ -55,12 +59,11 @@ def _sets(overrides: Mapping[str, Any] | None) -> list[str]:
             texts.append(f"{name}={_number(value[0], what)!r} [{value[1]}]")
         elif isinstance(value, str):
             texts.append(f"{name}={value}")
+        elif _is_number(value):
+            texts.append(f"{name}={_number(value, what)!r}")
         else:
-            if not isinstance(value, bool) and isinstance(value, (int, float, np.integer, np.floating)):
-                texts.append(f"{name}={_number(value, what)!r}")
-            else:
-                raise _usage(f"{what} must be a number, a string with a unit or a (number, unit) pair, not "
-                             f"{type(value).__name__} ({value!r})", hint='e.g. 1600, "1.6 [kN/m]" or (1.6, "kN/m")')
+            raise _usage(f"{what} must be a number, a string with a unit or a (number, unit) pair, not "
+                         f"{type(value).__name__} ({value!r})", hint='e.g. 1600, "1.6 [kN/m]" or (1.6, "kN/m")')
     return texts
 
 

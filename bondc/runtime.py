@@ -2453,7 +2453,7 @@ class _Run:
         near = self.near_surface(t, y, modes, k)
         if near is None:
             return False
-        on, band, plus, minus = near
+        on, band, plus, minus, _ = near
         with np.errstate(all="ignore"):
             at = on(0.0)
             rate = float(self.switch_rate(t, at, self.rhs(t, at, plus), plus, k))
@@ -2474,8 +2474,7 @@ class _Run:
         near = self.near_surface(t, y, modes, k)
         if near is None:
             return False
-        on, band, plus, minus = near
-        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        on, band, plus, minus, scale = near
         with np.errstate(all="ignore"):
             def jump(level):
                 at = on(level)
@@ -2488,7 +2487,7 @@ class _Run:
     def near_surface(self, t, y, modes, k):
         """For a sign switch ``k`` whose g moves with the state: (the state moved along g's gradient
         to where g has a given value, g's deadband there, the modes with k on its plus side, on its
-        minus side), or None."""
+        minus side, each state's error tolerance), or None."""
         vertex = self.vertex_override.get(k, self.model.SWITCH_VERTICES[k])
         if vertex != 1.0 or self.model.floor_switches[k]:
             return None
@@ -2503,7 +2502,7 @@ class _Run:
             return None
         plus, minus = np.array(modes, dtype=float), np.array(modes, dtype=float)
         plus[k], minus[k] = 1.0, -1.0
-        return (lambda level: y + (level - g0) * gradient / norm), band, plus, minus
+        return (lambda level: y + (level - g0) * gradient / norm), band, plus, minus, scale
 
     def too_many_events(self, t):
         window = self.span / 1000.0
