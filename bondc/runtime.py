@@ -1274,7 +1274,7 @@ class _NativeDriver:
         self.others = np.array(others, dtype=np.intc).reshape(-1)      # the C side keeps pointing to them
         self.drift = np.array(drift, dtype=float).reshape(-1)
         self.alphas = np.empty(self.capacity)
-        self.exits = np.empty(2 + self.others.size)
+        self.exits = np.empty(2 * (2 + self.others.size))     # its second half: the C side's scratch
         self.lib.bondc_driver_slide(self.handle, int(k), buffer("double[]", np.array(plus, dtype=float)),
                                     buffer("double[]", np.array(minus, dtype=float)), float(alpha), float(probe),
                                     int(self.others.size),
@@ -1289,7 +1289,7 @@ class _NativeDriver:
         self.drift = np.array(drift, dtype=float).reshape(-1)
         count = len(sliding)
         self.alphas = np.empty(self.capacity * count)
-        self.exits = np.empty(2 * count + self.others.size)
+        self.exits = np.empty(2 * (2 * count + self.others.size))     # its second half: the C side's scratch
         corners = np.ascontiguousarray(corners, dtype=float)
         return self.lib.bondc_driver_slide_many(
             self.handle, count, buffer("int[]", np.array(sliding, dtype=np.intc)), len(corners), int(affine),
@@ -1310,14 +1310,15 @@ class _NativeDriver:
 
     def exits_at(self, t, y):
         """The sliding mode's exits at (t, y), evaluated in C (as ``exits`` of :meth:`_Run.sliding_segment`)."""
-        out = np.empty(self.exits.size)
+        out = np.empty(self.exits.size // 2)
         self.lib.bondc_driver_exits(self.handle, float(t), self.ffi.from_buffer("double[]", np.ascontiguousarray(
             y, dtype=float)), self.ffi.from_buffer("double[]", out))
         return out
 
     def slide_advance(self, old):
         """One batch of a sliding mode: (code, times, states, alphas) — see ``bondc_driver_slide_advance``;
-        ``old`` (the exits before the batch) is updated in place, ``self.exits`` holds the last step's."""
+        ``old`` (the exits before the batch) is updated in place, the first half of ``self.exits``
+        holds the last step's."""
         return self.slide_advance_reporting(old, None)[:4]
 
     def slide_advance_reporting(self, old, t_eval, eval_next=0):
@@ -3333,6 +3334,14 @@ class _Run:
             weights = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides)
             return sum(w * self.jac(tt, yy, corner) for w, corner in zip(weights, corners) if w != 0)
 
+        def differences(tt, yy):
+            # scipy's implicit solvers: the combination's own Jacobian, the weights' dependence on the
+            # state included. The corners' weighted Jacobians leave it out, and Radau's Newton iteration
+            # then fails step after step (a held mass pulled through a spring: 5 201 steps in 20 s
+            # where 412 do). The SUNDIALS solvers cope with the weighted ones.
+            with np.errstate(all="ignore"):
+                return difference_jacobian(fun, tt, yy, np.asarray(fun(tt, yy), dtype=float))
+
         def exits(tt, yy):      # every entry stays positive while sliding lasts
             _, alpha = combination(tt, yy)
             values = list(alpha) + list(1.0 - alpha)
@@ -3357,7 +3366,8 @@ class _Run:
             if outcome[0] != "handover":
                 return outcome
             _, t, y = outcome       # a law not finite at a trial point: the step loop goes on and explains
-        solver = self.new_solver(fun, jac, t, y, t_stop)
+        sundials = self.method is IDA or issubclass(self.method, CvodeSolver)
+        solver = self.new_solver(fun, jac if sundials else differences, t, y, t_stop)
         old = np.maximum(exits(t, y), 0.0)      # at the edge of the sliding region: leaving counts from here
         while True:
             message = solver.step()
@@ -3388,12 +3398,13 @@ class _Run:
         """:meth:`sliding_end` of a step, its exits also tested inside it every
         :meth:`sliding_check`: a mode whose states stand still (a mass held at rest or at a speed)
         gives the solver nothing to limit its steps by, while the force that holds it follows an input
-        that may pass the holding limit and come back within one step."""
+        that may pass the holding limit and come back within one step. Between two tests, an exit
+        that dips below 0 and comes back is looked for too (:meth:`sliding_dip`): a step whose
+        states move is as long as their motion allows, which may be longer than the push is past
+        the limit."""
         longest = self.sliding_check()
         count = int(min(math.ceil((t_new - t_old) / longest), 1e6)) if longest > 0 else 1
-        if count <= 1:
-            return self.sliding_end(old, new, exits_at, t_old, t_new)
-        times = np.linspace(t_old, t_new, count + 1)
+        times = np.linspace(t_old, t_new, max(count, 1) + 1)
         before = old
         for a, b in zip(times[:-1], times[1:]):
             after = new if b == t_new else np.asarray(exits_at(b), dtype=float)
@@ -3513,7 +3524,7 @@ class _Run:
                 t_new, y_new = float(ts[-1]), ys[-1].copy()
                 self.stats["steps"] += 1
                 dense = _DriverStep(driver, t_prev, t_new, y_new).dense_output()
-                new = driver.exits.copy()
+                new = driver.exits[:driver.exits.size // 2].copy()
                 hit = self.sliding_end_within(old, new, lambda tt: driver.exits_at(tt, dense(tt)), t_prev, t_new)
                 end = t_new if hit is None else hit
                 y_end = y_new if hit is None else dense(hit)
@@ -4054,7 +4065,7 @@ typedef struct {
        d->switches long), affine (k + 1 corners) or multilinear (2^k): see bondc_driver_slide_many */
     int held, corners, affine;
     int *sliding;
-    double *cm, *cf, *rates, *alphas, *weights, *newton, *residual, *delta;
+    double *cm, *cf, *rates, *alphas, *weights, *newton, *residual, *delta, *kept;
     /* the unfrozen law (a chattering interval): the modes found again, from the last ones, at every
        evaluation (driver_modes_at with the floor switches `floors`): see bondc_driver_unfrozen_advance */
     int unfrozen;
@@ -4627,7 +4638,7 @@ int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corn
                             const double *alphas, double probe, int count, const int *others, const double *drift)
 {
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
-    free(d->newton); free(d->residual); free(d->delta);
+    free(d->newton); free(d->residual); free(d->delta); free(d->kept);
     d->sliding = (int *)calloc(k, sizeof(int));
     d->cm = (double *)calloc((long)corners * d->switches + 1, sizeof(double));
     d->cf = (double *)calloc((long)corners * d->n + 1, sizeof(double));
@@ -4637,9 +4648,10 @@ int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corn
     d->newton = (double *)calloc((long)k * k, sizeof(double));
     d->residual = (double *)calloc(k, sizeof(double));
     d->delta = (double *)calloc(2 * k, sizeof(double));
+    d->kept = (double *)calloc(k, sizeof(double));
     d->held = 0;
     if (!d->sliding || !d->cm || !d->cf || !d->rates || !d->alphas || !d->weights || !d->newton || !d->residual
-        || !d->delta) return -1;
+        || !d->delta || !d->kept) return -1;
     for (int i = 0; i < k; i++) { d->sliding[i] = sliding[i]; d->alphas[i] = alphas[i]; }
     for (long i = 0; i < (long)corners * d->switches; i++) d->cm[i] = cm[i];
     d->held = k; d->corners = corners; d->affine = affine;
@@ -4708,6 +4720,34 @@ static int report_step(bondc_driver *d, double t, const double *y, const double 
     return 0;
 }
 
+/* Whether an exit of the sliding mode may dip below 0 inside the step just taken, whose middle is
+   `middle`, where it is positive at both ends (left, right): a push passing a static limit for less
+   than a step. The exits at the middle (into mid, from CVODE's interpolant) change sign from an end,
+   or the parabola through the three has its vertex inside the step and below 0: the runtime looks
+   (_Run.sliding_dip). The weights kept for the next step are those of its end, as without the test. */
+static int slide_dips(bondc_driver *d, double middle, const double *left, const double *right, double *mid,
+                      int watched)
+{
+    double alpha = d->alpha;
+    int held = d->held > 1 ? d->held : 0;
+    for (int i = 0; i < held; i++) d->kept[i] = d->alphas[i];
+    int dip = 0;
+    if (CVodeGetDky(d->cvode, middle, 0, d->work) == 0) {
+        slide_exits(d, middle, N_VGetArrayPointer(d->work), mid);
+        for (int j = 0; j < watched && !dip; j++) {
+            if ((left[j] > 0 && mid[j] <= 0) || (left[j] >= 0 && mid[j] < 0)) dip = 1;
+            double curve = 2 * left[j] + 2 * right[j] - 4 * mid[j], slope = 4 * mid[j] - 3 * left[j] - right[j];
+            if (curve > 0) {
+                double vertex = -slope / (2 * curve);
+                if (vertex > 0 && vertex < 1 && left[j] + slope * vertex + curve * vertex * vertex < 0) dip = 1;
+            }
+        }
+    }
+    d->alpha = alpha;
+    for (int i = 0; i < held; i++) d->alphas[i] = d->kept[i];
+    return dip;
+}
+
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
                                int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count)
@@ -4742,9 +4782,11 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
         *count = k + 1;
         for (int j = 0; j < watched; j++)
             if ((old[j] > 0 && exits[j] <= 0) || (old[j] >= 0 && exits[j] < 0)) return 1;
-        if (d->longest > 0) {       /* a long step: the runtime looks for an exit inside it too */
-            double h = 0.0;
-            if (CVodeGetLastStep(d->cvode, &h) == 0 && h > d->longest) return 1;
+        double h = 0.0;
+        if (CVodeGetLastStep(d->cvode, &h) == 0 && h > 0) {
+            /* a long step: the runtime looks for an exit inside it too */
+            if (d->longest > 0 && h > d->longest) return 1;
+            if (slide_dips(d, t - 0.5 * h, old, exits, exits + watched, watched)) return 1;
         }
         for (int j = 0; j < watched; j++) old[j] = exits[j];
         int full = report_step(d, t, y, t_eval, n_eval, eval_next, eval_capacity, et, ey, eval_count);
@@ -4855,7 +4897,7 @@ void bondc_driver_free(bondc_driver *d)
     free(d->m); free(d->g); free(d->values); free(d->extra); free(d->mp); free(d->mm);
     free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead);
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
-    free(d->newton); free(d->residual); free(d->delta); free(d);
+    free(d->newton); free(d->residual); free(d->delta); free(d->kept); free(d);
 }
 """
 

@@ -99,15 +99,39 @@ def test_freezer_shares_modes_and_labels_switches():
     freezer = Freezer(t, states={f}, parameters={v0, F0})
     law = sympy.Piecewise((5 * f, sympy.Abs(f) < v0), (f + F0 * sympy.sign(f), True))
     frozen = freezer.freeze(law, "R.e")
-    # abs is continuous: evaluated as it is, never frozen; the if and the sign are switches
-    assert [s.g for s in freezer.switches] == [v0 - sympy.Abs(f), f]
+    # abs is continuous: evaluated as it is, never frozen; the if's condition is taken apart at
+    # the kink of its abs (two smooth switching functions), and the sign is a switch
+    assert [s.g for s in freezer.switches] == [v0 + f, v0 - f, f]
     assert all(s.event for s in freezer.switches)
-    assert frozen == sympy.Piecewise((5 * f, m0 > 0), (f + F0 * m1, True))
-    assert freezer.switches[1].label == "sign(f) in R.e"
-    # the same sign elsewhere shares its mode; abs, min and max never make a switch
+    m2 = sympy.Symbol("_m2", real=True)
+    assert frozen == sympy.Piecewise((5 * f, (m0 > 0) & (m1 > 0)), (f + F0 * m2, True))
+    assert [s.label for s in freezer.switches] == ["if v0 > abs(f) (f < 0) in R.e", "if v0 > abs(f) (f >= 0) in R.e",
+                                                   "sign(f) in R.e"]
+    # the same sign elsewhere shares its mode; abs, min and max outside a condition never make a switch
     assert freezer.freeze(2 * sympy.sign(f) + sympy.Max(f, 0) + sympy.Abs(f - 1), "C.e") == \
-        2 * m1 + sympy.Max(f, 0) + sympy.Abs(f - 1)
-    assert len(freezer.switches) == 2
+        2 * m2 + sympy.Max(f, 0) + sympy.Abs(f - 1)
+    assert len(freezer.switches) == 3
+
+
+@pytest.mark.parametrize("condition", [
+    lambda u, r: sympy.Abs(u) < r, lambda u, r: sympy.Abs(u) <= r, lambda u, r: sympy.Abs(u) > r,
+    lambda u, r: sympy.Abs(u) >= r, lambda u, r: 2 * sympy.Abs(u - 1) - 3 * sympy.Abs(r) < u,
+    lambda u, r: sympy.Max(u, r, 1) - sympy.Min(u, -r) >= 0.5, lambda u, r: -sympy.Abs(sympy.Abs(u) - 1) > r - 1,
+    lambda u, r: sympy.Min(u, 2 * r) <= sympy.Abs(r)])
+def test_a_condition_taken_apart_at_its_kinks_holds_exactly_where_the_written_one_does(condition):
+    """The frozen condition, its modes set to the signs of their switching functions, against the
+    condition as written, at a grid of values that includes the kinks and both signs of r."""
+    u, r = sympy.symbols("u r", real=True)
+    freezer = Freezer(t, states={u, r}, parameters=set())
+    written = condition(u, r)
+    frozen = freezer._condition(written)
+    assert not any(s.g.has(sympy.Abs, sympy.Max, sympy.Min) for s in freezer.switches)
+    values = [-2.5, -2, -1, -0.5, 0, 0.5, 1, 2, 3]
+    for uv in values:
+        for rv in values:
+            point = {u: uv, r: rv}
+            modes = {s.mode: int(np.sign(float(s.g.subs(point)))) for s in freezer.switches}
+            assert bool(frozen.subs(modes)) == bool(written.subs(point)), (uv, rv)
 
 
 def test_freezer_turns_time_switches_into_known_times():
@@ -237,9 +261,11 @@ def test_event_functions_work_with_plain_solve_ivp():
     _, ss, experiment = derive("friction")
     module = load_module(emit(ss, experiment))
     events = module["event_functions"]()
-    assert len(events) == len(module["SWITCHES"]) == 2
-    # switch 0 is the threshold abs(f) < v0; switch 1 is sign(f), zero at the start (solve_ivp would stop there)
-    solution = solve_ivp(lambda t, x: module["rhs"](t, x), (0.0, 1.0), [0.0, 0.0], events=events[0], rtol=1e-10,
+    assert len(events) == len(module["SWITCHES"]) == 3
+    # switches 0 and 1 are the threshold abs(f) < v0 on each side of f = 0; switch 2 is sign(f), zero at
+    # the start (solve_ivp would stop there)
+    assert module["SWITCHES"][1] == "if v0 > abs(friction.f) (friction.f >= 0) in friction.e"
+    solution = solve_ivp(lambda t, x: module["rhs"](t, x), (0.0, 1.0), [0.0, 0.0], events=events[1], rtol=1e-10,
                          atol=1e-12)
     assert solution.status == 1                                    # stopped by the threshold event
     assert solution.t_events[0][0] == pytest.approx(np.log(2) / 5, abs=1e-8)

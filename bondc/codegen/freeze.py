@@ -23,6 +23,11 @@ value jumps needs a frozen mode and a located switch; the solver's error
 control handles the kinks of continuous ones (and ``sign(e)*sqrt(abs(e))``
 stays finite on both sides of its frozen ``sign``: it is continuous at 0).
 
+A condition's ``abs``, ``min`` or ``max`` term is taken apart instead: ``abs(v) < v_th`` is
+``v < v_th and -v < v_th`` (:func:`_split_kink`), two switches with smooth switching functions. A
+velocity that crosses the whole band within one solver step changes the sign of each once, where
+``v_th - abs(v)`` has the same sign at both ends of the step.
+
 Identical switching functions (or opposite ones) share one mode. A switching
 function is itself frozen (a ``sign`` inside a condition is its mode), so it is
 smooth along a frozen segment and its zero is found by root finding.
@@ -37,9 +42,9 @@ and the sample times of a ``csv`` signal are listed the same way.
 >>> t, f, v0 = sympy.symbols("t f v0", real=True)
 >>> freezer = Freezer(t, states={f}, parameters={v0})
 >>> freezer.freeze(sympy.Piecewise((f, sympy.Abs(f) < v0), (2*f, True)), "R.e")
-Piecewise((f, _m0 > 0), (2*f, True))
+Piecewise((f, (_m0 > 0) & (_m1 > 0)), (2*f, True))
 >>> [(s.g, s.label) for s in freezer.switches]
-[(v0 - Abs(f), 'if v0 > abs(f) in R.e')]
+[(f + v0, 'if v0 > abs(f) (f < 0) in R.e'), (-f + v0, 'if v0 > abs(f) (f >= 0) in R.e')]
 """
 
 from __future__ import annotations
@@ -86,6 +91,40 @@ class TimeBreak:
     label: str
     kind: str                       # "step", "table", "if", "csv", ...
     csv: Csv | None = None
+
+
+def _split_kink(relation, g):
+    """``g < 0`` (or ``<=``, ``>``, ``>=``) as an ``And``/``Or`` of comparisons without the kink of
+    an ``abs``, ``max`` or ``min`` term of ``g``, and for each comparison the side of the kink it
+    stands for; None when ``g`` has no such term.
+
+    ``abs(v) < v_th`` is ``v < v_th and -v < v_th``: each part's switching function is smooth
+    where ``v_th - abs(v)`` has a corner, so a velocity that crosses the whole band within one
+    solver step changes the sign of each part once, where ``v_th - abs(v)`` is the same sign at
+    both ends of the step and the band would be stepped over. With ``a*max(x, y) + r`` (a > 0)
+    the comparison holds below 0 when both ``a*x + r`` and ``a*y + r`` do, above 0 when either
+    does; ``abs(u)`` is ``max(u, -u)`` and a negative ``a`` turns a max into a min. The rewrite
+    is exact for every value: no case is lost where ``r`` is a number of either sign.
+    """
+    if relation not in (sympy.StrictLessThan, sympy.LessThan, sympy.StrictGreaterThan, sympy.GreaterThan):
+        return None
+    for term in sympy.Add.make_args(g):
+        coefficient, kink = term.as_coeff_Mul()
+        if not isinstance(kink, (sympy.Abs, sympy.Max, sympy.Min)) or coefficient == 0:
+            continue
+        if isinstance(kink, sympy.Abs):
+            largest, pieces = True, (kink.args[0], -kink.args[0])
+            sides = (f"{_short(kink.args[0])} >= 0", f"{_short(kink.args[0])} < 0")
+        else:
+            largest, pieces = isinstance(kink, sympy.Max), kink.args
+            sides = tuple(f"{_short(kink)} = {_short(piece)}" for piece in pieces)
+        if coefficient < 0:
+            largest = not largest
+        rest = g - term
+        parts = [relation(coefficient * piece + rest, 0) for piece in pieces]
+        below = relation in (sympy.StrictLessThan, sympy.LessThan)
+        return (sympy.And if below == largest else sympy.Or)(*parts), dict(zip(parts, sides))
+    return None
 
 
 def _short(expr) -> str:
@@ -213,17 +252,25 @@ class Freezer:
         pieces = [(self._freeze(value), self._condition(cond)) for value, cond in expr.args]
         return sympy.Piecewise(*pieces)
 
-    def _condition(self, cond):
+    def _condition(self, cond, written: str = "", sides=None):
+        """``cond`` with its comparisons replaced by their switches' modes. ``written``: the
+        condition as the model wrote it, when ``cond`` is a part of it made by :func:`_split_kink`
+        (for the labels), ``sides`` the side of the kink each part stands for."""
         if cond in (sympy.true, sympy.false):
             return cond
         if isinstance(cond, Relational):
             lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
+            split = _split_kink(type(cond), lhs - rhs)
+            if split is not None:
+                return self._condition(split[0], written or _short(cond), split[1])
             truth = _TRUTH.get(type(cond), 0)
-            mode = self.switch(lhs - rhs, f"if {_short(cond)}", "if", truth=truth)
+            side = (sides or {}).get(cond)
+            label = f"if {written or _short(cond)}" + (f" ({side})" if side else "")
+            mode = self.switch(lhs - rhs, label, "if", truth=truth)
             return type(cond)(mode, 0) if not isinstance(cond, (sympy.Eq, sympy.Ne)) else \
                 type(cond)(mode, 0, evaluate=False)
         if isinstance(cond, (sympy.And, sympy.Or, sympy.Not, sympy.Xor)):
-            return cond.func(*[self._condition(arg) for arg in cond.args])
+            return cond.func(*[self._condition(arg, written, sides) for arg in cond.args])
         if isinstance(cond, sympy.Symbol):
             raise TypeError(f"boolean symbol {cond} in a condition")
         return self._freeze(cond)
