@@ -570,6 +570,30 @@ def _inside_when_block(text: str, start: int) -> bool:
     return False
 
 
+_DECLARATION = re.compile(r"(when|output|param|input|experiment|fn|state|discrete|port|defaults|model|import)\b"
+                          r"|[A-Za-z_]\w*\s+[A-Za-z_]\w*\s*(\(|:|\")|.*->")
+
+
+def _unclosed_when(text: str, offset: int) -> tuple[int, int] | None:
+    """The offsets of the ``when`` header whose block is still open at ``offset`` (no ``end`` since)
+    and of the line's statement, when that line is not a statement of its body but the model's (a
+    declaration, a bond, another ``when``): the block's ``end`` was forgotten. None otherwise."""
+    line_start = text.rfind("\n", 0, offset) + 1
+    line = text[line_start:].split("\n", 1)[0].split("#", 1)[0].strip()
+    if not _DECLARATION.match(line):
+        return None
+    statement = line_start + len(text[line_start:]) - len(text[line_start:].lstrip(" \t"))
+    position = line_start
+    for previous in reversed(text[:line_start].split("\n")[:-1]):
+        position -= len(previous) + 1
+        code = previous.split("#", 1)[0].strip()
+        if code == "end" or code.startswith(("model ", "experiment ")):
+            return None
+        if code.startswith("when "):
+            return None if code.endswith(" end") else (position + len(previous) - len(previous.lstrip()), statement)
+    return None
+
+
 def _open_bracket(text: str, offset: int) -> int | None:
     """The offset of the innermost ``(`` or ``[`` still open at ``offset`` (strings and comments
     skipped), or None."""
@@ -589,11 +613,18 @@ def _unclosed(diagnostic: Diagnostic, source: Source, offset: int) -> Diagnostic
     joined the lines (inside ( ) or [ ] a line break continues the statement), so say so and
     point at it."""
     opened = _open_bracket(source.text, offset)
-    if opened is None or "\n" not in source.text[opened:offset]:
+    if opened is None:
         return diagnostic
+    closing = ")" if source.text[opened] == "(" else "]"
+    if "\n" not in source.text[opened:offset] and (not diagnostic.message.endswith(f"expected '{closing}'")
+                                                    or source.text[offset:offset + 1] in ")]"):
+        return diagnostic       # on its own line, only a wrong closing bracket: that one is the error
     bracket = source.text[opened]
-    closing = ")" if bracket == "(" else "]"
     where = source.span(opened, opened + 1)
+    if "\n" not in source.text[opened:offset]:     # only a closing bracket can come here
+        return replace(diagnostic, hint=f"the '{bracket}' at column {where.column} is not closed; close it with "
+                                        f"'{closing}' where its expression ends",
+                       related=(Related(where, f"'{bracket}' opened here"),))
     return replace(diagnostic, hint=f"the '{bracket}' on line {where.line} is not closed: inside ( ) or [ ] the "
                                     f"statement goes on over the line break; close it with '{closing}'",
                    related=(Related(where, f"'{bracket}' opened here"),))
@@ -672,6 +703,21 @@ def parse_source(source: Source) -> ast.File:
             if diagnostics and (diagnostics[-1].span == diagnostic.span or (
                     diagnostics[-1].span.line == diagnostic.span.line and diagnostics[-1].message == diagnostic.message)):
                 break  # no progress: stop rather than report the same place (or line) twice
+            unclosed = _unclosed_when(text, offset)
+            if unclosed is not None and diagnostic.code in ("E100", "E104"):
+                # a forgotten 'end': one error, at the statement the block ran into; the block goes
+                header, statement = unclosed
+                where = source.span(header, header + 4)
+                word = re.match(r"\w+|->|\S", text[statement:])
+                diagnostics.append(replace(
+                    diagnostic, code="E100", span=source.span(statement, statement + len(word.group())),
+                    message=f"the 'when' block of line {where.line} is not closed before this statement",
+                    hint="close it with 'end': on a line of its own after its statements, or at the end of a "
+                         "one-line block (when c then d = 1 end)",
+                    related=(Related(where, "the block opened here"),)))
+                line_start = text.rfind("\n", 0, offset) + 1
+                text = _blank(text, header, line_start)
+                continue
             explained = _unclosed(diagnostic, source, offset)
             diagnostics.append(explained)
             if diagnostic.code == "E103" or len(diagnostics) >= MAX_SYNTAX_ERRORS or explained is not diagnostic:

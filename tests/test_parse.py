@@ -538,3 +538,51 @@ def test_one_slip_in_a_when_block_is_one_error(header, body, line, column, words
     (diagnostic,) = excinfo.value.diagnostics
     assert (diagnostic.span.line, diagnostic.span.column) == (line, column)
     assert words in diagnostic.message + (diagnostic.hint or "")
+
+
+FORGOTTEN_END = """model W
+  discrete d = 0
+  C s : e = 10*q, q(0) = 1
+  I m : f = p
+  1 j
+  j -> s
+  j -> m
+  BLOCK
+  NEXT
+  output x = s.q
+  experiment e1
+    t_end = 1
+  end
+end
+"""
+
+
+@pytest.mark.parametrize("block, next_line", [
+    ("when s.q > 0.5 then\n    d = 1", "when s.q < 0.2 then d = 0 end"),      # a block without its end
+    ("when s.q > 0.5 then d = 1", "output y = 2*s.q"),                       # a one-line block without it
+    ("when s.q > 0.5 then\n    d = 1", "R r : e = 2*f"),                     # an element after it
+    ("when s.q > 0.5 then\n    d = 1", "j -> r"),                            # a bond after it
+])
+def test_a_when_block_without_its_end_is_one_error_at_the_statement_it_runs_into(block, next_line):
+    """A forgotten 'end' gave two or three errors (the next 'when' unexpected, then 'output' and
+    'experiment' read as names in the block): it is one, naming the block's line."""
+    text = FORGOTTEN_END.replace("BLOCK", block).replace("NEXT", next_line)
+    with pytest.raises(ParseError) as excinfo:
+        parse_text(text, "w.bg")
+    (diagnostic,) = excinfo.value.diagnostics
+    line = text.split("\n").index("  " + next_line) + 1
+    assert (diagnostic.code, diagnostic.span.line, diagnostic.span.column) == ("E100", line, 3)
+    assert "the 'when' block of line 8 is not closed" in diagnostic.message and "'end'" in diagnostic.hint
+    (related,) = diagnostic.related
+    assert (related.span.line, related.span.column) == (8, 3)
+
+
+def test_a_bracket_left_open_on_its_own_line_is_named_in_the_one_error():
+    # the statement's later 'then' was reported, then the end of the file (the bracket joined every line)
+    text = FORGOTTEN_END.replace("BLOCK", "when (s.q > 0.5 then d = 1 end").replace("NEXT", "")
+    with pytest.raises(ParseError) as excinfo:
+        parse_text(text, "w.bg")
+    (diagnostic,) = excinfo.value.diagnostics
+    assert (diagnostic.span.line, diagnostic.span.column) == (8, 19)
+    assert "the '(' at column 8 is not closed" in diagnostic.hint
+    assert [(r.span.line, r.span.column) for r in diagnostic.related] == [(8, 8)]
