@@ -25,7 +25,9 @@ from pathlib import Path
 from urllib.parse import unquote, urlparse
 
 from lsprotocol import types as lsp
+from pygls.exceptions import JsonRpcInvalidRequest
 from pygls.lsp.server import LanguageServer
+from pygls.protocol import LanguageServerProtocol
 
 from bondc import __version__, ast
 from bondc.builtins import BUILTINS
@@ -337,9 +339,21 @@ class Document:
     graph: object = None
 
 
+class _Protocol(LanguageServerProtocol):
+    """pygls's protocol, except that a request after ``shutdown`` is answered with InvalidRequest,
+    as the LSP specification says (pygls drops it and the client waits for ever)."""
+
+    def handle_message(self, message):
+        if self._shutdown and getattr(message, "method", "exit") != "exit" and getattr(message, "id", None) is not None:
+            error = JsonRpcInvalidRequest("the server is shut down: only 'exit' is accepted")
+            self._send_response(message.id, None, error.to_response_error())
+            return
+        super().handle_message(message)
+
+
 class BondcServer(LanguageServer):
     def __init__(self):
-        super().__init__("bondc", __version__)
+        super().__init__("bondc", __version__, protocol_cls=_Protocol)
         self.documents: dict[str, Document] = {}
         self.published: dict[str, set] = {}     # an open document -> the imported files' URIs it reported on
 

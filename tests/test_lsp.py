@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -308,3 +309,34 @@ def test_a_call_of_step_is_the_built_in_even_beside_a_parameter_named_step(clien
     (found,) = [client.request("textDocument/definition", {"textDocument": {"uri": uri}, "position": name})]
     found = found[0] if isinstance(found, list) else found
     assert found["range"]["start"] == {"line": 1, "character": 8}          # the parameter
+
+
+def test_a_request_after_shutdown_is_refused_with_invalid_request():
+    """The specification: requests after 'shutdown' error with InvalidRequest (-32600). pygls
+    dropped them, and a client waiting for the answer waited for ever."""
+    c = Client()
+    try:
+        c.request("initialize", {"processId": None, "rootUri": ROOT.as_uri(), "capabilities": {}})
+        c.notify("initialized", {})
+        assert c.request("shutdown", None) is None
+        c.next_id += 1
+        c.send({"jsonrpc": "2.0", "id": c.next_id, "method": "textDocument/hover",
+                "params": {"textDocument": {"uri": FLAGSHIP.as_uri()}, "position": {"line": 0, "character": 0}}})
+        replies = []
+
+        def answer():
+            reply = c.read()
+            while "method" in reply:        # notifications still queued
+                reply = c.read()
+            replies.append(reply)
+        reader = threading.Thread(target=answer, daemon=True)
+        reader.start()
+        reader.join(timeout=30)
+        assert replies, "no answer to a request after shutdown"
+        reply = replies[0]
+        assert reply["id"] == c.next_id and reply["error"]["code"] == -32600, reply
+        c.notify("exit", None)
+        assert c.process.wait(timeout=10) == 0
+    finally:
+        if c.process.poll() is None:
+            c.process.kill()
