@@ -2354,7 +2354,8 @@ class _Run:
                          "cause": "a law like sign(dp)*sqrt(abs(dp)) has an infinite slope at dp = 0: near it "
                                   "the time constant of what it feeds goes to zero",
                          "hint": "give the law a laminar band around 0, as real orifices have: "
-                                 "if abs(dp) < dp_l then K*dp/sqrt(dp_l) else K*sign(dp)*sqrt(abs(dp))"})
+                                 "if abs(dp) < dp_l then K*dp/sqrt(dp_l) else K*sign(dp)*sqrt(abs(dp)) "
+                                 "(std:hydraulics's LaminarTurbulentOrifice)"})
         if near and len(near) <= _MAX_HELD:
             held, modes, alpha = self.consistent_sliding_set(t, y, modes, near)
             if held:

@@ -323,6 +323,31 @@ def test_a_variable_orifice_opened_at_5_ms_fills_a_chamber_as_the_closed_form(tm
     assert np.all(result.outputs["valve.Q"][result.t < 0.005] == 0)
 
 
+@pytest.mark.parametrize("p0", [0.0, 150e5])
+def test_an_orifice_with_a_laminar_band_fills_and_drains_a_chamber_as_the_closed_form(tmp_path, p0):
+    """Turbulent while the drop d = p_s - p is beyond dp_l (sqrt(|d|) linear in time, as the plain
+    orifice), then laminar inside the band: d decays exponentially with tau = sqrt(dp_l)*V/(beta*k),
+    to 0 (where the plain orifice's slope is infinite). From an empty chamber the drop is positive;
+    from 150 bar the chamber drains back into the 100 bar supply, the drop negative."""
+    valve = "LaminarTurbulentOrifice valve : A = 1e-6, dp_l = 1e5"
+    text = _FILL.replace("%VALVE%", valve).replace("beta = 1.5e9", f"beta = 1.5e9, p0 = {p0}")
+    result = _run(tmp_path, text, 0.25, 0.001)
+    k, rate, dp_l, ps = 0.6 * 1e-6 * math.sqrt(2 / 870), 1.5e9 / 1e-3, 1e5, 100e5
+    d0 = ps - p0
+    t1 = (math.sqrt(abs(d0)) - math.sqrt(dp_l)) * 2 / (rate * k)       # the drop reaches the band
+    tau = math.sqrt(dp_l) / (rate * k)
+    t = result.t
+    turbulent = np.sign(d0) * np.maximum(math.sqrt(abs(d0)) - rate * k / 2 * t, 0) ** 2
+    laminar = np.sign(d0) * dp_l * np.exp(-np.maximum(t - t1, 0) / tau)
+    expected = ps - np.where(t < t1, turbulent, laminar)
+    assert 0.05 < t1 < 0.15 and t[-1] - t1 > 10 * tau
+    np.testing.assert_allclose(result.outputs["tank.p"], expected, rtol=0, atol=2e-7 * ps)
+    flow = result.outputs["valve.Q"]
+    np.testing.assert_allclose(flow, k * np.sign(ps - result.outputs["tank.p"]) * np.minimum(
+        np.sqrt(np.abs(ps - result.outputs["tank.p"])), np.abs(ps - result.outputs["tank.p"]) / math.sqrt(dp_l)),
+        rtol=1e-9, atol=1e-18)
+
+
 def test_laminar_restriction_relief_valve_pump_and_accumulator(tmp_path):
     # Pump D*w into a chamber relieved above p_crack: steady state p = p_crack + D*w/K_v.
     text = '''import "std:hydraulics"
