@@ -1607,6 +1607,23 @@ class _FiniteJacobian:
             return difference_jacobian(self.fun, t, y, np.asarray(self.fun(t, y), dtype=float))
 
 
+def _may_dip(left, middle, right) -> bool:
+    """Whether an exit sampled at the ends and the middle of an interval, positive at all three,
+    may dip below 0 between them: the parabola through the three comes within its own curvature
+    (the second difference, the size of what the parabola leaves out where the interval is long
+    against the exit's time scale) of 0 inside the interval. A 40 ms peak of a push past a static
+    limit, every 0.9 s, between tests 0.3 s apart: the parabola's lowest point is 0.5 N above 0,
+    its second difference 1.1 N, and the halves are searched until the peak is found."""
+    with np.errstate(all="ignore"):
+        curve = 2 * left + 2 * right - 4 * middle      # p(u) = left + slope*u + curve*u^2, u in [0, 1]
+        slope = 4 * middle - 3 * left - right
+        vertex = np.where(curve > 0, -slope / (2 * curve), 0.0)
+        inside = (vertex > 0) & (vertex < 1)
+        lowest = np.where(inside, left + slope * vertex + curve * vertex * vertex, np.minimum(left, right))
+        # an exit at 0 at an end (where the mode began) leaves through the sign test, not here
+        return bool(np.any((left > 0) & (right > 0) & (lowest - 0.5 * np.abs(curve) < 0)))
+
+
 def solver_class(method):
     """The ``OdeSolver``-like class for a solver name (any case): CVODE, IDA, or a ``solve_ivp`` method."""
     if isinstance(method, type):
@@ -3011,6 +3028,39 @@ class _Run:
             differences[:, j] = self.switches_at(t, shifted, modes, index) - base
         return differences
 
+    def crossing_inside(self, solver, modes, index, signs, before, after, deadband, fused):
+        """A switch that crosses and comes back inside the last step, on its side at both ends
+        (``before``, ``after``: ``m*g + deadband``), as (time, switch index), or None: the sign test
+        at the step's ends sees nothing where a hump of a state passes a threshold and returns
+        within one step. Its values at the step's middle, and where their parabola comes within its
+        curvature of the band, the halves in turn (:meth:`sliding_dip`), as for a sliding mode's
+        exits."""
+        t_old, t_new = solver.t_old, solver.t
+        if not t_old < t_new:
+            return None
+        if fused is not None:
+            frozen = np.ascontiguousarray(modes, dtype=float)
+            values = lambda tt: signs * np.array([fused(frozen, tt, k) for k in index]) + deadband
+        else:
+            dense = solver.dense_output()
+            values = lambda tt: signs * self.model.switches(tt, dense(tt), self.p, modes)[index] + deadband
+        with np.errstate(all="ignore"):
+            hit = self.sliding_dip(np.asarray(before, dtype=float), np.asarray(after, dtype=float), values,
+                                   t_old, t_new)
+        if hit is None:
+            return None
+        self._dense = None if fused is not None else dense
+        j = int(np.argmin(values(hit)))
+        # as a crossing at a step's end: the zero itself (no bias by the band) where it lies before
+        surface = lambda tt: values(tt)[j] - deadband[j]
+        if deadband[j] > 0 and t_old < hit and surface(t_old) > 0 >= surface(hit):
+            with np.errstate(all="ignore"):
+                try:
+                    hit = brentq(surface, t_old, hit, 4 * _EPS, 4 * _EPS)
+                except ValueError:
+                    pass
+        return hit, int(index[j])
+
     def crossing(self, solver, modes, index, signs, old, new, deadband):
         """The earliest switch crossing in the last step: (time, switch index), or None.
 
@@ -3029,7 +3079,7 @@ class _Run:
             # the common step: no switch in mode +-1 went below its band (the loop's first test, at once)
             before, after = signs * old + deadband, signs * new + deadband
             if not ((after < 0) | ((after == 0) & (before > 0))).any():
-                return None
+                return self.crossing_inside(solver, modes, index, signs, before, after, deadband, fused)
         for j, k in enumerate(index):
             sign, band = signs[j], deadband[j]
             if floors[k]:
@@ -3417,14 +3467,17 @@ class _Run:
             before = after
         return None
 
-    def sliding_dip(self, left, right, exits_at, a, b, depth=30):
+    def sliding_dip(self, left, right, exits_at, a, b, budget=None):
         """The end of a sliding mode inside (a, b) where its exits are positive at both ends, or None:
         an exit that dips below 0 and comes back between them (a push passing a static limit for less
-        than the spacing of the tests). Each exit's parabola through a, the middle and b is looked at;
-        where its vertex is inside and below 0, the halves are searched in turn."""
+        than the spacing of the tests). Each exit's parabola through a, the middle and b is looked at
+        (:func:`_may_dip`): where it comes within its own curvature of 0 inside, the halves are
+        searched in turn, at most 60 evaluations in all."""
+        budget = [60] if budget is None else budget
         middle_t = 0.5 * (a + b)
-        if depth == 0 or not a < middle_t < b:
+        if budget[0] <= 0 or not a < middle_t < b:
             return None
+        budget[0] -= 1
         middle = np.asarray(exits_at(middle_t), dtype=float)
         hit = self.sliding_end(left, middle, exits_at, a, middle_t)
         if hit is not None:
@@ -3432,17 +3485,12 @@ class _Run:
         hit = self.sliding_end(middle, right, exits_at, middle_t, b)
         if hit is not None:
             return hit
-        with np.errstate(all="ignore"):
-            curve = 2 * left + 2 * right - 4 * middle      # p(u) = left + slope*u + curve*u^2, u in [0, 1]
-            slope = 4 * middle - 3 * left - right
-            vertex = -slope / (2 * curve)
-            lowest = left + slope * vertex + curve * vertex * vertex
-        if not np.any((curve > 0) & (vertex > 0) & (vertex < 1) & (lowest < 0)):
+        if not _may_dip(left, middle, right):
             return None
-        hit = self.sliding_dip(left, middle, exits_at, a, middle_t, depth - 1)
+        hit = self.sliding_dip(left, middle, exits_at, a, middle_t, budget)
         if hit is not None:
             return hit
-        return self.sliding_dip(middle, right, exits_at, middle_t, b, depth - 1)
+        return self.sliding_dip(middle, right, exits_at, middle_t, b, budget)
 
     def sliding_check(self) -> float:
         """The longest stretch of a sliding mode whose exits are tested only at its ends: the run's
@@ -4052,7 +4100,7 @@ typedef struct {
     int n, switches, entries, banded, lower, upper, started, bad;
     double longest;     /* a sliding step longer than this goes back to the runtime (0: none) */
     const int *rows, *cols;
-    double *p, *m, *g, *values;
+    double *p, *m, *g, *values, *gmid;
     double t_stop;
     /* a Filippov sliding mode on switch `slide` (-1: none), between the corners mp (side +) and
        mm (side -): see bondc_driver_slide */
@@ -4318,9 +4366,10 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
     d->shifted = (double *)calloc(n + 1, sizeof(double));
     d->scratch = (double *)calloc(switches + 1, sizeof(double));
     d->ahead = (double *)calloc(switches + 1, sizeof(double));
+    d->gmid = (double *)calloc(switches + 1, sizeof(double));
     d->slide = -1;
     if (!d->m || !d->g || !d->values || !d->extra || !d->mp || !d->mm || !d->fp || !d->fm || !d->shifted
-        || !d->scratch || !d->ahead || SUNContext_Create(0, &d->ctx) != 0) return NULL;
+        || !d->scratch || !d->ahead || !d->gmid || SUNContext_Create(0, &d->ctx) != 0) return NULL;
     d->y = N_VNew_Serial(n, d->ctx);
     d->work = N_VNew_Serial(n, d->ctx);
     d->cvode = CVodeCreate(adams ? 1 : 2, d->ctx);
@@ -4378,6 +4427,33 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
                        int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 
+/* Whether a watched switch in mode +-1 may cross twice inside the step just taken (to t), where it is
+   on its side at both ends (g_old, d->g): its value at the step's middle (CVODE's interpolant) is
+   past its band, or the parabola through the three comes within its curvature of it (as _may_dip).
+   The runtime then looks (_Run.crossing). */
+static int switch_dips(bondc_driver *d, double t, int watched, const int *watch, const double *signs,
+                       const double *band, const double *g_old)
+{
+    double h = 0.0;
+    if (CVodeGetLastStep(d->cvode, &h) != 0 || !(h > 0)) return 0;
+    if (CVodeGetDky(d->cvode, t - 0.5 * h, 0, d->work) != 0) return 0;
+    bondc_switches(t - 0.5 * h, N_VGetArrayPointer(d->work), d->p, d->m, d->gmid);
+    for (int j = 0; j < watched; j++) {
+        if (signs[j] == 0) continue;
+        double left = signs[j] * g_old[j] + band[j], right = signs[j] * d->g[watch[j]] + band[j];
+        double mid = signs[j] * d->gmid[watch[j]] + band[j];
+        if (mid < 0) return 1;
+        double curve = 2 * left + 2 * right - 4 * mid, slope = 4 * mid - 3 * left - right;
+        double lowest = fmin(left, right);
+        if (curve > 0) {
+            double vertex = -slope / (2 * curve);
+            if (vertex > 0 && vertex < 1) lowest = left + slope * vertex + curve * vertex * vertex;
+        }
+        if (left > 0 && right > 0 && lowest - 0.5 * fabs(curve) < 0) return 1;
+    }
+    return 0;
+}
+
 int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *watch, const double *signs,
                          const double *band, double *g_old, double *ts, double *ys, int *count,
                          const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
@@ -4405,7 +4481,7 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
                 double before = signs[j] * g_old[j] + band[j], after = signs[j] * d->g[watch[j]] + band[j];
                 if (after < 0 || (after == 0 && before > 0)) crossed = 1;
             }
-            if (crossed) return 1;
+            if (crossed || switch_dips(d, t, watched, watch, signs, band, g_old)) return 1;
             for (int j = 0; j < watched; j++) g_old[j] = d->g[watch[j]];
         }
         int full = report_step(d, t, y, t_eval, n_eval, eval_next, eval_capacity, et, ey, eval_count);
@@ -4724,7 +4800,7 @@ static int report_step(bondc_driver *d, double t, const double *y, const double 
 /* Whether an exit of the sliding mode may dip below 0 inside the step just taken, whose middle is
    `middle`, where it is positive at both ends (left, right): a push passing a static limit for less
    than a step. The exits at the middle (into mid, from CVODE's interpolant) change sign from an end,
-   or the parabola through the three has its vertex inside the step and below 0: the runtime looks
+   or the parabola through the three comes within its curvature of 0 (_may_dip): the runtime looks
    (_Run.sliding_dip). The weights kept for the next step are those of its end, as without the test. */
 static int slide_dips(bondc_driver *d, double middle, const double *left, const double *right, double *mid,
                       int watched)
@@ -4735,13 +4811,15 @@ static int slide_dips(bondc_driver *d, double middle, const double *left, const 
     int dip = 0;
     if (CVodeGetDky(d->cvode, middle, 0, d->work) == 0) {
         slide_exits(d, middle, N_VGetArrayPointer(d->work), mid);
-        for (int j = 0; j < watched && !dip; j++) {
+        for (int j = 0; j < watched && !dip; j++) {     /* as _may_dip */
             if ((left[j] > 0 && mid[j] <= 0) || (left[j] >= 0 && mid[j] < 0)) dip = 1;
             double curve = 2 * left[j] + 2 * right[j] - 4 * mid[j], slope = 4 * mid[j] - 3 * left[j] - right[j];
+            double lowest = fmin(left[j], right[j]);
             if (curve > 0) {
                 double vertex = -slope / (2 * curve);
-                if (vertex > 0 && vertex < 1 && left[j] + slope * vertex + curve * vertex * vertex < 0) dip = 1;
+                if (vertex > 0 && vertex < 1) lowest = left[j] + slope * vertex + curve * vertex * vertex;
             }
+            if (left[j] > 0 && right[j] > 0 && lowest - 0.5 * fabs(curve) < 0) dip = 1;
         }
     }
     d->alpha = alpha;
@@ -4896,7 +4974,7 @@ void bondc_driver_free(bondc_driver *d)
     if (d->work) N_VDestroy(d->work);
     if (d->ctx) SUNContext_Free(&d->ctx);
     free(d->m); free(d->g); free(d->values); free(d->extra); free(d->mp); free(d->mm);
-    free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead);
+    free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead); free(d->gmid);
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
     free(d->newton); free(d->residual); free(d->delta); free(d->kept); free(d);
 }
