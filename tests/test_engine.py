@@ -7,6 +7,7 @@ much tighter tolerance.
 """
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,20 @@ ENGINE = Path(__file__).parent / "fixtures" / "engine"
 def _derive(name, sets=()):
     derived = derive_file(ENGINE / f"{name}.bg", sets=sets)
     return derived.state_space, derived.experiment
+
+
+def _simulated(tmp_path, monkeypatch, text, native, solver=None):
+    """``text`` simulated with the C code (native "1") or the numpy code ("0"), with ``solver`` put
+    in its experiment; the run must complete."""
+    monkeypatch.setenv("BONDC_NATIVE", native)
+    if solver is not None:
+        text = re.sub(r"(\n    t_end = [^\n]*)", rf'\1\n    solver = "{solver}"', text, count=1)
+    path = tmp_path / "model.bg"
+    path.write_text(text)
+    derived = derive_file(path, cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    assert result.complete, result.message
+    return result
 
 
 # ------------------------------------------------------------ square-root laws
@@ -365,14 +380,9 @@ def test_every_breakaway_of_a_long_run_is_found_however_far_apart_the_exit_tests
     exits of the held mass were tested 0.3 s apart, and the parabola through three tests never
     came below 0: the first 8 breakaways and 11 of the 334 were missed (at t_end = 20 s all were
     found). Where the parabola comes within its own curvature of 0, the halves are searched."""
-    monkeypatch.setenv("BONDC_NATIVE", native)
-    path = tmp_path / "long.bg"
-    path.write_text(PERIODIC_PUSH.replace("15 + 10*sin(2*pi*t)", "2 + 1.01*sin(7*t)")
-                    .replace("coulomb(f, 20, 24.5)", "coulomb(f, 2, 3)").replace("t_end = 3 [s]", "t_end = 300 [s]")
-                    .replace("rtol = 1e-9\n    atol = 1e-12\n", ""))
-    derived = derive_file(path, cache=False)
-    result = simulate(derived.state_space, derived.experiment)
-    assert result.complete, result.message
+    result = _simulated(tmp_path, monkeypatch, PERIODIC_PUSH.replace("15 + 10*sin(2*pi*t)", "2 + 1.01*sin(7*t)")
+                        .replace("coulomb(f, 20, 24.5)", "coulomb(f, 2, 3)").replace("t_end = 3 [s]", "t_end = 300 [s]")
+                        .replace("rtol = 1e-9\n    atol = 1e-12\n", ""), native)
     ends = [time for time, label in result.events if label.endswith("ends")]
     away = math.asin(1 / 1.01) / 7
     expected = [away + 2 * math.pi * k / 7 for k in range(400) if away + 2 * math.pi * k / 7 < 300]
@@ -420,12 +430,8 @@ def test_a_breakaway_shorter_than_a_step_of_the_moving_spring_is_found(tmp_path,
     iteration failed step after step on the sliding mode's Jacobian, the corners' Jacobians
     weighted, which leaves out how the weights change with the state. It now takes the
     combination's own Jacobian by differences, and the breakaway to 1e-8 s."""
-    monkeypatch.setenv("BONDC_NATIVE", native)
-    path = tmp_path / "pull.bg"
-    path.write_text(SPRING_PULL.replace("t_end = 200 [s]", f"t_end = {t_end} [s]\n    solver = \"{solver}\""))
-    derived = derive_file(path, cache=False)
-    result = simulate(derived.state_space, derived.experiment)
-    assert result.complete, result.message
+    result = _simulated(tmp_path, monkeypatch, SPRING_PULL.replace("t_end = 200 [s]", f"t_end = {t_end} [s]"),
+                        native, solver)
     m, Fc, Fs, k, V, w = 1.0, 2.0, 3.0, 100.0, 0.03001, 2.0
     away = math.acos(1 - Fs * w / (k * V)) / w
 
@@ -480,12 +486,7 @@ def test_a_narrow_band_of_an_abs_condition_is_not_stepped_over(tmp_path, monkeyp
     long, and one stepped from v > v_th to v < -v_th, where ``v_th - abs(v)`` has the same sign at
     both ends: the band was missed and the mass sped backwards to v = -6.5 m/s. The condition is
     now two comparisons, v < v_th and -v < v_th, each crossed once."""
-    monkeypatch.setenv("BONDC_NATIVE", native)
-    path = tmp_path / "band.bg"
-    path.write_text(BAND.replace("t_end = 10 [s]", f"t_end = 10 [s]\n    solver = \"{solver}\""))
-    derived = derive_file(path, cache=False)
-    result = simulate(derived.state_space, derived.experiment)
-    assert result.complete, result.message
+    result = _simulated(tmp_path, monkeypatch, BAND, native, solver)
     t1 = (1 - 1e-4) / 0.75
     v = result.outputs["v"]
     before = result.t < t1
@@ -516,12 +517,7 @@ def test_a_switch_that_crosses_and_comes_back_within_one_step_is_found(tmp_path,
     switch (q - 9.99 on that side) is negative at both ends of the step that holds the window: the
     sign test at the ends saw nothing, and CVODE counted 3 of the 6 windows, LSODA none. Each step's
     switches are now looked at in its middle too (the parabola test of the sliding exits)."""
-    monkeypatch.setenv("BONDC_NATIVE", native)
-    path = tmp_path / "hump.bg"
-    path.write_text(HUMP.replace("t_end = 20 [s]", f"t_end = 20 [s]\n    solver = \"{solver}\""))
-    derived = derive_file(path, cache=False)
-    result = simulate(derived.state_space, derived.experiment)
-    assert result.complete, result.message
+    result = _simulated(tmp_path, monkeypatch, HUMP, native, solver)
     assert len(result.events) == 12, result.events
     window = 2 * math.acos(1 - 0.01 / 10)
     # the windows' edges move with q's error at rtol 1e-6 (4e-5 at the end, where q' = 0.45 there)
