@@ -4427,6 +4427,21 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
                        int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 
+/* As _may_dip, for one value positive while nothing happens (a sliding mode's exit, a switch's
+   m*g + band) at the start, the middle and the end of a step: 1 where it is past 0 in the middle,
+   or the parabola through the three comes within its own curvature of 0 inside the step. */
+static int may_dip(double left, double mid, double right)
+{
+    if ((left > 0 && mid <= 0) || (left >= 0 && mid < 0)) return 1;
+    double curve = 2 * left + 2 * right - 4 * mid, slope = 4 * mid - 3 * left - right;
+    double lowest = fmin(left, right);
+    if (curve > 0) {
+        double vertex = -slope / (2 * curve);
+        if (vertex > 0 && vertex < 1) lowest = left + slope * vertex + curve * vertex * vertex;
+    }
+    return left > 0 && right > 0 && lowest - 0.5 * fabs(curve) < 0;
+}
+
 /* Whether a watched switch in mode +-1 may cross twice inside the step just taken (to t), where it is
    on its side at both ends (g_old, d->g): its value at the step's middle (CVODE's interpolant) is
    past its band, or the parabola through the three comes within its curvature of it (as _may_dip).
@@ -4438,19 +4453,9 @@ static int switch_dips(bondc_driver *d, double t, int watched, const int *watch,
     if (CVodeGetLastStep(d->cvode, &h) != 0 || !(h > 0)) return 0;
     if (CVodeGetDky(d->cvode, t - 0.5 * h, 0, d->work) != 0) return 0;
     bondc_switches(t - 0.5 * h, N_VGetArrayPointer(d->work), d->p, d->m, d->gmid);
-    for (int j = 0; j < watched; j++) {
-        if (signs[j] == 0) continue;
-        double left = signs[j] * g_old[j] + band[j], right = signs[j] * d->g[watch[j]] + band[j];
-        double mid = signs[j] * d->gmid[watch[j]] + band[j];
-        if (mid < 0) return 1;
-        double curve = 2 * left + 2 * right - 4 * mid, slope = 4 * mid - 3 * left - right;
-        double lowest = fmin(left, right);
-        if (curve > 0) {
-            double vertex = -slope / (2 * curve);
-            if (vertex > 0 && vertex < 1) lowest = left + slope * vertex + curve * vertex * vertex;
-        }
-        if (left > 0 && right > 0 && lowest - 0.5 * fabs(curve) < 0) return 1;
-    }
+    for (int j = 0; j < watched; j++)
+        if (signs[j] != 0 && may_dip(signs[j] * g_old[j] + band[j], signs[j] * d->gmid[watch[j]] + band[j],
+                                     signs[j] * d->g[watch[j]] + band[j])) return 1;
     return 0;
 }
 
@@ -4811,16 +4816,7 @@ static int slide_dips(bondc_driver *d, double middle, const double *left, const 
     int dip = 0;
     if (CVodeGetDky(d->cvode, middle, 0, d->work) == 0) {
         slide_exits(d, middle, N_VGetArrayPointer(d->work), mid);
-        for (int j = 0; j < watched && !dip; j++) {     /* as _may_dip */
-            if ((left[j] > 0 && mid[j] <= 0) || (left[j] >= 0 && mid[j] < 0)) dip = 1;
-            double curve = 2 * left[j] + 2 * right[j] - 4 * mid[j], slope = 4 * mid[j] - 3 * left[j] - right[j];
-            double lowest = fmin(left[j], right[j]);
-            if (curve > 0) {
-                double vertex = -slope / (2 * curve);
-                if (vertex > 0 && vertex < 1) lowest = left[j] + slope * vertex + curve * vertex * vertex;
-            }
-            if (left[j] > 0 && right[j] > 0 && lowest - 0.5 * fabs(curve) < 0) dip = 1;
-        }
+        for (int j = 0; j < watched && !dip; j++) dip = may_dip(left[j], mid[j], right[j]);
     }
     d->alpha = alpha;
     for (int i = 0; i < held; i++) d->alphas[i] = d->kept[i];
