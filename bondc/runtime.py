@@ -3079,6 +3079,10 @@ class _Run:
             # the common step: no switch in mode +-1 went below its band (the loop's first test, at once)
             before, after = signs * old + deadband, signs * new + deadband
             if not ((after < 0) | ((after == 0) & (before > 0))).any():
+                if self.model.dae is not None:
+                    # an algebraic loop's switches: each evaluation between the steps would move the
+                    # loop's Newton iteration off the guesses the run takes from its last solution
+                    return None
                 return self.crossing_inside(solver, modes, index, signs, before, after, deadband, fused)
         for j, k in enumerate(index):
             sign, band = signs[j], deadband[j]
