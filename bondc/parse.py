@@ -570,8 +570,10 @@ def _inside_when_block(text: str, start: int) -> bool:
     return False
 
 
-_DECLARATION = re.compile(r"(when|output|param|input|experiment|fn|state|discrete|port|defaults|model|import)\b"
-                          r"|[A-Za-z_]\w*\s+[A-Za-z_]\w*\s*(\(|:|\")|.*->")
+# A line that starts a statement of the model, never one of a when block's body: a keyword that
+# begins a declaration, an element (KIND NAME followed by ':', '(' or its description) or a bond.
+_OPENERS = sorted((KEYWORDS | STATEMENT_KEYWORDS) - {"end", "if", "then", "else", "and", "or", "not"})
+_DECLARATION = re.compile(rf"({'|'.join(_OPENERS)})\b|[A-Za-z_]\w*\s+[A-Za-z_]\w*\s*(\(|:|\")|.*->")
 
 
 def _unclosed_when(text: str, offset: int) -> tuple[int, int] | None:
