@@ -14,6 +14,7 @@ import re
 import subprocess
 import sys
 import textwrap
+import types
 from pathlib import Path
 
 import numpy as np
@@ -408,6 +409,44 @@ def test_generated_module_copy_of_the_runtime_is_verbatim():
     source = emit(ss, experiment)
     runtime_text = (ROOT / "bondc" / "runtime.py").read_text(encoding="utf-8")
     assert runtime_text.rstrip("\n") in source
+
+
+def test_a_module_compiled_with_its_runtime_once_per_process_is_the_whole_text_compiled():
+    """compile_model compiles a module's copy of the runtime once per process (under runtime.py's
+    own name and lines) and the rest numbered as in the whole text: the same functions at the
+    same lines, and the same run to the bit, as the text compiled whole."""
+    import bondc.simulate as simulate_module
+    from bondc.simulate import _module_codes
+
+    _, ss, experiment = derive("friction")
+    source = emit(ss, experiment)
+    whole = load_module(source)
+    codes = _module_codes(source, "<generated>")
+    assert len(codes) == 3 and _module_codes(source, "<other>")[0] is codes[0]      # compiled once
+    parts = {"__name__": "generated", "__file__": str(SIM / "generated.py")}
+    for code in codes:
+        exec(code, parts)
+    functions = {name: value for name, value in whole.items() if isinstance(value, types.FunctionType)}
+    assert functions and set(functions) == {name for name, value in parts.items()
+                                            if isinstance(value, types.FunctionType)}
+    runtime_file = str(ROOT / "bondc" / "runtime.py")
+    runtime_lines = (ROOT / "bondc" / "runtime.py").read_text(encoding="utf-8").splitlines()
+    source_lines = source.splitlines()
+    for name, function in functions.items():
+        mine = parts[name].__code__
+        if mine.co_filename == runtime_file:        # the runtime's: its own file's line
+            assert runtime_lines[mine.co_firstlineno - 1] in source_lines[function.__code__.co_firstlineno - 1:][:1]
+        else:                                       # the model's: the line of the whole text
+            assert (mine.co_filename, mine.co_firstlineno) == ("<generated>", function.__code__.co_firstlineno)
+    assert parts["_rhs"].__code__.co_filename == "<generated>"
+    assert parts["simulate_model"].__code__.co_filename == runtime_file
+    assert parts["__doc__"] == whole["__doc__"]
+    a = whole["simulate_model"](whole["_MODEL"], t_end=0.5, native=False)
+    b = parts["simulate_model"](parts["_MODEL"], t_end=0.5, native=False)
+    assert np.array_equal(a.t, b.t) and all(np.array_equal(a.states[k], b.states[k]) for k in a.states)
+    # a text without the runtime's copy (another version's) is compiled whole
+    assert len(_module_codes(source.replace("def simulate_model(", "def simulate_model_(", 1), "<x>")) == 1
+    assert simulate_module._RUNTIME_CODE["code"] is codes[0]
 
 
 def test_model_code_golden(update_golden):

@@ -355,6 +355,7 @@ end
     assert "tighten" not in warning.hint
 
 
+@pytest.mark.slow      # 8 s: three energy accounts of loop models
 def test_a_models_algebraic_loop_is_evaluated_in_c_for_its_energy_account(monkeypatch):
     """The diode bridge is evaluated point by point (its loop is solved at every point): the energy
     account takes its right-hand side and switches from the C code (Newton inside C) where that is

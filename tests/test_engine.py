@@ -416,7 +416,7 @@ end
 """
 
 
-@pytest.mark.parametrize("solver, t_end", [("CVODE", 200), ("Radau", 20)])
+@pytest.mark.parametrize("solver, t_end", [pytest.param("CVODE", 200, marks=pytest.mark.slow), ("Radau", 20)])
 @pytest.mark.parametrize("native", ["1", "0"])
 def test_a_breakaway_shorter_than_a_step_of_the_moving_spring_is_found(tmp_path, monkeypatch, native, solver, t_end):
     """The held mass's spring is stretched by V/w (1 - cos wt): its force passes the 3 N static
@@ -684,6 +684,7 @@ def _bridge_solution(vs, vc, Rs=1.0, Ron=0.1, Roff=1e6, RL=100.0):
     raise AssertionError("no consistent diode states")
 
 
+@pytest.mark.slow      # 3.5 s
 def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     result = run(ENGINE / "diode_bridge.bg")
     assert result.complete, result.message
@@ -698,6 +699,7 @@ def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     assert len(switching) >= 8 and len(switching) % 2 == 0
 
 
+@pytest.mark.slow      # 5 s
 def test_a_loop_that_loses_its_root_stops_with_the_loops_own_cause_and_hint():
     """nonlinear_loop.bg with a3 = -1: r2's law e = -f^3 + f folds back. The loop u = R3 (i - f2) =
     -f2^3 + f2, i.e. f2^3 - 4 f2 + 3 i = 0, loses the root the run follows (from f2 = 0) where

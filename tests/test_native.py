@@ -400,7 +400,8 @@ def test_the_cvode_driver_integrates_whole_segments_in_c():
 @pytest.mark.parametrize("model, points, capacity", [
     ("models/mass_spring_damper.bg", 401, None),
     ("models/mass_spring_damper.bg", 20_001, 16),          # many points per step: the buffer fills
-    ("models/electro_pneumatic_hybrid.bg", 2_001, None),   # friction sticking and sliding too
+    pytest.param("models/electro_pneumatic_hybrid.bg", 2_001, None,     # friction sticking and sliding too
+                 marks=pytest.mark.slow),
     ("tests/fixtures/engine/pwm_rl.bg", 1_001, None),
 ])
 def test_a_run_reported_on_a_grid_takes_its_points_from_the_driver_as_the_step_loop_does(
@@ -940,6 +941,7 @@ def test_the_drivers_deadbands_and_switch_values_are_the_step_loops_to_the_bit()
             assert step.switch_value(modes, tt, k) == expected
 
 
+@pytest.mark.slow      # 3 s: a large model's C build
 @needs_cc
 def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute_the_same(tmp_path, monkeypatch):
     """From ``_NATIVE_SPLIT_FROM`` characters on, each C function (and the driver) is a translation
@@ -1025,6 +1027,7 @@ def _load_in_forked_child(source, work, queue):
     queue.put((ffi is not None, os.path.isdir(work)))
 
 
+@pytest.mark.slow      # 4 s: a forked build
 @needs_cc
 def test_a_forked_process_never_finishes_or_removes_its_parents_build(tmp_path, monkeypatch):
     """Sweep workers are forked: a child inherits its parent's build started ahead, but only the

@@ -132,6 +132,7 @@ def test_a_failed_point_is_reported_and_the_others_computed():
     assert data["points"][0]["metrics"]["x.final"] == pytest.approx(F0 / 800, rel=1e-5)
 
 
+@pytest.mark.slow      # 4 s: flagship runs
 def test_flagship_dependent_parameters_follow_the_varied_mass():
     # F_n0 = M*g - (P0 - P_atm)*Ar, delta0 and theta0 depend on M: the run starts at rest at the new
     # equilibrium only if they were recomputed (the values of the model: g, P0, P_atm, Ar, lead)

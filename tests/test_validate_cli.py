@@ -92,6 +92,7 @@ def test_scaled_measurements_fail_with_exit_1(simulated, tmp_path):
     assert "i_meas (measured)" in section and "i (simulated)" in section
 
 
+@pytest.mark.slow      # 7 s: a whole report
 def test_report_with_data_adds_the_section_and_exits_1_when_a_signal_fails(simulated, tmp_path):
     from bondc.report.build import run_report
 
