@@ -541,6 +541,56 @@ def test_an_if_condition_that_lands_on_its_boundary_says_true_or_false_as_its_co
     assert labels == [f"if {condition} in s.e -> {after}"], result.events
 
 
+_TWO_HELD = """model TwoHeld "two masses on dry friction, each pushed on its own"
+  param f1 = 1 [N]
+  param rate = 1 [N/s]
+  MSe push0 : e = PUSH
+  I mass0 : f = p/1
+  R fr0 : e = coulomb(f, 2, 3)
+  1 j0
+  push0 -> j0
+  j0 -> mass0
+  j0 -> fr0
+  MSe push1 : e = -f1
+  I mass1 : f = p/1
+  R fr1 : e = coulomb(f, 2, 3)
+  1 j1
+  push1 -> j1
+  j1 -> mass1
+  j1 -> fr1
+  output v0 [m/s] = mass0.f
+  output v1 [m/s] = mass1.f
+  output F0 [N] = fr0.e
+  output F1 [N] = fr1.e
+  experiment run
+    t_end = 3 [s]
+  end
+end
+"""
+
+
+@pytest.mark.parametrize("push, solver, native", [
+    *[("f1", solver, native) for solver in ("BDF", "Radau", "LSODA", "CVODE") for native in ("1", "0")],
+    ("f1 + rate*t", "BDF", "1"), ("f1 + rate*t", "Radau", "0")])
+def test_two_frictions_holding_opposite_forces_hold_with_every_solver(tmp_path, monkeypatch, push, solver, native):
+    """Two masses at rest, pushed with 1 N and -1 N, below the 3 N static limit of their frictions:
+    both are held, each friction carrying its push. scipy's BDF stopped at t = 0.2 ms (E811): the
+    two weights of the sliding combination, solved from the last ones, came out an ulp apart from
+    call to call, and BDF's Newton iteration declared the rounding noise divergent. With a push of
+    1 + t, mass 0 breaks away at t = 2 s and slides against 2 N: v0 = t^2/2 - t."""
+    result = _simulated(tmp_path, monkeypatch, _TWO_HELD.replace("PUSH", push), native, solver)
+    t, out = result.t, result.outputs
+    moving = t > 2.0 - 1e-6 if push != "f1" else np.zeros(t.size, dtype=bool)
+    assert np.max(np.abs(out["v1"])) < 1e-12
+    np.testing.assert_allclose(out["F1"], -1.0, rtol=1e-9)
+    assert np.max(np.abs(out["v0"][~moving])) < 1e-12
+    np.testing.assert_allclose(out["F0"][~moving], 1.0 + (t[~moving] if push != "f1" else 0.0), rtol=1e-9)
+    if moving.any():
+        np.testing.assert_allclose(out["v0"][moving], t[moving] ** 2 / 2 - t[moving], rtol=1e-6, atol=1e-8)
+        np.testing.assert_allclose(out["F0"][t > 2.0 + 1e-6], 2.0, rtol=1e-9)
+        assert [round(time, 6) for time, label in result.events if "ends" in label] == [2.0]
+
+
 # ----------------------------------------------------------------------- PWM
 
 def _rl_closed_form(times, edges, levels, R, L):
