@@ -3079,11 +3079,14 @@ class _Run:
             # the common step: no switch in mode +-1 went below its band (the loop's first test, at once)
             before, after = signs * old + deadband, signs * new + deadband
             if not ((after < 0) | ((after == 0) & (before > 0))).any():
-                if self.model.dae is not None:
-                    # an algebraic loop's switches: each evaluation between the steps would move the
-                    # loop's Newton iteration off the guesses the run takes from its last solution
-                    return None
-                return self.crossing_inside(solver, modes, index, signs, before, after, deadband, fused)
+                # an algebraic loop's switches, evaluated between the steps, would move the warm starts
+                # of its Newton iteration (its last solutions) that the run's next points start from
+                kept = dict(_BLOCK_SOLUTIONS)
+                try:
+                    return self.crossing_inside(solver, modes, index, signs, before, after, deadband, fused)
+                finally:
+                    _BLOCK_SOLUTIONS.clear()
+                    _BLOCK_SOLUTIONS.update(kept)
         for j, k in enumerate(index):
             sign, band = signs[j], deadband[j]
             if floors[k]:
