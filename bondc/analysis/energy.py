@@ -856,6 +856,16 @@ class _Trajectory:
         flat_modes = np.repeat(self.modes, 5, axis=0)
         values = self.model.variables(times.ravel(), states.reshape(n, steps * 5), flat_modes)
         values = values.reshape(len(self.model.variable_names), steps, 5)
+        outside = ~np.all(np.isfinite(values), axis=0)
+        if np.any(outside):
+            # a node whose interpolated state is a little outside its step's branch (a level that
+            # reaches 0 with zero slope, interpolated to -1e-20 under its law's sqrt): the laws'
+            # own branches at that node, as the unfrozen law evaluates them
+            rows, columns = np.nonzero(outside)
+            node_t, node_x = times[rows, columns], states[:, rows, columns]
+            with np.errstate(all="ignore"):
+                again = self.model.variables(node_t, node_x, self.model.modes(node_t, node_x))
+            values[:, rows, columns] = np.where(np.isfinite(again), again, values[:, rows, columns])
         for b in np.unique(self.block[self.block >= 0]):
             # a recorded sliding mode: its combination at the nodes, the states there from the cubic
             # Hermite interpolant of its rates
