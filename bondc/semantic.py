@@ -58,7 +58,7 @@ BUILTINS: Mapping[str, tuple[int, int | None]] = {name: b.arity for name, b in b
 
 RESERVED = {"t": "time", "pi": "the constant pi"}
 
-SOLVERS = ("CVODE", "CVODE-BDF", "CVODE-Adams", "IDA", "RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+SOLVERS = ("auto", "CVODE", "CVODE-BDF", "CVODE-Adams", "IDA", "DOPRI5", "RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
 
 # Experiment settings: name -> what its value is.
 SETTINGS: Mapping[str, str] = {
@@ -1799,7 +1799,7 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
         if item.value.value not in SOLVERS:
             m.report(_error("E317", f"unknown solver '{item.value.value}'", item.value.span,
                             hint=_join_hints(_did_you_mean(item.value.value, SOLVERS),
-                                             "solvers (SUNDIALS CVODE and IDA, or scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
+                                             "solvers (auto: chosen for stiffness; SUNDIALS CVODE and IDA; bondc's DOPRI5; scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
             return
     elif kind == "outputs":
         items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)

@@ -1273,7 +1273,8 @@ def _chain_text(n, m=1.0, k=400.0, b=2.0, b0=0.5, force=10.0, interleaved=False)
     for i in range(1, n):
         lines += [f"  v{i} -> link{i} -> v{i + 1}", f"  link{i} -> rel{i}", f"  rel{i} -> spring{i}",
                   f"  rel{i} -> damper{i}"]
-    lines += ["  experiment run", "    t_end = 2 [s]", "    rtol = 1e-8", "    atol = 1e-10", "  end", "end"]
+    lines += ["  experiment run", "    t_end = 2 [s]", "    rtol = 1e-8", "    atol = 1e-10", "    solver = \"CVODE\"", "  end",
+              "end"]
     return "\n".join(lines) + "\n"
 
 

@@ -1,0 +1,251 @@
+"""The explicit Dormand-Prince solver (DOPRI5) and the default solver, ``auto``, that takes it for
+a smooth model that is not stiff.
+
+Independent expectations: closed forms (the mass-spring-damper's step response, a driven RC
+circuit), scipy's RK45 (the same pair, stepped from Python: the numpy code's solver) for the C
+stepper's steps, scipy's Radau at tight tolerances for a model that stiffens, and the
+eigenvalues numpy finds for the spectral radius ``auto`` estimates.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from bondc import runtime
+from bondc.pipeline import derive_file
+from bondc.simulate import compile_model
+
+ROOT = Path(__file__).resolve().parent.parent
+HAVE_CXX = bool(shutil.which("c++") or shutil.which("g++") or shutil.which("clang++"))
+needs_cxx = pytest.mark.skipif(not HAVE_CXX or runtime.load_erk()[0] is None,
+                               reason="bondc's explicit stepper cannot be built here (no C++ compiler)")
+
+
+@functools.lru_cache(maxsize=None)
+def _compiled(path):
+    derived = derive_file(path, cache=False)
+    return compile_model(derived.state_space), derived.experiment
+
+
+def _from_text(tmp_path, text, name="model.bg"):
+    path = tmp_path / name
+    path.write_text(text)
+    derived = derive_file(path, cache=False)
+    return compile_model(derived.state_space), derived.experiment
+
+
+def _simulate(namespace, experiment, **settings):
+    settings = {"t_end": experiment.t_end, "rtol": experiment.rtol, "atol": experiment.atol,
+                "max_step": experiment.max_step, **settings}
+    return namespace["simulate_model"](namespace["_MODEL"], **settings)
+
+
+def _underdamped(t, force=10.0, m=2.0, k=800.0, b=12.0, t_step=0.1):
+    wn, zeta = math.sqrt(k / m), b / (2 * math.sqrt(k * m))
+    wd, s = wn * math.sqrt(1 - zeta ** 2), t - t_step
+    return np.where(s >= 0, force / k * (1 - np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta / math.sqrt(
+        1 - zeta ** 2) * np.sin(wd * s))), 0.0)
+
+
+@needs_cxx
+@pytest.mark.parametrize("native", [None, False])
+def test_dopri5_gives_the_step_response_of_the_mass_spring_damper(native):
+    """DOPRI5 in C (Boost.Odeint's pair in the driver) and with the numpy code (scipy's RK45): the
+    closed-form step response, at every recorded point and on a grid from the interpolant."""
+    namespace, experiment = _compiled(ROOT / "models" / "mass_spring_damper.bg")
+    run = _simulate(namespace, experiment, method="DOPRI5", native=native)
+    assert run.complete and run.stats["code"] == ("native" if native is None else "numpy")
+    np.testing.assert_allclose(run.states["spring.q"], _underdamped(run.t), rtol=0, atol=1e-8)
+    grid = np.linspace(0.0, experiment.t_end, 1237)
+    gridded = _simulate(namespace, experiment, method="DOPRI5", native=native, t_eval=grid)
+    np.testing.assert_array_equal(gridded.t, grid)
+    np.testing.assert_allclose(gridded.states["spring.q"], _underdamped(grid), rtol=0, atol=1e-8)
+
+
+@needs_cxx
+@pytest.mark.parametrize("model", ["models/mass_spring_damper.bg", "models/quarter_car.bg",
+                                   "tests/fixtures/engine/pwm_rl.bg", "models/dc_motor_gear.bg"])
+def test_the_c_stepper_takes_the_steps_of_scipys_rk45(model):
+    """The C driver's explicit stepper controls its steps as scipy's RK45 does (error norm, step
+    factors, first step): the C code and the numpy code take the same steps, to rounding, and
+    their events (a PWM's edges) fall at the same instants."""
+    namespace, experiment = _compiled(ROOT / model)
+    c_run = _simulate(namespace, experiment, method="DOPRI5")
+    numpy_run = _simulate(namespace, experiment, method="DOPRI5", native=False)
+    assert c_run.stats["code"] == "native" and c_run.stats["linear_solver"] == "none"
+    assert c_run.stats["driver_segments"] >= 1 and numpy_run.stats["code"] == "numpy"
+    assert c_run.t.size == numpy_run.t.size and c_run.stats["steps"] == numpy_run.stats["steps"]
+    np.testing.assert_allclose(c_run.t, numpy_run.t, rtol=0, atol=1e-9 * experiment.t_end)
+    assert [label for _, label in c_run.events] == [label for _, label in numpy_run.events]
+    np.testing.assert_allclose([t for t, _ in c_run.events], [t for t, _ in numpy_run.events], rtol=0, atol=1e-9)
+    for name, values in numpy_run.states.items():
+        scale = max(float(np.max(np.abs(values))), 1e-12)
+        assert float(np.max(np.abs(c_run.states[name] - values))) <= 1e-7 * scale, name
+
+
+@needs_cxx
+def test_auto_takes_dopri5_for_a_smooth_model_that_is_not_stiff():
+    """The mass-spring-damper (a step of time, no switch of the state; spectral radius 20 1/s over
+    2 s): DOPRI5, with the same run as asked for by name; the result equals the closed form."""
+    namespace, experiment = _compiled(ROOT / "models" / "mass_spring_damper.bg")
+    auto = _simulate(namespace, experiment)
+    assert experiment.solver is None and auto.stats["solver"] == "DOPRI5"
+    assert auto.stats["spectral_radius"] == pytest.approx(20.0, rel=0.25)
+    named = _simulate(namespace, experiment, method="DOPRI5")
+    np.testing.assert_array_equal(auto.t, named.t)
+    np.testing.assert_allclose(auto.states["spring.q"], _underdamped(auto.t), rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("model", ["tests/fixtures/sim/friction.bg", "tests/fixtures/engine/bouncing_ball.bg",
+                                   "tests/fixtures/engine/relief_valve.bg"])
+def test_auto_keeps_cvode_for_a_model_with_switches_of_the_state(model):
+    """Friction (sliding modes), a when clause on a state, a relief valve: CVODE, as before."""
+    namespace, experiment = _compiled(ROOT / model)
+    run = _simulate(namespace, experiment)
+    assert run.complete and run.stats["solver"] == "CVODE"
+    named = _simulate(namespace, experiment, method="CVODE")
+    np.testing.assert_array_equal(run.t, named.t)
+    assert run.events == named.events
+
+
+STIFF_RC = """model StiffRC
+  param R1 = 1 [Ohm]
+  param C1 = 1 [F]
+  param R2 = 1 [Ohm]
+  param C2 = 1e-5 [F]
+  Se source : e = 1
+  R  r1 : e = R1*f
+  C  c1 : e = q/C1
+  R  r2 : e = R2*f
+  C  c2 : e = q/C2
+  1  s1
+  0  n1
+  1  s2
+  source -> s1
+  s1 -> r1
+  s1 -> n1
+  n1 -> c1
+  n1 -> s2
+  s2 -> r2
+  s2 -> c2
+  output v2 [V] = c2.e
+  experiment run
+    t_end = 5 [s]
+  end
+end
+"""
+
+
+@needs_cxx
+def test_auto_takes_cvode_for_a_stiff_model(tmp_path):
+    """Two RC stages with time constants of 1 s and 10 us (spectral radius about 2e5 1/s): the
+    explicit pair would need 300 000 steps for its stability alone over 5 s, so CVODE."""
+    namespace, experiment = _from_text(tmp_path, STIFF_RC)
+    run = _simulate(namespace, experiment)
+    assert run.complete and run.stats["solver"] == "CVODE"
+    model = namespace["_Model"](namespace["_MODEL"])
+    p = namespace["param_array"](model.PARAMETERS)
+    jacobian = np.asarray(model.jac(0.0, np.asarray(model.x0(p), dtype=float), p, np.zeros(0)))
+    radius = float(np.max(np.abs(np.linalg.eigvals(jacobian))))
+    assert run.stats["spectral_radius"] == pytest.approx(radius, rel=0.25) and radius > 1e5
+
+
+STIFFENING = """model Stiffening "a current into a capacitor whose leak grows: its time constant falls from 1 s to 1 us"
+  param C = 1 [F]
+  input G [1/Ohm] = 1 + 1e6*t
+  Sf source : f = 1
+  C  cap : e = q/C
+  R  leak : f = G*e
+  0  n
+  source -> n
+  n -> cap
+  n -> leak
+  output v [V] = cap.e
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+@needs_cxx
+def test_auto_goes_on_with_cvode_where_the_model_becomes_stiff(tmp_path):
+    """At the start the model is not stiff (spectral radius 1 1/s), so DOPRI5; its leak then grows
+    until the explicit pair's steps are held by its stability (h < 3.3/G): auto looks again every
+    500 steps and takes CVODE for the rest of the run, where DOPRI5 alone takes 150 000 steps. The
+    voltage equals scipy's Radau at tight tolerances (q' = 1 - G(t) q/C)."""
+    namespace, experiment = _from_text(tmp_path, STIFFENING)
+    run = _simulate(namespace, experiment)
+    assert run.complete, run.message
+    note = run.stats["solver_note"]
+    assert note.startswith("auto: DOPRI5 until t=") and "then CVODE" in note
+    switched = float(note.split("t=")[1].split(" s")[0])
+    assert 0.0 < switched < 0.2
+    explicit = _simulate(namespace, experiment, method="DOPRI5")
+    assert run.stats["steps"] < explicit.stats["steps"] / 10
+
+    reference = solve_ivp(lambda t, q: [1 - (1 + 1e6 * t) * q[0]], (0.0, 1.0), [0.0], method="Radau",
+                          rtol=1e-11, atol=1e-14, dense_output=True, jac=lambda t, q: [[-(1 + 1e6 * t)]])
+    np.testing.assert_allclose(run.outputs["v"], reference.sol(run.t)[0], rtol=1e-4, atol=1e-9)
+
+
+@needs_cxx
+@pytest.mark.parametrize("case", ["chain", "flagship"])
+def test_the_spectral_radius_estimate_follows_the_jacobians_eigenvalues(case, tmp_path):
+    """The power iteration on difference quotients (states scaled by their size) against numpy's
+    eigenvalues of the analytic Jacobian: the 30-section chain (fast modes lightly damped) and the
+    flagship (fast modes damped), within 25 %."""
+    from benchmarks.chain import chain_source
+
+    if case == "chain":
+        path = tmp_path / "chain30.bg"
+        path.write_text(chain_source(30))
+    else:
+        path = ROOT / "models" / "electro_pneumatic_hybrid.bg"
+    namespace = compile_model(derive_file(path, cache=False).state_space)
+    model = namespace["_Model"](namespace["_MODEL"])
+    p = namespace["param_array"](model.PARAMETERS, None, model.derive_parameters)
+    y = np.asarray(model.x0(p), dtype=float)
+    modes = namespace["modes_at"](model, 0.0, y, p)
+    run = namespace["_Run"].__new__(namespace["_Run"])
+    run.model, run.p, run.options = model, p, {"rtol": 1e-6, "atol": 1e-9}
+    radius = float(np.max(np.abs(np.linalg.eigvals(np.asarray(model.jac(0.0, y, p, modes))))))
+    assert run.spectral_radius(0.0, y, modes) == pytest.approx(radius, rel=0.25)
+
+
+def test_without_a_cxx_compiler_auto_takes_cvode_and_says_why(tmp_path, monkeypatch):
+    """No C++ compiler (or no Boost headers): the explicit stepper cannot be built, and auto takes
+    CVODE for every model, saying why; DOPRI5 asked for by name runs scipy's RK45 from Python."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
+    table, why = runtime.load_erk()
+    assert table is None and "could not run" in why
+    namespace, experiment = _compiled(ROOT / "models" / "mass_spring_damper.bg")
+    run = _simulate(namespace, experiment)
+    assert run.complete and run.stats["solver"] == "CVODE"
+    assert "C++ compiler could not run" in run.stats["solver_note"]
+    named = _simulate(namespace, experiment, method="DOPRI5")
+    assert named.stats["solver"] == "DOPRI5" and "scipy's RK45" in named.stats["code_note"]
+    np.testing.assert_allclose(named.states["spring.q"], _underdamped(named.t), rtol=0, atol=1e-8)
+
+
+@needs_cxx
+def test_a_rate_that_is_not_finite_at_a_trial_point_hands_the_step_to_the_step_loop():
+    """A tank drained through ``if e > 0 then a*sqrt(e) else 0``: trial points past the empty tank
+    take the square root of a negative number. The C stepper hands the step over (as CVODE's driver
+    does), the step loop takes the branch that holds there, and the tank empties at t = 1 s as
+    q = (1 - t)^2 says."""
+    namespace, experiment = _compiled(ROOT / "tests" / "fixtures" / "engine" / "branch_domain.bg")
+    run = _simulate(namespace, experiment, method="DOPRI5")
+    assert run.complete and run.stats["branch_extensions"] > 0 and run.stats["driver_segments"] >= 1
+    level = run.outputs["level"]
+    np.testing.assert_allclose(level, np.where(run.t < 1, (1 - run.t) ** 2, 0.0), rtol=0, atol=1e-6)
+    emptied = [time for time, label in run.events if "drain.e > 0" in label]
+    assert emptied and emptied[0] == pytest.approx(1.0, abs=1e-3)
