@@ -271,7 +271,7 @@ def _keep_light(derived, account) -> None:
 
 
 def _cmd_simulate(args) -> int:
-    from bondc.analysis.energy import energy_account, steps_of
+    from bondc.analysis.energy import dense_steps, energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
     from bondc.io import check_output
     from bondc.simulate import check_result_path, simulate, write
@@ -301,7 +301,7 @@ def _cmd_simulate(args) -> int:
     account = None
     steps = result
     if result.t.size > 1:
-        steps = steps_of(state_space, result)      # a run on a grid: its statistics from the solver's steps
+        steps = dense_steps(state_space, result)   # the solver's steps and the solution between them
         summary["statistics"] = output_statistics(steps)
         for name, row in summary["statistics"].items():         # each output in its declared unit
             unit, _ = result.units.get(name, (None, 1.0))

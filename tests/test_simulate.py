@@ -505,6 +505,33 @@ end
     assert gridded["motors"]["requirements"]["peak_torque"] == pytest.approx(2.5, rel=5e-3)
 
 
+def test_the_statistics_take_the_solution_between_the_solvers_steps():
+    """dense_steps: the run at its solver's steps and at the three interior Lobatto nodes of every
+    step, its outputs evaluated on the energy account's interpolant. The mass-spring-damper's
+    position there is the closed-form step response (the recorded points alone are 5 times
+    sparser than the nodes), and its maximum is the first peak's, 20.3 mm at 0.1 + pi/wd s."""
+    import math
+
+    from bondc.analysis.energy import dense_steps
+    from bondc.analysis.stats import output_statistics
+    from bondc.pipeline import derive_file
+
+    derived = derive_file(Path(__file__).parent.parent / "models" / "mass_spring_damper.bg", cache=False)
+    result = simulate(derived.state_space, derived.experiment)
+    dense = dense_steps(derived.state_space, result)
+    assert dense_steps(derived.state_space, result) is dense      # made once
+    assert dense.t.size == 4 * (result.t.size - 1) + 1 and np.all(np.diff(dense.t) > 0)
+    assert set(result.t) <= set(dense.t)
+    wn, zeta = 20.0, 0.15
+    wd, s = wn * math.sqrt(1 - zeta ** 2), dense.t - 0.1
+    expected = np.where(s >= 0, 10 / 800 * (1 - np.exp(-zeta * wn * s) * (np.cos(wd * s) + zeta / math.sqrt(
+        1 - zeta ** 2) * np.sin(wd * s))), 0.0)
+    np.testing.assert_allclose(dense.outputs["x"], expected, rtol=0, atol=2e-8)
+    peak = 10 / 800 * (1 + math.exp(-zeta * wn * math.pi / wd))
+    assert output_statistics(dense)["x"]["max"] == pytest.approx(peak, rel=2e-5)
+    assert abs(output_statistics(result)["x"]["max"] - peak) > abs(output_statistics(dense)["x"]["max"] - peak)
+
+
 def test_simulate_with_a_motor_catalogue_that_cannot_be_used_exits_1(tmp_path, capsys, monkeypatch):
     """A missing catalogue is an error before the run (nothing simulated); a model without a torque
     output cannot be sized: the run is printed, the error too, exit 1 (not 0 as if all went well)."""

@@ -804,9 +804,9 @@ def _finish_point(setup: _Setup, index: int, values, path, parameters, state_spa
         message = "; ".join(f"{d.code}: {d.message}" for d in diagnostics)
         return SweepPoint(index, values, "failed", message, path, parameters, {}, result.t_reached,
                           diagnostics, tuple(warnings))
-    from bondc.analysis.energy import steps_of
+    from bondc.analysis.energy import dense_steps
 
-    steps = steps_of(state_space, result)      # with dt: the metrics from the solver's steps, not the grid's
+    steps = dense_steps(state_space, result)   # the metrics from the solver's steps and between them, not a grid's
     metrics = _measure(setup, state_space, graph, experiment, steps, warnings)
     motors = _qualifying_motors(setup, steps, graph, warnings) if setup.motors else None
     missing = [name for name, value in metrics.items() if not math.isfinite(value)]

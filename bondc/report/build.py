@@ -110,11 +110,11 @@ class PipelineRun:
 
     @property
     def steps(self):
-        """The run at the solver's steps (:func:`~bondc.analysis.energy.steps_of`): statistics and
-        motor requirements are computed from it, plots show ``result``."""
-        from bondc.analysis.energy import steps_of
+        """The run at the solver's steps and between them (:func:`~bondc.analysis.energy.dense_steps`):
+        statistics and motor requirements are computed from it, plots show ``result``."""
+        from bondc.analysis.energy import dense_steps
 
-        return steps_of(self.state_space, self.result)
+        return dense_steps(self.state_space, self.result)
 
 
 def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str | None = None,
