@@ -4263,6 +4263,22 @@ def cache_dir() -> str:
 #: bondc's CVODE driver (C, appended to a model's code where scikit-sundae's SUNDIALS libraries can be
 #: linked): integrates a segment with the model's C functions and watches its switching functions,
 #: returning to Python only at a possible crossing, the segment's end, or anything unusual.
+#: The table of functions of bondc's explicit stepper (``_ERK_SOURCE``), as the driver (C) and the
+#: stepper's library (C++) both declare it
+_ERK_API = r"""typedef int (*bondc_erk_rhs)(double t, const double *y, double *dydt, void *data);
+typedef struct {
+    int version;
+    void *(*create)(int n);
+    void (*destroy)(void *stepper);
+    int (*start)(void *stepper, bondc_erk_rhs rhs, void *data, double t0, const double *y0, double t_stop,
+                 double rtol, double atol, double max_step, double first_step, long max_steps);
+    int (*step)(void *stepper, double *t, double *y);
+    int (*dky)(void *stepper, double t, double *out);
+    double (*last_step)(void *stepper);
+    void (*counts)(void *stepper, long *out);
+} bondc_erk_api;
+"""
+
 _DRIVER_SOURCE = r"""/* ---- bondc's CVODE driver: integrates with the model's C functions, no Python per step ---- */
 #include <stdlib.h>
 #include <string.h>
@@ -4310,18 +4326,7 @@ extern int CVodeGetNumLinSolvSetups(void *mem, long *n);
 extern void CVodeFree(void **mem);
 
 /* bondc's explicit Runge-Kutta stepper (_ERK_SOURCE, a library of its own): its table of functions */
-typedef int (*bondc_erk_rhs)(double t, const double *y, double *dydt, void *data);
-typedef struct {
-    int version;
-    void *(*create)(int n);
-    void (*destroy)(void *stepper);
-    int (*start)(void *stepper, bondc_erk_rhs rhs, void *data, double t0, const double *y0, double t_stop,
-                 double rtol, double atol, double max_step, double first_step, long max_steps);
-    int (*step)(void *stepper, double *t, double *y);
-    int (*dky)(void *stepper, double t, double *out);
-    double (*last_step)(void *stepper);
-    void (*counts)(void *stepper, long *out);
-} bondc_erk_api;
+/* BONDC_ERK_API */
 
 typedef struct {
     void *cvode;
@@ -5279,7 +5284,7 @@ void bondc_driver_free(bondc_driver *d)
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
     free(d->newton); free(d->residual); free(d->delta); free(d->kept); free(d);
 }
-"""
+""".replace("/* BONDC_ERK_API */\n", _ERK_API)
 
 _DRIVER_DECLARATIONS = """
 typedef struct bondc_driver bondc_driver;
@@ -5341,18 +5346,7 @@ _ERK_SOURCE = r"""/* ---- bondc's explicit Runge-Kutta stepper: Boost.Odeint's D
 #include <boost/numeric/odeint/stepper/runge_kutta_dopri5.hpp>
 
 extern "C" {
-typedef int (*bondc_erk_rhs)(double t, const double *y, double *dydt, void *data);
-typedef struct {
-    int version;
-    void *(*create)(int n);
-    void (*destroy)(void *stepper);
-    int (*start)(void *stepper, bondc_erk_rhs rhs, void *data, double t0, const double *y0, double t_stop,
-                 double rtol, double atol, double max_step, double first_step, long max_steps);
-    int (*step)(void *stepper, double *t, double *y);
-    int (*dky)(void *stepper, double t, double *out);
-    double (*last_step)(void *stepper);
-    void (*counts)(void *stepper, long *out);
-} bondc_erk_api;
+/* BONDC_ERK_API */
 const bondc_erk_api *bondc_erk_table(void);
 }
 
@@ -5572,7 +5566,7 @@ const bondc_erk_api table = {1, create, destroy, start, step, dky, last_step, co
 }   // namespace
 
 const bondc_erk_api *bondc_erk_table(void) { return &table; }
-"""
+""".replace("/* BONDC_ERK_API */\n", _ERK_API)
 _ERK_FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off", "-std=c++17")
 _ERK_LOADED: dict = {}          # (cache folder, $CXX) -> (ffi, lib, table address) or (None, None, why)
 
