@@ -50,6 +50,18 @@ def best_of(repeat: int, function):
     return best, value
 
 
+def best_of_pairs(repeat: int, first, second):
+    """(fastest time of ``first``, fastest of ``second``, their last values) over ``repeat`` rounds
+    that run one then the other: a machine whose load drifts over the rounds slows both alike."""
+    best, values = [math.inf, math.inf], [None, None]
+    for _ in range(repeat):
+        for i, function in enumerate((first, second)):
+            start = time.perf_counter()
+            values[i] = function()
+            best[i] = min(best[i], time.perf_counter() - start)
+    return best[0], best[1], values[0], values[1]
+
+
 def fitted_exponent(rows: list) -> float | None:
     """Slope of log(total time) against log(N), least squares over the given rows."""
     if len(rows) < 2:
@@ -81,8 +93,11 @@ def compile_scaling(sizes) -> dict:
 
 # ------------------------------------------------------------------ 2. simulation
 
-def _bondc_run(path: Path, repeat: int):
-    """Best time of bondc simulating ``path``'s first experiment in this process, compiled once."""
+def _bondc_run(path: Path, repeat: int, hand):
+    """Best times of bondc simulating ``path``'s first experiment in this process, compiled once,
+    and of ``hand()``, in rounds of one run each; then bondc with every variable read (again
+    against ``hand()``) and its numpy code once: (bondc s, bondc read s, numpy s, bondc's result,
+    settings, hand s, hand's result)."""
     from bondc.pipeline import derive_file
     from bondc.simulate import compile_model
 
@@ -102,10 +117,10 @@ def _bondc_run(path: Path, repeat: int):
         return result
 
     run()       # builds (or loads) the C library outside the timing
-    seconds, result = best_of(repeat, run)
-    read_seconds, _ = best_of(repeat, run_read)
+    seconds, hand_seconds, result, reference = best_of_pairs(repeat, run, lambda: hand(settings))
+    read_seconds, again, _, _ = best_of_pairs(repeat, run_read, lambda: hand(settings))
     numpy_seconds, _ = best_of(1, lambda: run(False))
-    return seconds, read_seconds, numpy_seconds, result, settings
+    return seconds, read_seconds, numpy_seconds, result, settings, min(hand_seconds, again), reference
 
 
 def _difference(hand_y, result, names, atol) -> float:
@@ -125,9 +140,9 @@ def _difference(hand_y, result, names, atol) -> float:
 def simulate_flagship(repeat: int) -> dict:
     from benchmarks.hand import flagship as hand
 
-    ours, read_time, numpy_time, result, settings = _bondc_run(FLAGSHIP, repeat)
-    hand_time, reference = best_of(repeat, lambda: hand.simulate(settings["rtol"], settings["atol"],
-                                                                  settings["max_step"], "LSODA"))
+    ours, read_time, numpy_time, result, settings, hand_time, reference = _bondc_run(
+        FLAGSHIP, repeat, lambda settings: hand.simulate(settings["rtol"], settings["atol"], settings["max_step"],
+                                                         "LSODA"))
     names = list(result.states)
     dense = hand.simulate(settings["rtol"], settings["atol"], settings["max_step"], "LSODA", dense=True)
     return {"benchmark": "flagship cycle (4.2 s)", "hand": "LSODA, events for the friction jump",
@@ -146,9 +161,9 @@ def simulate_chain(n: int, repeat: int) -> dict:
     folder = Path(tempfile.mkdtemp(prefix="bondc-bench-"))
     path = folder / f"chain{n}.bg"
     path.write_text(chain_source(n), encoding="utf-8")
-    ours, read_time, numpy_time, result, settings = _bondc_run(path, repeat)
-    hand_time, reference = best_of(repeat, lambda: hand.simulate(n, settings["t_end"], settings["rtol"],
-                                                                  settings["atol"], "LSODA"))
+    ours, read_time, numpy_time, result, settings, hand_time, reference = _bondc_run(
+        path, repeat, lambda settings: hand.simulate(n, settings["t_end"], settings["rtol"], settings["atol"],
+                                                     "LSODA"))
     names = [name for i in range(1, n + 1) for name in (f"m{i}.p", f"k{i}.q")]
     at_ours = hand.simulate(n, settings["t_end"], settings["rtol"], settings["atol"], "LSODA", t_eval=result.t)
     return {"benchmark": f"chain N = {n} (10 s)", "hand": "LSODA, banded Jacobian, sparse matrix RHS",
@@ -274,9 +289,10 @@ def main(argv=None) -> int:
     print("compile scaling (N-section chain: parse .. loaded C library)", file=sys.stderr, flush=True)
     scaling = compile_scaling(sizes)
     print("simulation against hand-written scipy code", file=sys.stderr, flush=True)
-    simulations = [simulate_flagship(repeat), simulate_chain(100, repeat)]
+    rounds = 3 if args.quick else 5     # a run of either side takes 0.01-0.6 s: rounds are cheap
+    simulations = [simulate_flagship(rounds), simulate_chain(100, rounds)]
     if not args.quick:
-        simulations.append(simulate_chain(1000, repeat))
+        simulations.append(simulate_chain(1000, rounds))
     print("startup", file=sys.stderr, flush=True)
     starts = startup(repeat)
     print("equations and linearize of a large model", file=sys.stderr, flush=True)
