@@ -97,6 +97,7 @@ def test_an_edit_options_or_no_cache_are_misses(tmp_path, isolated):
     assert len(loads) == 5
 
 
+@pytest.mark.slow
 def test_set_values_are_bound_late_to_the_cached_model_with_the_same_results(tmp_path, isolated, monkeypatch):
     """--set k=400 on a cached model: checked with the value, not derived or generated again; the run
     equals a derivation from scratch with the value (no cache), point for point."""
@@ -124,6 +125,7 @@ def test_set_values_are_bound_late_to_the_cached_model_with_the_same_results(tmp
     assert result.outputs["x"][-1] == pytest.approx(x, rel=1e-4)
 
 
+@pytest.mark.slow
 def test_a_changed_import_is_a_miss(tmp_path, isolated):
     _, loads = isolated
     library = tmp_path / "lib.bg"
@@ -144,6 +146,7 @@ def test_a_changed_import_is_a_miss(tmp_path, isolated):
     assert result.states["spring.q"].max() == pytest.approx((1 + overshoot) * 15 / 800, rel=0.01)
 
 
+@pytest.mark.slow
 def test_a_simulation_after_an_edit_of_an_import_runs_the_edited_model_not_the_cached_module(
         tmp_path, isolated, capsys):
     """A spring defined in an imported file: after a cached simulate, its stiffness (then its law)
@@ -307,6 +310,7 @@ def test_a_cached_simulate_imports_no_sympy_or_lark_and_writes_the_same_results(
         assert runs[1][3] == runs[2][3] == "[]"
 
 
+@pytest.mark.slow
 def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(tmp_path, isolated):
     from bondc.analysis.energy import energy_account
     from bondc.simulate import compile_model
@@ -332,6 +336,7 @@ def test_the_light_entry_gives_the_full_state_space_for_other_parameter_values(t
         full.state_space.derivatives.keys()
 
 
+@pytest.mark.slow
 def test_a_corrupt_light_entry_is_a_miss_and_the_full_entry_is_read(tmp_path, isolated):
     from bondc.analysis.energy import energy_account
     from bondc.simulate import compile_model
@@ -419,6 +424,7 @@ def test_the_cache_folder_is_the_runtimes(tmp_path, monkeypatch):
     assert str(cache.cache_dir()).startswith(str(tmp_path / "xdg"))
 
 
+@pytest.mark.slow
 def test_the_generated_module_is_kept_compiled_and_checked_against_its_text(tmp_path, isolated, monkeypatch):
     """The entry keeps the module compiled by this Python (as a ``.pyc``): the next process runs it
     without compiling, with the same results; a damaged file, or a text that does not match the
@@ -504,6 +510,7 @@ def test_a_parameter_value_that_decides_a_laws_inverse_is_checked_again_after_ea
     assert results == [(0, False, 1), (1, True, 1), (0, False, 1), (1, True, 1)]
 
 
+@pytest.mark.slow
 def test_the_energy_account_of_a_run_with_set_values_uses_the_base_module(tmp_path, isolated, monkeypatch):
     """``--set`` values are bound late to the base model's module; its energy account evaluates
     that module with the run's values too (no second code generation) and gives the account of

@@ -373,6 +373,7 @@ def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     np.testing.assert_allclose(data[:, 4], reference.states["x"], rtol=1e-13, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_generated_module_finds_its_csv_data_relative_to_itself(tmp_path):
     from bondc.simulate import simulate
 

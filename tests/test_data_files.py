@@ -37,6 +37,7 @@ def test_check_refuses_a_data_file_that_is_not_a_regular_file(tmp_path, endless)
     assert f"{model}:2:21" in done.stderr
 
 
+@pytest.mark.slow
 def test_validate_and_fit_friction_refuse_it_too(tmp_path, endless):
     done = bondc("validate", str(SIM / "msd.bg"), "--data", endless, "--compare", "x=x", cwd=tmp_path)
     assert "error[E950]" in done.stderr and "not a regular file" in done.stderr

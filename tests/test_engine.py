@@ -416,7 +416,8 @@ end
 """
 
 
-@pytest.mark.parametrize("solver, t_end", [pytest.param("CVODE", 200, marks=pytest.mark.slow), ("Radau", 20)])
+@pytest.mark.parametrize("solver, t_end", [pytest.param("CVODE", 200, marks=pytest.mark.slow),
+                                            pytest.param("Radau", 20, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("native", ["1", "0"])
 def test_a_breakaway_shorter_than_a_step_of_the_moving_spring_is_found(tmp_path, monkeypatch, native, solver, t_end):
     """The held mass's spring is stretched by V/w (1 - cos wt): its force passes the 3 N static
@@ -477,8 +478,16 @@ end
 """
 
 
-@pytest.mark.parametrize("solver", ["CVODE", "Radau", "BDF", "LSODA"])
-@pytest.mark.parametrize("native", ["1", "0"])
+def _both_codes(*before):
+    """Cases (*before, native, solver): CVODE and scipy's Radau, BDF and LSODA, each with the model's
+    C code ("1") and its numpy code ("0"); scipy's solvers on numpy code are marked slow, so that
+    `make test-fast` runs CVODE both ways and every solver on C (`make test` runs them all)."""
+    return [pytest.param(*before, native, solver,
+                         marks=[pytest.mark.slow] if native == "0" and solver != "CVODE" else [])
+            for solver in ("CVODE", "Radau", "BDF", "LSODA") for native in ("1", "0")]
+
+
+@pytest.mark.parametrize("native, solver", _both_codes())
 def test_a_narrow_band_of_an_abs_condition_is_not_stepped_over(tmp_path, monkeypatch, native, solver):
     """The mass slows at (a - F0)/m = 0.75 m/s^2 from 1 m/s and reaches the band abs(v) < v_th at
     t1 = (1 - v_th)/0.75; inside it c0*v_th = 1 N < F0 pushes back out, and outside a = 3 N > F0
@@ -544,8 +553,8 @@ end
 """
 
 
-@pytest.mark.parametrize("solver", ["CVODE", "IDA", "Radau", "BDF", "LSODA"])
-@pytest.mark.parametrize("native", ["1", "0"])
+@pytest.mark.parametrize("native, solver", _both_codes() + [pytest.param(native, "IDA", marks=pytest.mark.slow)
+                                                         for native in ("1", "0")])
 def test_a_hump_inside_one_step_is_found_in_a_model_with_an_algebraic_loop(tmp_path, monkeypatch, native, solver):
     """The voltage u of the loop (r2's cubic law, r3's linear one, fed i = 10 cos t: u = f2^3 + f2,
     f2 = i - u/3) passes 21.95 for 44 ms around each of the peaks of i, at t = 0, 2 pi, 4 pi and
@@ -606,9 +615,8 @@ end
 """
 
 
-@pytest.mark.parametrize("push, solver, native", [
-    *[("f1", solver, native) for solver in ("BDF", "Radau", "LSODA", "CVODE") for native in ("1", "0")],
-    ("f1 + rate*t", "BDF", "1"), ("f1 + rate*t", "Radau", "0")])
+@pytest.mark.parametrize("push, native, solver", [
+    *_both_codes("f1"), ("f1 + rate*t", "1", "BDF"), pytest.param("f1 + rate*t", "0", "Radau", marks=pytest.mark.slow)])
 def test_two_frictions_holding_opposite_forces_hold_with_every_solver(tmp_path, monkeypatch, push, solver, native):
     """Two masses at rest, pushed with 1 N and -1 N, below the 3 N static limit of their frictions:
     both are held, each friction carrying its push. scipy's BDF stopped at t = 0.2 ms (E811): the
@@ -1278,7 +1286,8 @@ def _chain_text(n, m=1.0, k=400.0, b=2.0, b0=0.5, force=10.0, interleaved=False)
     return "\n".join(lines) + "\n"
 
 
-@pytest.mark.parametrize("solver, interleaved", [pytest.param("dense", False, marks=pytest.mark.slow), ("band", True),
+@pytest.mark.parametrize("solver, interleaved", [pytest.param("dense", False, marks=pytest.mark.slow),
+                                                 pytest.param("band", True, marks=pytest.mark.slow),
                                                  pytest.param("sparse", False, marks=pytest.mark.slow)])
 def test_every_linear_solver_matches_the_hand_written_chain(tmp_path, monkeypatch, solver, interleaved):
     """Dense LU, banded LU (the interleaved chain's Jacobian has a band of 2 + 2) and SuperLU on

@@ -632,6 +632,7 @@ def linear_bond_graphs(draw):
 _workdir = Path(tempfile.mkdtemp(prefix="bondc-prop-"))
 
 
+@pytest.mark.slow
 @settings(max_examples=50, deadline=5000, suppress_health_check=[HealthCheck.too_slow],
           derandomize=True)
 @given(text=linear_bond_graphs(), seed=st.integers(0, 2 ** 16))

@@ -335,6 +335,7 @@ def test_where_cs_newton_fails_the_numpy_module_solves_the_loop(monkeypatch, tmp
             assert np.array_equal(getattr(native, kind)[name], values), name
 
 
+@pytest.mark.slow
 @needs_cc
 def test_without_a_compiler_the_numpy_code_runs_and_says_why(tmp_path, monkeypatch):
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
@@ -554,6 +555,7 @@ def _same_to_the_bit(ours, loop):
         assert ours.stats[count] == loop.stats[count], count
 
 
+@pytest.mark.slow
 @needs_cc
 def test_a_chattering_interval_runs_in_the_driver_and_is_the_step_loops_to_the_bit(monkeypatch):
     """twisting.bg chatters: its unfrozen law (the modes found again at every evaluation) is
@@ -665,7 +667,7 @@ def _carts(count: int) -> str:
 
 
 @needs_cc
-@pytest.mark.parametrize("model", ["coupled_clutches", "carts"])
+@pytest.mark.parametrize("model", ["coupled_clutches", pytest.param("carts", marks=pytest.mark.slow)])
 def test_a_sliding_mode_on_several_switches_runs_in_the_driver_and_agrees_with_the_step_loop(
         model, monkeypatch, tmp_path):
     """Three clutches stuck at once, and twelve carts (the affine combination of 13 corners), are
@@ -985,6 +987,7 @@ def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute
     assert hasattr(split, "bondc_driver_new") == hasattr(whole, "bondc_driver_new")
 
 
+@pytest.mark.slow
 @needs_cc
 def test_a_build_started_ahead_is_the_one_load_native_finishes_and_an_unused_one_is_removed(tmp_path, monkeypatch):
     """start_native begins a large model's build in the background (here forced on the flagship):

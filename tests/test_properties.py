@@ -209,6 +209,7 @@ def _branches(children):
 expressions = st.recursive(_leaves, _branches, max_leaves=25)
 
 
+@pytest.mark.slow
 @given(expressions)
 @FAST
 def test_printed_expressions_parse_back_equal(tree):

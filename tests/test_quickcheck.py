@@ -52,6 +52,7 @@ def _graphs():
                 continue
 
 
+@pytest.mark.slow
 def test_where_the_quick_verdict_answers_the_equations_stage_agrees_on_every_model():
     answered = unsure = 0
     for path, name, causal in _graphs():

@@ -163,6 +163,7 @@ end
 """
 
 
+@pytest.mark.slow
 def test_hostile_text_is_shown_as_text(tmp_path):
     model = tmp_path / "hostile.bg"
     model.write_text(HOSTILE, encoding="utf-8")
@@ -226,6 +227,7 @@ def test_model_without_end_time_is_reported_unsimulated(tmp_path):
     assert "Not simulated" in html and "results" not in sections(html) and "equations" in sections(html)
 
 
+@pytest.mark.slow
 def test_a_failure_leaves_the_earlier_report_intact(tmp_path, monkeypatch):
     model = tmp_path / "m.bg"
     model.write_text(FAILING.replace("sqrt(0.5 - t)", "1"), encoding="utf-8")

@@ -62,6 +62,7 @@ def test_measurements_within_noise_pass(simulated, tmp_path):
     assert suite.get("tests") == "2" and suite.get("failures") == "0"
 
 
+@pytest.mark.slow
 def test_scaled_measurements_fail_with_exit_1(simulated, tmp_path):
     data = write_measured(tmp_path / "bench.csv", *noisy(simulated, scale=1.3))
     stream = io.StringIO()
