@@ -317,7 +317,7 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
             notes.append(f"no state equation depends on {', '.join(held)}: held at the initial value")
     if discrete:
         notes.append("discrete variables held at their initial value, not states of the linear model: "
-                     + ", ".join(f"{ss.state_names[i]} = {x[i]:.6g}" for i in discrete))
+                     + ", ".join(f"{name} = {x[i]:.6g}" for i, name in enumerate(ss.state_names) if name in names))
     outputs = getattr(ss.graph, "outputs", None) or {}
     scaled = [(name, outputs[name]) for name in ss.outputs
               if name in outputs and abs((outputs[name].display_factor or 1.0) - 1.0) > 1e-12]
@@ -328,7 +328,9 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
     f_rows, g_rows = jacobian(point(x))
     _require_finite(f_rows, [f"der({name})" for name in ss.state_names], g_rows, list(ss.outputs),
                     list(ss.state_names) + list(ss.inputs), time)
-    keep = [i for i in range(n) if i not in discrete]
+    state_names = ss.state_names        # a property that builds the tuple: once, not per state
+    held_discrete = set(discrete)
+    keep = [i for i in range(n) if i not in held_discrete]
     A, B = f_rows[keep][:, keep], f_rows[keep, n:]
     C, D = g_rows[:, keep], g_rows[:, n:]
     n = len(keep)
@@ -343,7 +345,7 @@ def linearize(ss: StateSpace, *, time: float = 0.0, at: str = "initial",
     with np.errstate(divide="ignore", invalid="ignore"):
         damping = np.where(magnitude > 0, -eigenvalues.real / np.where(magnitude > 0, magnitude, 1), np.nan)
     return Linearization(
-        states=tuple(ss.state_names[i] for i in keep), inputs=tuple(ss.inputs), outputs=tuple(ss.outputs),
+        states=tuple(state_names[i] for i in keep), inputs=tuple(ss.inputs), outputs=tuple(ss.outputs),
         A=A, B=B.reshape(n, m), C=C, D=D.reshape(len(ss.outputs), m),
         eigenvalues=eigenvalues, natural_frequencies=magnitude, damping_ratios=damping,
         time=float(time), at=at, x0=np.asarray(x, dtype=float)[keep], u0=u0, held=held, notes=tuple(notes))
@@ -451,7 +453,8 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs, fixed=()):
     columns = columns_at(x_start)
     columns[list(fixed)] = False
     free = [i for i in range(n) if columns[i]]
-    held = tuple(ss.state_names[i] for i in range(n) if i not in free)
+    state_names = ss.state_names        # a property that builds the tuple: once, not per state
+    held = tuple(state_names[i] for i in range(n) if not columns[i])
     bad, rates = unbalanced(x_start)
     if not bad.any():
         return x_start, held          # already at rest: do not wander along flat directions
@@ -471,10 +474,10 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs, fixed=()):
         if retry is not None and not retry[1] and not retry[2].any():
             x, runaway, bad, rates = retry
             at_rest = columns_at(x)
-            held = tuple(ss.state_names[i] for i in range(n) if not at_rest[i] and not wider[i])
+            held = tuple(state_names[i] for i in range(n) if not at_rest[i] and not wider[i])
     if runaway or bad.any():
         detail = ": the solver ran away" if runaway else ", ".join(
-            f"der({ss.state_names[i]}) stays {rates[i]:.3g}" for i in np.flatnonzero(bad))
+            f"der({state_names[i]}) stays {rates[i]:.3g}" for i in np.flatnonzero(bad))
         raise AnalysisError(Diagnostic(
             "error", "E940",
             f"no equilibrium found near the initial state with the inputs held at t = {time:g} s"
