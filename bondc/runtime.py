@@ -2679,6 +2679,11 @@ class _Run:
     #: method must follow (the 1000-section chain: 190 such steps; the flagship: 3 300, stiff)
     EXPLICIT_STEPS = 2000
 
+    def explicit_suits(self, t, radius) -> bool:
+        """Whether DOPRI5's steps for its stability alone over the rest of the run from ``t``, at the
+        spectral radius ``radius``, are at most ``EXPLICIT_STEPS``."""
+        return (self.t_end - t) * radius / DOPRI5.STABILITY <= self.EXPLICIT_STEPS
+
     def solver_label(self) -> str:
         return getattr(self.method, "label", None) or self.method.__name__
 
@@ -2700,7 +2705,7 @@ class _Run:
             return
         radius = self.spectral_radius(t, y, modes)
         self.stats["spectral_radius"] = radius
-        if (self.t_end - t) * radius / DOPRI5.STABILITY <= self.EXPLICIT_STEPS:
+        if self.explicit_suits(t, radius):
             self.method, self.implicit = DOPRI5, False
             self._driver, self._pieces = None, None
 
@@ -2716,7 +2721,7 @@ class _Run:
             return False
         self.stiffness_check = self.stats["steps"] + self.STIFFNESS_CHECK
         radius = self.spectral_radius(t, y, modes)
-        if (self.t_end - t) * radius / DOPRI5.STABILITY <= self.EXPLICIT_STEPS:
+        if self.explicit_suits(t, radius):
             return False
         self.method = solver_class(stiff_solver())
         self.implicit = self.method.__name__ in _IMPLICIT
@@ -5582,6 +5587,11 @@ _ERK_FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off", "-std=c++17")
 _ERK_LOADED: dict = {}          # (cache folder, $CXX) -> (ffi, lib, table address) or (None, None, why)
 
 
+def native_turned_off() -> bool:
+    """Whether ``BONDC_NATIVE`` turns compiled code off (0, no, off, false)."""
+    return os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false")
+
+
 def _cxx_compiler():
     import shutil
 
@@ -5593,7 +5603,7 @@ def load_erk():
     ``(None, why not)``: native code turned off, the Boost headers (package boost-headers) or a C++
     compiler missing, a failed build. Built once per machine into ``cache_dir()/native`` (in a
     private folder, then renamed into place) and loaded once per process."""
-    if os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false"):
+    if native_turned_off():
         return None, "native code is turned off (BONDC_NATIVE=0)"
     key = (cache_dir(), os.environ.get("CXX", ""))
     known = _ERK_LOADED.get(key)
@@ -5708,7 +5718,7 @@ def load_native(source, driver=True):
     A large model's functions are compiled as separate units at once (``_NATIVE_SPLIT_FROM``),
     and :func:`start_native` may have started that build already: it is then waited for.
     """
-    if os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false"):
+    if native_turned_off():
         return None, "native code is turned off (BONDC_NATIVE=0)"
     # a model's text object seen before in this process (every run of a loaded model): its
     # library without joining and hashing the text again (2 ms for a 1000-section chain)
@@ -5822,7 +5832,7 @@ def start_native(source, driver=True) -> None:
     when it is a large model's (compiled as several units) and not built yet: its compilers then
     run while the caller goes on (Python compiling the generated module), and ``load_native``
     waits for them. Does nothing otherwise, or where anything is missing (it is only a head start)."""
-    if os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false") or not source:
+    if native_turned_off() or not source:
         return
     if isinstance(source, (tuple, list)):
         source = "".join(source)

@@ -874,6 +874,21 @@ class _Trajectory:
             self._node_states = states
         return self._node_states
 
+    def interpolated_states(self) -> np.ndarray:
+        """The states (n, steps, 5) at each step's Lobatto nodes as :meth:`samples` takes them: the
+        corrected interpolant (:meth:`node_states`), and in a sliding step the cubic Hermite
+        interpolant of its combination's rates."""
+        states = np.array(self.node_states(), dtype=float)
+        sliding = np.flatnonzero(self.sliding)
+        if sliding.size:
+            tau = (_LOBATTO_NODES + 1.0) / 2.0
+            h = (self.tb - self.ta)[sliding]
+            states[:, sliding, :] = _hermite(tau[None, None, :], h[None, :, None], self.xa[:, sliding, None],
+                                             self.xb[:, sliding, None], self.fa[:, sliding, None],
+                                             self.fb[:, sliding, None])
+            states[:, sliding, 0], states[:, sliding, -1] = self.xa[:, sliding], self.xb[:, sliding]
+        return states
+
     def samples(self, kind: str = "variables") -> tuple[np.ndarray, dict]:
         """Times (steps, 5) of the Lobatto nodes and every variable there (``kind`` "outputs": every
         output): name -> (steps, 5)."""
@@ -1269,6 +1284,16 @@ def _run_nodes(ss, steps, boundaries):
     return memo[key]
 
 
+def _flat_nodes(values):
+    """Values at the nodes (steps, 5) as one row: the first step's start, then each step's nodes
+    after its start (a step's start is the step before's end).
+
+    >>> _flat_nodes(np.array([[0.0, 1, 2, 3, 4], [4, 5, 6, 7, 8]])).tolist()
+    [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]
+    """
+    return np.concatenate([values[:1, 0], values[:, 1:].ravel()])
+
+
 class _NodeRows(Mapping):
     """Node values (name -> (steps, 5)) as the rows of :func:`dense_steps` (each step's nodes after
     its start, the first step's start too), flattened when first read."""
@@ -1278,8 +1303,7 @@ class _NodeRows(Mapping):
 
     def __getitem__(self, name):
         if name not in self._made:
-            values = np.asarray(self._values[name])
-            self._made[name] = np.concatenate([values[:1, 0], values[:, 1:].ravel()])
+            self._made[name] = _flat_nodes(np.asarray(self._values[name]))
         return self._made[name]
 
     def __iter__(self):
@@ -1325,23 +1349,14 @@ def _dense_view(ss, steps):
                          for edge in (start, end)})
     model, trajectory, times, variables = _run_nodes(ss, steps, boundaries)
     _, outputs = trajectory.samples("outputs")
-    states = np.array(trajectory.node_states(), dtype=float)
-    sliding = np.flatnonzero(trajectory.sliding)
-    if sliding.size:        # the combination's interpolant, as samples() takes it there
-        tau = (_LOBATTO_NODES + 1.0) / 2.0
-        h = (trajectory.tb - trajectory.ta)[sliding]
-        states[:, sliding, :] = _hermite(tau[None, None, :], h[None, :, None], trajectory.xa[:, sliding, None],
-                                         trajectory.xb[:, sliding, None], trajectory.fa[:, sliding, None],
-                                         trajectory.fb[:, sliding, None])
-        states[:, sliding, 0], states[:, sliding, -1] = trajectory.xa[:, sliding], trajectory.xb[:, sliding]
-    flat = lambda values: np.concatenate([values[:1, 0], values[:, 1:].ravel()])      # noqa: E731
-    t = flat(times)
+    states = trajectory.interpolated_states()
+    t = _flat_nodes(times)
     if not np.all(np.diff(t) > 0):
         raise ValueError("the nodes do not increase")
     bond_names = list(steps.bonds)
     return dataclasses.replace(
-        steps, t=t, states={name: flat(states[i]) for i, name in enumerate(model.state_names)},
-        outputs={name: flat(values) for name, values in outputs.items()},
+        steps, t=t, states={name: _flat_nodes(states[i]) for i, name in enumerate(model.state_names)},
+        outputs={name: _flat_nodes(values) for name, values in outputs.items()},
         variables=_NodeRows(variables, model.variable_names),
         bonds=_NodeRows({name: variables[name] for name in bond_names if name in variables},
                         [name for name in bond_names if name in variables]))
