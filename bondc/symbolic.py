@@ -643,34 +643,69 @@ def strip_impulses(expr):
 
 # ------------------------------------------------------------------ derivatives
 
-def partial_derivative(expr, symbol, leaf=None):
+def partial_derivative(expr, symbol, leaf=None, secant_kinks=False):
     """``d expr / d symbol`` with bondc's opaque signals (free of ``symbol``) held as constants.
 
     Sums and products are taken apart here (the sum rule, and a product with one factor that
     depends on ``symbol``) before sympy's ``diff`` sees the rest: a large model's Jacobian is
     tens of thousands of such small derivatives, and this is most of them. ``leaf``
     differentiates what is left (default: sympy's ``diff`` with tables and csv signals held).
+
+    ``secant_kinks``: a kink ``sign(a)*r`` (``r`` vanishes at ``a = 0``, and depends on
+    ``symbol`` only through ``a``) gets its secant through the kink, ``r/abs(a) * da/dsymbol``,
+    instead of its tangent: the Newton matrix of an implicit solver (codegen's Jacobian). A
+    turbulent orifice's ``sign(a)*sqrt(abs(a))`` has an infinite tangent at ``a = 0``, and Newton's
+    method with the tangent steps from ``a`` to ``-a`` and back without end (the solver then cuts its
+    step to nothing); with the secant it lands on the kink in one iteration, and the residual it
+    converges on is the law as written.
+
+    >>> a, c = sympy.symbols("a c", real=True)
+    >>> partial_derivative(c*sympy.sign(a)*sympy.sqrt(sympy.Abs(a)), a, secant_kinks=True)
+    Piecewise((c/sqrt(Abs(a)), Ne(a, 0)), (0, True))
     """
     if expr == symbol:
         return sympy.Integer(1)
     if symbol not in expr.free_symbols:
         return sympy.Integer(0)
     if expr.is_Add:
-        return sympy.Add(*[partial_derivative(arg, symbol, leaf) for arg in expr.args])
+        return sympy.Add(*[partial_derivative(arg, symbol, leaf, secant_kinks) for arg in expr.args])
     if expr.is_Mul:
+        if secant_kinks:
+            secant = _kink_secant(expr, symbol, leaf)
+            if secant is not None:
+                return secant
         depending = [arg for arg in expr.args if symbol in arg.free_symbols]
         if len(depending) == 1:
             rest = sympy.Mul(*[arg for arg in expr.args if arg is not depending[0]])
-            return rest * partial_derivative(depending[0], symbol, leaf)
+            return rest * partial_derivative(depending[0], symbol, leaf, secant_kinks)
     return (leaf or _held_diff)(expr, symbol)
+
+
+def _kink_secant(product, symbol, leaf):
+    """The secant slope of a kink ``sign(a)*r`` through its kink (see :func:`partial_derivative`),
+    or None when ``product`` is not one whose ``r`` depends on ``symbol`` only through ``a``."""
+    for factor in product.args:
+        if not isinstance(factor, sympy.sign) or symbol not in factor.free_symbols:
+            continue
+        argument = factor.args[0]
+        rest = sympy.Mul(*[arg for arg in product.args if arg is not factor])
+        through = sympy.Dummy("a", real=True)
+        if symbol in rest.xreplace({argument: through}).free_symbols:
+            return None
+        # at the kink itself the secant's limit (infinite for a square root) is left out: 0 there,
+        # and the solver's next Jacobian, away from the kink, has the secant
+        secant = sympy.Piecewise((rest / sympy.Abs(argument), sympy.Ne(argument, 0)), (0, True))
+        return secant * partial_derivative(argument, symbol, leaf)
+    return None
 
 
 def _held_diff(expr, symbol):
     opaque = sorted(expr.atoms(Table, Csv), key=sympy.default_sort_key)
     if not opaque:
-        return sympy.diff(expr, symbol)
+        return strip_impulses(sympy.diff(expr, symbol))
     held = {f: sympy.Symbol(f"_held{i}", real=True) for i, f in enumerate(opaque)}
     if any(symbol in f.free_symbols for f in opaque):
         raise ValueError(f"cannot differentiate a signal of {symbol}")
     derivative = sympy.diff(expr.xreplace(held), symbol)
-    return derivative.xreplace({v: k for k, v in held.items()})
+    return strip_impulses(derivative.xreplace({v: k for k, v in held.items()}))
+

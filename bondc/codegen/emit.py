@@ -252,6 +252,7 @@ class _Plan:
     jacobian_statements: list = field(default_factory=list)
     jacobian_entries: dict = field(default_factory=dict)   # (row, column) -> expr
     blocks: int = 0
+    freezer: object = None                         # the Freezer that froze the laws (its kinks)
 
 
 def _derived_parameters(ss) -> list:
@@ -331,7 +332,26 @@ def _law_text(expr) -> str:
     return text if len(text) <= _LAW_LIMIT else text[: _LAW_LIMIT - 3] + "..."
 
 
-def _plan(ss) -> _Plan:
+def switch_kinds(ss) -> list[tuple[str, str, str]]:
+    """Every switch of a model's laws as the engine treats it (LANGUAGE.md section 7), as
+    ``(switch, kind, variable)``: a ``jump`` (located as an event, its law frozen on a branch
+    between events; ``jump (known times)`` when its instants are found before integrating) or a
+    ``kink`` (the law continuous across it: evaluated as written, never frozen), and the variable
+    whose law has it; jumps first, each in the order the laws are frozen.
+
+    >>> from bondc.pipeline import derive_file
+    >>> from pathlib import Path
+    >>> root = Path(__file__).resolve().parent.parent.parent
+    >>> switch_kinds(derive_file(root / "tests" / "fixtures" / "engine" / "relief_valve.bg", cache=False).state_space)
+    [('if b4.e > pr', 'kink', 'b4.f')]
+    """
+    freezer = _plan(ss, jacobian=False).freezer
+    rows = [(switch.label.removesuffix(f" in {switch.owner}"), "jump" if switch.event else "jump (known times)",
+             switch.owner) for switch in freezer.switches if switch.event or switch.breaks]
+    return rows + [(kink.label, "kink", kink.owner) for kink in freezer.kinks]
+
+
+def _plan(ss, jacobian: bool = True) -> _Plan:
     states = list(ss.states)
     state_symbols = [s.symbol for s in states]
     parameters = [(name, symbol, float(value)) for name, (symbol, value) in ss.parameters.items()]
@@ -368,8 +388,9 @@ def _plan(ss) -> _Plan:
         events.append((label, frozen, [(state_index[name], freezer.freeze(value, label)) for name, value in actions]))
     plan = _Plan(ss, states, parameters, statements, variables, derivatives, outputs, freezer.switches,
                  freezer.time_breaks, blocks=len(ss.algebraic_blocks), derived=_derived_parameters(ss),
-                 events=events)
-    _forward_jacobian(plan, state_symbols)
+                 events=events, freezer=freezer)
+    if jacobian:
+        _forward_jacobian(plan, state_symbols)
     return plan
 
 
@@ -408,7 +429,7 @@ def _forward_jacobian(plan: _Plan, state_symbols) -> None:
             ds = sensitivity(symbol)
             if not ds:
                 continue
-            partial = partial_derivative(expr, symbol)
+            partial = partial_derivative(expr, symbol, secant_kinks=True)
             if partial.is_Number and partial == 0:
                 continue
             one = partial.is_Number and partial == 1

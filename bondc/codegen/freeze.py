@@ -93,6 +93,46 @@ class TimeBreak:
     csv: Csv | None = None
 
 
+@dataclass(frozen=True)
+class Kink:
+    """A switch where the law stays continuous: evaluated as written, never frozen nor located."""
+
+    label: str
+    owner: str                      # the variable whose law has it
+
+
+#: The size (sympy operations) up to which a difference of branches is simplified on a switching
+#: surface; a larger one is left undecided (a jump), so classifying stays cheap for any law.
+_SIMPLIFY_LIMIT = 400
+
+
+def continuous_across(difference, g) -> bool:
+    """Whether ``difference`` (the jump of a law across ``g = 0``: its two branches' difference, or
+    the factor of a ``sign(g)``) is 0 everywhere on the surface ``g = 0``.
+
+    ``g`` is solved for a symbol it is linear in, and the difference simplified there; a surface
+    that cannot be solved so, or a difference that does not simplify to 0, is not shown continuous
+    (the caller treats it as a jump).
+
+    >>> x, c = sympy.symbols("x c", real=True)
+    >>> continuous_across(2*(x - c) - 0, x - c), continuous_across(x, x - c)
+    (True, False)
+    >>> continuous_across(sympy.sqrt(sympy.Abs(x)), x), continuous_across(sympy.sqrt(sympy.Abs(x)) + c, x)
+    (True, False)
+    """
+    if difference.is_number:
+        return difference == 0
+    if sympy.count_ops(difference) > _SIMPLIFY_LIMIT or difference.has(sympy.Piecewise, Table, Csv):
+        return False
+    for symbol in sorted(g.free_symbols, key=sympy.default_sort_key):
+        slope = sympy.diff(g, symbol)
+        if slope == 0 or symbol in slope.free_symbols:
+            continue
+        on_surface = sympy.simplify(difference.subs(symbol, symbol - g / slope))
+        return on_surface == 0
+    return False
+
+
 def _split_kink(relation, g):
     """``g < 0`` (or ``<=``, ``>``, ``>=``) as an ``And``/``Or`` of comparisons without the kink of
     an ``abs``, ``max`` or ``min`` term of ``g``, and for each comparison the side of the kink it
@@ -154,6 +194,7 @@ class Freezer:
         self._time_only: set = set(self.parameters) | {time}
         self._time_modes: set = set()
         self._owner = ""
+        self.kinks: list[Kink] = []
 
     # -- bookkeeping
 
@@ -249,8 +290,44 @@ class Freezer:
         return expr.func(*args)
 
     def _freeze_Piecewise(self, expr):
+        kink = self._kink_condition(expr)
+        if kink is not None:
+            (value, cond), (other, _) = expr.args
+            return sympy.Piecewise((self._freeze(value), kink), (self._freeze(other), True))
         pieces = [(self._freeze(value), self._condition(cond)) for value, cond in expr.args]
         return sympy.Piecewise(*pieces)
+
+    def _kink_condition(self, expr):
+        """The condition of ``if c then u else v`` kept as written (its sides frozen), when the
+        ``if`` is a kink: one comparison of a state-dependent ``g`` whose branches agree on ``g = 0``
+        (a relief valve ``if p > p_cr then K*(p - p_cr) else 0``). None: a jump, or undecided."""
+        if len(expr.args) != 2 or expr.args[1][1] != sympy.true:
+            return None
+        (value, cond), (other, _) = expr.args
+        if not isinstance(cond, Relational) or isinstance(cond, (sympy.Eq, sympy.Ne)):
+            return None
+        g = cond.lhs - cond.rhs
+        if self.is_time_only(g) or not continuous_across(value - other, g):
+            return None
+        lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
+        self.kinks.append(Kink(f"if {_short(cond)}", self._owner))
+        return type(cond)(lhs, rhs)
+
+    def _freeze_Mul(self, expr):
+        """A product with a ``sign(a)`` factor whose other factors vanish at ``a = 0`` (an orifice's
+        ``sign(dp)*sqrt(abs(dp))``) is continuous there: that ``sign`` is a kink, kept as written."""
+        args = []
+        for arg in expr.args:
+            if isinstance(arg, sympy.sign) and not self.is_time_only(arg.args[0]):
+                rest = sympy.Mul(*[other for other in expr.args if other is not arg])
+                if continuous_across(rest, arg.args[0]):
+                    self.kinks.append(Kink(f"sign({_short(arg.args[0])})", self._owner))
+                    args.append(sympy.sign(self._freeze(arg.args[0])))
+                    continue
+            args.append(self._freeze(arg))
+        if all(a is b for a, b in zip(args, expr.args)):
+            return expr
+        return sympy.Mul(*args)
 
     def _condition(self, cond, written: str = "", sides=None):
         """``cond`` with its comparisons replaced by their switches' modes. ``written``: the
