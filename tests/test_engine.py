@@ -302,10 +302,11 @@ end
 @pytest.mark.parametrize("solver", ["Radau", "BDF"])
 def test_scipys_implicit_solvers_take_finite_differences_where_the_jacobian_is_not(tmp_path, solver):
     """A supply ramping at 10 bar/s into a dead-end hose through a turbulent orifice starts at dp = 0,
-    where the law's slope (and the analytic Jacobian) is infinite. Radau and BDF stopped at once with
-    scipy's 'array must not contain infs or NaNs' (E803, no location); finite differences replace it
-    there, as with CVODE. The hose follows quasi-statically: Q = V/beta*dps/dt, and the drop that
-    passes it is dp = (Q/(Cd*A*sqrt(2/rho)))^2."""
+    where the law's slope is infinite. Radau and BDF stopped at once with scipy's 'array must not
+    contain infs or NaNs' (E803, no location). The orifice's sign(dp)*sqrt(abs(dp)) is a kink: its
+    Jacobian is the secant through the kink, 0 at the kink itself, so the Jacobian is finite from
+    the start and no finite differences are needed. The hose follows quasi-statically:
+    Q = V/beta*dps/dt, and the drop that passes it is dp = (Q/(Cd*A*sqrt(2/rho)))^2."""
     path = tmp_path / "ramp.bg"
     path.write_text(ORIFICE_SINE.replace("1e5*sin(2*pi*t)", "1e6*t").replace("t_end = 2 [s]",
                                                                              f'solver = "{solver}"\n    t_end = 2 [s]'))
@@ -315,8 +316,8 @@ def test_scipys_implicit_solvers_take_finite_differences_where_the_jacobian_is_n
     flow = 1e-5 / 1.4e9 * 1e6
     drop = (flow / (0.62 * 2e-6 * math.sqrt(2 / 850))) ** 2
     assert result.outputs["dp"][-1] == pytest.approx(drop, rel=0.05)      # (dp is 5e-9 of the pressure)
-    assert result.stats["jacobian_fallbacks"] >= 1
-    assert any(label.startswith("the analytic Jacobian is not finite") for _, label in result.events)
+    assert result.stats.get("jacobian_fallbacks", 0) == 0
+    assert not any(label.startswith("the analytic Jacobian is not finite") for _, label in result.events)
 
 
 def test_a_turbulent_orifice_is_never_held_on_its_sign_and_says_where_it_is_too_steep(tmp_path):
@@ -789,9 +790,9 @@ def test_diode_bridge_inside_an_algebraic_loop_matches_nodal_analysis():
     expected = reference.sol(result.t)[0]
     np.testing.assert_allclose(result.outputs["vout"], expected, rtol=0, atol=1e-5 * V)
     np.testing.assert_allclose(result.outputs["i_load"], result.outputs["vout"] / 100.0, rtol=1e-9)
-    # two diodes switch on and two off at each change of conduction: events in pairs
-    switching = [time for time, label in result.events if label.startswith("if ")]
-    assert len(switching) >= 8 and len(switching) % 2 == 0
+    # each diode's law is continuous at v = 0 (both branches 0): kinks, solved inside the loop as
+    # written, no event at a change of conduction (the jump variant, diode_bridge_jump.bg, has them)
+    assert not result.events and result.stats["mode_changes"] == 0
 
 
 @pytest.mark.slow      # 5 s
@@ -1000,8 +1001,8 @@ def test_nozzle_fills_choked_then_subsonic_to_the_supply_pressure_and_stays():
     assert np.all(np.isfinite(P)) and np.all(np.isfinite(result.outputs["mdot"]))
     np.testing.assert_allclose(P, expected, rtol=0, atol=1e-6 * Ps)
     assert P.max() <= Ps * (1 + 1e-9)
-    choked = [time for time, label in result.events if label.startswith("if b >=")]
-    assert choked == [pytest.approx(t_b, rel=1e-9)]
+    # psi is 1 on both sides of b at the choke: the switch is a kink, evaluated as written, no event
+    assert not [time for time, label in result.events if label.startswith("if b >=")]
 
 
 # ------------------------------------------------------------------ chattering
@@ -1350,10 +1351,10 @@ def test_a_branch_is_never_evaluated_outside_its_domain_beyond_its_switch():
     t, level = result.t, result.outputs["level"]
     assert np.all(np.isfinite(level))
     np.testing.assert_allclose(level, np.where(t < 1, (1 - t) ** 2, 0.0), rtol=0, atol=1e-5)
-    np.testing.assert_allclose(level[t > 1.001], 0.0, atol=1e-12)
-    # the tank reaches its switch at t = 1 s (and stays there: both branches leave it at rest)
-    switched = [time for time, label in result.events if "if drain.e > 0" in label]     # bond b2, named by its element
-    assert switched and switched[0] == pytest.approx(1.0, abs=1e-3)
+    # both branches are 0 at e = 0: a kink, evaluated as written (the else branch beyond it, so no
+    # square root of a negative level), never an event; the empty tank rests within atol (1e-9) of 0
+    np.testing.assert_allclose(level[t > 1.001], 0.0, atol=1e-8)
+    assert not result.events and result.stats["mode_changes"] == 0
 
 
 def test_a_model_without_states_is_evaluated_on_its_grid(tmp_path):

@@ -141,15 +141,47 @@ def test_auto_takes_dopri5_for_a_smooth_model_that_is_not_stiff():
 
 
 @pytest.mark.parametrize("model", ["tests/fixtures/sim/friction.bg", "tests/fixtures/engine/bouncing_ball.bg",
-                                   "tests/fixtures/engine/relief_valve.bg"])
+                                   "tests/fixtures/engine/branch_domain_jump.bg"])
 def test_auto_keeps_cvode_for_a_model_with_switches_of_the_state(model):
-    """Friction (sliding modes), a when clause on a state, a relief valve: CVODE, as before."""
+    """Friction (sliding modes), a when clause on a state, a drain whose law jumps where the tank
+    empties (a pump stopped by a float switch): CVODE, as before."""
     namespace, experiment = _compiled(ROOT / model)
     run = _simulate(namespace, experiment)
     assert run.complete and run.stats["solver"] == "CVODE"
     named = _simulate(namespace, experiment, method="CVODE")
     np.testing.assert_array_equal(run.t, named.t)
     assert run.events == named.events
+
+
+def _relief_pressure(t, beta=1.4e9, V=1e-3, Q0=2e-4, Rl=5e10, pr=50e5, kr=1e-9):
+    """relief_valve.bg's chamber: p = Q0*Rl*(1 - exp(-t*beta/(V*Rl))) while the valve is closed,
+    until p = pr at t1; then p relaxes to (Q0 + kr*pr)/(1/Rl + kr) at the rate (beta/V)*(1/Rl + kr)."""
+    t = np.asarray(t, dtype=float)
+    t1 = V * Rl / beta * math.log(Q0 * Rl / (Q0 * Rl - pr))
+    settled = (Q0 + kr * pr) / (1 / Rl + kr)
+    closed = Q0 * Rl * (1 - np.exp(-beta / (V * Rl) * t))
+    opened = settled + (pr - settled) * np.exp(-beta / V * (1 / Rl + kr) * np.maximum(t - t1, 0.0))
+    return np.where(t < t1, closed, opened)
+
+
+@needs_cxx
+def test_auto_takes_dopri5_for_a_relief_valve_whose_law_is_a_kink():
+    """relief_valve.bg: ``if e > pr then kr*(e - pr) else 0`` is continuous where the valve opens
+    (a kink): no switch of the state, no event, no mode change, the law evaluated as written. Auto
+    starts on DOPRI5 (spectral radius 28 1/s with the valve closed) and goes on with CVODE once the
+    open valve makes the chamber stiff (1.43e3 1/s). The pressure follows the closed form to the
+    experiment's atol (1e-9 m^3 of the chamber's volume state, 1400 Pa) and settles on the
+    equilibrium."""
+    namespace, experiment = _compiled(ROOT / "tests" / "fixtures" / "engine" / "relief_valve.bg")
+    assert not namespace["_Model"](namespace["_MODEL"]).SWITCHES
+    run = _simulate(namespace, experiment)
+    assert run.complete and run.stats["solver"] == "DOPRI5"
+    assert run.stats["spectral_radius"] == pytest.approx(28.0, rel=1e-3)
+    assert "then CVODE" in run.stats["solver_note"]
+    assert not run.events and run.stats["mode_changes"] == 0
+    atol = 1e-9 * 1.4e9 / 1e-3
+    np.testing.assert_allclose(run.outputs["P"], _relief_pressure(run.t), rtol=0, atol=3 * atol)
+    assert run.outputs["P"][-1] == pytest.approx((2e-4 + 1e-9 * 50e5) / (1 / 5e10 + 1e-9), rel=1e-9)
 
 
 STIFF_RC = """model StiffRC
@@ -273,16 +305,45 @@ def test_without_a_cxx_compiler_auto_takes_cvode_and_says_why(tmp_path, monkeypa
     np.testing.assert_allclose(named.states["spring.q"], _underdamped(named.t), rtol=0, atol=1e-8)
 
 
+def _drained(t, b=0.5):
+    """branch_domain_jump.bg's level: with s = sqrt(q), t = (1 - s) - (b/2)*ln((2 + b)/(2s + b))
+    (decreasing in s, inverted by bisection) until the tank empties at t = 1 - (b/2)*ln((2 + b)/b)."""
+    t = np.asarray(t, dtype=float)
+    low, high = np.zeros_like(t), np.ones_like(t)
+    for _ in range(80):
+        s = 0.5 * (low + high)
+        late = (1 - s) - 0.5 * b * np.log((2 + b) / (2 * s + b)) > t
+        low, high = np.where(late, s, low), np.where(late, high, s)
+    return np.where(t < 1 - 0.5 * b * math.log((2 + b) / b), (0.5 * (low + high)) ** 2, 0.0)
+
+
 @needs_cxx
 def test_a_rate_that_is_not_finite_at_a_trial_point_hands_the_step_to_the_step_loop():
-    """A tank drained through ``if e > 0 then a*sqrt(e) else 0``: trial points past the empty tank
+    """A tank drained through ``if e > 0 then a*sqrt(e) + b else 0`` (an outlet and a pump that a
+    float switch stops: a jump, the branch frozen between events): trial points past the empty tank
     take the square root of a negative number. The C stepper hands the step over (as CVODE's driver
-    does), the step loop takes the branch that holds there, and the tank empties at t = 1 s as
-    q = (1 - t)^2 says."""
-    namespace, experiment = _compiled(ROOT / "tests" / "fixtures" / "engine" / "branch_domain.bg")
+    does), the step loop takes the branch that holds there, and the tank empties at
+    t = 1 - ln(5)/4 s as the closed form says."""
+    namespace, experiment = _compiled(ROOT / "tests" / "fixtures" / "engine" / "branch_domain_jump.bg")
     run = _simulate(namespace, experiment, method="DOPRI5")
     assert run.complete and run.stats["branch_extensions"] > 0 and run.stats["driver_segments"] >= 1
     level = run.outputs["level"]
-    np.testing.assert_allclose(level, np.where(run.t < 1, (1 - run.t) ** 2, 0.0), rtol=0, atol=1e-6)
+    np.testing.assert_allclose(level, _drained(run.t), rtol=0, atol=1e-6)
     emptied = [time for time, label in run.events if "drain.e > 0" in label]
-    assert emptied and emptied[0] == pytest.approx(1.0, abs=1e-3)
+    assert emptied and emptied[0] == pytest.approx(1 - math.log(5) / 4, abs=1e-6)
+
+
+@needs_cxx
+def test_a_branch_beyond_a_kink_is_never_evaluated_by_the_c_stepper():
+    """branch_domain.bg: ``if e > 0 then a*sqrt(e) else 0`` is 0 on both sides of e = 0, a kink
+    evaluated as written: C takes the else branch past the empty tank (no square root of a negative
+    level, nothing handed over), no event, no mode change, and q = (1 - t)^2 until t = 1 s."""
+    namespace, experiment = _compiled(ROOT / "tests" / "fixtures" / "engine" / "branch_domain.bg")
+    assert not namespace["_Model"](namespace["_MODEL"]).SWITCHES
+    run = _simulate(namespace, experiment, method="DOPRI5")
+    assert run.complete and run.stats["solver"] == "DOPRI5" and run.stats["driver_segments"] == 1
+    assert "branch_extensions" not in run.stats
+    assert not run.events and run.stats["mode_changes"] == 0
+    level = run.outputs["level"]
+    assert np.all(np.isfinite(level))
+    np.testing.assert_allclose(level, np.where(run.t < 1, (1 - run.t) ** 2, 0.0), rtol=0, atol=1e-6)

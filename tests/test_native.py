@@ -696,14 +696,16 @@ def test_a_sliding_mode_on_several_switches_runs_in_the_driver_and_agrees_with_t
 
 @needs_cc
 @pytest.mark.parametrize("model", ["tests/fixtures/engine/thermostat.bg", "tests/fixtures/engine/bouncing_ball.bg",
-                                   "tests/fixtures/engine/breakaway.bg", "tests/fixtures/engine/diode_bridge.bg",
-                                   "tests/fixtures/engine/orifice_reversing.bg", "tests/fixtures/engine/hard_stop.bg"])
+                                   "tests/fixtures/engine/breakaway.bg", "tests/fixtures/engine/diode_bridge_jump.bg",
+                                   "tests/fixtures/engine/orifice_reversing_jump.bg",
+                                   "tests/fixtures/engine/hard_stop.bg"])
 def test_restarts_found_in_c_are_the_runs_own_to_the_bit(model, monkeypatch):
     """At a restart the modes just after it come from C (``bondc_driver_restart``: the modes at the
     point, the same a probe ahead along their law) where that is simple, else from the runtime's
     own loop, which also finds chattering. Runs with when clauses, sticking friction, a diode
     bridge in an algebraic loop (C's values taken only where finite) and reversing flow are the
-    same to the bit as with every restart found by the runtime."""
+    same to the bit as with every restart found by the runtime. (The bridge's diodes and the
+    reversing flow's regulator jump: a continuous diode or orifice law is a kink, with no restart.)"""
     if runtime._sundials_link() is None:
         pytest.skip("scikit-sundae's SUNDIALS libraries are not linkable here")
     namespace, experiment = _compiled(ROOT / model)
@@ -740,8 +742,9 @@ PIECE_MODELS = {
                   "  R fric : e = 1e-5*f + coulomb(f, 0.02, 0.03)\n  1 el\n  1 mech\n  source -> el\n"
                   "  el -> winding\n  el -> coil\n  el -> motor\n  motor -> mech\n  mech -> rotor\n  mech -> fric\n"
                   "  experiment run\n    t_end = 0.02 [s]\n  end\nend\n"),
-    # a reversing flow through a turbulent orifice: its sign switch crosses inside pieces
-    "orifice_reversing": (ROOT / "tests/fixtures/engine/orifice_reversing.bg").read_text(encoding="utf-8"),
+    # a reversing flow through a turbulent orifice and a flow regulator: the regulator's sign switch
+    # (a jump; the orifice's sign(e)*sqrt(abs(e)) is a kink, no switch) crosses inside pieces
+    "orifice_reversing_jump": (ROOT / "tests/fixtures/engine/orifice_reversing_jump.bg").read_text(encoding="utf-8"),
     # 1 % pulses into a Shockley diode in a nonlinear algebraic loop (its switches and laws in C's
     # Newton, numpy's MINPACK where that fails)
     "pwm_diode": (ROOT / "tests/fixtures/sim/pwm_diode.bg").read_text(encoding="utf-8"),
@@ -776,7 +779,7 @@ PIECE_MODELS.update({
 #: in which a switch of the state crosses inside a piece
 TIME_ALONE = {"pwm_rl", "pwm_sine_compare", "duty_step", "staircase", "pwm_diode", "sampled_pi", "chirp_count",
               "held_exp_sin"}
-CROSSING = {"orifice_reversing"}
+CROSSING = {"orifice_reversing_jump"}
 
 
 def _same_run_with_pieces_ahead(path, ahead, monkeypatch, every_segment, resumed=False):
@@ -886,11 +889,12 @@ def test_a_sliding_mode_the_driver_hands_over_goes_on_in_the_step_loop(monkeypat
         assert difference.max() <= 1e-3 * scale, name
 
 
-@pytest.mark.parametrize("model", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/diode_bridge.bg"])
+@pytest.mark.parametrize("model", ["models/electro_pneumatic_hybrid.bg", "tests/fixtures/engine/diode_bridge_jump.bg"])
 def test_the_modes_a_right_hand_side_reads_depend_on_the_modes_alone(model):
     """The step loop keeps, per mode vector, which switches matter (the modes the active branches
-    read): every condition of a law is a switch, so the state cannot change which branches run.
-    Checked on the generated numpy code at random states for random mode vectors."""
+    read): every condition of a jump is a switch, so the state cannot change which of its branches
+    run (a kink's condition is evaluated as written and reads no mode). Checked on the generated
+    numpy code at random states for random mode vectors."""
     namespace, _ = _compiled(ROOT / model)
     runtime_model = namespace["_Model"](namespace["_MODEL"])
     p = namespace["param_array"](runtime_model.PARAMETERS, None, runtime_model.derive_parameters)
@@ -1131,7 +1135,7 @@ def test_a_loaded_models_library_is_found_again_by_its_text_without_building(tmp
     assert out[0] == 6.0
 
 
-@pytest.mark.parametrize("fixture", ["engine/diode_bridge.bg", "sim/pwm_diode.bg"])
+@pytest.mark.parametrize("fixture", ["engine/diode_bridge_jump.bg", "sim/pwm_diode.bg"])
 def test_the_modes_a_loop_models_laws_read_are_found_without_solving_the_loop(fixture):
     """Which switches matter for a mode vector is found by evaluating the right-hand side with a
     mode reader; in a model with a nonlinear loop the loop's residual is then evaluated once, not
