@@ -28,7 +28,7 @@ from pathlib import Path
 from urllib.parse import unquote, urlparse
 
 from lsprotocol import types as lsp
-from pygls.exceptions import JsonRpcInvalidRequest
+from pygls.exceptions import JsonRpcException, JsonRpcInvalidParams, JsonRpcInvalidRequest
 from pygls.lsp.server import LanguageServer
 from pygls.protocol import LanguageServerProtocol
 
@@ -514,29 +514,101 @@ class _Framed:
                 return False
 
 
+class _Unreadable:
+    """A message pygls could not read into its types (its parameters' types, for a request): a
+    request (``answer``) is answered with ``error`` all the same; a notification or a response is
+    logged and dropped."""
+
+    def __init__(self, msg_id, error: JsonRpcException, answer: bool):
+        self.id = msg_id
+        self.error = error
+        self.answer = answer
+
+
 class _Answered(logging.Filter):
-    """pygls logs a traceback for every message that is not JSON; bondc answers those itself and
-    logs them in one line."""
+    """pygls logs a traceback for every message it cannot read, or that is not JSON; bondc answers
+    (or logs) those itself, in one line."""
 
     def filter(self, record: logging.LogRecord) -> bool:
+        text = str(record.msg)
+        if text.startswith("Unable to deserialize message"):
+            return False
         error = record.exc_info[1] if record.exc_info else None
-        return not (str(record.msg).startswith("Unable to handle message") and isinstance(error, _NOT_JSON))
+        return not (text.startswith("Unable to handle message") and isinstance(error, _NOT_JSON))
 
 
 _NOT_JSON = (json.JSONDecodeError, UnicodeDecodeError, RecursionError)
-logging.getLogger("pygls.server").addFilter(_Answered())
+for _name in ("pygls.protocol.json_rpc", "pygls.server"):
+    logging.getLogger(_name).addFilter(_Answered())
+
+
+def _valid_id(value):
+    """A request's id as it may be answered: a string or an integer, else None (JSON-RPC: null)."""
+    return value if isinstance(value, str) or (isinstance(value, int) and not isinstance(value, bool)) else None
 
 
 class _Protocol(LanguageServerProtocol):
-    """pygls's protocol, except that a request after ``shutdown`` is answered with InvalidRequest,
-    as the LSP specification says (pygls drops it and the client waits for ever)."""
+    """pygls's protocol, except that every request gets an answer:
+
+    - a request after ``shutdown`` is answered with InvalidRequest, as the LSP specification says
+      (pygls drops it and the client waits for ever);
+    - a request whose parameters do not have their types (a negative position, a string for a
+      number, a field missing) is answered with InvalidParams: pygls logged it and sent nothing;
+    - a message that is not a JSON-RPC request (no ``jsonrpc``, a method that is no name, a batch)
+      is answered with InvalidRequest.
+    """
+
+    def structure_message(self, data):
+        try:
+            return super().structure_message(data)
+        except JsonRpcException as error:
+            method, cause = data.get("method"), error.__cause__
+            detail = ""
+            if cause is not None:
+                try:
+                    import cattrs
+
+                    # "... @ $.params.text_document": the field as the client spells it (textDocument)
+                    detail = "; ".join(re.sub(r"_([a-z])", lambda m: m[1].upper(), line)
+                                       for line in cattrs.transform_error(cause))
+                except Exception:   # noqa: BLE001  (not a cattrs error: its own text)
+                    detail = str(cause)
+            if "id" not in data or "method" not in data:        # a notification or a response
+                what = f"the notification {method!r} with invalid params" if "method" in data else \
+                    "a response that cannot be read"
+                return _Unreadable(None, JsonRpcInvalidParams(what + (f": {detail}" if detail else "")),
+                                   answer=False)
+            if not isinstance(method, str) or _valid_id(data["id"]) is None:
+                return _Unreadable(_valid_id(data["id"]), JsonRpcInvalidRequest(
+                    "a request needs a method name (a string) and an id (a string or an integer)"), answer=True)
+            return _Unreadable(data["id"], JsonRpcInvalidParams(
+                f"invalid params for {method}" + (f": {detail}" if detail else "")), answer=True)
 
     def send_error(self, msg_id, code: int, message: str) -> None:
         """A JSON-RPC error response; ``msg_id`` None is sent as null (pygls would leave it out)."""
         self._send_data({"jsonrpc": "2.0", "id": msg_id, "error": {"code": code, "message": message}})
 
     def handle_message(self, message):
-        if self._shutdown and getattr(message, "method", "exit") != "exit" and getattr(message, "id", None) is not None:
+        if isinstance(message, _Unreadable):
+            if message.answer:
+                logger.warning("answered a request with an error: %s", message.error.message)
+                self.send_error(message.id, message.error.code, message.error.message)
+            else:
+                logger.warning("ignored %s", message.error.message)
+            return
+        if not hasattr(message, "jsonrpc"):            # json that is not a JSON-RPC message
+            msg_id = _valid_id(message.get("id")) if isinstance(message, dict) else None
+            self.send_error(msg_id, INVALID_REQUEST, "not a JSON-RPC 2.0 message (an object with "
+                                                     "\"jsonrpc\": \"2.0\" and a method)")
+            return
+        msg_id, method = getattr(message, "id", None), getattr(message, "method", None)
+        if method is not None and msg_id is not None and (message.jsonrpc != self.VERSION
+                                                          or not isinstance(method, str)):
+            self.send_error(_valid_id(msg_id), INVALID_REQUEST,
+                            f"jsonrpc must be \"2.0\", not {message.jsonrpc!r}" if message.jsonrpc != self.VERSION
+                            else "a request needs a method name (a string)")
+            return
+        if self._shutdown and getattr(message, "method", "exit") != "exit" and msg_id is not None:
             error = JsonRpcInvalidRequest("the server is shut down: only 'exit' is accepted")
             self._send_response(message.id, None, error.to_response_error())
             return

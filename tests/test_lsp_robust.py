@@ -2,7 +2,8 @@
 
 - a Content-Length of 10^15 bytes;
 - a Content-Length that is not a number, or none;
-- a body that is not JSON, or shorter than announced.
+- a body that is not JSON, or shorter than announced;
+- requests with parameters of the wrong shape, or no JSON-RPC request at all.
 
 Each test drives a real server process over its stdio, as an editor does: it sends one of these,
 then a valid request, and checks that the server answered both, is still alive, and exits
@@ -168,6 +169,40 @@ def test_a_content_length_of_a_petabyte_is_refused_not_allocated(client, tmp_pat
 
     body = json.dumps({"jsonrpc": "2.0", "method": "$/note", "params": {"text": "x" * MAX_MESSAGE_BYTES}}).encode()
     client.raw(b"Content-Length: %d\r\n\r\n" % len(body) + body)
+    assert client.error_without_id()["code"] == -32600
+    client.still_serving(tmp_path)
+    client.finish()
+
+
+@server_process
+@pytest.mark.parametrize("params", [
+    {"textDocument": {"uri": "file:///x.bg"}, "position": {"line": -1, "character": 0}},       # negative
+    {"textDocument": {"uri": "file:///x.bg"}, "position": {"line": 0, "character": "three"}},  # a string
+    {"textDocument": {"uri": "file:///x.bg"}},                                                   # no position
+    {"textDocument": "file:///x.bg", "position": {"line": 0, "character": 0}},                 # not an object
+    [1, 2, 3],                                                                                   # not an object
+    None,                                                                                        # no params
+], ids=["negative-line", "string-character", "missing-position", "uri-not-object", "list", "null"])
+def test_a_request_with_invalid_params_is_answered_with_invalid_params(client, tmp_path, params):
+    """pygls logged the parameters it could not read and sent nothing: the client waited for ever."""
+    for method in ("textDocument/hover", "textDocument/definition", "textDocument/completion"):
+        number = client.request_id(method, params)
+        reply = client.reply(number)
+        assert reply["error"]["code"] == -32602, reply            # InvalidParams
+        assert method in reply["error"]["message"]
+    client.still_serving(tmp_path)
+    client.finish()
+
+
+@server_process
+def test_requests_with_odd_ids_or_no_jsonrpc_are_answered(client, tmp_path):
+    client.send({"jsonrpc": "2.0", "id": "text-id", "method": "textDocument/hover", "params": {"position": 3}})
+    assert client.reply("text-id")["error"]["code"] == -32602
+    client.send({"id": 41, "method": "textDocument/hover", "params": {}})              # no "jsonrpc"
+    assert client.reply(41)["error"]["code"] == -32600
+    client.send({"jsonrpc": "2.0", "id": 42, "method": 7, "params": {}})               # a method that is no name
+    assert client.reply(42)["error"]["code"] == -32600
+    client.send([{"jsonrpc": "2.0", "id": 43, "method": "shutdown"}])                  # a batch: not LSP
     assert client.error_without_id()["code"] == -32600
     client.still_serving(tmp_path)
     client.finish()
