@@ -13,6 +13,13 @@ It works on the editor's buffers, saved or not:
 - completion of names, element kinds, built-ins, units, and members after a
   dot (``valve.`` lists the instance's ports, elements and outputs);
 - document symbols (the outline) and formatting (``bondc fmt``).
+
+A client that sends bad input is answered and served on: a message that cannot be framed (no
+Content-Length, one that is not a number, one above :data:`MAX_MESSAGE_BYTES`) or is not JSON gets
+a JSON-RPC error with id null and reading goes on at the next message (:class:`_Framed`); a request
+with parameters of the wrong shape gets InvalidParams (:class:`_Protocol`); a buffer beyond
+:data:`MAX_DOCUMENT_LINES` lines or :data:`MAX_DOCUMENT_CHARS` characters is not analysed (one
+diagnostic, E006), so that the server keeps answering.
 """
 
 from __future__ import annotations
@@ -42,6 +49,10 @@ DEBOUNCE = 0.15          # seconds after the last change before the buffer is ch
 MAX_MESSAGE_BYTES = 64 * 1024 * 1024
 #: The largest header block of a message [bytes] (a header is a line or two: Content-Length, Content-Type).
 MAX_HEADER_BYTES = 8192
+#: The largest buffer analysed: a larger one gets one diagnostic, E006, and no index (a check of a
+#: buffer runs in the server's only thread, and one of 20 000 lines of a model takes seconds).
+MAX_DOCUMENT_LINES = 20_000
+MAX_DOCUMENT_CHARS = 1_000_000
 KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment", "import", "if", "then",
             "else", "and", "or", "not", "port", "defaults", "discrete", "when")
 _DOCS = Path(__file__).resolve().parent.parent / "docs" / "diagnostics.md"
@@ -344,6 +355,7 @@ class Document:
     files: list = field(default_factory=list)
     index: Index | None = None
     graph: object = None
+    too_large: bool = False          # beyond MAX_DOCUMENT_LINES or MAX_DOCUMENT_CHARS: not analysed (E006)
 
 
 logger = logging.getLogger(__name__)
@@ -634,6 +646,17 @@ class BondcServer(LanguageServer):
         from bondc import semantic
 
         document = Document(uri, text, version, path_of(uri))
+        too_large = _too_large(text)
+        if too_large is not None:       # one diagnostic, no index: every feature answers at once
+            document.too_large = True
+            self.documents[uri] = document
+            self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(
+                uri=uri, diagnostics=[too_large], version=version))
+            for other_uri in self.published.pop(uri, set()):
+                if other_uri not in self.documents:
+                    self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(uri=other_uri,
+                                                                                        diagnostics=[]))
+            return
         diagnostics, document.graph = check_text(document.path, text)
         try:
             document.files, _, _ = semantic.load_files(document.path, text)
@@ -660,6 +683,20 @@ class BondcServer(LanguageServer):
             if other_uri not in self.documents:
                 self.text_document_publish_diagnostics(lsp.PublishDiagnosticsParams(uri=other_uri, diagnostics=items))
         self.published[uri] = set(by_file)
+
+
+def _too_large(text: str) -> lsp.Diagnostic | None:
+    """E006 for a buffer beyond :data:`MAX_DOCUMENT_LINES` or :data:`MAX_DOCUMENT_CHARS`, else None."""
+    lines = text.count("\n") + (1 if text and not text.endswith("\n") else 0)
+    if lines <= MAX_DOCUMENT_LINES and len(text) <= MAX_DOCUMENT_CHARS:
+        return None
+    return lsp.Diagnostic(
+        range=lsp.Range(lsp.Position(0, 0), lsp.Position(0, 0)), severity=lsp.DiagnosticSeverity.Error,
+        code="E006", source="bondc",
+        message=(f"the document is too large to analyse as you type: {lines} lines, {len(text)} characters "
+                 f"(at most {MAX_DOCUMENT_LINES} lines and {MAX_DOCUMENT_CHARS} characters)\n"
+                 "run 'bondc check FILE' on it, or split it into files that import each other"),
+        code_description=(lsp.CodeDescription(href=_DOCS.as_uri() + "#e006") if _DOCS.exists() else None))
 
 
 server = BondcServer()
@@ -969,7 +1006,7 @@ def _model_at(document: Document, line: int) -> str | None:
 @server.feature(lsp.TEXT_DOCUMENT_COMPLETION, lsp.CompletionOptions(trigger_characters=[".", "["]))
 def completion(ls: BondcServer, params: lsp.CompletionParams):
     document = ls.documents.get(params.text_document.uri)
-    if document is None:
+    if document is None or document.too_large:
         return []
     buffer = ls.workspace.get_text_document(params.text_document.uri)
     lines = buffer.lines
@@ -1006,6 +1043,8 @@ def formatting(ls: BondcServer, params: lsp.DocumentFormattingParams):
     from bondc.fmt import fmt
 
     document = ls.workspace.get_text_document(params.text_document.uri)
+    if _too_large(document.source) is not None:
+        return None                     # E006 says so
     try:
         formatted = fmt(document.source, str(path_of(document.uri)))
     except (BondcError, OSError):

@@ -3,7 +3,8 @@
 - a Content-Length of 10^15 bytes;
 - a Content-Length that is not a number, or none;
 - a body that is not JSON, or shorter than announced;
-- requests with parameters of the wrong shape, or no JSON-RPC request at all.
+- requests with parameters of the wrong shape, or no JSON-RPC request at all;
+- a document of three million lines.
 
 Each test drives a real server process over its stdio, as an editor does: it sends one of these,
 then a valid request, and checks that the server answered both, is still alive, and exits
@@ -234,6 +235,28 @@ def test_a_message_that_is_not_framed_or_not_json_is_reported_and_the_next_one_r
     assert error["code"] == code and error["message"]
     client.finish()
 
+
+@server_process
+def test_a_document_of_three_million_lines_gets_one_diagnostic_and_the_server_goes_on(client, tmp_path):
+    """Checking a buffer of three million lines stalled the server: nothing else was answered."""
+    big = (tmp_path / "big.bg").resolve().as_uri()
+    text = "model Big\n" + "  param k = 1\n" * 3_000_000 + "end\n"
+    client.open(big, text)
+    (too_large,) = client.diagnostics(big)
+    assert too_large["code"] == "E006" and "3000002 lines" in too_large["message"]
+    assert too_large["range"]["start"] == {"line": 0, "character": 0}
+    for method, extra in (("textDocument/hover", {"position": {"line": 5, "character": 9}}),
+                          ("textDocument/completion", {"position": {"line": 5, "character": 9}}),
+                          ("textDocument/definition", {"position": {"line": 5, "character": 9}}),
+                          ("textDocument/documentSymbol", {}),
+                          ("textDocument/formatting", {"options": {"tabSize": 2, "insertSpaces": True}})):
+        client.request(method, {"textDocument": {"uri": big}, **extra})
+    client.still_serving(tmp_path)
+    # edited down to a model of normal size, it is checked again
+    client.notify("textDocument/didChange", {"textDocument": {"uri": big, "version": 2},
+                                             "contentChanges": [{"text": MODEL}]})
+    assert client.diagnostics(big) == []
+    client.finish()
 
 
 class _Trickle:
