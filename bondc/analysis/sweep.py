@@ -67,7 +67,11 @@ file (matched by their parameter values) are not run again. What they were
 computed from (the text of the model file and its imports, the model,
 experiment, --set values, t_end, dt and motor catalogue) is recorded beside a
 csv table in ``<table>.csv.study`` and inside a json one; a resume with any of
-these changed is E970, not a table mixing two studies.
+these changed is E970, not a table mixing two studies. A sweep never rewrites
+its file without the finished points it holds: a grid (or Latin hypercube)
+that leaves out some of them is E970 too, and the file is left as it is; a
+grid that holds them all extends the study. A row cut short by a killed run
+is not a point, and runs again.
 
 **Statuses.** "ok"; "failed" (it did not load, or its run stopped early);
 "timed out"; "incomplete" (it ran, but a metric or the motor selection could
@@ -81,7 +85,7 @@ quantity than the parameter's), E964 (more than :data:`MAX_RUNS` runs),
 E965 (an unknown metric), E966 (a parameter varied twice, or varied and
 ``--set``), E967 (jobs < 1, a negative time limit), E969 (an output file
 that is not .csv or .json), E970 (an output file holding another sweep's
-table), E971 (Dask not installed, an unknown executor, an unreachable
+table, points this sweep would drop, or a file bondc did not write), E971 (Dask not installed, an unknown executor, an unreachable
 scheduler). E968 is a failed point's diagnostic when it has none of its own
 (the model file changed during the sweep, a worker process died, an
 internal error).
@@ -1077,6 +1081,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         previous = _previous_points(output, template.csv_header(), axes, chosen_metrics, motors is not None)
         if previous:
             _check_study(output, settings["study"])
+            _check_grid(output, previous, keys, axes, samples, seed)
     done: dict[int, SweepPoint] = {}
     for index, (key, values) in enumerate(zip(keys, grid)):
         if key in previous:
@@ -1088,7 +1093,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         setup = dataclasses.replace(setup, bound=True)
     journal = None
     if output is not None and Path(output).suffix.lower() == ".csv":
-        journal = _Journal(output, result_of(()).csv_header(), keep_rows=bool(previous))
+        journal = _Journal(output, result_of(()).csv_header())
         _write_study(output, settings["study"])
     report = _progress_reporter(progress, len(tasks))
 
@@ -1427,18 +1432,28 @@ def _key(parameters: Mapping, names: Sequence[str]) -> tuple:
     return tuple(f"{float(parameters[name]):.12g}" for name in names)
 
 
+def _not_resumable(path, why: str) -> UsageError:
+    return _usage("E970", f"cannot resume from '{path}': {why}",
+                  hint="it is not the table of this sweep, and bondc leaves it as it is; write to another file "
+                       "(-o), or delete it to start again")
+
+
 def _previous_points(path, result_header: list[str], axes, metrics, motors: bool) -> dict[tuple, SweepPoint]:
     """The points an earlier run of the same sweep wrote to ``path`` (a .csv or .json), by key.
 
-    A file of another sweep (other columns) is not resumed: E970 says so rather than mixing them."""
+    A file of another sweep (other columns), or one that bondc did not write (a row it would not
+    write, a json that is not a sweep's), is not resumed: E970 says so rather than mixing them or
+    replacing the file. A csv row cut short (an interruption) is not a point: that point runs again."""
     path = Path(path)
-    if not path.exists():
+    if not path.exists() or path.stat().st_size == 0:
         return {}
     names = [axis.name for axis in axes]
     found: dict[tuple, SweepPoint] = {}
     try:
         if path.suffix.lower() == ".json":
             data = json.loads(path.read_text(encoding="utf-8"))
+            if not isinstance(data, dict) or not isinstance(data.get("points", []), list):
+                raise ValueError("not the json table of a sweep")
             if [p["name"] for p in data.get("parameters", [])] != names or \
                     [m["name"] for m in data.get("metrics", [])] != [m.name for m in metrics]:
                 raise ValueError("other columns")
@@ -1448,36 +1463,62 @@ def _previous_points(path, result_header: list[str], axes, metrics, motors: bool
                                    {k: _from_json_number(v) for k, v in (item.get("metrics") or {}).items()},
                                    item.get("t_reached"), wall_time=item.get("wall_time"),
                                    motors=tuple(item["motors"]) if "motors" in item else None)
+                if point.status not in STATUSES:
+                    raise ValueError(f"a point with the status {point.status!r}")
                 found[_key(point.parameters, names)] = point
             return found
         with open(path, newline="", encoding="utf-8") as handle:
             rows = list(csv.reader(handle))
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError) as error:
-        raise _usage("E970", f"cannot resume from '{path}': {error}",
-                     hint="it is not the table of this sweep; write to another file, or delete it to start "
-                          "again") from None
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError, AttributeError, csv.Error) as error:
+        raise _not_resumable(path, str(error) or type(error).__name__) from None
     if not rows:
         return {}
     if rows[0] != result_header:
         raise _usage("E970", f"'{path}' holds the table of another sweep (other columns)",
-                     hint="write to another file, or delete it to start again")
+                     hint="bondc leaves it as it is; write to another file (-o), or delete it to start again")
     width = len(result_header)
     columns = {name: number for number, name in enumerate(result_header)}
-    for row in rows[1:]:
-        if len(row) != width or row[columns["status"]] not in STATUSES:
+    for line, row in enumerate(rows[1:], 2):
+        if len(row) < width:
             continue            # a row cut short by an interruption: that point runs again
+        if len(row) > width or row[columns["status"]] not in STATUSES or not row[0].isdigit():
+            raise _not_resumable(path, f"row {line} is not a row bondc writes")
         try:
             parameters = {axis.name: float(row[1 + i]) for i, axis in enumerate(axes)}
         except ValueError:
             continue            # a row without its values (written by an older bondc): that point runs again
-        metrics_values = {m.name: _from_csv(row[1 + len(axes) + i]) for i, m in enumerate(metrics)}
+        try:
+            metrics_values = {m.name: _from_csv(row[1 + len(axes) + i]) for i, m in enumerate(metrics)}
+            wall_time = _from_csv(row[columns["wall_time [s]"]])
+        except ValueError:
+            raise _not_resumable(path, f"row {line} is not a row bondc writes") from None
         status = row[columns["status"]]
         point = SweepPoint(int(row[0]), (), status, row[columns["message"]] or None, None, parameters,
                            metrics_values if status in ("ok", "incomplete") else {},
-                           wall_time=_from_csv(row[columns["wall_time [s]"]]),
+                           wall_time=wall_time,
                            motors=tuple(m for m in row[columns["motors"]].split(";") if m) if motors else None)
         found[_key(parameters, names)] = point
     return found
+
+
+def _check_grid(output, previous: dict[tuple, SweepPoint], keys: Sequence[tuple], axes, samples, seed) -> None:
+    """E970 where ``output`` holds finished points that are not points of this sweep: running it
+    would rewrite the table without them. A grid that holds every one of them resumes or extends
+    the study."""
+    grid = set(keys)
+    strays = [point for key, point in previous.items() if key not in grid]
+    if not strays:
+        return
+    example = ", ".join(f"{name}={value:.6g}" for name, value in strays[0].parameters.items())
+    how = ("the same --samples, --range and --seed" if samples else "the same --vary values, or a grid that "
+           "holds them,")
+    hint = (f"bondc leaves '{output}' as it is. To resume it give {how} as the run that wrote it; otherwise "
+            "write to another file (-o), or delete it to start again")
+    if samples and seed is None:
+        hint += " (a Latin hypercube without --seed draws other points every run: give --seed)"
+    raise _usage("E970", f"'{output}' holds {len(strays)} finished point{'s' if len(strays) != 1 else ''} "
+                         f"that {'are' if len(strays) != 1 else 'is'} not in this sweep (e.g. {example}): "
+                         "running it would drop them", hint=hint)
 
 
 def _study(graph, model, experiment, sets, t_end, dt, motors) -> dict:
@@ -1545,11 +1586,14 @@ def _from_json_number(value):
 
 class _Journal:
     """The csv results file, one row appended and flushed as each point finishes, so that nothing
-    finished is lost whatever stops the sweep; at the end the file is rewritten in grid order."""
+    finished is lost whatever stops the sweep; at the end the file is rewritten in grid order.
 
-    def __init__(self, path, header: list[str], keep_rows: bool):
+    A file that exists is only appended to (its header and rows were checked by
+    :func:`_previous_points` and :func:`_check_grid`): a new file, or an empty one, gets the header."""
+
+    def __init__(self, path, header: list[str]):
         self.path = Path(path)
-        fresh = not keep_rows or not self.path.exists() or self.path.stat().st_size == 0
+        fresh = not self.path.exists() or self.path.stat().st_size == 0
         if fresh:
             from bondc.io import atomic_write_text
 

@@ -484,12 +484,20 @@ d("E969", "sweep output file",
   "`bondc sweep -o FILE`: the file name does not end in `.csv` or `.json`.",
   "Name the output `results.csv` (SI values) or `results.json`.")
 d("E970", "sweep output holds another sweep",
-  "`bondc sweep -o FILE` resumes from the points already in FILE; FILE holds a table with other columns "
-  "(other varied parameters or metrics) or cannot be read as a sweep table, so its rows cannot be the points of "
-  "this sweep; or its points were computed from something else than this sweep's: a model file or import whose "
-  "text changed since, or another model, experiment, `--set`, `t_end`, `dt` or motor catalogue (recorded in "
-  "`FILE.study` beside a csv table, inside a json one).",
-  "Write to another file, or delete FILE to start the study again.")
+  "`bondc sweep -o FILE` resumes from the points already in FILE, and never rewrites FILE without them. It "
+  "refuses, and leaves FILE (and `FILE.study`) byte for byte as they are, when FILE holds a table with other "
+  "columns (other varied parameters or metrics, or a `motors` column where this sweep has none) or cannot be "
+  "read as a sweep table (not text, a row bondc does not write, a json that is not a sweep's); when FILE holds "
+  "finished points that are not points of this sweep (a `--vary` grid that leaves some of them out, other "
+  "`--samples`, `--range` or `--seed`, or a Latin hypercube without `--seed`, which draws other points every "
+  "run): running it would drop them; or when its points were computed from something else than this sweep's: "
+  "a model file or import whose text changed since, or another model, experiment, `--set`, `t_end`, `dt` or "
+  "motor catalogue (recorded in `FILE.study` beside a csv table, inside a json one). A grid that holds every "
+  "point already in FILE extends the study: they are kept and only the new points run. A row cut short by a "
+  "killed run is not a point: it runs again.",
+  "To resume, give the same `--vary` (or a grid that holds its points), or the same `--samples`, `--range` "
+  "and `--seed`, as the run that wrote FILE; otherwise write to another file (`-o`), or delete FILE to start "
+  "the study again.")
 d("E972", "not a sweep table",
   "`bondc report --sweep FILE`: FILE cannot be read, or is not the csv `bondc sweep -o` wrote (its header "
   "starts with `index` and has a `status` column).",
@@ -571,6 +579,14 @@ d("E005", "expression nested too deeply",
   "the translation to sympy follow it one level per term. Sums of a few thousand terms are fine; beyond "
   "what Python's call depth allows (20 000 levels) the command stops with this error instead of a traceback.",
   "Split the expression: name parts of it with `param` or write them as `fn` definitions.")
+d("E006", "document too large to analyse",
+  "`bondc lsp`: an open document has more than 20 000 lines or 1 000 000 characters. The language server "
+  "checks a buffer in its only thread as you type, so it does not analyse one that large (a model of "
+  "20 000 lines takes seconds to check, and one of millions of lines would stop the server answering "
+  "anything else); it shows this one diagnostic at the top of the document instead, and hover, "
+  "definitions, completion and formatting give nothing for it. Every other document is served as "
+  "before, and the document is analysed again once an edit brings it under the limits.",
+  "Run `bondc check FILE` on the file, or split it into files that import each other.")
 # ================================================================== examples
 
 PARSE_EXAMPLES = {
@@ -762,6 +778,11 @@ live("E965", Cli(_SWEEP + "--vary J=1e-4,2e-4 --metric omgea.max", {"spin.bg": S
 live("E966", Cli(_SWEEP + "--vary J=1e-4 --vary J=2e-4", {"spin.bg": SPIN}))
 live("E967", Cli(_SWEEP + "--vary J=1e-4 --jobs 0", {"spin.bg": SPIN}))
 live("E969", Cli(_SWEEP + "--vary J=1e-4,2e-4 -o results.txt", {"spin.bg": SPIN}))
+live("E970", Cli(_SWEEP + "--vary J=1e-4,4e-4 --metric omega.final -o study.csv",
+                 {"spin.bg": SPIN,
+                  "study.csv": "index,J [kg*m^2],omega.final [rad/s],status,message,wall_time [s]\n"
+                               "0,0.0001,499.99,ok,,0.02\n1,0.0002,496.63,ok,,0.02\n"},
+                 note="`study.csv` is the table of an earlier `--vary J=1e-4,2e-4`."))
 
 # -- validation
 
