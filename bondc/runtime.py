@@ -2658,6 +2658,7 @@ class _Run:
                 if table is None:
                     self.stats["code_note"] = f"DOPRI5 runs scipy's RK45 from Python: {why}"
                     return None
+                self.stats["compiler_cxx"] = compiler_label("c++")
                 driver = _NativeDriver.create(self.model, library, self.p, False, explicit=table)
                 if driver is not None and self.auto:
                     # batches no longer than the stiffness checks' spacing (check_stiffness)
@@ -5584,18 +5585,170 @@ const bondc_erk_api table = {1, create, destroy, start, step, dky, last_step, co
 const bondc_erk_api *bondc_erk_table(void) { return &table; }
 """.replace("/* BONDC_ERK_API */\n", _ERK_API)
 _ERK_FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off", "-std=c++17")
-_ERK_LOADED: dict = {}          # (cache folder, $CXX) -> (ffi, lib, table address) or (None, None, why)
+_ERK_LOADED: dict = {}          # (cache folder, $CXX, $PATH) -> (ffi, lib, table address) or (None, None, why)
+
+
+#: The compilers bondc builds its native code with, per language: ``$CC`` (``$CXX``) where it names a
+#: program, then the system's on PATH, then zig's (the ``ziglang`` package, one of bondc's
+#: dependencies: a C and C++ compiler wherever pip installs bondc). Each candidate builds a small
+#: shared library once per machine (a compiler without its C library's headers fails there) and the
+#: outcome is recorded in ``cache_dir()/native``; the first that builds is the one, and its name and
+#: version are part of the cache key of every library it builds.
+_SYSTEM_COMPILERS = {"c": ("CC", ("cc", "gcc", "clang")), "c++": ("CXX", ("c++", "g++", "clang++"))}
+#: zig's flags on top of bondc's: code for the architecture's baseline processor, as a system
+#: compiler makes it (zig's default is this machine's processor), and no UndefinedBehaviorSanitizer
+#: (zig's default below -O2: large models' units are compiled at -O0, and a signed overflow would
+#: abort the process)
+_ZIG_FLAGS = ("-mcpu=baseline", "-fno-sanitize=undefined")
+#: (file name, text, flags) of the library each language's candidates build once
+_COMPILER_PROBES = {
+    "c": ("probe.c", "#include <math.h>\ndouble bondc_probe(double x) { return sin(x); }\n", ("-lm",)),
+    "c++": ("probe.cpp", "#include <algorithm>\n#include <vector>\nextern \"C\" double bondc_probe(double x)\n"
+            "{ std::vector<double> v{x, 1.0}; return *std::max_element(v.begin(), v.end()); }\n",
+            ("-std=c++17",)),
+}
+_COMPILERS: dict = {}       # (language, $CC or $CXX, $PATH) -> (Compiler or None, why)
+
+
+#: A compiler bondc builds with: ``command`` (the program and the flags it always gets), ``label``
+#: (its version and where it is, as ``stats["compiler"]`` shows it) and ``identity`` (what the cache
+#: keys of its builds carry)
+Compiler = _collections.namedtuple("Compiler", "command label identity")
+
+
+def find_compiler(language="c"):
+    """``(Compiler, "")`` for ``language`` ("c" or "c++"), or ``(None, why none)``; chosen once per
+    process (for the same ``$CC``/``$CXX`` and PATH) from the outcomes recorded for this machine."""
+    variable = _SYSTEM_COMPILERS[language][0]
+    key = (language, os.environ.get(variable, ""), os.environ.get("PATH", ""))
+    known = _COMPILERS.get(key)
+    if known is None:
+        known = _COMPILERS[key] = _choose_compiler(language)
+    return known
+
+
+def _zig():
+    """The zig program the ``ziglang`` package ships, or None."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec("ziglang")
+    except (ImportError, ValueError):
+        return None
+    for folder in (spec.submodule_search_locations or []) if spec is not None else []:
+        program = os.path.join(folder, "zig.exe" if os.name == "nt" else "zig")
+        if os.access(program, os.X_OK):
+            return program
+    return None
+
+
+def _choose_compiler(language):
+    import shlex
+    import shutil
+
+    variable, names = _SYSTEM_COMPILERS[language]
+    kind = "C" if language == "c" else "C++"
+    given = os.environ.get(variable, "").strip()
+    try:
+        words = shlex.split(given)
+    except ValueError:
+        words = []
+    candidates = ([(f"${variable}", words)] if given else []) + [(name, [name]) for name in names]
+    failures, seen = [], set()
+    if given and not (words and shutil.which(words[0])):
+        failures.append(f"${variable} ({given}) was not found")
+    for origin, words in candidates:
+        program = shutil.which(words[0]) if words else None
+        if program is None or os.path.realpath(program) in seen:
+            continue
+        seen.add(os.path.realpath(program))
+        command = (program, *words[1:])
+        built, text = _probe_compiler(language, command, (*command, "--version"))
+        if built:
+            where = "; ".join((" ".join(command), *failures))
+            return Compiler(command, f"{text} ({where})", f"{os.path.realpath(program)} {text}"), ""
+        failures.append(f"{origin} ({program}) failed ({text})")
+    zig = _zig()
+    if zig is None:
+        failures.append("the ziglang package is not installed")
+        return None, f"no {kind} compiler works here ({'; '.join(failures)}; set {variable})"
+    command = (zig, "cc" if language == "c" else "c++", *_ZIG_FLAGS)
+    built, text = _probe_compiler(language, command, (zig, "version"))
+    if not built:
+        failures.append(f"zig (the ziglang package) failed ({text})")
+        return None, f"no {kind} compiler works here ({'; '.join(failures)}; set {variable})"
+    why = "; ".join(failures) or f"no {kind} compiler on PATH"
+    return Compiler(command, f"zig {command[1]} {text} (the ziglang package: {why})",
+                    f"{os.path.realpath(zig)} zig {text} {' '.join(_ZIG_FLAGS)}"), ""
+
+
+def _probe_compiler(language, command, version):
+    """``(True, its version)`` where ``command`` builds the language's small shared library, else
+    ``(False, its first complaint)``: found in this machine's record of the program (by its path,
+    size and time), else tried and recorded. A failure is tried again after a day (the C library's
+    headers may have been installed since)."""
+    import hashlib
+    import json
+    import shutil
+    import subprocess
+    import tempfile
+
+    try:
+        status = os.stat(command[0])
+    except OSError as error:
+        return False, str(error)
+    name, code, flags = _COMPILER_PROBES[language]
+    digest = hashlib.sha256(repr((language, command, os.path.realpath(command[0]), status.st_size,
+                                  status.st_mtime_ns, code, flags)).encode("utf-8")).hexdigest()[:24]
+    folder = os.path.join(cache_dir(), "native")
+    record = os.path.join(folder, f"compiler_{digest}.json")
+    try:
+        with open(record, encoding="utf-8") as stream:
+            known = json.load(stream)
+        if known["built"] or _time_module.time() - os.path.getmtime(record) < 86400:
+            return bool(known["built"]), str(known["text"])
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    work = None
+    try:
+        os.makedirs(folder, exist_ok=True)
+        work = tempfile.mkdtemp(dir=folder, prefix="build-")
+        source = os.path.join(work, name)
+        with open(source, "w", encoding="utf-8") as stream:
+            stream.write(code)
+        done = subprocess.run([*command, "-O2", "-fPIC", "-shared", "-o", os.path.join(work, "probe.so"), source,
+                               *flags], capture_output=True, text=True, timeout=900, cwd=work)
+        if done.returncode != 0:
+            lines = done.stderr.strip().splitlines() or ["no message"]
+            built, text = False, next((line for line in lines if "error" in line), lines[0]).strip()
+        else:
+            told = subprocess.run(version, capture_output=True, text=True, timeout=60)
+            built, text = True, ((told.stdout.strip().splitlines() or ["unknown version"])[0]).strip()
+    except (OSError, subprocess.SubprocessError) as error:
+        return False, f"could not run: {error}"       # not recorded: it may run another time
+    finally:
+        if work is not None:
+            shutil.rmtree(work, ignore_errors=True)
+    try:
+        fd, temporary = tempfile.mkstemp(dir=folder, prefix="build-", suffix=".json")
+        with os.fdopen(fd, "w", encoding="utf-8") as stream:
+            json.dump({"built": built, "text": text, "command": list(command)}, stream)
+        os.replace(temporary, record)
+    except OSError:
+        pass
+    return built, text
+
+
+def compiler_label(language="c") -> str:
+    """What ``stats["compiler"]`` (``stats["compiler_cxx"]``) says: the compiler :func:`find_compiler`
+    chose for ``language``, its version and why (zig's: why no system compiler), or ""."""
+    compiler = find_compiler(language)[0]
+    return compiler.label if compiler is not None else ""
 
 
 def native_turned_off() -> bool:
     """Whether ``BONDC_NATIVE`` turns compiled code off (0, no, off, false)."""
     return os.environ.get("BONDC_NATIVE", "1").strip() in ("0", "no", "off", "false")
-
-
-def _cxx_compiler():
-    import shutil
-
-    return os.environ.get("CXX") or next(filter(None, map(shutil.which, ("c++", "g++", "clang++"))), None)
 
 
 def load_erk():
@@ -5605,7 +5758,7 @@ def load_erk():
     private folder, then renamed into place) and loaded once per process."""
     if native_turned_off():
         return None, "native code is turned off (BONDC_NATIVE=0)"
-    key = (cache_dir(), os.environ.get("CXX", ""))
+    key = (cache_dir(), os.environ.get("CXX", ""), os.environ.get("PATH", ""))
     known = _ERK_LOADED.get(key)
     if known is None:
         known = _ERK_LOADED[key] = _build_erk()
@@ -5621,22 +5774,22 @@ def _build_erk():
         return None, None, "the Boost headers (the package boost-headers) are not installed"
     import hashlib
 
-    include = str(boost_headers.get_include())
-    compiler = _cxx_compiler()
-    digest = hashlib.sha256("\n".join((*_ERK_FLAGS, getattr(boost_headers, "__version__", ""), _ERK_SOURCE)
-                                      ).encode("utf-8")).hexdigest()[:40]
-    path = os.path.join(cache_dir(), "native", f"erk_{digest}.so")
     try:
         import cffi
     except ImportError:
         return None, None, "cffi is not installed"
+    include = str(boost_headers.get_include())
+    compiler, why = find_compiler("c++")
+    if compiler is None:
+        return None, None, why
+    digest = hashlib.sha256("\n".join((*_ERK_FLAGS, compiler.identity, getattr(boost_headers, "__version__", ""),
+                                       _ERK_SOURCE)).encode("utf-8")).hexdigest()[:40]
+    path = os.path.join(cache_dir(), "native", f"erk_{digest}.so")
     if not os.path.exists(path):
         import shutil
         import subprocess
         import tempfile
 
-        if not compiler:
-            return None, None, "no C++ compiler was found (set CXX)"
         work = None
         try:
             os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -5645,7 +5798,7 @@ def _build_erk():
             with open(source, "w", encoding="utf-8") as stream:
                 stream.write(_ERK_SOURCE)
             library = os.path.join(work, "erk.so")
-            done = subprocess.run([compiler, *_ERK_FLAGS, "-I", include, "-o", library, source],
+            done = subprocess.run([*compiler.command, *_ERK_FLAGS, "-I", include, "-o", library, source],
                                   capture_output=True, text=True, timeout=900)
             if done.returncode != 0:
                 lines = done.stderr.strip().splitlines() or ["no message"]
@@ -5709,9 +5862,10 @@ def _sundials_link():
 def load_native(source, driver=True):
     """``(ffi, lib)`` for the C text ``source``, or ``(None, why not)``.
 
-    The shared library is built once per distinct text with the system C compiler
-    (``$CC``, else ``cc``/``gcc``/``clang``) into ``cache_dir()/native`` (built in a
-    private folder, then renamed into place, so concurrent runs never see half a file)
+    The shared library is built once per distinct text and compiler (:func:`find_compiler`:
+    ``$CC``, else ``cc``/``gcc``/``clang``, else zig's from the ziglang package) into
+    ``cache_dir()/native`` (built in a private folder, then renamed into place, so concurrent
+    runs never see half a file)
     and loaded with cffi. ``BONDC_NATIVE=0`` turns native code off. With ``driver`` and
     scikit-sundae's SUNDIALS libraries at hand, bondc's CVODE driver is built in too
     (``hasattr(lib, "bondc_driver_new")``); if that build fails, the model alone is built.
@@ -5754,8 +5908,9 @@ def _native_variants(source, driver):
     return variants
 
 
-def _native_plan(source, libraries):
-    """(compiler flags, translation units, digest, library path) of a C text."""
+def _native_plan(source, libraries, compiler):
+    """(compiler flags, translation units, digest, library path) of a C text built by ``compiler``
+    (a :class:`Compiler`)."""
     import hashlib
 
     def level(text):
@@ -5766,15 +5921,9 @@ def _native_plan(source, libraries):
     # several units: each optimised by its own size; one: by the whole text's
     units = [(text, level(text) if len(texts) > 1 else flags[0]) for text in texts]
     levels = " ".join(level for _, level in units)
-    digest = hashlib.sha256("\n".join((*flags, *libraries, f"units {len(units)} {levels}", source)).encode("utf-8")
-                            ).hexdigest()[:40]
+    digest = hashlib.sha256("\n".join((*flags, compiler.identity, *libraries, f"units {len(units)} {levels}",
+                                       source)).encode("utf-8")).hexdigest()[:40]
     return flags, units, digest, os.path.join(cache_dir(), "native", f"model_{digest}.so")
-
-
-def _compiler():
-    import shutil
-
-    return os.environ.get("CC") or next(filter(None, map(shutil.which, ("cc", "gcc", "clang"))), None)
 
 
 def _link_flags(libraries):
@@ -5782,22 +5931,22 @@ def _link_flags(libraries):
 
 
 def _build_native(source, libraries):
-    flags, units, digest, path = _native_plan(source, libraries)
-    if digest in _NATIVE_LIBRARIES:
-        return _NATIVE_LIBRARIES[digest]
     try:
         import cffi
     except ImportError:
         return None, "cffi is not installed"
+    compiler, why = find_compiler("c")
+    if compiler is None:
+        return None, why
+    flags, units, digest, path = _native_plan(source, libraries, compiler)
+    if digest in _NATIVE_LIBRARIES:
+        return _NATIVE_LIBRARIES[digest]
     build = _NATIVE_PENDING.pop(digest, None)        # started ahead by start_native
     if build is not None and build.owner != os.getpid():
         build = None        # a forked process's copy of its parent's build: the parent finishes it
     if not os.path.exists(path):
         import subprocess
 
-        compiler = _compiler()
-        if build is None and not compiler:
-            return None, "no C compiler was found (set CC)"
         try:
             if build is None:
                 os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -5838,9 +5987,11 @@ def start_native(source, driver=True) -> None:
         source = "".join(source)
     text, libraries = _native_variants(source, driver)[0]
     try:
-        flags, units, digest, path = _native_plan(text, libraries)
-        compiler = _compiler()
-        if (len(units) == 1 or not compiler or digest in _NATIVE_LIBRARIES or digest in _NATIVE_PENDING
+        compiler = find_compiler("c")[0]
+        if compiler is None:
+            return
+        flags, units, digest, path = _native_plan(text, libraries, compiler)
+        if (len(units) == 1 or digest in _NATIVE_LIBRARIES or digest in _NATIVE_PENDING
                 or os.path.exists(path)):
             return
         os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -5885,11 +6036,11 @@ class _NativeBuild:
                 stream.write(text)
         if len(files) == 1:
             self.objects = None
-            commands = [[compiler, *flags, "-o", self.library, files[0], *link, "-lm"]]
+            commands = [[*compiler.command, *flags, "-o", self.library, files[0], *link, "-lm"]]
         else:
             self.objects = [name[:-2] + ".o" for name in files]
             compile_flags = [flag for flag in flags[1:] if flag != "-shared"]
-            commands = [[compiler, level, *compile_flags, "-c", "-o", obj, name]
+            commands = [[*compiler.command, level, *compile_flags, "-c", "-o", obj, name]
                         for (_, level), name, obj in zip(units, files, self.objects)]
         self.runs = [subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
                      for command in commands]
@@ -5908,7 +6059,8 @@ class _NativeBuild:
                 failure = first_line(stderr)
         if failure or self.objects is None:
             return failure
-        done = subprocess.run([self.compiler, *self.flags, "-o", self.library, *self.objects, *self.link, "-lm"],
+        done = subprocess.run([*self.compiler.command, *self.flags, "-o", self.library, *self.objects, *self.link,
+                               "-lm"],
                               capture_output=True, text=True, timeout=900)
         return first_line(done.stderr) if done.returncode != 0 else ""
 
@@ -6144,6 +6296,8 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     run.stats["code"] = "native" if native_used else "numpy"
     if not native_used:
         run.stats["code_note"] = native_note
+    else:
+        run.stats["compiler"] = compiler_label("c")
     result = run.run()
     if padded:
         result.states.pop(_PADDING, None)

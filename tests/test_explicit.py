@@ -290,16 +290,22 @@ def test_the_spectral_radius_estimate_follows_the_jacobians_eigenvalues(case, tm
 
 
 def test_without_a_cxx_compiler_auto_takes_cvode_and_says_why(tmp_path, monkeypatch):
-    """No C++ compiler (or no Boost headers): the explicit stepper cannot be built, and auto takes
-    CVODE for every model, saying why; DOPRI5 asked for by name runs scipy's RK45 from Python."""
-    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "cache"))
-    monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
-    table, why = runtime.load_erk()
-    assert table is None and "could not run" in why
+    """No C++ compiler ($CXX naming no program, none on PATH, no ziglang package; or no Boost
+    headers): the explicit stepper cannot be built, and auto takes CVODE for every model, saying
+    why; DOPRI5 asked for by name runs scipy's RK45 from Python. The model's C code is built
+    before PATH is emptied (its C compiler is found)."""
     namespace, experiment = _compiled(ROOT / "models" / "mass_spring_damper.bg")
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "cache"))
+    _simulate(namespace, experiment, t_end=0.01, method="CVODE")
+    monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
+    monkeypatch.setenv("PATH", str(tmp_path / "no-programs"))
+    monkeypatch.setattr(runtime, "_zig", lambda: None)
+    monkeypatch.setitem(namespace, "_zig", lambda: None)      # the module's own copy of the runtime
+    table, why = runtime.load_erk()
+    assert table is None and "no C++ compiler works here" in why and "was not found" in why
     run = _simulate(namespace, experiment)
     assert run.complete and run.stats["solver"] == "CVODE"
-    assert "C++ compiler could not run" in run.stats["solver_note"]
+    assert "no C++ compiler works here" in run.stats["solver_note"]
     named = _simulate(namespace, experiment, method="DOPRI5")
     assert named.stats["solver"] == "DOPRI5" and "scipy's RK45" in named.stats["code_note"]
     np.testing.assert_allclose(named.states["spring.q"], _underdamped(named.t), rtol=0, atol=1e-8)

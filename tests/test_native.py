@@ -13,6 +13,7 @@ import functools
 import math
 import os
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -338,21 +339,132 @@ def test_where_cs_newton_fails_the_numpy_module_solves_the_loop(monkeypatch, tmp
 @pytest.mark.slow
 @needs_cc
 def test_without_a_compiler_the_numpy_code_runs_and_says_why(tmp_path, monkeypatch):
+    """No compiler at all: $CC names no program, none on PATH, no ziglang package (a standalone
+    module's environment may lack it). The generated module runs its own copy of the runtime."""
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
-    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
     runtime._NATIVE_LIBRARIES.clear()
     path = ROOT / "models" / "mass_spring_damper.bg"
     derived = derive_file(path, cache=False)
     namespace = compile_model(derived.state_space)
-    run = namespace["simulate_model"](namespace["_MODEL"], t_end=0.5)
+    with monkeypatch.context() as hidden:
+        hidden.setenv("CC", str(tmp_path / "no-such-compiler"))
+        hidden.setenv("PATH", str(tmp_path / "no-programs"))
+        hidden.setitem(namespace, "_zig", lambda: None)
+        run = namespace["simulate_model"](namespace["_MODEL"], t_end=0.5, method="CVODE")    # (auto: no C++ either)
     assert run.complete
-    assert run.stats["code"] == "numpy"
-    assert "C compiler" in run.stats["code_note"]
-    monkeypatch.delenv("CC")
-    again = namespace["simulate_model"](namespace["_MODEL"], t_end=0.5)
+    assert run.stats["code"] == "numpy" and "compiler" not in run.stats
+    assert "no C compiler works here" in run.stats["code_note"]
+    assert "was not found" in run.stats["code_note"] and "ziglang package is not installed" in run.stats["code_note"]
+    again = namespace["simulate_model"](namespace["_MODEL"], t_end=0.5, method="CVODE")
     assert again.stats["code"] == "native"
     np.testing.assert_allclose(again.states["spring.q"], np.interp(again.t, run.t, run.states["spring.q"]),
                                rtol=1e-6, atol=1e-9)
+
+
+@needs_cc
+def test_an_unusable_cc_gives_way_to_the_system_compiler_and_the_choice_is_recorded(tmp_path, monkeypatch):
+    """$CC naming no program: the compiler on PATH builds, and says $CC was passed over; the
+    machine's record of the compiler's probe spares the next process a second probe."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
+    monkeypatch.setattr(runtime, "_COMPILERS", {})
+    compiler, why = runtime.find_compiler("c")
+    assert compiler is not None and why == ""
+    assert not compiler.command[0].startswith(str(tmp_path)) and "was not found" in compiler.label
+    assert len(list((tmp_path / "native").glob("compiler_*.json"))) == 1
+    probes = []
+    monkeypatch.setattr(runtime, "_COMPILERS", {})      # a new process
+    monkeypatch.setattr(subprocess, "run", lambda *a, **k: probes.append(a))
+    assert runtime.find_compiler("c") == (compiler, "") and not probes
+
+
+def test_the_compiler_is_part_of_a_librarys_cache_key():
+    """A library built by one compiler is never taken for another's: the same text gets another
+    digest, and so another file, with another compiler."""
+    gcc = runtime.Compiler(("gcc",), "gcc 12", "/usr/bin/gcc-12 gcc 12")
+    zig = runtime.Compiler(("zig", "cc"), "zig cc 0.17.1", "/venv/ziglang/zig zig 0.17.1")
+    text = PRELUDE + "void bondc_rhs(double t, const double *x, const double *p, const double *m, double *out) {}\n"
+    assert runtime._native_plan(text, (), gcc)[2:] != runtime._native_plan(text, (), zig)[2:]
+    assert runtime._native_plan(text, (), gcc) == runtime._native_plan(text, (), gcc)
+
+
+#: the flagship simulated in a process of its own, its states saved to argv[2], its stats printed
+_RUN_ELSEWHERE = """
+import json, sys
+import numpy as np
+from bondc.pipeline import derive_file
+from bondc.simulate import compile_model
+namespace = compile_model(derive_file(sys.argv[1], cache=False).state_space)
+run = namespace["simulate_model"](namespace["_MODEL"], t_end=float(sys.argv[4]), method=sys.argv[3])
+np.savez(sys.argv[2], t=run.t, **run.states)
+print(json.dumps({key: value for key, value in run.stats.items() if isinstance(value, str)}))
+"""
+
+
+def _run_without_a_system_compiler(tmp_path, model, method, t_end):
+    """(stats, t, states) of ``model`` run in a process that sees no system compiler: PATH is an
+    empty folder and $CC/$CXX are unset, so the ziglang package's zig builds (zig's own cache,
+    ~/.cache/zig, is kept: a machine builds zig's C library parts once)."""
+    import json
+    import sys
+
+    (tmp_path / "no-programs").mkdir(exist_ok=True)
+    environment = {key: value for key, value in os.environ.items() if key not in ("CC", "CXX")}
+    environment.update(PATH=str(tmp_path / "no-programs"), BONDC_CACHE_DIR=str(tmp_path))
+    saved = tmp_path / f"{method}.npz"
+    done = subprocess.run([sys.executable, "-c", _RUN_ELSEWHERE, str(model), str(saved), method, repr(t_end)],
+                          capture_output=True, text=True, env=environment, timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    with np.load(saved) as stored:
+        states = {name: stored[name] for name in stored.files if name != "t"}
+        return json.loads(done.stdout.strip().splitlines()[-1]), stored["t"], states
+
+
+@pytest.mark.slow       # 3 s, and 7 s more once per machine: zig builds its C library parts
+@pytest.mark.skipif(runtime._zig() is None, reason="the ziglang package is not installed")
+@needs_cc
+def test_without_a_system_compiler_zig_builds_the_flagship_and_runs_it_as_the_system_compiler_does(tmp_path,
+                                                                                                    monkeypatch):
+    """A machine without cc, gcc or clang: the ziglang package's compiler builds the flagship's C
+    code with bondc's CVODE driver (auto takes CVODE: the flagship's frictions switch on its
+    states), stats say so, and the run is the system compiler's run (the same C, the same libm)."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    model = ROOT / "models" / "electro_pneumatic_hybrid.bg"
+    derived = derive_file(model, cache=False)
+    namespace = compile_model(derived.state_space)
+    system = namespace["simulate_model"](namespace["_MODEL"], t_end=derived.experiment.t_end, method="auto")
+    assert system.stats["code"] == "native" and not system.stats["compiler"].startswith("zig")
+    stats, t, states = _run_without_a_system_compiler(tmp_path, model, "auto", derived.experiment.t_end)
+    assert stats["code"] == "native" and stats["solver"] == "CVODE", stats
+    assert stats["compiler"].startswith("zig cc ") and "no C compiler on PATH" in stats["compiler"]
+    assert len(list((tmp_path / "native").glob("model_*.so"))) == 2       # one per compiler
+    np.testing.assert_allclose(t, system.t, rtol=1e-12, atol=0)
+    for name, values in system.states.items():
+        np.testing.assert_allclose(states[name], values, rtol=1e-9, atol=1e-12 * np.max(np.abs(values)), err_msg=name)
+
+
+@pytest.mark.slow       # 5 s, and a minute more once per machine: zig builds its C++ library (libc++)
+@pytest.mark.skipif(not os.environ.get("BONDC_TEST_ZIG_CXX"),
+                    reason="zig's first C++ build takes a minute: set BONDC_TEST_ZIG_CXX=1 to run it")
+@pytest.mark.skipif(runtime._zig() is None, reason="the ziglang package is not installed")
+def test_without_a_system_compiler_zig_builds_the_explicit_stepper_and_runs_it_as_the_system_compiler_does(
+        tmp_path, monkeypatch):
+    """A machine without c++, g++ or clang++: zig's C++ compiler builds bondc's DOPRI5 stepper
+    (Boost.Odeint's headers) and auto takes it for the mass-spring-damper, as with g++."""
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
+    model = ROOT / "models" / "mass_spring_damper.bg"
+    derived = derive_file(model, cache=False)
+    namespace = compile_model(derived.state_space)
+    system = namespace["simulate_model"](namespace["_MODEL"], t_end=derived.experiment.t_end, method="auto")
+    if system.stats["solver"] != "DOPRI5":
+        pytest.skip("the explicit stepper cannot be built with the system's compiler here")
+    stats, t, states = _run_without_a_system_compiler(tmp_path, model, "auto", derived.experiment.t_end)
+    assert stats["code"] == "native" and stats["solver"] == "DOPRI5", stats
+    assert stats["compiler_cxx"].startswith("zig c++ ") and stats["compiler"].startswith("zig cc ")
+    assert len(list((tmp_path / "native").glob("erk_*.so"))) == 2       # one per compiler
+    np.testing.assert_allclose(t, system.t, rtol=1e-12, atol=0)
+    for name, values in system.states.items():
+        np.testing.assert_allclose(states[name], values, rtol=1e-9, atol=1e-12 * np.max(np.abs(values)), err_msg=name)
 
 
 @needs_cc
