@@ -1091,3 +1091,31 @@ def test_the_flagship_with_a_light_mass_closes_its_balance_through_events_inside
     assert any(label.startswith("sign(nut.q)") for _, label in result.events)
     assert abs(account.windows[0].balance.relative_residual) < 1e-7
     assert not [d for d in account.diagnostics if d.code == "W930"]
+
+
+def test_an_account_whose_run_at_its_steps_stopped_early_says_it_covers_part_of_the_run(monkeypatch):
+    """A run on a grid (dt) is accounted from the same run at the solver's steps. When that one
+    stops early (over the point limit: E814), the account covers only up to there and says so
+    (W932, incomplete, last window partial); it used to be reported as the whole run, its
+    'supplied' energy short by a third with nothing to say so. The pump supplies Q*p at the pump's
+    pressure: the work over the covered span is the integral of the hose pressure the steps give."""
+    from bondc.pipeline import derive_file
+    from bondc.simulate import compile_model
+
+    derived = derive_file(Path(__file__).parent / "fixtures" / "engine" / "pump_relief.bg", cache=False)
+    result = simulate(derived.state_space, derived.experiment, dt=0.01)
+    assert result.complete and result.t[-1] == pytest.approx(2.0)
+    # the steps' run (7 034 points) stops at its 1000th point: the module's copy of the runtime
+    monkeypatch.setitem(compile_model(derived.state_space), "MAX_POINTS", 1000)
+    account = energy_account(derived.state_space, result)
+    (warning,) = [d for d in account.diagnostics if d.code == "W932"]
+    (window,) = account.windows
+    assert not account.complete and window.partial
+    assert 0.0 < window.t_end < 2.0 and f"to {window.t_end:.6g} s of the run's 0 to 2 s" in warning.message
+    assert "missing, not zero" in warning.hint
+    steps = result._solver_steps
+    assert steps.t[-1] == pytest.approx(window.t_end)
+    pressure = steps.outputs["p1"]                             # SI (Pa) in a result
+    supplied = np.trapezoid(1e-4 * pressure, steps.t) if hasattr(np, "trapezoid") else np.trapz(1e-4 * pressure, steps.t)
+    assert window.element("pump").supplied == pytest.approx(supplied, rel=1e-3)
+    assert abs(window.balance.relative_residual) < 1e-5

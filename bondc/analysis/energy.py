@@ -1452,9 +1452,15 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
                      hint="simulate past the start time")
     if cycle is None:
         cycle = experiment_cycle(ss, result)
-    windows = cycle_windows(float(t[0]), float(t[-1]), cycle)
     resimulated = not _at_solver_steps(result)
     steps = steps_of(ss, result)
+    # a run on a grid is accounted from the same run at its solver's steps, which may have stopped
+    # earlier (over a million steps, E814): the account then covers only that, and says so
+    covered = float(np.asarray(steps.t, dtype=float)[-1]) if len(steps.t) else float(t[0])
+    truncated = covered < float(t[-1]) - 1e-9 * max(abs(float(t[-1])), 1.0)
+    windows = cycle_windows(float(t[0]), covered if truncated else float(t[-1]), cycle)
+    if truncated and windows and windows[-1][1] == covered:
+        windows[-1] = (windows[-1][0], windows[-1][1], True)
 
     units = getattr(graph, "si_units", {}) or {}
     # values bound late (--set, an edit of values only): the base's module, given the run's values
@@ -1499,6 +1505,14 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
 
     per_element: dict[str, list[ElementEnergy]] = {}
     diagnostics: list[Diagnostic] = []
+    if truncated:
+        diagnostics.append(Diagnostic(
+            "warning", "W932",
+            f"the energy account covers t = {float(t[0]):.6g} to {covered:.6g} s of the run's {float(t[0]):.6g} to "
+            f"{float(t[-1]):.6g} s: the run at the solver's own steps that it is computed from stopped there "
+            f"({getattr(steps, 'message', '') or 'incomplete'})",
+            hint="the figures after that time are missing, not zero: shorten the run or loosen its tolerances "
+                 "so that it takes fewer steps"))
     for element in graph.elements.values():
         role = ROLES[element.kind]
         ports = [power_into(element, i) for i in range(len(element.bonds))]
@@ -1574,5 +1588,6 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
                 hint=_residual_hint(result, settings, graph)))
     return EnergyAccount(
         model=getattr(graph, "name", ""), experiment=getattr(result, "experiment", None),
-        cycle=cycle, windows=tuple(result_windows), complete=bool(result.complete), resimulated=resimulated,
+        cycle=cycle, windows=tuple(result_windows), complete=bool(result.complete) and not truncated,
+        resimulated=resimulated,
         quadrature=quadrature, diagnostics=tuple(diagnostics), energy_recipes=energy_recipes(functions))

@@ -426,6 +426,13 @@ d("W931", "two-port does not conserve power",
   "two-port equations so that p1.e*p1.f = p2.e*p2.f holds exactly, so this is an internal consistency check of "
   "the energy account: it cannot be triggered from a model, and seeing it means a bug in bondc.",
   "Report it with the model file.")
+d("W932", "energy account covers part of the run",
+  "A run reported on a grid (`--dt`, `dt` in the experiment) is accounted from the same run at the solver's own "
+  "steps, repeated without the grid. Where that repetition stops before the run's end (it would record over a "
+  "million steps: E814), the energy account, its power cycles and its balance cover only the time up to there; "
+  "the account is marked incomplete and its last cycle partial, and the message gives the time and why.",
+  "Shorten the run, or loosen `rtol`/`atol` so that the solver takes fewer steps; a model that chatters on a "
+  "switch may need its law written continuously (a kink, LANGUAGE.md section 7).")
 d("E940", "no equilibrium",
   "`bondc linearize --at equilibrium` looks for a state where every rate is zero, starting from the initial "
   "state with the inputs held at `--time`, and found none: some rate stays away from zero (a constant force "
