@@ -21,6 +21,53 @@ from bondc.errors import BondcError, Diagnostic, UsageError, render_all
 from bondc.io import json_safe
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
+#: A reader closed the pipe while output went to it through a channel the guard does not cover (a
+#: binary stream): the status a shell gives a program killed by SIGPIPE (128 + 13), as git returns.
+EXIT_BROKEN_PIPE = 141
+
+
+class _PipeGuard:
+    """A standard stream whose reader may go away (``bondc check m.bg | head -1``): once a write
+    finds the pipe closed, the rest of the output is dropped and the command goes on to the end,
+    so that it writes its files and exits with its own status (1 for a model with errors), never
+    0 because a reader stopped listening."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.broken = False
+
+    def write(self, text):
+        if not self.broken:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self.broken = True
+        return len(text)
+
+    def flush(self):
+        if not self.broken:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self.broken = True
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def _silence(stream) -> None:
+    """After a broken pipe: the stream's file descriptor pointed at /dev/null, so that what is left
+    in its buffer is flushed there at exit (not a second BrokenPipeError, which Python reports as
+    "Exception ignored" with exit status 120)."""
+    try:
+        descriptor = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return          # (an in-memory stream: nothing to flush at exit)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, descriptor)
+    finally:
+        os.close(null)
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -606,10 +653,17 @@ def main(argv: list[str] | None = None) -> int:
         previous = None
     from bondc.pipeline import fewer_collections
 
+    streams = sys.stdout, sys.stderr
+    guards = _PipeGuard(sys.stdout), _PipeGuard(sys.stderr)
+    sys.stdout, sys.stderr = guards
     try:
         with fewer_collections():
             return _main(argv, debug)
     finally:
+        sys.stdout, sys.stderr = streams
+        for guard, stream in zip(guards, streams):
+            if guard.broken:
+                _silence(stream)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
@@ -635,8 +689,9 @@ def _main(argv: list[str], debug: bool) -> int:
         terminated = isinstance(interrupt, Terminated)
         print(f"bondc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
         return 143 if terminated else 130
-    except BrokenPipeError:
-        return EXIT_OK
+    except BrokenPipeError:     # (a binary stream: the text streams are guarded, see _PipeGuard)
+        _silence(sys.stdout)
+        return EXIT_BROKEN_PIPE
     except SystemExit as exit_:  # --help / --version
         return int(exit_.code or 0)
     except RecursionError:
