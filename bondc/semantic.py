@@ -43,7 +43,7 @@ from typing import Iterable, Mapping, Sequence
 from bondc import ast, builtins, units
 from bondc.io import read_source
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
-from bondc.evaluate import EvaluationError, evaluate
+from bondc.evaluate import EvaluationError, ExpansionBudget, evaluate
 from bondc.model import (
     JUNCTION_KINDS, KINDS, PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
     OutputDef, Parameter, Signal, StateVar, WhenDef,
@@ -170,6 +170,8 @@ class _Model:
     good_bindings: list = field(default_factory=list)  # those that fit their parameter
     instances: list = field(default_factory=list)      # flatten.Instance: the instance tree
     by_kind: dict = field(default_factory=dict, repr=False)     # statements(): kind -> statements
+    # what evaluating the constants may spend on expanding fn calls (E319)
+    budget: ExpansionBudget = field(default_factory=ExpansionBudget, repr=False)
 
     def report(self, diagnostic: Diagnostic) -> None:
         self.diagnostics.append(diagnostic)
@@ -1552,9 +1554,10 @@ def _function_closure(m: _Model, names: Iterable[str]) -> set[str]:
 def _definition_value(m: _Model, definition: _Definition, values: Mapping[str, float]) -> float | None:
     """A parameter's SI value: a constant is converted by its unit (or the declared one), an expression is SI."""
     try:
-        value = evaluate(definition.expr, values, m.functions)
+        value = evaluate(definition.expr, values, m.functions, m.budget)
     except EvaluationError as error:
-        m.report(error.diagnostic)
+        if not error.repeated:
+            m.report(error.diagnostic)
         return None
     if not _is_constant(definition.expr):
         return value
@@ -1655,9 +1658,10 @@ def _try_evaluate(m: _Model, expr: ast.Expr, values: Mapping[str, float], checke
     if any(name not in values and name != "pi" for name in _names(expr)):
         return None  # uses a parameter that failed (already reported), or a function argument
     try:
-        return evaluate(expr, values, m.functions)
+        return evaluate(expr, values, m.functions, m.budget)
     except EvaluationError as error:
-        m.report(error.diagnostic)
+        if not error.repeated:
+            m.report(error.diagnostic)
         return None
 
 
@@ -1996,6 +2000,8 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     if chosen is None:
         return None, problems
     flat = flatten(chosen, files, standalone=bool(ports_of(chosen)))
+    if flat.too_large:
+        return None, list(flat.diagnostics)
     m = _Model(files[0], sources, _with_defaults(flat.model), tuple(files))
     m.diagnostics += flat.diagnostics
     m.bindings, m.instances = flat.bindings, flat.instances

@@ -82,6 +82,19 @@ d("E315", "reserved name", "`t` (time) and `pi` cannot be defined as names, and 
 d("E316", "name not allowed here", "A name that exists but cannot be used where it is written: a parameter (a constant) using an input, `t` or a graph variable; an input (a signal of `t` and parameters) using a graph variable, output or state; a function body using anything but its arguments; `csv(...)` outside an input or law; an element or function used as a value. The hint says what the place may use.", "Pass the value as a function argument, move the expression into an output or element law, or use the element's variables (`X.e`, `X.f`).")
 d("E317", "invalid setting value", "A setting has a value outside its range: an unknown solver (solvers are SUNDIALS `CVODE` (BDF, the default), `CVODE-BDF`, `CVODE-Adams`, `IDA` and the `scipy.integrate.solve_ivp` methods `RK45 RK23 DOP853 Radau BDF LSODA`), or a time or tolerance that is not positive.", "Use one of the listed solvers, or a positive value.")
 d("E318", "unknown experiment", "`--experiment NAME` names an experiment the model does not have.", "Use one of the listed experiments.")
+d("E319", "expansion too large",
+  "Writing out what the model says would not end: `fn` functions that call the one before twice with "
+  "different arguments (`f1(x) = f0(x + 1) + f0(2*x)`, ... `f20`: 2^20 bodies), or components that "
+  "instantiate two (or more) of the one before at every level (2^40 copies). A function is expanded once "
+  "per distinct arguments, so functions that call the one before twice with the same arguments "
+  "(`f1(x) = f0(x) + f0(x)`) are fine at any depth. The limits: one expression (a parameter, a setting, an "
+  "initial value, a law, an output) may write out 10 000 operations of function bodies, and all the "
+  "constants of a model 1 000 000 (all its laws, 50 000), or ten per character of its files where that is "
+  "more; a model may expand through its instances to 20 000 statements, or twenty per statement written in "
+  "its files where that is more. The error is at the call (or instance) written in the model that goes "
+  "beyond; `bondc check` stops there within seconds instead of running for hours.",
+  "Compute the repeated part once: make it a parameter, an input or a model variable (`param y = f5(a)`, "
+  "then use `y`), or simplify the functions; instantiate fewer components in each other.")
 d("E330", "unknown library model", "An instance's kind is qualified with a library (`hydraulics.Orifice`) that has no such model, or no imported file has that library name. A library's name is its file name without `.bg`, or `NAME` for `import \"std:NAME\"`.", "Import the library at file level, or fix the model's name.")
 d("E331", "ambiguous model name", "Two imported files define a model of the same name and an instance uses it unqualified.", "Qualify the name with its library: `hydraulics.Cylinder`.")
 d("E332", "model instantiates itself", "A model contains an instance of itself, directly or through other models. The message names the chain.", "A component cannot contain itself; remove the instance.")
@@ -174,8 +187,8 @@ d("E701", "expression cannot be translated",
   "is 0 for every value of the variables once simplified (`q/(exp(q)*exp(-q) - 1)`, `log(b - b)`), a "
   "constant beyond a double's range (`q*1e309`), a constant with no real value (`sqrt(-1)`, `log(-2)`, "
   "`(-8)^(1/3)`: laws are evaluated as real numbers, so an odd root that keeps its sign is written "
-  "`sign(x)*abs(x)^(1/3)`), initial values that depend on each other in a cycle, or "
-  "functions that call one another so often that expanding them would not end. Most other mistakes of "
+  "`sign(x)*abs(x)^(1/3)`), or initial values that depend on each other in a cycle (functions that call "
+  "one another so often that expanding them would not end are E319). Most other mistakes of "
   "this kind (an unknown name, a divisor written as `a - a`, a function that calls itself) are reported "
   "first by the semantic checks (E301, E302, E306, E311, E312, E313, E316). `bondc check` runs this stage "
   "too, so a model that passes it does not get E701 later.",
