@@ -380,8 +380,10 @@ class Translator:
 
     def _Num(self, node: ast.Num):
         text = node.text.strip()
-        if text.isdigit():
+        if text.isdigit() and math.isfinite(node.value):
             return sympy.Integer(int(text))
+        # (an integer beyond a double's range, as 1e309: infinite, E701; Python would not even
+        # convert its digits past 4300)
         return sympy.Float(node.value)
 
     def _Str(self, node: ast.Str):
