@@ -470,11 +470,13 @@ def load_csv(path, column):
     value_index = header.index(column)
     times, values = [], []
     for number, row in enumerate(rows[1:], start=2):
-        try:
-            times.append(float(row[time_index]))
-            values.append(float(row[value_index]))
-        except (ValueError, IndexError):
-            raise CsvError(f"{path}: row {number} is not numeric: {','.join(row)!r}") from None
+        # (the row's cells are not quoted: a model may name any file, and only its column names
+        # are shown)
+        for index, into in ((time_index, times), (value_index, values)):
+            try:
+                into.append(float(row[index]))
+            except (ValueError, IndexError):
+                raise CsvError(f"{path}: row {number} has no number in column {header[index]!r}") from None
     times, values = np.array(times), np.array(values)
     if times.size == 0:
         raise CsvError(f"{path}: no data rows")

@@ -1014,6 +1014,32 @@ class _ExpressionChecker:
             _check_csv(self.m, node, *strings, report=self.report)
 
 
+def _is_table(path: Path, header: list[str]) -> bool:
+    """Whether a file whose first line is ``header`` is a CSV table, whose column names may be
+    shown: two columns or more, named in printable text, and a first data row (if any) of as many
+    numbers."""
+    if len(header) < 2 or any(_CONTROL.search(cell) for cell in header):
+        return False
+    from bondc.runtime import csv_rows, open_data
+
+    try:
+        with open_data(path) as handle:
+            rows = csv_rows(handle)
+    except (OSError, UnicodeDecodeError, ValueError, csv.Error):
+        return False
+    if len(rows) < 2:
+        return True
+    try:
+        numbers = [float(cell) for cell in rows[1]]
+    except ValueError:
+        return False
+    return len(numbers) == len(header)
+
+
+#: Characters no column name (or line of a model) holds: the C0 controls but tab, and DEL.
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")
+
+
 def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str, report) -> None:
     """E310: the CSV file exists (relative to the model file) and has the column."""
     source = m.sources.get(node.span.file)
@@ -1040,6 +1066,11 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     elif not header or not any(header):
         report(_error("E310", f"CSV file '{path_arg.value}' has no header line", path_arg.span,
                       hint="the first line names the columns, e.g. t,omega"))
+    elif column_arg.value not in header and not _is_table(path, header):
+        # a model may name any file (/etc/passwd, /proc/self/environ): what is not a table is not quoted
+        report(_error("E310", f"'{path_arg.value}' is not a CSV table", path_arg.span,
+                      hint="a data file is a header line of column names separated by commas (time first), "
+                           "then rows of numbers"))
     elif column_arg.value not in header:
         columns = [c for c in header if c]
         report(_error("E310", f"CSV file '{path_arg.value}' has no column '{column_arg.value}'", column_arg.span,
@@ -2247,6 +2278,27 @@ def _std_library(name: str) -> Path | None:
     return None if found is None else Path(str(found))
 
 
+def _shown_path(path: str, limit: int = 80) -> str:
+    """A path as a message quotes it: a path longer than any file system allows, shortened."""
+    return path if len(path) <= limit else f"{path[:limit // 2]}...{path[-limit // 4:]} ({len(path)} characters)"
+
+
+def _not_a_model_file(target: Path, written: str) -> str | None:
+    """Why an import's path cannot be a model file, or None: its name (or, through symbolic links,
+    the name of the file it is) does not end in .bg, or the system cannot look it up."""
+    if not written.endswith(".bg"):
+        return f"cannot import '{_shown_path(written)}': it is not a .bg model file"
+    try:
+        real = target.resolve()
+        target.is_file()
+    except (OSError, RuntimeError, ValueError) as error:
+        reason = getattr(error, "strerror", None) or "the system cannot look it up"
+        return f"cannot find imported file '{_shown_path(written)}': {reason.lower()}"
+    if real.suffix != ".bg" and target.exists():
+        return f"cannot import '{_shown_path(written)}': it is a link to a file that is not a .bg model file"
+    return None
+
+
 def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:
     """Parse ``path`` and, recursively, the files it imports (each once).
 
@@ -2275,6 +2327,13 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
             else:
                 target = source.path.parent / item.path
                 name = os.path.normpath(os.path.join(os.path.dirname(source.name), item.path))
+                problem = _not_a_model_file(target, item.path)
+                if problem is not None:
+                    # (a model may name any file: one that is not a model is not read, nor quoted)
+                    diagnostics.append(_error("E307", problem, item.span,
+                                              hint="import names a model file (.bg), relative to the importing "
+                                                   "file, or a shipped library (std:NAME)"))
+                    continue
             key = target.resolve()
             keys = [k for k, _ in stack]
             if key in keys:

@@ -52,3 +52,108 @@ def test_a_failing_check_as_json_into_a_closed_pipe_exits_1_without_a_traceback(
     assert line == "{\n"
     assert status == 1
     assert "Traceback" not in errors and "Exception ignored" not in errors and "internal error" not in errors
+
+
+def _check(path: Path, *options: str) -> tuple[int, str]:
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["check", str(path), *options])
+    return code, err.getvalue()
+
+
+PLAIN = "model M\n  param k = 2\n  {kind} s : e = {law}\n  R r : f = e/k\n  s -> r\nend\n"
+
+
+def test_an_integer_of_5000_digits_in_a_law_is_a_constant_beyond_a_doubles_range(tmp_path):
+    """It was an internal error (Python converts at most 4300 digits); it is what 1e309 is there."""
+    path = tmp_path / "big.bg"
+    path.write_text(PLAIN.format(kind="Se", law="1" + "0" * 5000))
+    code, err = _check(path)
+    assert code == 1
+    assert "big.bg:3:14: error[E701]: this constant is not a finite number" in err
+    assert "internal error" not in err
+
+
+def test_an_import_path_longer_than_the_system_allows_is_e307(tmp_path):
+    path = tmp_path / "long.bg"
+    path.write_text(f'import "{"a" * 5000}.bg"\n' + PLAIN.format(kind="Se", law="1"))
+    code, err = _check(path)
+    assert code == 1
+    assert "long.bg:1:1: error[E307]: cannot find imported file 'aaaa" in err
+    assert "(5003 characters)': file name too long" in err
+    assert "internal error" not in err
+
+
+SECRET = "alice_s3cret:x:0:0:hunter2:/home/a:/bin/sh\nbob_s3cret:x:1:1:bob:/home/b:/usr/sbin/nologin\n"
+
+
+def test_an_import_of_a_file_that_is_not_a_model_quotes_none_of_it(tmp_path):
+    """``import "/etc/passwd"`` quoted its lines in up to 20 syntax errors."""
+    (tmp_path / "passwd").write_text(SECRET)
+    path = tmp_path / "m.bg"
+    path.write_text('import "passwd"\n' + PLAIN.format(kind="Se", law="1"))
+    code, err = _check(path)
+    assert code == 1
+    assert "m.bg:1:1: error[E307]: cannot import 'passwd': it is not a .bg model file" in err
+    assert "s3cret" not in err and "hunter2" not in err
+
+
+def test_an_import_of_a_link_named_bg_to_a_file_that_is_not_a_model_quotes_none_of_it(tmp_path):
+    (tmp_path / "passwd").write_text(SECRET)
+    (tmp_path / "lib.bg").symlink_to(tmp_path / "passwd")
+    path = tmp_path / "m.bg"
+    path.write_text('import "lib.bg"\n' + PLAIN.format(kind="Se", law="1"))
+    code, err = _check(path)
+    assert code == 1 and "error[E307]: cannot import 'lib.bg': it is a link to a file that is not a .bg" in err
+    assert "s3cret" not in err and "hunter2" not in err
+
+
+@pytest.mark.parametrize("content", [
+    SECRET,                                                             # /etc/passwd
+    "HOME=/s3cret\x00API_TOKEN=hunter2,s3cret\x00SHELL=/bin/sh\x00",    # /proc/self/environ
+])
+def test_a_csv_call_on_a_file_that_is_not_a_table_quotes_none_of_it(tmp_path, content):
+    """``csv("/etc/passwd", "root")`` showed its first line as the columns' hint, and
+    ``/proc/self/environ`` the whole environment."""
+    (tmp_path / "secret").write_text(content)
+    path = tmp_path / "m.bg"
+    path.write_text(PLAIN.format(kind="MSe", law='csv("secret", "alice")'))
+    code, err = _check(path)
+    assert code == 1
+    assert "m.bg:3:19: error[E310]: 'secret' is not a CSV table" in err
+    assert "hunter2" not in err and "s3cret" not in err
+
+
+def test_a_csv_row_that_is_not_numbers_is_named_not_quoted(tmp_path):
+    """A table's column names may be shown, its rows not (they were quoted whole)."""
+    (tmp_path / "users.csv").write_text("t,password\n0,1\n1,hunter2\n")
+    path = tmp_path / "m.bg"
+    path.write_text(PLAIN.format(kind="MSe", law='csv("users.csv", "password")'))
+    code, err = _check(path)
+    assert code == 1
+    assert "error[E310]: CSV file 'users.csv': row 3 has no number in column 'password'" in err
+    assert "hunter2" not in err
+
+
+def test_terminal_control_bytes_are_escaped_in_excerpts_with_the_caret_under_them(tmp_path):
+    """ESC and BEL from a model line were written to the terminal as they are."""
+    path = tmp_path / "m.bg"
+    path.write_text(PLAIN.format(kind="Se", law="1 + \x1b[31mx\x07").replace("param k = 2", "param k = 2\x07"))
+    code, err = _check(path)
+    assert code == 1
+    assert "\x1b" not in err and "\x07" not in err
+    lines = err.splitlines()
+    shown = lines.index("3 |   Se s : e = 1 + \\x1b[31mx\\x07")
+    caret = lines[shown + 1]
+    assert caret.index("^") == lines[shown].index("\\x1b") and caret.count("^") == len("\\x1b")
+
+
+def test_terminal_control_bytes_of_a_csv_header_are_escaped(tmp_path):
+    (tmp_path / "w.csv").write_text("t,om\x1b]0;pwned\x07ega\n0,1\n")
+    path = tmp_path / "m.bg"
+    path.write_text(PLAIN.format(kind="MSe", law='csv("w.csv", "omega")'))
+    code, err = _check(path)
+    assert code == 1 and "\x1b" not in err and "\x07" not in err
