@@ -1791,7 +1791,9 @@ class _Run:
         self.stiffness_check = self.STIFFNESS_CHECK          # steps of DOPRI5 before auto looks again
         self.options = {"rtol": rtol, "atol": atol, "max_step": max_step}
         if first_step is not None:
-            self.options["first_step"] = first_step
+            # a first step that the creep guard counts as not advancing (first_step = 1e-300) would
+            # stop the run before the step size grows: it starts at the smallest step that advances
+            self.options["first_step"] = max(first_step, 10 * _CREEP * max(abs(t_start), 1.0))
         self.implicit = self.method.__name__ in _IMPLICIT
         self.progress = progress
         self.max_events = max_events

@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import difflib
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -1596,7 +1597,20 @@ def _definition_value(m: _Model, definition: _Definition, values: Mapping[str, f
     resolved = m.units.get(id(unit)) if unit is not None else None
     if unit is not None and resolved is None:
         return None
-    return resolved.to_si(value) if resolved is not None else value
+    if resolved is None:
+        return value
+    return _finite_si(m, resolved.to_si(value), value, unit, definition.expr.span)
+
+
+def _finite_si(m: _Model, si: float, value: float, unit: ast.Unit, span: Span) -> float | None:
+    """A number converted to SI, or None with E311 where the conversion leaves a double's range
+    (``1e308 [kN/m]`` is 1e311 N/m: inf, which no law and no generated module can use)."""
+    if math.isfinite(si):
+        return si
+    m.report(_error("E311", f"cannot evaluate: {value:g} [{unit.text}] is {'an infinite' if si == si else 'no'} "
+                            f"number in SI units (beyond a double's range, about 1.8e308)", span,
+                    hint="write the value in a unit closer to SI, or a smaller value"))
+    return None
 
 
 def _parameters(m: _Model, definitions: Mapping[str, _Definition],
@@ -1884,7 +1898,9 @@ def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
     if value is None:
         return None
     if _is_constant(item.value) and item.unit is not None:
-        value = m.units[id(item.unit)].to_si(value)
+        value = _finite_si(m, m.units[id(item.unit)].to_si(value), value, item.unit, item.value.span)
+        if value is None:
+            return None
     if value <= 0:
         m.report(_error("E317", f"{item.name} must be positive, not {value:g}", item.value.span))
         return None

@@ -157,3 +157,38 @@ def test_terminal_control_bytes_of_a_csv_header_are_escaped(tmp_path):
     path.write_text(PLAIN.format(kind="MSe", law='csv("w.csv", "omega")'))
     code, err = _check(path)
     assert code == 1 and "\x1b" not in err and "\x07" not in err
+
+
+def test_a_parameter_whose_si_value_is_not_finite_is_e311(tmp_path):
+    """1e308 kN/m is 1e311 N/m: the generated module held a bare `inf` (NameError, exit 3)."""
+    path = tmp_path / "m.bg"
+    path.write_text("model M\n  param k = 1e308 [kN/m]\n  Se s : e = 1\n  C c : e = k*q\n  R r : e = 2*f\n"
+                    "  1 j\n  s -> j\n  j -> c\n  j -> r\n  experiment x\n    t_end = 1\n  end\nend\n")
+    code, err = _check(path)
+    assert code == 1
+    assert "m.bg:2:13: error[E311]: cannot evaluate: 1e+308 [kN/m] is an infinite number in SI units" in err
+
+
+def test_a_first_step_of_1e_300_runs_and_accounts_energy(tmp_path):
+    """It stopped after 200 steps that did not advance (E811), and the energy account then failed
+    on an empty run (ValueError, exit 3). The step starts where it advances; the run ends at t_end
+    and its energy balance closes: the source's work is what the damper took plus what the mass
+    holds."""
+    import contextlib
+    import io
+    import json
+
+    path = tmp_path / "m.bg"
+    path.write_text("model M\n  Se s : e = 1\n  I m : f = p/2\n  R r : e = f\n  1 j\n  s -> j\n  j -> m\n  j -> r\n"
+                    "  experiment x\n    t_end = 1\n    first_step = 1e-300\n  end\nend\n")
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
+        code = main(["simulate", str(path), "--json"])
+    assert code == 0
+    summary = json.loads(out.getvalue())
+    # p(t) = 2 (1 - exp(-t/2)): the mass stores p^2/4 at t = 1
+    p = 2 * (1 - 2.718281828459045 ** -0.5)
+    assert summary["final"]["m.p"] == pytest.approx(p, rel=1e-4)
+    balance = summary["energy"]["cycles"][0]["balance"]
+    assert balance["stored_change"] == pytest.approx(p ** 2 / 4, rel=1e-4)
+    assert balance["supplied"] == pytest.approx(balance["dissipated"] + balance["stored_change"], rel=1e-6)
