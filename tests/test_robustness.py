@@ -192,3 +192,19 @@ def test_a_first_step_of_1e_300_runs_and_accounts_energy(tmp_path):
     balance = summary["energy"]["cycles"][0]["balance"]
     assert balance["stored_change"] == pytest.approx(p ** 2 / 4, rel=1e-4)
     assert balance["supplied"] == pytest.approx(balance["dissipated"] + balance["stored_change"], rel=1e-6)
+
+
+def test_an_absurdly_long_unknown_unit_is_e201_without_a_search_for_a_spelling(tmp_path, monkeypatch):
+    """A unit name of 300 kB took 19 s in the "did you mean" search (quadratic in its length); no
+    unit is spelt with more than 11 letters, so such a name gets no search at all."""
+    from bondc import units
+
+    searched = []
+    real = units.difflib.get_close_matches
+    monkeypatch.setattr(units.difflib, "get_close_matches",
+                        lambda name, *args, **kw: searched.append(len(name)) or real(name, *args, **kw))
+    path = tmp_path / "m.bg"
+    path.write_text(PLAIN.format(kind="Se", law="1").replace("param k = 2", "param k = 2 [" + "x" * 300_000 + "]"))
+    code, err = _check(path)
+    assert code == 1 and "m.bg:2:16: error[E201]: unknown unit 'xxxx" in err
+    assert all(length <= units.MAX_SUGGESTED for length in searched)
