@@ -668,6 +668,78 @@ def main(argv: list[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
+def _inputs(args) -> list[tuple[Path, str]]:
+    """(path, what it is) of every file the command reads: the model file, the files it imports,
+    the data files its csv() calls name, and the data files of the options."""
+    found: list[tuple[Path, str]] = []
+    for option, what in (("data", "the measured data"), ("motors", "the motor catalogue"),
+                         ("sweep", "the sweep table")):
+        if getattr(args, option, None):
+            found.append((Path(getattr(args, option)), what))
+    model = getattr(args, "file", None)
+    if not model or getattr(args, "command", None) == "fit-friction":
+        return found + ([(Path(model), "the data file")] if model else [])
+    found.append((Path(model), "the model file"))
+    from bondc import ast
+    from bondc.semantic import load_files
+
+    try:
+        files, sources, _ = load_files(Path(model))
+    except (BondcError, OSError, ValueError):
+        return found            # (the command reports it)
+    for file in files:
+        source = sources.get(file.path)
+        if source is None or source.path is None:
+            continue
+        if source.path != Path(model):
+            found.append((source.path, f"the imported model '{file.path}'"))
+        for node in _nodes(file):
+            if isinstance(node, ast.Call) and node.func == "csv" and node.args and isinstance(node.args[0], ast.Str):
+                found.append((source.path.parent / node.args[0].value, f"the data file '{node.args[0].value}'"))
+    return found
+
+
+def _nodes(node):
+    """Every syntax node under ``node`` (a file: its statements, laws and expressions)."""
+    import dataclasses
+
+    todo = [node]
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (tuple, list)):
+            todo.extend(node)
+        elif dataclasses.is_dataclass(node) and not isinstance(node, type):
+            yield node
+            todo.extend(getattr(node, f.name) for f in dataclasses.fields(node)
+                        if not isinstance(getattr(node, f.name), (str, int, float, type(None))))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _refuse_inputs_as_outputs(args) -> None:
+    """E003 before any work for an output path that is one of the command's inputs (``bondc
+    compile -o m.bg m.bg`` replaced the model with the generated module)."""
+    from bondc.errors import UsageError
+
+    outputs = [(option, getattr(args, attribute)) for option, attribute in (("-o", "output"), ("--junit", "junit"))
+               if getattr(args, attribute, None)]
+    outputs = [(option, Path(path)) for option, path in outputs if Path(path).exists()]   # (new files read nothing)
+    if not outputs:
+        return
+    inputs = _inputs(args)
+    for option, output in outputs:
+        for path, what in inputs:
+            if _same_file(output, path):
+                raise UsageError(Diagnostic(
+                    "error", "E003", f"cannot write the output '{output}' ({option}): it is {what} the command reads",
+                    hint="give another path for the output; bondc never writes over its inputs"))
+
+
 def _main(argv: list[str], debug: bool) -> int:
     args = None
     try:
@@ -676,6 +748,7 @@ def _main(argv: list[str], debug: bool) -> int:
         if not getattr(args, "run", None):
             parser.print_help(sys.stderr)
             return EXIT_USAGE
+        _refuse_inputs_as_outputs(args)         # before any work
         return args.run(args)
     except UsageError as error:
         _print_diagnostics(error.diagnostics, error.sources)

@@ -208,3 +208,25 @@ def test_an_absurdly_long_unknown_unit_is_e201_without_a_search_for_a_spelling(t
     code, err = _check(path)
     assert code == 1 and "m.bg:2:16: error[E201]: unknown unit 'xxxx" in err
     assert all(length <= units.MAX_SUGGESTED for length in searched)
+
+
+MODEL = ("model M\n  input F [N] = csv(\"push.csv\", \"F\")\n  MSe s : e = F\n  R r : f = e/2\n  s -> r\n"
+         "  experiment x\n    t_end = 1\n  end\nend\n")
+
+
+@pytest.mark.parametrize("command, output", [
+    ("compile", "m.bg"), ("simulate", "m.bg"), ("report", "m.bg"),      # the model file itself
+    ("compile", "lib.bg"),                                              # a file it imports
+    ("simulate", "push.csv"),                                           # a data file it reads
+])
+def test_an_output_that_is_one_of_the_inputs_is_refused_before_any_work(tmp_path, monkeypatch, capsys,
+                                                                          command, output):
+    """``bondc compile -o m.bg m.bg`` replaced the model with the generated module."""
+    monkeypatch.chdir(tmp_path)
+    files = {"m.bg": 'import "lib.bg"\n' + MODEL, "lib.bg": "fn twice(x) = 2*x\n", "push.csv": "t,F\n0,1\n1,2\n"}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    assert main([command, "m.bg", "-o", output]) == 2
+    err = capsys.readouterr().err
+    assert f"error[E003]: cannot write the output '{output}' (-o): it is the" in err
+    assert {name: (tmp_path / name).read_text() for name in files} == files

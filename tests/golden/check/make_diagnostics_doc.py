@@ -569,8 +569,10 @@ d("E002", "model file cannot be read",
   "Check the path (relative to the current directory); save the model as UTF-8.")
 d("E003", "output path cannot be written",
   "An output file (`-o`, `--junit`) is checked before any work: its folder must exist and be writable, and "
-  "bondc replaces only regular files — never a folder, a symbolic link, a named pipe or a device. The command "
-  "exits with status 2 and computes nothing. (A report's or JUnit file's folder is created when missing.)",
+  "bondc replaces only regular files — never a folder, a symbolic link, a named pipe or a device — and never "
+  "one of the command's inputs: the model file, a file it imports, a data file its `csv(...)` calls read, or "
+  "the files of `--data`, `--motors`, `--sweep` (`bondc compile -o m.bg m.bg` would replace the model). The "
+  "command exits with status 2 and computes nothing. (A report's or JUnit file's folder is created when missing.)",
   "Give the path of a new file or of a regular file to replace, in a folder you may write; create the folder "
   "first (`mkdir -p`).")
 d("E004", "output could not be written",
@@ -829,6 +831,7 @@ live("E813", Api(_RUNTIME.format(file="spin.bg")
 live("E001", Cli("bondc simulate --t-end 2"), Cli("bondc report spin.bg --compare omega=omega_meas", {"spin.bg": SPIN}))
 live("E002", Cli("bondc check spin.gb", {"spin.bg": SPIN}))
 live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
+live("E003", Cli("bondc compile spin.bg -o spin.bg", {"spin.bg": SPIN}))
 
 # ================================================================== the page
 
