@@ -21,6 +21,53 @@ from bondc.errors import BondcError, Diagnostic, UsageError, render_all
 from bondc.io import json_safe
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
+#: A reader closed the pipe while output went to it through a channel the guard does not cover (a
+#: binary stream): the status a shell gives a program killed by SIGPIPE (128 + 13), as git returns.
+EXIT_BROKEN_PIPE = 141
+
+
+class _PipeGuard:
+    """A standard stream whose reader may go away (``bondc check m.bg | head -1``): once a write
+    finds the pipe closed, the rest of the output is dropped and the command goes on to the end,
+    so that it writes its files and exits with its own status (1 for a model with errors), never
+    0 because a reader stopped listening."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.broken = False
+
+    def write(self, text):
+        if not self.broken:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self.broken = True
+        return len(text)
+
+    def flush(self):
+        if not self.broken:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self.broken = True
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def _silence(stream) -> None:
+    """After a broken pipe: the stream's file descriptor pointed at /dev/null, so that what is left
+    in its buffer is flushed there at exit (not a second BrokenPipeError, which Python reports as
+    "Exception ignored" with exit status 120)."""
+    try:
+        descriptor = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return          # (an in-memory stream: nothing to flush at exit)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, descriptor)
+    finally:
+        os.close(null)
 
 
 class _ArgumentParser(argparse.ArgumentParser):
@@ -627,12 +674,91 @@ def main(argv: list[str] | None = None) -> int:
         previous = None
     from bondc.pipeline import fewer_collections
 
+    streams = sys.stdout, sys.stderr
+    guards = _PipeGuard(sys.stdout), _PipeGuard(sys.stderr)
+    sys.stdout, sys.stderr = guards
     try:
         with fewer_collections():
             return _main(argv, debug)
     finally:
+        sys.stdout, sys.stderr = streams
+        for guard, stream in zip(guards, streams):
+            if guard.broken:
+                _silence(stream)
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _inputs(args) -> list[tuple[Path, str]]:
+    """(path, what it is) of every file the command reads: the model file, the files it imports,
+    the data files its csv() calls name, and the data files of the options."""
+    found: list[tuple[Path, str]] = []
+    for option, what in (("data", "the measured data"), ("motors", "the motor catalogue"),
+                         ("sweep", "the sweep table")):
+        if getattr(args, option, None):
+            found.append((Path(getattr(args, option)), what))
+    model = getattr(args, "file", None)
+    if not model or getattr(args, "command", None) == "fit-friction":
+        return found + ([(Path(model), "the data file")] if model else [])
+    found.append((Path(model), "the model file"))
+    from bondc import ast
+    from bondc.semantic import load_files
+
+    try:
+        files, sources, _ = load_files(Path(model))
+    except (BondcError, OSError, ValueError):
+        return found            # (the command reports it)
+    for file in files:
+        source = sources.get(file.path)
+        if source is None or source.path is None:
+            continue
+        if source.path != Path(model):
+            found.append((source.path, f"the imported model '{file.path}'"))
+        for node in _nodes(file):
+            if isinstance(node, ast.Call) and node.func == "csv" and node.args and isinstance(node.args[0], ast.Str):
+                found.append((source.path.parent / node.args[0].value, f"the data file '{node.args[0].value}'"))
+    return found
+
+
+def _nodes(node):
+    """Every syntax node under ``node`` (a file: its statements, laws and expressions)."""
+    import dataclasses
+
+    todo = [node]
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (tuple, list)):
+            todo.extend(node)
+        elif dataclasses.is_dataclass(node) and not isinstance(node, type):
+            yield node
+            todo.extend(getattr(node, f.name) for f in dataclasses.fields(node)
+                        if not isinstance(getattr(node, f.name), (str, int, float, type(None))))
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def _refuse_inputs_as_outputs(args) -> None:
+    """E003 before any work for an output path that is one of the command's inputs (``bondc
+    compile -o m.bg m.bg`` replaced the model with the generated module)."""
+    from bondc.errors import UsageError
+
+    outputs = [(option, getattr(args, attribute)) for option, attribute in (("-o", "output"), ("--junit", "junit"))
+               if getattr(args, attribute, None)]
+    outputs = [(option, Path(path)) for option, path in outputs if Path(path).exists()]   # (new files read nothing)
+    if not outputs:
+        return
+    inputs = _inputs(args)
+    for option, output in outputs:
+        for path, what in inputs:
+            if _same_file(output, path):
+                raise UsageError(Diagnostic(
+                    "error", "E003", f"cannot write the output '{output}' ({option}): it is {what} the command reads",
+                    hint="give another path for the output; bondc never writes over its inputs"))
 
 
 def _main(argv: list[str], debug: bool) -> int:
@@ -643,6 +769,7 @@ def _main(argv: list[str], debug: bool) -> int:
         if not getattr(args, "run", None):
             parser.print_help(sys.stderr)
             return EXIT_USAGE
+        _refuse_inputs_as_outputs(args)         # before any work
         return args.run(args)
     except UsageError as error:
         _print_diagnostics(error.diagnostics, error.sources)
@@ -656,8 +783,9 @@ def _main(argv: list[str], debug: bool) -> int:
         terminated = isinstance(interrupt, Terminated)
         print(f"bondc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
         return 143 if terminated else 130
-    except BrokenPipeError:
-        return EXIT_OK
+    except BrokenPipeError:     # (a binary stream: the text streams are guarded, see _PipeGuard)
+        _silence(sys.stdout)
+        return EXIT_BROKEN_PIPE
     except SystemExit as exit_:  # --help / --version
         return int(exit_.code or 0)
     except RecursionError:

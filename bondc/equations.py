@@ -55,10 +55,11 @@ from bondc import ast
 from bondc.causality import (CONDUCTANCE, DERIVATIVE, ROLES, CausalGraph, describe_node, element_span, join_words,
                              strongly_connected)
 from bondc.errors import Diagnostic, EquationError, Related
+from bondc.evaluate import ExpansionBudget
 from bondc.model import ElementNode, JunctionNode, readable_names
 from bondc.source import NO_SPAN
 from bondc.statespace import AlgebraicBlock, StateInfo, StateSpace
-from bondc.symbolic import (Csv, Step, Table, Translator, discontinuities, strip_impulses, as_sympy)
+from bondc.symbolic import (TRANSLATION_IN_ALL, Csv, Step, Table, Translator, discontinuities, strip_impulses, as_sympy)
 
 _OPAQUE = (sympy.Piecewise, sympy.Abs, sympy.sign, sympy.Min, sympy.Max, sympy.Heaviside, Table, Step, Csv)
 _ENERGY_VARIABLE = sympy.Dummy("s", real=True)      # the integration variable of stored-energy functions
@@ -112,6 +113,8 @@ class _Deriver:
         self.diagnostics: list[Diagnostic] = []
         self.law_memo: dict = {}
         self.base_dir = Path(graph.file).parent if graph.file else None
+        # what translating the laws may spend on expanding fn calls, for the whole model (E319)
+        self.budget = ExpansionBudget.for_sources(getattr(graph, "sources", None) or {}, TRANSLATION_IN_ALL)
 
     def _new_symbol(self, name: str) -> sympy.Symbol:
         if name in self.symbols:
@@ -177,7 +180,7 @@ class _Deriver:
                 return self.state_symbols[what]
             return self.e(what) if kind == "e" else self.f(what)
 
-        translator = Translator(resolve_name, resolve_ref, graph.functions, self.base_dir, self.t)
+        translator = Translator(resolve_name, resolve_ref, graph.functions, self.base_dir, self.t, self.budget)
         return translator(expr)
 
     def law(self, element: ElementNode, target: str, local: Mapping | None = None):

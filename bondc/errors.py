@@ -18,6 +18,7 @@ m.bg:1:17: error[E201]: unknown unit 'kgg'
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping
@@ -143,20 +144,41 @@ def _source_for(name: str, sources: Mapping[str, Source]) -> Source | None:
         return None
 
 
+#: The characters a terminal acts on instead of showing them: the C0 controls but tab (ESC starts
+#: escape sequences that recolour, move the cursor or retitle the window; BEL rings), DEL and the
+#: C1 controls.
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """``text`` with every control character written as an escape (``\\x1b``), so that a model
+    line or a data file's header is shown, never acted on by the terminal.
+
+    >>> print(printable("e = 1" + chr(27) + "[31m" + chr(7)))
+    e = 1\\x1b[31m\\x07
+    """
+    return _CONTROL.sub(lambda found: f"\\x{ord(found.group()):02x}", text)
+
+
 def _excerpt(span: Span, source: Source | None, label: str = "") -> list[str]:
-    """The source line of a span with a caret line under it."""
+    """The source line of a span with a caret line under it (control characters escaped, the
+    caret under what they became)."""
     if source is None or span.line < 1:
         return []
-    text = source.line_text(span.line).expandtabs(1)
+    raw = source.line_text(span.line).rstrip("\r").expandtabs(1)
+    text = printable(raw)
     gutter = " " * len(str(span.line))
     start = max(span.column, 1)
     if span.end_line == span.line and span.end_column > span.column:
         width = span.end_column - span.column
     elif span.end_line > span.line:
-        width = max(len(text) - start + 1, 1)
+        width = max(len(raw) - start + 1, 1)
     else:
         width = 1
-    caret = " " * (start - 1) + "^" * width
+    # the columns of the escaped line: what precedes the span, and the span itself, as shown
+    before = len(printable(raw[:start - 1])) + max(start - 1 - len(raw), 0)
+    width = max(len(printable(raw[start - 1:start - 1 + width])), 1) if start - 1 < len(raw) else width
+    caret = " " * before + "^" * width
     if label:
         caret += " " + label
     return [f"{gutter} |", f"{span.line} | {text}", f"{gutter} | {caret}"]
@@ -172,17 +194,17 @@ def render(diagnostic: Diagnostic, sources: Mapping[str, Source] | None = None) 
         head = f"{span.file}: "
     else:
         head = ""
-    lines = [f"{head}{diagnostic.severity}[{diagnostic.code}]: {diagnostic.message}"]
+    lines = [f"{head}{diagnostic.severity}[{diagnostic.code}]: {printable(diagnostic.message)}"]
     lines += _excerpt(span, _source_for(span.file, sources))
     if span.instance:
         lines.append(f"  note: in {span.instance}")
     for rel in diagnostic.related:
         where = f"{rel.span.file}:{rel.span.line}:{rel.span.column}"
-        lines.append(f"  note: {rel.label} ({where})")
+        lines.append(f"  note: {printable(rel.label)} ({where})")
         lines += ["  " + row for row in _excerpt(rel.span, _source_for(rel.span.file, sources))]
     if diagnostic.hint:
         gutter = " " * len(str(span.line)) if span.line > 0 else ""
-        lines.append(f"{gutter} = hint: {diagnostic.hint}")
+        lines.append(f"{gutter} = hint: {printable(diagnostic.hint)}")
     return "\n".join(lines)
 
 

@@ -36,10 +36,83 @@ from bondc.errors import Diagnostic, ModelError, Related
 from bondc.source import Span
 
 CODE = "E311"
+#: The code of an expansion of ``fn`` calls beyond :class:`ExpansionBudget`'s limits.
+EXPANSION_CODE = "E319"
 
 # Deeper nesting of function calls than this is a runaway (recursion is
 # reported by the semantic stage; this only keeps the evaluator safe).
 MAX_CALL_DEPTH = 100
+
+
+class ExpansionBudget:
+    """How much writing out ``fn`` calls may cost, so that no model file makes bondc work without
+    end: functions that call earlier ones twice with different arguments (``f1(x) = f0(x + 1) +
+    f0(2*x)``, ... ``f40``) would expand to 2^40 bodies.
+
+    The cost of an expansion is the number of expression nodes of the function body written out
+    (a call with arguments already expanded costs nothing: its value is reused). One expression
+    (a parameter, a law) may spend ``per_expression``; all the expressions sharing this budget (a
+    model's constants, a model's laws) ``in_all``. The evaluator of constants and the translator
+    to sympy each keep one for a model.
+    """
+
+    PER_EXPRESSION = 10_000
+    IN_ALL = 1_000_000
+
+    def __init__(self, per_expression: int = PER_EXPRESSION, in_all: int = IN_ALL):
+        self.per_expression = per_expression
+        self.in_all = in_all
+        self.spent = 0
+        self.said = False       # whether an expression beyond the budget in all was reported
+        self._sizes: dict[int, tuple[object, int]] = {}
+
+    @classmethod
+    def for_sources(cls, sources: Mapping[str, object], in_all: int = IN_ALL) -> "ExpansionBudget":
+        """A model's budget: ``in_all``, or ten operations per character of its files where that is
+        more (a model of 120 000 statements calls functions in proportion; only what a small text
+        expands to without end is cut)."""
+        size = sum(len(getattr(source, "text", "")) for source in sources.values())
+        return cls(in_all=max(in_all, 10 * size))
+
+    def size(self, body) -> int:
+        """The number of nodes of a function body (counted once per body)."""
+        known = self._sizes.get(id(body))
+        if known is None or known[0] is not body:
+            known = (body, sum(1 for _ in ast.walk(body)))
+            self._sizes[id(body)] = known
+        return known[1]
+
+    def spend(self, cost: int, expression_spent: int) -> str | None:
+        """Add ``cost``; None, or which limit the expression (having spent ``expression_spent``
+        with this) or the budget is now beyond: "expression" or "model"."""
+        self.spent += cost
+        if expression_spent > self.per_expression:
+            return "expression"
+        if self.spent > self.in_all:
+            return "model"
+        return None
+
+    def diagnostic(self, which: str, function_name: str, span: Span) -> Diagnostic:
+        """E319 at the call written in the expression, whose expansion went beyond ``which``."""
+        if which == "expression":
+            message = (f"expanding {function_name}() here writes out more than {self.per_expression} "
+                       f"operations of function bodies (the functions call one another at every level, "
+                       f"with different arguments)")
+        else:
+            message = (f"expanding {function_name}() here takes the model's function calls beyond "
+                       f"{self.in_all} operations of function bodies written out in all")
+        return Diagnostic("error", EXPANSION_CODE, message, span,
+                          hint="compute the repeated part once: make it a parameter, an input or a model "
+                               "variable, or simplify the functions")
+
+
+class Exploded(Exception):
+    """An expansion beyond the budget (``which``: "expression" or "model"), raised from the
+    innermost call; the outermost call of the expression turns it into the E319 diagnostic."""
+
+    def __init__(self, which: str):
+        super().__init__(which)
+        self.which = which
 
 
 class FunctionLike(Protocol):
@@ -57,6 +130,7 @@ class EvaluationError(ModelError):
     def __init__(self, diagnostic: Diagnostic):
         super().__init__(diagnostic)
         self.diagnostic = diagnostic
+        self.repeated = False   # the same failure as one reported before (E319 for the budget in all)
 
 
 def _number(value: float) -> str:
@@ -153,13 +227,17 @@ class _Evaluator:
     """Walks an expression; one ``_eval_<Class>`` method per AST node class."""
 
     def __init__(self, values: Mapping[str, float], functions: Mapping[str, FunctionLike], depth: int = 0,
-                 constants: Mapping[str, float] | None = None):
+                 constants: Mapping[str, float] | None = None, budget: ExpansionBudget | None = None,
+                 expansion: "_Expansion | None" = None):
         self.values = values
         self.functions = functions
         self.depth = depth
         # what a function body may use besides its arguments: the model's parameters (a function
         # declared inside a model may use them; the semantic stage keeps file-level ones to arguments)
         self.constants = values if constants is None else constants
+        self.budget = budget if budget is not None else ExpansionBudget()
+        # shared by the evaluators of one expression: the calls already evaluated, the cost so far
+        self.expansion = expansion if expansion is not None else _Expansion()
 
     def __call__(self, node) -> float:
         method = getattr(self, f"_eval_{type(node).__name__}", None)
@@ -262,15 +340,39 @@ class _Evaluator:
         if self.depth >= MAX_CALL_DEPTH:
             raise _fail(node, f"calls nested more than {MAX_CALL_DEPTH} deep (is '{function.name}' recursive?)")
         args = {name: self(arg) for name, arg in zip(function.params, node.args)}
-        inner = _Evaluator(ChainMap(args, self.constants), self.functions, self.depth + 1, self.constants)
+        # a function's value depends on its arguments only (and the constants, fixed during one
+        # evaluation): evaluated once per distinct arguments, so that f1(x) = f0(x) + f0(x), ...
+        # stays linear in size
+        key = (function.name, tuple(args.values()))
+        known = self.expansion.values.get(key)
+        if known is not None:
+            return known
+        cost = self.budget.size(function.body)
+        self.expansion.spent += cost
+        beyond = self.budget.spend(cost, self.expansion.spent)
+        inner = _Evaluator(ChainMap(args, self.constants), self.functions, self.depth + 1, self.constants,
+                           self.budget, self.expansion)
         try:
-            return inner(function.body)
+            if beyond is not None:
+                raise Exploded(beyond)
+            value = inner(function.body)
+        except Exploded as exploded:
+            if self.depth > 0:
+                raise
+            # reported at the call written in the expression, with the function it starts from; the
+            # model's budget spent is said once (the expressions after it have no value either)
+            error = EvaluationError(self.budget.diagnostic(exploded.which, function.name, node.span))
+            error.repeated = exploded.which == "model" and self.budget.said
+            self.budget.said = self.budget.said or exploded.which == "model"
+            raise error from None
         except EvaluationError as error:
             # Point at the call the user wrote, and show where in the function it failed.
             cause = error.diagnostic
             related = (Related(cause.span, f"in function '{function.name}'"),) + cause.related
-            raise EvaluationError(Diagnostic("error", CODE, cause.message, node.span, hint=cause.hint,
+            raise EvaluationError(Diagnostic("error", cause.code, cause.message, node.span, hint=cause.hint,
                                              related=related)) from None
+        self.expansion.values[key] = value
+        return value
 
     def _table(self, node: ast.Call) -> float:
         if len(node.args) != 3 or not all(isinstance(a, ast.ListExpr) for a in node.args[1:]):
@@ -282,7 +384,19 @@ class _Evaluator:
         return float(interpolate(self(node.args[0]), xs, ys))
 
 
+class _Expansion:
+    """What the evaluators of one expression share: the values of the calls evaluated so far, by
+    (function, arguments), and the cost of the function bodies evaluated."""
+
+    def __init__(self):
+        self.values: dict[tuple, float] = {}
+        self.spent = 0
+
+
 def evaluate(expr: ast.Expr, values: Mapping[str, float] | None = None,
-             functions: Mapping[str, FunctionLike] | None = None) -> float:
-    """The value of ``expr`` given the values of its names; raises :class:`EvaluationError` (E311)."""
-    return _Evaluator(values or {}, functions or {})(expr)
+             functions: Mapping[str, FunctionLike] | None = None,
+             budget: ExpansionBudget | None = None) -> float:
+    """The value of ``expr`` given the values of its names; raises :class:`EvaluationError` (E311,
+    or E319 where calls of ``functions`` would expand beyond ``budget``: by default, a budget of
+    this expression's own)."""
+    return _Evaluator(values or {}, functions or {}, budget=budget)(expr)

@@ -63,6 +63,14 @@ _BOND_NUMBER = re.compile(r"b([0-9]+)")
 #: The codes of an instance's kind that names no model (E330) or two (E331): no E303 for it after them.
 KIND_CODES = ("E330", "E331")
 _ELEMENT_LOCALS = frozenset({"e", "f"})   # an element's own variables inside its laws (and its states)
+#: The statements a model may expand to through its instances (E319 beyond), or twenty per
+#: statement written in its files where that is more: components that instantiate two of the
+#: one before, 40 deep, would expand to 2^40 copies (the flattening of 20 000 takes seconds).
+MAX_FLAT_STATEMENTS = 20_000
+
+
+class _TooLarge(Exception):
+    """The expansion went beyond the limit; the top model's instance turns it into E319."""
 
 
 def _error(code: str, message: str, span: Span, hint: str | None = None, related=()) -> Diagnostic:
@@ -122,6 +130,7 @@ class Flat:
     bindings: list[Binding] = field(default_factory=list)
     instances: list[Instance] = field(default_factory=list)
     diagnostics: list[Diagnostic] = field(default_factory=list)
+    too_large: bool = False         # its instances expand beyond MAX_FLAT_STATEMENTS (E319)
 
 
 @dataclass
@@ -187,6 +196,9 @@ class _Flattener:
         self.flat = flat
         self.standalone = standalone
         self.aliases: dict[str, str] = {}      # a port bond's inner name -> the fused bond's name
+        written = sum(len(model.body) for file in files for model in file.models)
+        self.limit = max(MAX_FLAT_STATEMENTS, 20 * written)
+        self.expanded = 0                       # statements of the models expanded so far
         self.by_file: dict[int, ast.File] = {}
         for file in files:
             for model in file.models:
@@ -234,6 +246,9 @@ class _Flattener:
     # -- one model at one prefix
 
     def expand(self, model: ast.Model, prefix: str, stack: tuple) -> _Expansion:
+        self.expanded += len(model.body)
+        if self.expanded > self.limit:
+            raise _TooLarge()
         x = _Expansion(model, prefix)
         kinds: dict[int, ast.Model] = {}
         for statement in model.body:
@@ -280,7 +295,18 @@ class _Flattener:
                                    hint="a component cannot contain itself, directly or through others"))
                 continue
             relocated = _relocate(sub, path)
-            x.instances[statement.name] = self.expand(relocated, path + ".", stack + ((sub, sub.name),))
+            try:
+                x.instances[statement.name] = self.expand(relocated, path + ".", stack + ((sub, sub.name),))
+            except _TooLarge:
+                if prefix:
+                    raise
+                # reported at the instance in the model itself, with the component it starts from
+                self.report(_error("E319", f"instance '{statement.name}' of '{sub.name}' expands to more than "
+                                           f"{self.limit} statements (its components instantiate others at "
+                                           f"every level)", statement.kind_span.to(statement.name_span),
+                                   hint="instantiate fewer components in each other, or write the repeated "
+                                        "part once"))
+                raise
             self.flat.instances.append(Instance(path, sub.name, statement.description,
                                                 tuple(ports_of(sub)), statement.name_span))
         renamer = _Renamer(self, x)
@@ -666,7 +692,11 @@ def flatten(model: ast.Model, files: Sequence[ast.File], *, standalone: bool = F
     if plain and not _has_instances(model, files):
         return flat         # a version-1 model: nothing to expand
     flattener = _Flattener(files, flat, standalone)
-    x = flattener.expand(model, "", ((model, model.name),))
+    try:
+        x = flattener.expand(model, "", ((model, model.name),))
+    except _TooLarge:
+        flat.too_large = True       # (reported; nothing of the model is checked further)
+        return flat
     body = [s for s in x.statements if not isinstance(s, _InstanceMark)] + x.bonds
     if flattener.aliases:
         body = [_realias(s, flattener.aliases) for s in body]

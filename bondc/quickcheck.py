@@ -45,9 +45,10 @@ from bondc.causality import CONDUCTANCE, ROLES, CausalGraph
 #: The points at which every expression is evaluated: at the first, each parameter has its own
 #: value; at the first two, every other name is positive; at the others, of either sign.
 POINTS = 4
-#: Function bodies expanded per expression before the answer is None (the translator's own limit
-#: is 20 000; an expression this large is left to it).
-MAX_EXPANSIONS = 2000
+#: Operations of function bodies expanded per expression before the answer is None (the
+#: translator's own limit, E319, is ExpansionBudget.PER_EXPRESSION; an expression this large is
+#: left to it).
+MAX_EXPANSIONS = 10_000
 #: Magnitudes beyond this are treated as overflow (a double's range ends at about 1.8e308).
 HUGE = 1e300
 
@@ -643,7 +644,7 @@ class _Walk:
         key = (function.name, tuple(v.key() for v in bound.values()))
         if key in self.applied:
             return self.applied[key]
-        self.expansions += 1
+        self.expansions += sum(1 for _ in ast.walk(function.body))
         if self.expansions > MAX_EXPANSIONS:
             raise _Unsure("too many function expansions")
         self.bound.append(bound)

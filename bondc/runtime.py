@@ -470,11 +470,13 @@ def load_csv(path, column):
     value_index = header.index(column)
     times, values = [], []
     for number, row in enumerate(rows[1:], start=2):
-        try:
-            times.append(float(row[time_index]))
-            values.append(float(row[value_index]))
-        except (ValueError, IndexError):
-            raise CsvError(f"{path}: row {number} is not numeric: {','.join(row)!r}") from None
+        # (the row's cells are not quoted: a model may name any file, and only its column names
+        # are shown)
+        for index, into in ((time_index, times), (value_index, values)):
+            try:
+                into.append(float(row[index]))
+            except (ValueError, IndexError):
+                raise CsvError(f"{path}: row {number} has no number in column {header[index]!r}") from None
     times, values = np.array(times), np.array(values)
     if times.size == 0:
         raise CsvError(f"{path}: no data rows")
@@ -1789,7 +1791,9 @@ class _Run:
         self.stiffness_check = self.STIFFNESS_CHECK          # steps of DOPRI5 before auto looks again
         self.options = {"rtol": rtol, "atol": atol, "max_step": max_step}
         if first_step is not None:
-            self.options["first_step"] = first_step
+            # a first step that the creep guard counts as not advancing (first_step = 1e-300) would
+            # stop the run before the step size grows: it starts at the smallest step that advances
+            self.options["first_step"] = max(first_step, 10 * _CREEP * max(abs(t_start), 1.0))
         self.implicit = self.method.__name__ in _IMPLICIT
         self.progress = progress
         self.max_events = max_events

@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import difflib
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -43,7 +44,7 @@ from typing import Iterable, Mapping, Sequence
 from bondc import ast, builtins, units
 from bondc.io import read_source
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
-from bondc.evaluate import EvaluationError, evaluate
+from bondc.evaluate import EvaluationError, ExpansionBudget, evaluate
 from bondc.model import (
     JUNCTION_KINDS, KINDS, PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
     OutputDef, Parameter, Signal, StateVar, WhenDef,
@@ -170,6 +171,8 @@ class _Model:
     good_bindings: list = field(default_factory=list)  # those that fit their parameter
     instances: list = field(default_factory=list)      # flatten.Instance: the instance tree
     by_kind: dict = field(default_factory=dict, repr=False)     # statements(): kind -> statements
+    # what evaluating the constants may spend on expanding fn calls (E319)
+    budget: ExpansionBudget = field(default_factory=ExpansionBudget, repr=False)
 
     def report(self, diagnostic: Diagnostic) -> None:
         self.diagnostics.append(diagnostic)
@@ -692,7 +695,7 @@ class _Scope:
     local: Mapping[str, str] = field(default_factory=dict)       # name -> what it is here
     forbidden: Mapping[str, str] = field(default_factory=dict)   # own names this law may not use -> why
     owner: str | None = None                # the element whose law this is
-    params_before: frozenset[str] | None = None   # in a parameter declaration: those above it
+    params_before: "_Above | frozenset[str] | None" = None   # in a parameter declaration: those above it
     current: str | None = None              # the name being defined (a parameter's self-reference)
     constant_locals: bool = False           # locals are constants (function arguments)
 
@@ -1012,6 +1015,32 @@ class _ExpressionChecker:
             _check_csv(self.m, node, *strings, report=self.report)
 
 
+def _is_table(path: Path, header: list[str]) -> bool:
+    """Whether a file whose first line is ``header`` is a CSV table, whose column names may be
+    shown: two columns or more, named in printable text, and a first data row (if any) of as many
+    numbers."""
+    if len(header) < 2 or any(_CONTROL.search(cell) for cell in header):
+        return False
+    from bondc.runtime import csv_rows, open_data
+
+    try:
+        with open_data(path) as handle:
+            rows = csv_rows(handle)
+    except (OSError, UnicodeDecodeError, ValueError, csv.Error):
+        return False
+    if len(rows) < 2:
+        return True
+    try:
+        numbers = [float(cell) for cell in rows[1]]
+    except ValueError:
+        return False
+    return len(numbers) == len(header)
+
+
+#: Characters no column name (or line of a model) holds: the C0 controls but tab, and DEL.
+_CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")
+
+
 def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str, report) -> None:
     """E310: the CSV file exists (relative to the model file) and has the column."""
     source = m.sources.get(node.span.file)
@@ -1038,6 +1067,11 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
     elif not header or not any(header):
         report(_error("E310", f"CSV file '{path_arg.value}' has no header line", path_arg.span,
                       hint="the first line names the columns, e.g. t,omega"))
+    elif column_arg.value not in header and not _is_table(path, header):
+        # a model may name any file (/etc/passwd, /proc/self/environ): what is not a table is not quoted
+        report(_error("E310", f"'{path_arg.value}' is not a CSV table", path_arg.span,
+                      hint="a data file is a header line of column names separated by commas (time first), "
+                           "then rows of numbers"))
     elif column_arg.value not in header:
         columns = [c for c in header if c]
         report(_error("E310", f"CSV file '{path_arg.value}' has no column '{column_arg.value}'", column_arg.span,
@@ -1162,14 +1196,29 @@ def _cycles(order: Sequence[str], edges: Mapping[str, Sequence[str]]) -> list[li
     return found
 
 
+class _Above:
+    """The parameters declared above the one at ``index`` (``name in above``), without a copy."""
+
+    __slots__ = ("order", "index")
+
+    def __init__(self, order: Mapping[str, int], index: int):
+        self.order, self.index = order, index
+
+    def __contains__(self, name) -> bool:
+        return self.order.get(name, self.index) < self.index
+
+
 def check_expressions(m: _Model) -> None:
     """Every expression of the model: E301, E305, E306, E310, E312, E313, E316, E506."""
-    before: set[str] = set()
-    for param in m.params:
+    order: dict[str, int] = {}
+    for index, param in enumerate(m.params):
+        order.setdefault(param.name, index)         # (a name defined twice: from its first line on)
+    for index, param in enumerate(m.params):
+        # (the parameters above it as a view, not a copy: a copy per parameter was quadratic, 39 s
+        # for 60 000 parameters)
         scope = _scope(m, "a parameter", CONSTANT, _PARAMETER_RULE,
-                       params_before=frozenset(before), current=param.name)
+                       params_before=_Above(order, index), current=param.name)
         _check_expr(m, param.value, scope)
-        before.add(param.name)
     for signal in m.inputs:
         _check_expr(m, signal.value, _scope(m, "an input", SIGNAL, _INPUT_RULE))
     for output in m.outputs:
@@ -1552,9 +1601,10 @@ def _function_closure(m: _Model, names: Iterable[str]) -> set[str]:
 def _definition_value(m: _Model, definition: _Definition, values: Mapping[str, float]) -> float | None:
     """A parameter's SI value: a constant is converted by its unit (or the declared one), an expression is SI."""
     try:
-        value = evaluate(definition.expr, values, m.functions)
+        value = evaluate(definition.expr, values, m.functions, m.budget)
     except EvaluationError as error:
-        m.report(error.diagnostic)
+        if not error.repeated:
+            m.report(error.diagnostic)
         return None
     if not _is_constant(definition.expr):
         return value
@@ -1562,7 +1612,20 @@ def _definition_value(m: _Model, definition: _Definition, values: Mapping[str, f
     resolved = m.units.get(id(unit)) if unit is not None else None
     if unit is not None and resolved is None:
         return None
-    return resolved.to_si(value) if resolved is not None else value
+    if resolved is None:
+        return value
+    return _finite_si(m, resolved.to_si(value), value, unit, definition.expr.span)
+
+
+def _finite_si(m: _Model, si: float, value: float, unit: ast.Unit, span: Span) -> float | None:
+    """A number converted to SI, or None with E311 where the conversion leaves a double's range
+    (``1e308 [kN/m]`` is 1e311 N/m: inf, which no law and no generated module can use)."""
+    if math.isfinite(si):
+        return si
+    m.report(_error("E311", f"cannot evaluate: {value:g} [{unit.text}] is {'an infinite' if si == si else 'no'} "
+                            f"number in SI units (beyond a double's range, about 1.8e308)", span,
+                    hint="write the value in a unit closer to SI, or a smaller value"))
+    return None
 
 
 def _parameters(m: _Model, definitions: Mapping[str, _Definition],
@@ -1655,9 +1718,10 @@ def _try_evaluate(m: _Model, expr: ast.Expr, values: Mapping[str, float], checke
     if any(name not in values and name != "pi" for name in _names(expr)):
         return None  # uses a parameter that failed (already reported), or a function argument
     try:
-        return evaluate(expr, values, m.functions)
+        return evaluate(expr, values, m.functions, m.budget)
     except EvaluationError as error:
-        m.report(error.diagnostic)
+        if not error.repeated:
+            m.report(error.diagnostic)
         return None
 
 
@@ -1849,7 +1913,9 @@ def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
     if value is None:
         return None
     if _is_constant(item.value) and item.unit is not None:
-        value = m.units[id(item.unit)].to_si(value)
+        value = _finite_si(m, m.units[id(item.unit)].to_si(value), value, item.unit, item.value.span)
+        if value is None:
+            return None
     if value <= 0:
         m.report(_error("E317", f"{item.name} must be positive, not {value:g}", item.value.span))
         return None
@@ -1996,6 +2062,8 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     if chosen is None:
         return None, problems
     flat = flatten(chosen, files, standalone=bool(ports_of(chosen)))
+    if flat.too_large:
+        return None, list(flat.diagnostics)
     m = _Model(files[0], sources, _with_defaults(flat.model), tuple(files))
     m.diagnostics += flat.diagnostics
     m.bindings, m.instances = flat.bindings, flat.instances
@@ -2241,6 +2309,27 @@ def _std_library(name: str) -> Path | None:
     return None if found is None else Path(str(found))
 
 
+def _shown_path(path: str, limit: int = 80) -> str:
+    """A path as a message quotes it: a path longer than any file system allows, shortened."""
+    return path if len(path) <= limit else f"{path[:limit // 2]}...{path[-limit // 4:]} ({len(path)} characters)"
+
+
+def _not_a_model_file(target: Path, written: str) -> str | None:
+    """Why an import's path cannot be a model file, or None: its name (or, through symbolic links,
+    the name of the file it is) does not end in .bg, or the system cannot look it up."""
+    if not written.endswith(".bg"):
+        return f"cannot import '{_shown_path(written)}': it is not a .bg model file"
+    try:
+        real = target.resolve()
+        target.is_file()
+    except (OSError, RuntimeError, ValueError) as error:
+        reason = getattr(error, "strerror", None) or "the system cannot look it up"
+        return f"cannot find imported file '{_shown_path(written)}': {reason.lower()}"
+    if real.suffix != ".bg" and target.exists():
+        return f"cannot import '{_shown_path(written)}': it is a link to a file that is not a .bg model file"
+    return None
+
+
 def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File], dict[str, Source], list[Diagnostic]]:
     """Parse ``path`` and, recursively, the files it imports (each once).
 
@@ -2269,6 +2358,13 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
             else:
                 target = source.path.parent / item.path
                 name = os.path.normpath(os.path.join(os.path.dirname(source.name), item.path))
+                problem = _not_a_model_file(target, item.path)
+                if problem is not None:
+                    # (a model may name any file: one that is not a model is not read, nor quoted)
+                    diagnostics.append(_error("E307", problem, item.span,
+                                              hint="import names a model file (.bg), relative to the importing "
+                                                   "file, or a shipped library (std:NAME)"))
+                    continue
             key = target.resolve()
             keys = [k for k, _ in stack]
             if key in keys:

@@ -215,7 +215,7 @@ _RUNTIME_CODE: dict = {}
 # ------------------------------------------------------------------ simulate
 
 
-def _settings(experiment, t_end, dt, method, rtol, atol, max_step) -> dict:
+def _settings(experiment, t_end, dt, method, rtol, atol, max_step, first_step=None) -> dict:
     extra = dict(getattr(experiment, "settings", {}) or {}) if experiment is not None else {}
     pick = lambda given, name, default=None: given if given is not None else (
         getattr(experiment, name, None) if experiment is not None and getattr(experiment, name, None) is not None
@@ -227,7 +227,7 @@ def _settings(experiment, t_end, dt, method, rtol, atol, max_step) -> dict:
         "atol": float(pick(atol, "atol", 1e-9)),
         "max_step": pick(max_step, "max_step"),
         "dt": dt if dt is not None else extra.get("dt"),
-        "first_step": extra.get("first_step"),
+        "first_step": first_step if first_step is not None else extra.get("first_step"),
     }
     # Settings from the model are checked by the semantic stage; these can come from the command line.
     for name in ("t_end", "dt", "max_step", "rtol", "atol", "first_step"):
@@ -269,17 +269,17 @@ def _check_bound_divisors(ss, namespace, overrides: Mapping[str, float]) -> None
 def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | None = None,
              overrides: Mapping[str, float] | None = None, progress: bool = False, t_eval=None,
              method: str | None = None, rtol: float | None = None, atol: float | None = None,
-             max_step: float | None = None) -> SimResult:
+             max_step: float | None = None, first_step: float | None = None) -> SimResult:
     """Simulate ``ss`` with the settings of ``experiment`` (an ExperimentDef or None).
 
     Keyword arguments override the experiment: ``t_end`` [s], ``dt`` (report
     on a regular grid instead of at every solver step), ``overrides``
     (parameter name -> SI value), ``t_eval`` (report at these times),
-    ``method``/``rtol``/``atol``/``max_step``. ``progress``: draw a progress
+    ``method``/``rtol``/``atol``/``max_step``/``first_step``. ``progress``: draw a progress
     bar on stderr when the run takes more than 2 s and stderr is a terminal.
     Never raises for a failed run: see ``SimResult.complete``.
     """
-    settings = _settings(experiment, t_end, dt, method, rtol, atol, max_step)
+    settings = _settings(experiment, t_end, dt, method, rtol, atol, max_step, first_step)
     if settings["t_end"] is None:
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))

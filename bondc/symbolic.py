@@ -40,6 +40,7 @@ from sympy.core.symbol import Str as _SymStr
 
 from bondc import ast
 from bondc.errors import Diagnostic, EquationError
+from bondc.evaluate import ExpansionBudget, Exploded
 
 # ------------------------------------------------------------ signal functions
 
@@ -309,12 +310,9 @@ def _short_number(value) -> str:
     return text if len(text) <= 40 else f"{text[:20]}...({len(text)} digits)"
 
 
-#: At most this many function bodies are expanded in one law (each with distinct arguments).
-MAX_EXPANSIONS = 20_000
-
-
-class _Exploded(Exception):
-    """Raised past MAX_EXPANSIONS; the outermost call turns it into the law's diagnostic."""
+#: What the translations of one model's laws may spend on function bodies in all (sympy builds
+#: an expression from each operation: slower than evaluating a constant; see ExpansionBudget).
+TRANSLATION_IN_ALL = 50_000
 
 
 def _fail(node, message: str, hint: str | None = None) -> EquationError:
@@ -347,13 +345,14 @@ class Translator:
     ``resolve_name(name, node)`` returns the sympy value of a bare name (and
     raises for an unknown one); ``resolve_ref(node)`` that of a dotted
     reference. ``functions`` are the model's ``fn`` definitions (anything with
-    ``params`` and ``body``), inlined at each call. ``base_dir`` resolves csv
-    paths of nodes without a source file.
+    ``params`` and ``body``), inlined at each call, within ``budget`` (E319 beyond it; by
+    default, a budget of this translator's own). ``base_dir`` resolves csv paths of nodes
+    without a source file.
     """
 
     def __init__(self, resolve_name: Callable, resolve_ref: Callable | None = None,
                  functions: Mapping[str, object] | None = None, base_dir: Path | None = None,
-                 time: sympy.Symbol | None = None):
+                 time: sympy.Symbol | None = None, budget: ExpansionBudget | None = None):
         self.resolve_name = resolve_name
         self.resolve_ref = resolve_ref
         self.functions = functions or {}
@@ -362,7 +361,8 @@ class Translator:
         self._bound: list[Mapping[str, object]] = []    # fn parameters, innermost last
         self._calls: list[str] = []
         self._applied: dict = {}        # (function, argument values) -> value
-        self._expansions = 0            # function bodies translated (the law's size, in a way)
+        self.budget = budget if budget is not None else ExpansionBudget(in_all=TRANSLATION_IN_ALL)
+        self._spent = 0                 # operations of function bodies translated (the law's size, in a way)
 
     def __call__(self, node):
         return _as_value(self.translate(node))
@@ -380,8 +380,10 @@ class Translator:
 
     def _Num(self, node: ast.Num):
         text = node.text.strip()
-        if text.isdigit():
+        if text.isdigit() and math.isfinite(node.value):
             return sympy.Integer(int(text))
+        # (an integer beyond a double's range, as 1e309: infinite, E701; Python would not even
+        # convert its digits past 4300)
         return sympy.Float(node.value)
 
     def _Str(self, node: ast.Str):
@@ -481,22 +483,21 @@ class Translator:
             key, known = None, None
         if known is not None:
             return known
-        self._expansions += 1
+        cost = self.budget.size(function.body)
+        self._spent += cost
         outermost = not self._calls
-        if self._expansions > MAX_EXPANSIONS:
-            raise _Exploded()
+        beyond = self.budget.spend(cost, self._spent)
         self._bound.append(bound)
         self._calls.append(function.name)
         try:
+            if beyond is not None:
+                raise Exploded(beyond)
             value = self.translate(function.body)
-        except _Exploded:
+        except Exploded as exploded:
             if not outermost:
                 raise
             # reported at the call in the law itself, with the function it starts from
-            raise _fail(node, f"expanding {function.name}() here calls functions more than {MAX_EXPANSIONS} "
-                              f"times with different arguments (they call one another at every level)",
-                        hint="compute the repeated part once: make it a parameter, an input or a model "
-                             "variable, or simplify the functions") from None
+            raise EquationError(self.budget.diagnostic(exploded.which, function.name, node.span)) from None
         finally:
             self._bound.pop()
             self._calls.pop()

@@ -287,8 +287,16 @@ def _case_score(name: str, candidate: str) -> int:
     return sum(a == b for a, b in zip(name, candidate))
 
 
+#: Names longer than this get no suggestion: no unit is spelt with more letters (the longest,
+#: "revolutions", has 11), and the search below is quadratic in the length (a unit name of
+#: 300 kB took 19 s).
+MAX_SUGGESTED = 32
+
+
 def _suggestions(name: str) -> list[str]:
     """Known spellings close to ``name``, most likely first (at most three)."""
+    if len(name) > MAX_SUGGESTED:
+        return []
     # A wrong case is the commonest slip (Mpa, KG, hz). Ties (mpa: mPa or MPa)
     # keep the one agreeing in more letters first.
     folded = [known for known in KNOWN_NAMES if known.lower() == name.lower()]

@@ -16,6 +16,10 @@ Python traceback, and never a hang. Every error diagnostic of ``check`` must
 name where it is: ``file:line:col``, or the file for a whole-file problem. The
 counts are printed in the test session's summary (see ``conftest.py``).
 
+Beside the mutants, ``SHAPES`` generate small inputs of the shapes that once made bondc run
+without end, crash, show another file or drive the terminal (functions or components that double
+at every level, huge literals and paths, files that are not models or tables, control bytes).
+
 Mutants are reproducible: ``FUZZ_SEED`` picks the sequence, ``FUZZ_CHECKS`` and
 ``FUZZ_RUNS`` its length. Both tests are marked slow, so CI runs them.
 """
@@ -138,6 +142,104 @@ def test_mutants_of_every_model_are_checked_without_an_internal_error(tmp_path, 
     SUMMARY["check"] = (f"{CHECKS} mutants of {len(CORPUS)} models (seed {SEED}): {outcomes[0]} valid, "
                         f"{outcomes[1]} with model errors, {outcomes[2]} usage errors, {len(problems)} problems")
     assert not problems, "\n\n".join(problems[:5])
+
+
+# -- hostile shapes: small inputs that once made bondc work without end, crash or show other files
+
+_SHAPE_MODEL = "model M\n  param k = 2\n  {kind} s : e = {law}\n  R r : f = e/k\n  s -> r\n{extra}end\n"
+
+
+def _exploding_functions(rng: random.Random) -> tuple[str, dict, str]:
+    depth = rng.randint(25, 40)
+    twice = rng.choice(["f{p}(x + 1) + f{p}(2*x)", "f{p}(3*x) + f{p}(x + 1)", "f{p}(x + 1) - f{p}(x/2)"])
+    lines = ["fn f0(x) = x*x"] + [f"fn f{i}(x) = " + twice.format(p=i - 1) for i in range(1, depth + 1)]
+    where = rng.choice(["param", "law", "setting"])
+    law = f"f{depth}(k)" if where == "law" else "k"
+    extra = f"  experiment x\n    t_end = f{depth}(0.5)\n  end\n" if where == "setting" else ""
+    text = "\n".join(lines) + "\n" + _SHAPE_MODEL.format(kind="Se", law=law, extra=extra)
+    if where == "param":
+        text = text.replace("param k = 2", f"param k = 1 + f{depth}(0.5)")
+    return text, {}, "E319"
+
+
+def _nested_components(rng: random.Random) -> tuple[str, dict, str]:
+    depth, copies = rng.randint(16, 40), rng.randint(2, 3)
+    parts = ["model C0\n  port a, b\n  R r : e = 2*f\n  1 j\n  a -> j -> b\n  j -> r\nend\n"]
+    for i in range(1, depth + 1):
+        names = [f"x{c}" for c in range(copies)]
+        body = "".join(f"  C{i - 1} {name}\n" for name in names)
+        chain = " -> ".join(["a"] + [f"{n}.a" for n in names[:1]]) + "\n"
+        links = "".join(f"  {a}.b -> {b}.a\n" for a, b in zip(names, names[1:]))
+        parts.append(f"model C{i}\n  port a, b\n{body}  {chain}{links}  {names[-1]}.b -> b\nend\n")
+    parts.append(f"model Top\n  Se s : e = 1\n  C{depth} c\n  R load : e = f\n  s -> c.a\n  c.b -> load\nend\n")
+    return "\n".join(parts), {}, "E319"
+
+
+def _huge_literal(rng: random.Random) -> tuple[str, dict, str]:
+    return _SHAPE_MODEL.format(kind="Se", law="1" * rng.randint(4301, 20000), extra=""), {}, "E701"
+
+
+def _long_import(rng: random.Random) -> tuple[str, dict, str]:
+    return f'import "{"d/" * rng.randint(3000, 6000)}x.bg"\n' + _SHAPE_MODEL.format(kind="Se", law="1", extra=""), \
+        {}, "E307"
+
+
+def _foreign_files(rng: random.Random) -> tuple[str, dict, str]:
+    secret = "".join(rng.choice("abcdefghij:=,/\x00\n") for _ in range(200)) + "SECRET_TOKEN"
+    if rng.random() < 0.5:
+        return 'import "notes.txt"\n' + _SHAPE_MODEL.format(kind="Se", law="1", extra=""), \
+            {"notes.txt": secret}, "E307"
+    return _SHAPE_MODEL.format(kind="MSe", law='csv("notes.txt", "x")', extra=""), {"notes.txt": secret}, "E310"
+
+
+def _control_bytes(rng: random.Random) -> tuple[str, dict, str]:
+    junk = "".join(rng.choice("\x1b\x07\x08\x0b\x0c\x7f[]31m;") for _ in range(rng.randint(1, 30)))
+    return _SHAPE_MODEL.format(kind="Se", law="1 + " + junk, extra=""), {}, "E10"
+
+
+def _huge_unit(rng: random.Random) -> tuple[str, dict, str]:
+    unit = "".join(rng.choice("kgmNsx") for _ in range(rng.randint(10_000, 300_000)))
+    return _SHAPE_MODEL.format(kind="Se", law="1", extra="").replace("param k = 2", f"param k = 2 [{unit}]"), {}, "E201"
+
+
+def _infinite_si(rng: random.Random) -> tuple[str, dict, str]:
+    unit, value = rng.choice([("kN/m", "1e308"), ("MPa", "1e303"), ("h", "1e305"), ("GW", "1.7e300")])
+    return _SHAPE_MODEL.format(kind="Se", law="1", extra="").replace("param k = 2", f"param k = {value} [{unit}]"), \
+        {}, "E311"
+
+
+SHAPES = [_exploding_functions, _nested_components, _huge_literal, _long_import, _foreign_files, _control_bytes,
+          _huge_unit, _infinite_si]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("shape", SHAPES, ids=lambda shape: shape.__name__.strip("_"))
+def test_hostile_shapes_are_diagnosed_without_a_hang_a_crash_or_a_leak(tmp_path, monkeypatch, shape):
+    """Generated inputs of the shapes that once ran without end (2^40 function bodies, 2^40
+    component copies), crashed (a 5000-digit integer in a law, an import path longer than the
+    system allows, an SI value beyond a double), showed another file (import or csv() of a file
+    that is not a model or a table) or drove the terminal (control bytes): each is a diagnostic
+    with its code, with nothing of the other file and no raw control byte in the output. A bound
+    enforced, not a speed: the limits are E319's."""
+    monkeypatch.setenv("BONDC_CACHE", "0")
+    rng = random.Random(f"{SEED}-{shape.__name__}")
+    for number in range(3):
+        text, files, code = shape(rng)
+        folder = tmp_path / f"s{number}"
+        folder.mkdir()
+        for name, content in files.items():
+            (folder / name).write_text(content)
+        path = folder / "shape.bg"
+        path.write_text(text)
+        options = ["--model", "Top"] if "model Top" in text else []
+        out, err = io.StringIO(), io.StringIO()
+        with redirect_stdout(out), redirect_stderr(err):
+            status = main(["check", str(path), *options])
+        shown = err.getvalue()
+        assert status == 1, f"{shape.__name__} #{number}: exit {status}\n{shown[-800:]}"
+        assert f"error[{code}" in shown, shown[-800:]
+        assert "Traceback" not in shown and "internal error" not in shown
+        assert "SECRET_TOKEN" not in shown and not any(c in shown for c in "\x1b\x07\x00")
 
 
 @pytest.mark.slow

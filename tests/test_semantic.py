@@ -545,7 +545,7 @@ def test_csv_inputs(tmp_path):
 
 @pytest.mark.parametrize("rows, words", [
     ("0,0\n1,2\n0.5,3\n", "the time column must not decrease: row 4 has t = 0.5 after 1"),
-    ("0,0\n# a comment\n1,abc\n", "row 3 is not numeric: '1,abc'"),
+    ("0,0\n# a comment\n1,abc\n", "row 3 has no number in column 'omega'"),
 ])
 def test_a_csv_files_bad_data_rows_are_found_by_the_check_at_the_call(tmp_path, rows, words):
     # not only when a simulation reads them (E804, without a place in the model)

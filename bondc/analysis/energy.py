@@ -1370,7 +1370,7 @@ def repeat_run(ss, result, t_eval=None):
     settings = dict(result.settings)
     rerun = simulate(ss, None, t_end=settings.get("t_end", float(result.t[-1])), method=settings.get("method"),
                      rtol=settings.get("rtol"), atol=settings.get("atol"), max_step=settings.get("max_step"),
-                     overrides=dict(result.parameters), t_eval=t_eval)
+                     first_step=settings.get("first_step"), overrides=dict(result.parameters), t_eval=t_eval)
     if not result.complete:
         keep = rerun.t <= result.t[-1]
         rerun.t = rerun.t[keep]
@@ -1480,6 +1480,9 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     energies = {name: energy for name, energy in functions.items()
                 if energy.state_name in model.state_names or energy.state_name in values}
     step_start, step_end = trajectory.ta, trajectory.tb
+    if not step_start.size:     # (a run again at its steps that stopped before its first step)
+        raise _error("E931", "the simulation result has no solver step to account energy over",
+                     hint="simulate past the start time")
     state_bounds = trajectory.states_at_bounds()
     scale = max(abs(windows[-1][1]), 1.0)
     masks = [(step_start >= start - 1e-12 * scale) & (step_end <= end + 1e-12 * scale)

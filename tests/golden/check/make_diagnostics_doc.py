@@ -70,11 +70,11 @@ d("E303", "unknown element kind", "The first word of an element statement is not
 d("E304", "recursive function", "A function calls itself, directly or through other functions. The message names the cycle.", "Functions are pure formulas evaluated by substitution; write the repetition out, or use an `if` expression.")
 d("E305", "dependency cycle or forward reference", "A parameter uses a parameter defined below it (parameters are evaluated top to bottom), or a parameter uses itself, or an override (experiment `param`, `--set`) makes parameters depend on each other in a cycle, or inputs (or outputs) are defined in terms of each other in a cycle.", "Move the parameter that is used above the one that uses it; break the cycle.")
 d("E306", "wrong arguments", "A call has the wrong number or shape of arguments: `abs sign sqrt exp log sin cos tan tanh atan` take 1, `atan2` 2, `min`/`max` at least 2, `step(t, t0)` 2, `csv(\"file\", \"column\")` 2, `table(t, [t0, ...], [v0, ...])` a value and two lists of the same length with at least two points and breakpoints that do not decrease; an `fn` takes as many as it declares.", "Write the call as shown in the hint.")
-d("E307", "missing import", "`import \"path\"` names a file that does not exist (or cannot be read). The path is relative to the importing file.", "Fix the path; the hint shows where bondc looked.")
+d("E307", "missing import", "`import \"path\"` names a file that does not exist (or cannot be read, or whose path is longer than the system allows), or a file that is not a model: its path does not end in `.bg`, or it is a link to a file that does not. Such a file is not read, and nothing of it is shown (a model may name any file, `/etc/passwd` too). The path is relative to the importing file.", "Fix the path; the hint shows where bondc looked.")
 d("E308", "cyclic import", "Files import each other, directly or through other files. The message names the chain.", "Move what both files need into a third file that both import.")
 d("E309", "model selection", "The file has no model, or several and no `--model` was given, or `--model` names a model the file (and its imports) does not have.", "Pass `--model NAME` with one of the listed models.")
-d("E310", "CSV file or column", "`csv(\"file\", \"column\")` names a file that cannot be read (paths are relative to the model file), a file without a header line, or a column that the header does not have, or data rows the simulation could not read: a cell that is not a number, a time before the one above it (the row is counted with the header as row 1, blank lines and `#` comments left out). The first column (or the column `t` or `time`) is time.", "Fix the path or the column name (the hint lists the columns), or the row the message names.")
-d("E311", "cannot evaluate", "A constant (parameter, override, setting, initial value, table breakpoint) has no value: a logarithm or square root of a negative number, a division by zero, a negative number to a fractional power, or a result too large for a float. Also a law, output or input that divides by parameters whose value is 0 (`f = p/m` with `m = 0`, outside an `if` that guards it): every evaluation would be inf or nan. The caret is under the sub-expression that failed; inside a function, a note points into its body.", "Fix the expression or the parameter values it uses. If the value comes from an experiment's overrides, a note names the experiment.")
+d("E310", "CSV file or column", "`csv(\"file\", \"column\")` names a file that cannot be read (paths are relative to the model file), a file without a header line, or a column that the header does not have, or data rows the simulation could not read: a cell that is not a number, a time before the one above it (the row is counted with the header as row 1, blank lines and `#` comments left out; the message names the row and the column, and does not quote the row). A file that is not a CSV table (a header of two or more column names, then rows of as many numbers) is said to be none, and nothing of it is shown: a model may name any file (`/etc/passwd`, `/proc/self/environ`). The first column (or the column `t` or `time`) is time.", "Fix the path or the column name (the hint lists the columns), or the row the message names.")
+d("E311", "cannot evaluate", "A constant (parameter, override, setting, initial value, table breakpoint) has no value: a logarithm or square root of a negative number, a division by zero, a negative number to a fractional power, or a result too large for a float (also a number whose value in SI is: `1e308 [kN/m]` is 1e311 N/m). Also a law, output or input that divides by parameters whose value is 0 (`f = p/m` with `m = 0`, outside an `if` that guards it): every evaluation would be inf or nan. The caret is under the sub-expression that failed; inside a function, a note points into its body.", "Fix the expression or the parameter values it uses. If the value comes from an experiment's overrides, a note names the experiment.")
 d("E312", "unknown variable of a graph node", "A dotted reference names a variable the node does not have: `X.q` on an element without a state `q`, `X.p1.e` on a one-port, `X.e` on a two-port (name the port), `J.f` on a 0-junction or `J.e` on a 1-junction (a 0-junction has one common effort, a 1-junction one common flow), `bN.e` with no bond N, or a dotted reference on a parameter or input.", "Use one of the variables the hint lists; for the flow at a 0-junction use one bond's flow (`b3.f` or a label).")
 d("E313", "string or list where a number is expected (or the reverse)", "A string appears in an arithmetic expression, a list outside `table(...)`, a `solver` that is not a string, `csv` arguments that are not strings, or `outputs` entries that are not names.", "Write numbers in expressions; quote the solver name (`solver = \"Radau\"`); write `outputs = [name1, name2]`.")
 d("E314", "unknown experiment setting", "A setting inside `experiment ... end` is not one of `t_end solver rtol atol max_step cycle outputs first_step dt`.", "Use the suggested setting.")
@@ -82,6 +82,19 @@ d("E315", "reserved name", "`t` (time) and `pi` cannot be defined as names, and 
 d("E316", "name not allowed here", "A name that exists but cannot be used where it is written: a parameter (a constant) using an input, `t` or a graph variable; an input (a signal of `t` and parameters) using a graph variable, output or state; a function body using anything but its arguments; `csv(...)` outside an input or law; an element or function used as a value. The hint says what the place may use.", "Pass the value as a function argument, move the expression into an output or element law, or use the element's variables (`X.e`, `X.f`).")
 d("E317", "invalid setting value", "A setting has a value outside its range: an unknown solver (solvers are SUNDIALS `CVODE` (BDF, the default), `CVODE-BDF`, `CVODE-Adams`, `IDA` and the `scipy.integrate.solve_ivp` methods `RK45 RK23 DOP853 Radau BDF LSODA`), or a time or tolerance that is not positive.", "Use one of the listed solvers, or a positive value.")
 d("E318", "unknown experiment", "`--experiment NAME` names an experiment the model does not have.", "Use one of the listed experiments.")
+d("E319", "expansion too large",
+  "Writing out what the model says would not end: `fn` functions that call the one before twice with "
+  "different arguments (`f1(x) = f0(x + 1) + f0(2*x)`, ... `f20`: 2^20 bodies), or components that "
+  "instantiate two (or more) of the one before at every level (2^40 copies). A function is expanded once "
+  "per distinct arguments, so functions that call the one before twice with the same arguments "
+  "(`f1(x) = f0(x) + f0(x)`) are fine at any depth. The limits: one expression (a parameter, a setting, an "
+  "initial value, a law, an output) may write out 10 000 operations of function bodies, and all the "
+  "constants of a model 1 000 000 (all its laws, 50 000), or ten per character of its files where that is "
+  "more; a model may expand through its instances to 20 000 statements, or twenty per statement written in "
+  "its files where that is more. The error is at the call (or instance) written in the model that goes "
+  "beyond; `bondc check` stops there within seconds instead of running for hours.",
+  "Compute the repeated part once: make it a parameter, an input or a model variable (`param y = f5(a)`, "
+  "then use `y`), or simplify the functions; instantiate fewer components in each other.")
 d("E330", "unknown library model", "An instance's kind is qualified with a library (`hydraulics.Orifice`) that has no such model, or no imported file has that library name. A library's name is its file name without `.bg`, or `NAME` for `import \"std:NAME\"`.", "Import the library at file level, or fix the model's name.")
 d("E331", "ambiguous model name", "Two imported files define a model of the same name and an instance uses it unqualified.", "Qualify the name with its library: `hydraulics.Cylinder`.")
 d("E332", "model instantiates itself", "A model contains an instance of itself, directly or through other models. The message names the chain.", "A component cannot contain itself; remove the instance.")
@@ -174,8 +187,8 @@ d("E701", "expression cannot be translated",
   "is 0 for every value of the variables once simplified (`q/(exp(q)*exp(-q) - 1)`, `log(b - b)`), a "
   "constant beyond a double's range (`q*1e309`), a constant with no real value (`sqrt(-1)`, `log(-2)`, "
   "`(-8)^(1/3)`: laws are evaluated as real numbers, so an odd root that keeps its sign is written "
-  "`sign(x)*abs(x)^(1/3)`), initial values that depend on each other in a cycle, or "
-  "functions that call one another so often that expanding them would not end. Most other mistakes of "
+  "`sign(x)*abs(x)^(1/3)`), or initial values that depend on each other in a cycle (functions that call "
+  "one another so often that expanding them would not end are E319). Most other mistakes of "
   "this kind (an unknown name, a divisor written as `a - a`, a function that calls itself) are reported "
   "first by the semantic checks (E301, E302, E306, E311, E312, E313, E316). `bondc check` runs this stage "
   "too, so a model that passes it does not get E701 later.",
@@ -571,8 +584,10 @@ d("E002", "model file cannot be read",
   "Check the path (relative to the current directory); save the model as UTF-8.")
 d("E003", "output path cannot be written",
   "An output file (`-o`, `--junit`) is checked before any work: its folder must exist and be writable, and "
-  "bondc replaces only regular files — never a folder, a symbolic link, a named pipe or a device. The command "
-  "exits with status 2 and computes nothing. (A report's or JUnit file's folder is created when missing.)",
+  "bondc replaces only regular files — never a folder, a symbolic link, a named pipe or a device — and never "
+  "one of the command's inputs: the model file, a file it imports, a data file its `csv(...)` calls read, or "
+  "the files of `--data`, `--motors`, `--sweep` (`bondc compile -o m.bg m.bg` would replace the model). The "
+  "command exits with status 2 and computes nothing. (A report's or JUnit file's folder is created when missing.)",
   "Give the path of a new file or of a regular file to replace, in a folder you may write; create the folder "
   "first (`mkdir -p`).")
 d("E004", "output could not be written",
@@ -844,6 +859,7 @@ live("E813", Api(_RUNTIME.format(file="spin.bg")
 live("E001", Cli("bondc simulate --t-end 2"), Cli("bondc report spin.bg --compare omega=omega_meas", {"spin.bg": SPIN}))
 live("E002", Cli("bondc check spin.gb", {"spin.bg": SPIN}))
 live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
+live("E003", Cli("bondc compile spin.bg -o spin.bg", {"spin.bg": SPIN}))
 
 # ================================================================== the page
 
@@ -883,7 +899,10 @@ Every problem bondc reports has a stable code, a message, the place in the
 source it is about (`file:line:column`, the line and a caret), notes at related
 places, and a hint. One run reports every problem it can find, sorted by
 position. `bondc check --json` prints the same diagnostics as JSON
-(`Diagnostic.to_json()`).
+(`Diagnostic.to_json()`). Control characters in what a diagnostic quotes (a
+model line, a data file's column names) are shown as escapes (`\\x1b`, with the
+caret under them), never sent to the terminal; of a file that is not a model
+or a CSV table, nothing is quoted.
 
 A code's letter is its severity: `E` an error, `W` a warning, `I` information
 (two warnings have an `E` code: E915 and E926). Errors stop the command with
