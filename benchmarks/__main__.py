@@ -175,6 +175,38 @@ def simulate_chain(n: int, repeat: int) -> dict:
             "difference": _difference(at_ours.y, result, names, settings["atol"])}
 
 
+PUMP_RELIEF = ROOT / "tests" / "fixtures" / "engine" / "pump_relief.bg"
+
+
+def simulate_pump_relief(repeat: int) -> tuple[dict, dict]:
+    """The pump/relief circuit (kinks at rest: a relief valve at its opening, an orifice at zero
+    flow): in this process against benchmarks/hand/pump_relief.py, and as whole processes
+    (``bondc simulate -o out.csv``, cached, against ``python -m benchmarks.hand.pump_relief``) in
+    alternating rounds."""
+    from benchmarks.hand import pump_relief as hand
+
+    ours, read_time, numpy_time, result, settings, hand_time, reference = _bondc_run(
+        PUMP_RELIEF, repeat, lambda settings: hand.simulate(settings["t_end"], settings["rtol"] or 1e-6, settings["atol"]))
+    dense = hand.simulate(settings["t_end"], settings["rtol"] or 1e-6, settings["atol"], dense=True)
+    row = {"benchmark": "pump/relief circuit (2 s)", "hand": "LSODA, the orifice's secant in the Jacobian",
+           "hand_s": hand_time, "bondc_s": ours, "bondc_numpy_s": numpy_time, "ratio": ours / hand_time,
+           "bondc_read_s": read_time, "ratio_read": read_time / hand_time,
+           "hand_nfev": int(reference.nfev), "hand_njev": int(reference.njev),
+           "bondc_nfev": int(result.stats["nfev"]), "bondc_njev": int(result.stats["njev"]),
+           "code": result.stats.get("code"), "solver": result.stats.get("solver"),
+           "difference": _difference(dense.sol(result.t), result, list(result.states), settings["atol"])}
+    environment = {key: value for key, value in os.environ.items() if key != "PYTHONDONTWRITEBYTECODE"}
+    environment["BONDC_CACHE_DIR"] = tempfile.mkdtemp(prefix="bondc-bench-cache-")
+    out = str(Path(environment["BONDC_CACHE_DIR"]) / "out.csv")
+    bondc = [sys.executable, "-m", "bondc", "simulate", str(PUMP_RELIEF), "-o", out]
+    subprocess.run(bondc, env=environment, capture_output=True, check=True, cwd=ROOT)       # fills the cache
+    bondc_s, hand_s, _, _ = best_of_pairs(
+        repeat, lambda: subprocess.run(bondc, env=environment, capture_output=True, check=True, cwd=ROOT),
+        lambda: subprocess.run([sys.executable, "-m", "benchmarks.hand.pump_relief"], env=environment,
+                               capture_output=True, check=True, cwd=ROOT))
+    return row, {"bondc_s": bondc_s, "hand_s": hand_s, "ratio": bondc_s / hand_s}
+
+
 # ------------------------------------------------------------------ 3. startup
 
 def startup(repeat: int) -> dict:
@@ -290,7 +322,8 @@ def main(argv=None) -> int:
     scaling = compile_scaling(sizes)
     print("simulation against hand-written scipy code", file=sys.stderr, flush=True)
     rounds = 3 if args.quick else 5     # a run of either side takes 0.01-0.6 s: rounds are cheap
-    simulations = [simulate_flagship(rounds), simulate_chain(100, rounds)]
+    relief, relief_process = simulate_pump_relief(rounds)
+    simulations = [simulate_flagship(rounds), relief, simulate_chain(100, rounds)]
     if not args.quick:
         simulations.append(simulate_chain(1000, rounds))
     print("startup", file=sys.stderr, flush=True)
@@ -319,6 +352,11 @@ def main(argv=None) -> int:
               f"{row['bondc_read_s']:.3f} | {row['ratio_read']:.2f} | "
               f"{row['bondc_numpy_s']:.3f} | {row['hand_nfev']} / {row['bondc_nfev']} | "
               f"{row['hand_njev']} / {row['bondc_njev']} | {row['difference']:.1e} |")
+    print("\n## The pump/relief circuit, whole process (cached `bondc simulate -o out.csv` against "
+          "`python -m benchmarks.hand.pump_relief`, alternating rounds)\n")
+    print("| hand s | bondc s | ratio |")
+    print("| --- | --- | --- |")
+    print(f"| {relief_process['hand_s']:.2f} | {relief_process['bondc_s']:.2f} | {relief_process['ratio']:.2f} |")
     print("\n## Startup (whole process, best of runs)\n")
     print("| command | s |")
     print("| --- | --- |")
@@ -331,7 +369,8 @@ def main(argv=None) -> int:
         peak = f"{row['peak_mb']:.0f}" if row["peak_mb"] is not None else "-"
         print(f"| {name} | {row['seconds']:.2f}{'' if row['ok'] else ' (failed)'} | {peak} |")
     if args.json:
-        Path(args.json).write_text(json.dumps({"scaling": scaling, "simulation": simulations, "startup": starts,
+        Path(args.json).write_text(json.dumps({"scaling": scaling, "simulation": simulations,
+                                               "pump_relief_process": relief_process, "startup": starts,
                                                "analysis": analyses}, indent=2), encoding="utf-8")
     return 0
 

@@ -122,7 +122,7 @@ def continuous_across(difference, g) -> bool:
     """
     if difference.is_number:
         return difference == 0
-    if sympy.count_ops(difference) > _SIMPLIFY_LIMIT or difference.has(sympy.Piecewise, Table, Csv):
+    if sympy.count_ops(difference) > _SIMPLIFY_LIMIT or difference.has(Table, Csv):
         return False
     for symbol in sorted(g.free_symbols, key=sympy.default_sort_key):
         slope = sympy.diff(g, symbol)
