@@ -194,23 +194,13 @@ def _equations_checked(args, model, graph, causal) -> tuple:
     return (None if states is None else _CheckedEquations(states)), list(diagnostics)
 
 
-def _switches_json(args, graph) -> list[dict]:
-    """Every switch of a checked model's laws, a kink or a jump (LANGUAGE.md section 7), with the
-    file and line of the law that has it: ``check --json``. Derives the model (the compile cache's)."""
-    from bondc.codegen.emit import switch_kinds
-    from bondc.model import readable, readable_names
-    from bondc.pipeline import derive_file
-    from bondc.simulate import _span_of
+def _switches_json(args, graph, loaded) -> list[dict]:
+    """Every switch of a checked model's laws, a kink or a jump, with its law's file and line
+    (``check --json``; :func:`bondc.pipeline.switches_of`)."""
+    from bondc.pipeline import switches_of
 
-    derived = derive_file(args.file, model=graph.name if graph.name else None, sets=args.set,
-                          cache=not getattr(args, "no_cache", False) and None)
-    names = readable_names(graph)
-    rows = []
-    for label, kind, variable in switch_kinds(derived.state_space):
-        span = _span_of(graph, variable.removeprefix("output "))
-        rows.append({"switch": readable(names, label), "kind": kind, "variable": readable(names, variable),
-                     "file": span.file if span else None, "line": span.line if span else None})
-    return rows
+    use_cache = not getattr(args, "no_cache", False)
+    return [dict(row) for row in switches_of(args.file, graph, loaded, sets=args.set, cache=use_cache)]
 
 
 def _models_to_check(args) -> tuple[list[tuple[str | None, bool]], tuple | None]:
@@ -254,7 +244,7 @@ def _cmd_check(args) -> int:
             if summary is not None and state_space is not None:
                 summary["states_kept"] = len(state_space.states)
                 if ok:
-                    summary["switches"] = _switches_json(args, graph)
+                    summary["switches"] = _switches_json(args, graph, loaded)
             if summary is not None and component:
                 summary["component"] = True
             summaries.append(summary)

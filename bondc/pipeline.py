@@ -160,3 +160,54 @@ def rebind(state_space, graph):
     bound = dataclasses.replace(state_space, parameters=values, graph=graph)
     object.__setattr__(bound, "bound_base", getattr(state_space, "bound_base", None) or state_space)
     return bound
+
+
+#: The built-in functions whose every use is a switch (LANGUAGE.md section 7); an ``if`` is one too.
+SWITCH_FUNCTIONS = frozenset({"abs", "sign", "min", "max", "step", "table", "floor", "ceil", "mod", "pwm",
+                              "coulomb", "heaviside"})
+
+
+def _has_switch(node) -> bool:
+    """Whether a parsed file (or any node of it) writes an ``if`` or a switching built-in."""
+    if isinstance(node, ast.If) or (isinstance(node, ast.Call) and node.func in SWITCH_FUNCTIONS):
+        return True
+    if isinstance(node, (tuple, list)):
+        return any(_has_switch(item) for item in node)
+    fields = getattr(node, "__dataclass_fields__", None)
+    if not fields:
+        return False
+    return any(_has_switch(getattr(node, name)) for name in fields if name not in ("span", "func_span"))
+
+
+def switches_of(path, graph, loaded=None, *, sets: Sequence = (), cache: bool = True) -> tuple:
+    """Every switch of ``graph``'s laws as the engine treats it (``codegen.emit.switch_kinds``),
+    each ``{"switch", "kind", "variable", "file", "line"}`` with its law's place: ``check --json``.
+
+    A model whose files (``loaded``: ``semantic.load_files``'s, else read again) write no switch has
+    none, found without sympy; the others are derived once per content of the files and kept in
+    the check cache, so that checking them again imports no sympy either."""
+    from bondc import cache as compile_cache
+    from bondc import semantic
+
+    files = (loaded or semantic.load_files(Path(path)))[0]
+    if not _has_switch(files):
+        return ()
+    key = compile_cache.check_key(graph.sources, graph.name, sets) + "-switches" if cache else None
+    known = compile_cache.load_check(key) if key else None
+    if known is not None:
+        return known
+    from bondc.codegen.emit import switch_kinds
+    from bondc.model import readable, readable_names
+    from bondc.simulate import _span_of
+
+    derived = derive_file(path, model=graph.name, sets=sets, cache=cache)
+    names = readable_names(graph)
+    rows = []
+    for label, kind, variable in switch_kinds(derived.state_space):
+        span = _span_of(graph, variable.removeprefix("output "))
+        rows.append({"switch": readable(names, label), "kind": kind, "variable": readable(names, variable),
+                     "file": span.file if span else None, "line": span.line if span else None})
+    rows = tuple(rows)
+    if key:
+        compile_cache.store_check(key, rows)
+    return rows

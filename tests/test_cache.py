@@ -407,8 +407,14 @@ def test_a_second_check_of_unchanged_files_reports_the_same_without_sympy(tmp_pa
         code, output, stderr, imported, _ = _check_runs(tmp_path, path, *options)
         assert code == 0 and "E605" not in stderr and not imported
     msd = _write(tmp_path / "msd.bg")
-    code, output, _, imported, _ = _check_runs(tmp_path, msd, "--no-cache", "--json")
-    assert code == 0 and '"states_kept": 2' in output and not imported
+    code, output, _, imported, _ = _check_runs(tmp_path, msd, "--no-cache")
+    assert code == 0 and "2 states" in output and not imported
+    # --json also lists the model's switches (its force's step): that derives the model, once per
+    # content of the files
+    code, output, _, imported, _ = _check_runs(tmp_path, msd, "--json")
+    assert code == 0 and '"states_kept": 2' in output and '"kind": "jump (known times)"' in output and imported
+    code, again, _, imported, _ = _check_runs(tmp_path, msd, "--json")
+    assert again == output and not imported
 
 
 def test_the_cache_folder_is_the_runtimes(tmp_path, monkeypatch):

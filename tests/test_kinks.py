@@ -96,14 +96,15 @@ def test_the_pump_relief_circuit_runs_straight_through_to_its_closed_form_rest(o
     assert account.windows[0].balance.relative_residual < 1e-6
 
 
-def test_check_lists_the_circuits_two_switches_as_kinks_with_their_laws_lines():
+def test_check_lists_the_circuits_switches_as_kinks_with_their_laws_lines():
     done = subprocess.run([sys.executable, "-m", "bondc", "check", str(CIRCUIT), "--json", "--no-cache"],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     switches = json.loads(done.stdout)["model"]["switches"]
     lines = CIRCUIT.read_text().splitlines()
     assert [(s["switch"], s["kind"], s["variable"]) for s in switches] == [
-        ("if relief.e > p_cr", "kink", "relief.f"), ("sign(orifice.e)", "kink", "orifice.f")]
+        ("if relief.e > p_cr", "kink", "relief.f"), ("abs(orifice.e)", "kink", "orifice.f"),
+        ("sign(orifice.e)", "kink", "orifice.f")]
     for switch in switches:
         assert lines[switch["line"] - 1].lstrip().startswith("R  " + switch["variable"].split(".")[0])
 
@@ -134,5 +135,5 @@ def test_the_classification_compares_the_branches_on_the_surface():
     assert relief == sympy.Piecewise((k * (x - c), x > c), (0, True))     # as written
     assert orifice == sympy.sign(x) * sympy.sqrt(sympy.Abs(x))
     assert friction != sympy.sign(x) * c and [s.label for s in freezer.switches] == ["sign(x) in friction.e"]
-    assert [(kink.label, kink.owner) for kink in freezer.kinks] == [("if c < x", "relief.f"),
+    assert [(kink.label, kink.owner) for kink in freezer.kinks] == [("if c < x", "relief.f"), ("abs(x)", "orifice.f"),
                                                                      ("sign(x)", "orifice.f")]

@@ -195,6 +195,7 @@ class Freezer:
         self._time_modes: set = set()
         self._owner = ""
         self.kinks: list[Kink] = []
+        self._in_condition = 0          # inside a condition's comparison: its abs/min/max become jumps
 
     # -- bookkeeping
 
@@ -310,7 +311,7 @@ class Freezer:
         if self.is_time_only(g) or not continuous_across(value - other, g):
             return None
         lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
-        self.kinks.append(Kink(f"if {_short(cond)}", self._owner))
+        self._kink(f"if {_short(cond)}")
         return type(cond)(lhs, rhs)
 
     def _freeze_Mul(self, expr):
@@ -321,7 +322,7 @@ class Freezer:
             if isinstance(arg, sympy.sign) and not self.is_time_only(arg.args[0]):
                 rest = sympy.Mul(*[other for other in expr.args if other is not arg])
                 if continuous_across(rest, arg.args[0]):
-                    self.kinks.append(Kink(f"sign({_short(arg.args[0])})", self._owner))
+                    self._kink(f"sign({_short(arg.args[0])})")
                     args.append(sympy.sign(self._freeze(arg.args[0])))
                     continue
             args.append(self._freeze(arg))
@@ -336,7 +337,11 @@ class Freezer:
         if cond in (sympy.true, sympy.false):
             return cond
         if isinstance(cond, Relational):
-            lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
+            self._in_condition += 1
+            try:
+                lhs, rhs = self._freeze(cond.lhs), self._freeze(cond.rhs)
+            finally:
+                self._in_condition -= 1
             split = _split_kink(type(cond), lhs - rhs)
             if split is not None:
                 return self._condition(split[0], written or _short(cond), split[1])
@@ -352,8 +357,20 @@ class Freezer:
             raise TypeError(f"boolean symbol {cond} in a condition")
         return self._freeze(cond)
 
+    def _continuous(self, expr, label: str):
+        """``abs``, ``min``, ``max``: always kinks, evaluated as written; listed as kinks where they
+        depend on the state (inside a condition they are taken apart into jumps instead)."""
+        if not self._in_condition and not self.is_time_only(expr):
+            self._kink(label)
+        return expr
+
+    def _kink(self, label: str) -> None:
+        kink = Kink(label, self._owner)
+        if kink not in self.kinks:
+            self.kinks.append(kink)
+
     def _freeze_Abs(self, expr):
-        return sympy.Abs(self._freeze(expr.args[0]))
+        return self._continuous(sympy.Abs(self._freeze(expr.args[0])), f"abs({_short(expr.args[0])})")
 
     def _freeze_sign(self, expr):
         arg = self._freeze(expr.args[0])
@@ -394,10 +411,10 @@ class Freezer:
                                (0, True))
 
     def _freeze_Min(self, expr):
-        return sympy.Min(*[self._freeze(arg) for arg in expr.args])
+        return self._continuous(sympy.Min(*[self._freeze(arg) for arg in expr.args]), _short(expr))
 
     def _freeze_Max(self, expr):
-        return sympy.Max(*[self._freeze(arg) for arg in expr.args])
+        return self._continuous(sympy.Max(*[self._freeze(arg) for arg in expr.args]), _short(expr))
 
     def _freeze_Step(self, expr):
         arg, x0 = self._freeze(expr.args[0]), self._freeze(expr.args[1])
