@@ -530,12 +530,14 @@ class Candidate:
         margins = "  ".join(f"{_MARGIN_LABELS[check.rule]} {_ratio_text(check.margin)}" for check in self.checks)
         verdict = "ok " if self.qualifies else "no "
         line = f"{verdict} {self.motor.name:<12} {margins}"
+        if self.inertia_ratio is not None:
+            line += f"  J_load/J_rotor {self.inertia_ratio:.3g}"
         details = [f"      - {reason}" for reason in self.reasons]
         return "\n".join([line] + details)
 
 
 _MARGIN_LABELS = {"peak_torque": "peak tau", "rms_torque": "rms tau", "speed": "speed",
-                  "inertia_ratio": "J ratio", "power": "(power)"}
+                  "inertia_ratio": "J limit", "power": "(power)"}
 
 
 def _ratio_text(value: float | None) -> str:
