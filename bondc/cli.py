@@ -328,6 +328,19 @@ def _keep_light(derived, account) -> None:
         entry.store_light(derived, account.energy_recipes)
 
 
+def _inertia_ratio(args) -> float | None:
+    """``--inertia-ratio`` as a positive number (E928 before any work), or None."""
+    from bondc.analysis.motors import check_inertia_limit
+
+    value = getattr(args, "inertia_ratio", None)
+    if value is None:
+        return None
+    try:
+        return check_inertia_limit(value)
+    except BondcError as error:
+        raise UsageError(error.diagnostics) from None
+
+
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import dense_steps, energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
@@ -337,6 +350,7 @@ def _cmd_simulate(args) -> int:
     if args.output:
         check_result_path(args.output)
         check_output(args.output)       # before any work
+    inertia_ratio = _inertia_ratio(args)
     if args.motors:
         from bondc.analysis.motors import load_catalogue
 
@@ -379,7 +393,8 @@ def _cmd_simulate(args) -> int:
         from bondc.analysis.motor_report import motor_report
 
         try:
-            motors_text, summary["motors"] = motor_report(steps, graph, Path(args.motors))
+            motors_text, summary["motors"] = motor_report(steps, graph, Path(args.motors),
+                                                          inertia_limit=inertia_ratio)
         except BondcError as problem:
             _print_diagnostics(problem.diagnostics, graph.sources)
             summary.setdefault("diagnostics", []).extend(d.to_json() for d in problem.diagnostics)
@@ -425,6 +440,7 @@ def _cmd_compile(args) -> int:
 def _cmd_report(args) -> int:
     from bondc.report.build import run_report
 
+    inertia_ratio = _inertia_ratio(args)
     if args.sweep:
         from bondc.report.sweep_report import build_sweep_report
 
@@ -436,7 +452,7 @@ def _cmd_report(args) -> int:
                                     hint="see 'bondc report --help'"))
     _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
                          data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
-                         t_end=args.t_end, progress=True)
+                         t_end=args.t_end, progress=True, inertia_ratio=inertia_ratio)
     return code  # run_report prints the diagnostics and where it wrote the report
 
 
@@ -445,7 +461,8 @@ def _cmd_validate(args) -> int:
 
     _, code = run_validate(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
                            output=args.output, model=args.model, experiment=args.experiment,
-                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=True)
+                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=True,
+                           inertia_ratio=_inertia_ratio(args))
     return code
 
 
@@ -457,7 +474,8 @@ def _cmd_sweep(args) -> int:
                            vary=args.vary or (), samples=args.samples, ranges=args.ranges or (), seed=args.seed,
                            metrics=args.metric, output=args.output, jobs=args.jobs, t_end=args.t_end, dt=args.dt,
                            rederive=args.rederive, progress=not args.json, point_timeout=args.point_timeout,
-                           motors=args.motors, executor=args.executor, scheduler=args.scheduler)
+                           motors=args.motors, executor=args.executor, scheduler=args.scheduler,
+                           inertia_ratio=_inertia_ratio(args))
     except KeyboardInterrupt as interrupt:
         partial = getattr(interrupt, "sweep_result", None)
         if partial is not None:
@@ -556,6 +574,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--json", action="store_true", help="print a JSON summary")
     sim.add_argument("--motors", metavar="CATALOGUE.csv",
                      help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")
+    sim.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
     sim.set_defaults(run=_cmd_simulate)
 
     report = commands.add_parser("report", help="one self-contained HTML report: model, bond graph, equations, "
@@ -569,6 +588,7 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--compare", action="append", metavar="OUT=COLUMN[:nrmse=0.05]",
                         help="compare output OUT with the measured COLUMN (repeatable)")
     report.add_argument("--motors", metavar="CATALOGUE.csv", help="judge the motors of this catalogue against the cycle")
+    report.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
     report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
                                                    "reports/<file>-<experiment>.html for a non-first experiment)")
     report.set_defaults(run=_cmd_report)
@@ -582,6 +602,7 @@ def build_parser() -> argparse.ArgumentParser:
                           help="output OUT against measured COLUMN with its tolerance (repeatable)")
     validate.add_argument("--junit", metavar="results.xml", help="write JUnit XML, one test case per signal")
     validate.add_argument("--motors", metavar="CATALOGUE.csv", help=argparse.SUPPRESS)
+    validate.add_argument("--inertia-ratio", metavar="LIMIT", help=argparse.SUPPRESS)
     validate.add_argument("-o", "--output", help="also write the HTML report with the validation section")
     validate.set_defaults(run=_cmd_validate)
 
@@ -606,7 +627,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--scheduler", metavar="ADDRESS",
                        help="an existing Dask scheduler, e.g. tcp://host:8786 (implies --executor dask)")
     sweep.add_argument("--motors", metavar="CATALOGUE.csv",
-                       help="per point, which motors of the catalogue cover its torque and speed")
+                       help="per point, which motors of the catalogue pass the sizing rules (as simulate --motors)")
+    sweep.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
     sweep.add_argument("--metric", action="append", metavar="NAME",
                        help="a column: OUTPUT.min, .max, .mean, .rms, .final, OUTPUT.*, energy.residual, "
                             "energy.relative_residual, motor.* (default: all but the means; repeatable)")

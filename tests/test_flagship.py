@@ -512,11 +512,14 @@ def test_motor_report_for_the_cycle(cycle, graph):
     assert need["peak_speed"] == pytest.approx(W_MAX, rel=1e-9)
     assert need["energy_net"] == pytest.approx(need["energy_positive"] - need["energy_regenerative"], rel=1e-12)
     # the RMS torque (~0.17 N*m by the cruise estimate) exceeds SV-50's 0.16 N*m rated torque;
-    # SV-100 (0.32 N*m rated, 0.95 peak, 100 W) is the smallest that meets every check
-    assert data["best"] == "SV-100"
-    rejected = [c["motor"]["name"] for c in data["candidates"] if not c["qualifies"]]
-    assert rejected == ["SV-50"]
-    assert "SV-100" in text and "RMS torque" in text
+    # SV-100 (0.32 N*m rated, 0.95 peak) meets the torque and speed rules, but its rotor
+    # (0.051e-4 kg*m^2) is 1/11.9 of the load: the inertia-ratio rule (<= 10) rejects it
+    assert data["best"] == "SV-200"
+    rejected = {c["motor"]["name"]: [rule for rule, check in c["checks"].items() if check["passed"] is False]
+                for c in data["candidates"] if not c["qualifies"]}
+    assert rejected == {"SV-50": ["rms_torque", "inertia_ratio"], "SV-100": ["inertia_ratio"]}
+    assert "SV-100 is smaller but its load/rotor inertia ratio is 11.9, above 10." in data["verdict"]
+    assert text.rstrip().endswith("above 10.") and "RMS torque" in text
 
 
 def test_motor_report_options(cycle, graph):

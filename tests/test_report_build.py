@@ -111,7 +111,14 @@ def test_flagship_report():
     motors = html[html.index('<section id="motor-requirements">'):html.index('<section id="source"')]
     assert "RMS torque" in motors and "SV-200" in motors and "Choice: SV-200" in motors
     top = header + html[:html.index('<section id="bond-graph">')]
-    assert "smallest qualifying motor" in top and "recommended motor" in top
+    # the answer first, in full sentences: the choice, each rule's figures, the smaller motor and why not
+    verdict = re.search(r'<p class="verdict-text">(.*?)</p>', top, flags=re.S).group(1)
+    assert verdict.startswith("SV-200 is the smallest motor that qualifies: peak torque ")
+    for words in (" N·m at ", "RMS torque ", "top speed 1000 of 3000 rpm", "load/rotor inertia ratio 4.33 of 10"):
+        assert words in verdict, words
+    assert verdict.endswith("and its load/rotor inertia ratio is 24.3, above 10.")
+    assert "SV-100 is smaller but its load/rotor inertia ratio is 11.9, above 10." in verdict
+    assert "<dt>motor</dt><dd>SV-200</dd>" in top
     assert "torque against speed over the motors" in motors and "operating points" in motors
     assert len(html) < 3_000_000
 

@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bondc.analysis.motor_report import SPEED_NAMES, TORQUE_NAMES, cycle_window, find_signal
-from bondc.analysis.motors import load_catalogue, requirements, select
+from bondc.analysis.energy import dense_steps
+from bondc.analysis.motor_report import size_motors
+from bondc.analysis.motors import load_catalogue
 from bondc.analysis.stats import output_statistics
 from bondc.analysis.sweep import latin_hypercube, parse_range, run_sweep
 from bondc.pipeline import derive_file
@@ -160,13 +161,13 @@ def test_each_point_lists_the_motors_that_qualify():
     study = run_sweep(MOTOR_MODEL, vary=["U_s=12,48"], metrics=["torque.max"], motors=CATALOGUE, point_timeout=0)
     assert study.motors and [p.status for p in study.points] == ["ok", "ok"]
     for point in study.points:
-        single = run(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"])
-        graph = derive_file(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"]).graph
-        _, _, torque = find_signal(single, TORQUE_NAMES, "torque")
-        _, _, speed = find_signal(single, SPEED_NAMES, "speed")
-        need = requirements(single.t, torque, speed, cycle=cycle_window(single, graph))
-        expected = tuple(c.motor.name for c in select(need, catalogue) if c.qualifies)
+        # what `bondc simulate --motors` judges at the same value: the run between its steps, the
+        # rotor inertia added, the load inertia estimated (the same rules, inertia ratio included)
+        derived = derive_file(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"])
+        single = dense_steps(derived.state_space, run(MOTOR_MODEL, sets=[f"U_s={point.values[0]}"]))
+        expected = tuple(c.motor.name for c in size_motors(single, derived.graph, catalogue).qualified)
         assert point.motors == expected
+        assert point.chosen_motor == (expected[0] if expected else None)
     assert len(study.points[0].motors) >= len(study.points[1].motors)     # more voltage, more torque
     assert "motors" in study.csv_header()
 

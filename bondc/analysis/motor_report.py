@@ -14,11 +14,12 @@
   seconds of the run (the whole run when ``cycle`` equals ``t_end``, as in
   the flagship; the run's last, settled cycle when several were simulated).
   Without a ``cycle`` setting, the whole run.
-* **the load inertia** for the inertia-ratio check: given, or estimated
+* **the load inertia** for the inertia-ratio rule: given, or estimated
   from the run as the inertia that the motor shaft sees,
-  J = integral(sum p*f over the I elements) dt / integral(omega^2) dt, i.e.
-  twice the kinetic energy of every I element per omega^2, averaged over the
-  cycle. For a rigid transmission (every I's flow proportional to omega)
+  J = integral(sum p*f over the mechanical I elements) dt / integral(omega^2) dt, i.e.
+  twice the kinetic energy of every mass and rotating inertia per omega^2, averaged over the
+  cycle (:func:`load_inertia_of`; when it cannot be known, it says why and the
+  inertia-ratio rule is not applied). For a rigid transmission (every I's flow proportional to omega)
   this is exact: for the flagship it gives M*(lead/2pi)^2 + I_z =
   6.067e-5 kg*m^2 to within 0.1 % (the compliances and the dwell creep
   account for the rest).
@@ -81,71 +82,125 @@ def cycle_window(result, graph) -> tuple[float, float]:
     return start, t_last
 
 
-def estimate_load_inertia(result, graph, window: tuple[float, float] | None = None,
-                          speed: np.ndarray | None = None) -> float | None:
-    """The inertia the motor shaft sees, from the run: integral(sum p*f of the I elements)/integral(omega^2).
+#: Flow units of the mechanical bonds (rotation, translation): the I elements whose kinetic energy the
+#: motor shaft sees. An inductance (A) or a fluid inertance (m^3/s) is not a load inertia.
+MECHANICAL_FLOWS = ("1/s", "m/s")
 
-    ``p`` is each I element's state and ``f`` its bond's flow; None when the
-    model has no I element with a recorded state, or the speed is zero throughout.
+
+def load_inertia_of(result, graph, window: tuple[float, float] | None = None,
+                    speed: np.ndarray | None = None) -> tuple[float | None, str | None]:
+    """(the inertia the motor shaft sees, None) from the run, or (None, why it cannot be known).
+
+    J = integral(sum p*f over the mechanical I elements) dt / integral(omega^2) dt: twice their
+    kinetic energy per omega^2, averaged over the cycle (exact for a rigid transmission). ``p``
+    is each I element's state, ``f`` its bond's flow. An I element whose bond carries a current
+    or a volume flow is left out; one without a recorded state (rigidly coupled to another
+    inertia: derivative causality) makes the load inertia unknown, since the run holds no
+    momentum to reflect it from.
     """
     if graph is None:
-        return None
+        return None, "there is no model to estimate it from"
     time = np.asarray(result.t, dtype=float)
     if speed is None:
         _, _, speed = find_signal(result, SPEED_NAMES, "speed")
+    units = getattr(graph, "si_units", {}) or {}
     twice_kinetic = np.zeros_like(time)
-    found = False
+    found, unrecorded = [], []
     for element in graph.elements.values():
-        if element.kind != "I" or not element.states or not element.bonds:
+        if element.kind != "I" or not element.bonds:
             continue
-        state = element.states[0].qualified
-        flow = f"b{element.bonds[0]}.f"
+        bond = graph.bond(element.bonds[0]).name
+        if units.get(f"{bond}.f", MECHANICAL_FLOWS[0]) not in MECHANICAL_FLOWS:
+            continue                        # an inductance or an inertance: not a load inertia
+        state = element.states[0].qualified if element.states else None
+        flow = f"{bond}.f"
         if state in result.states and flow in result.bonds:
             twice_kinetic = twice_kinetic + np.asarray(result.states[state]) * np.asarray(result.bonds[flow])
-            found = True
+            found.append(element.name)
+        else:
+            unrecorded.append(element.name)
+    if unrecorded:
+        names = ", ".join(f"'{name}'" for name in unrecorded)
+        plural = len(unrecorded) > 1
+        return None, (f"the inerti{'as' if plural else 'a'} {names} {'are' if plural else 'is'} rigidly coupled "
+                      f"to another inertia, in derivative causality, so the run records no momentum of "
+                      f"{'them' if plural else 'it'} to reflect to the motor shaft")
     if not found:
-        return None
+        return None, "the model has no mass or rotating inertia, no mechanical I element, to reflect to the motor shaft"
     inside = np.ones(time.shape, dtype=bool) if window is None else (time >= window[0]) & (time <= window[1])
-    t, energy, omega = time[inside], twice_kinetic[inside], speed[inside]
+    t, energy, omega = time[inside], twice_kinetic[inside], np.asarray(speed, dtype=float)[inside]
     denominator = float(np.sum(np.diff(t) * (omega[1:] ** 2 + omega[:-1] ** 2) / 2))
     if not denominator > 0:
-        return None
+        return None, "the motor speed is zero throughout the cycle"
     value = float(np.sum(np.diff(t) * (energy[1:] + energy[:-1]) / 2)) / denominator
-    return value if math.isfinite(value) and value > 0 else None
+    if not (math.isfinite(value) and value > 0):
+        return None, "the kinetic energy of the model's inertias is not positive over the cycle"
+    return value, None
 
 
-def motor_report(result, graph, catalogue_path, *, load_inertia: float | None = None,
-                 include_rotor_inertia: bool = True, torque: str | None = None,
-                 speed: str | None = None) -> tuple[str, dict]:
-    """Motor requirements over the experiment's cycle and the catalogue motors that meet them.
+def estimate_load_inertia(result, graph, window: tuple[float, float] | None = None,
+                          speed: np.ndarray | None = None) -> float | None:
+    """The inertia the motor shaft sees, from the run (see :func:`load_inertia_of`); None when unknown."""
+    return load_inertia_of(result, graph, window, speed)[0]
 
-    Returns ``(text, json_dict)``: the text is what ``bondc simulate
-    --motors FILE`` prints after the run; the dict holds ``torque`` and
-    ``speed`` (the names and whether each is an output or an input),
-    ``cycle`` [t_start, t_end], ``load_inertia`` and how it was obtained
-    (``load_inertia_source``: "given", "estimated" or None), and everything
-    of :meth:`bondc.analysis.motors.Selection.to_json` (``requirements``,
-    ``include_rotor_inertia``, ``best``, ``candidates``).
+
+def size_motors(result, graph, catalogue, *, load_inertia: float | None = None,
+                inertia_limit: float | None = None, include_rotor_inertia: bool = True,
+                torque: str | None = None, speed: str | None = None):
+    """The run's requirements judged against every motor of ``catalogue`` (a path or a list of Motor).
+
+    The one place a simulated run meets the sizing rules (:func:`bondc.analysis.motors.judge`):
+    ``bondc simulate --motors``, ``bondc report --motors`` and ``bondc sweep --motors`` all
+    call it. Returns the :class:`~bondc.analysis.motors.Selection`, with the attributes
+    ``signals`` ((name, where) of the torque and the speed), ``cycle`` and
+    ``load_inertia_source`` ("given", "estimated" or None).
     """
     torque_name, torque_where, torque_values = find_signal(result, (torque,) if torque else TORQUE_NAMES, "torque")
     speed_name, speed_where, speed_values = find_signal(result, (speed,) if speed else SPEED_NAMES, "speed")
     window = cycle_window(result, graph)
     need = requirements(result.t, torque_values, speed_values, cycle=window)
-    source = "given" if load_inertia is not None else None
+    source, why = ("given", None) if load_inertia is not None else (None, None)
     if load_inertia is None:
-        load_inertia = estimate_load_inertia(result, graph, window, speed_values)
+        load_inertia, why = load_inertia_of(result, graph, window, speed_values)
         source = "estimated" if load_inertia is not None else None
-    catalogue = load_catalogue(catalogue_path)
-    selection = select(need, catalogue, load_inertia=load_inertia, include_rotor_inertia=include_rotor_inertia)
+    name = None
+    if not isinstance(catalogue, (list, tuple)):
+        name = Path(catalogue).name
+        catalogue = load_catalogue(catalogue)
+    selection = select(need, catalogue, load_inertia=load_inertia, include_rotor_inertia=include_rotor_inertia,
+                       inertia_limit=inertia_limit, unknown_inertia=why, catalogue_name=name)
+    selection.signals = ((torque_name, torque_where), (speed_name, speed_where))
+    selection.cycle = window
+    selection.load_inertia_source = source
+    return selection
 
-    head = [f"motor selection from {Path(catalogue_path).name} ({len(catalogue)} motors)",
+
+def motor_report(result, graph, catalogue_path, *, load_inertia: float | None = None,
+                 include_rotor_inertia: bool = True, torque: str | None = None,
+                 speed: str | None = None, inertia_limit: float | None = None) -> tuple[str, dict]:
+    """Motor requirements over the experiment's cycle and the catalogue motors that meet them.
+
+    Returns ``(text, json_dict)``: the text is what ``bondc simulate
+    --motors FILE`` prints after the run, ending with the verdict paragraph; the dict holds
+    ``torque`` and ``speed`` (the names and whether each is an output or an input),
+    ``cycle`` [t_start, t_end], ``load_inertia`` and how it was obtained
+    (``load_inertia_source``: "given", "estimated" or None, then
+    ``load_inertia_unknown_because``), and everything of
+    :meth:`bondc.analysis.motors.Selection.to_json` (``requirements``, ``verdict``,
+    ``include_rotor_inertia``, ``best``, ``candidates``).
+    """
+    selection = size_motors(result, graph, catalogue_path, load_inertia=load_inertia, inertia_limit=inertia_limit,
+                            include_rotor_inertia=include_rotor_inertia, torque=torque, speed=speed)
+    (torque_name, torque_where), (speed_name, speed_where) = selection.signals
+    source, window = selection.load_inertia_source, selection.cycle
+    head = [f"motor selection from {Path(catalogue_path).name} ({len(selection)} motors)",
             f"  torque: {torque_where} '{torque_name}'; speed: {speed_where} '{speed_name}'"]
-    if load_inertia is not None:
+    if selection.load_inertia is not None:
         how = ("given" if source == "given" else
-               "estimated from the run: integral(sum p*f of the I elements)/integral(omega^2)")
-        head.append(f"  load inertia at the motor shaft: {load_inertia:.4g} kg*m^2 ({how})")
+               "estimated from the run: integral(sum p*f of the mechanical I elements)/integral(omega^2)")
+        head.append(f"  load inertia at the motor shaft: {selection.load_inertia:.4g} kg*m^2 ({how})")
     else:
-        head.append("  load inertia: unknown (no inertia-ratio check)")
+        head.append(f"  load inertia: unknown ({selection.unknown_inertia}); no inertia-ratio check")
     text = "\n".join(head + ["", selection.to_text()])
 
     data = {

@@ -377,6 +377,11 @@ class SweepPoint:
         return self.status == "ok"
 
     @property
+    def chosen_motor(self) -> str | None:
+        """With --motors: the point's answer, the smallest motor that qualifies (None if none does)."""
+        return self.motors[0] if self.motors else None
+
+    @property
     def ran(self) -> bool:
         """The simulation completed (its metrics are there, maybe not all of them)."""
         return self.status in ("ok", "incomplete")
@@ -643,6 +648,7 @@ class _Setup:
     dt: float | None
     rederive: bool
     motors: str | None = None                # a motor catalogue (csv): which motors qualify per point
+    inertia_ratio: float | None = None       # --inertia-ratio: every motor's load/rotor inertia limit
     bound: bool = False                      # late binding: points are vectors of values (see _measure_point)
 
 
@@ -826,21 +832,24 @@ def _finish_point(setup: _Setup, index: int, values, path, parameters, state_spa
 
 
 _CATALOGUES: dict[str, list] = {}
+#: The version of the sizing rules a study's motors column was made with (part of its identity).
+MOTOR_RULES = "peak envelope, RMS at RMS speed, top speed, inertia ratio (2)"
 
 
 def _qualifying_motors(setup: _Setup, result, graph, warnings: list) -> tuple[str, ...] | None:
-    """The catalogue motors that cover this point's torque and speed (None: no selection possible)."""
-    from bondc.analysis.motor_report import SPEED_NAMES, TORQUE_NAMES, cycle_window, find_signal
-    from bondc.analysis.motors import load_catalogue, requirements, select
+    """The catalogue motors that pass every sizing rule at this point, smallest first (the first is the
+    point's choice); None: no selection possible. The same call as ``bondc simulate --motors``
+    (:func:`bondc.analysis.motor_report.size_motors`): rotor inertia added, the load inertia
+    estimated from the point's run, the inertia-ratio rule applied."""
+    from bondc.analysis.motor_report import size_motors
+    from bondc.analysis.motors import load_catalogue
 
     try:
         catalogue = _CATALOGUES.get(setup.motors)
         if catalogue is None:
             catalogue = _CATALOGUES[setup.motors] = load_catalogue(setup.motors)
-        _, _, torque = find_signal(result, TORQUE_NAMES, "torque")
-        _, _, speed = find_signal(result, SPEED_NAMES, "speed")
-        need = requirements(result.t, torque, speed, cycle=cycle_window(result, graph))
-        return tuple(candidate.motor.name for candidate in select(need, catalogue) if candidate.qualifies)
+        selection = size_motors(result, graph, catalogue, inertia_limit=setup.inertia_ratio)
+        return tuple(candidate.motor.name for candidate in selection.qualified)
     except BondcError as error:
         warnings += [Diagnostic("warning", d.code, f"no motor selection: {d.message}", d.span, d.hint)
                      for d in error.diagnostics]
@@ -982,7 +991,7 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
               t_end: float | None = None, dt: float | None = None, rederive: bool = False,
               progress: bool | Callable[[SweepPoint, int, int], None] = False,
               point_timeout: float | None = None, motors=None, executor: str = "local",
-              scheduler: str | None = None) -> SweepResult:
+              scheduler: str | None = None, inertia_ratio: float | None = None) -> SweepResult:
     """``bondc sweep``: run the model at every point of the grid of ``vary`` (or at ``samples``
     Latin-hypercube points over ``ranges``, reproducible with ``seed``); see the module docstring.
 
@@ -993,7 +1002,9 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     they are kept and only the others run (resuming). ``point_timeout``:
     seconds a point may take (None: 20 times the median, at least 60 s; 0: no
     limit, points run in this process). ``motors``: a motor catalogue (csv);
-    each point lists the motors that qualify. ``progress`` True shows progress
+    each point lists the motors that pass the sizing rules of ``bondc simulate --motors``,
+    smallest (the point's choice) first; ``inertia_ratio`` is every motor's load/rotor
+    inertia-ratio limit (default: the catalogue's, else 10). ``progress`` True shows progress
     on stderr, or is called as ``progress(point, done, total)``. ``executor``
     "local" runs ``jobs`` worker processes here; "dask" runs the points on a
     ``dask.distributed`` cluster: ``scheduler`` (``tcp://host:8786``) or a
@@ -1052,18 +1063,22 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         from bondc.analysis.motors import load_catalogue
 
         load_catalogue(motors)          # a bad catalogue is an error now, not at every point
+    from bondc.analysis.motors import check_inertia_limit
+
+    inertia_ratio = check_inertia_limit(inertia_ratio)
 
     setup = _Setup(key=(os.getpid(), next(_COUNTER)), path=str(path), model=model, experiment=experiment,
                    sets=parsed_sets, names=tuple(axis.name for axis in axes),
                    units=tuple(axis.unit for axis in axes), converters=tuple(converters),
                    metrics=tuple(m.name for m in chosen_metrics), t_end=t_end, dt=dt, rederive=rederive,
-                   motors=str(motors) if motors is not None else None)
+                   motors=str(motors) if motors is not None else None,
+                   inertia_ratio=inertia_ratio)
     grid = latin_hypercube(axes, samples, seed) if samples else list(itertools.product(*(axis.values for axis in axes)))
     settings = {"t_end": t_end if t_end is not None else chosen.t_end, "dt": dt, "rederive": rederive,
                 "point_timeout": point_timeout, "executor": executor}
     if samples:
         settings.update(samples=samples, seed=seed)
-    settings["study"] = _study(graph, model, experiment, sets, settings["t_end"], dt, motors)
+    settings["study"] = _study(graph, model, experiment, sets, settings["t_end"], dt, motors, inertia_ratio)
 
     def result_of(points) -> SweepResult:
         return SweepResult(
@@ -1521,7 +1536,7 @@ def _check_grid(output, previous: dict[tuple, SweepPoint], keys: Sequence[tuple]
                          "running it would drop them", hint=hint)
 
 
-def _study(graph, model, experiment, sets, t_end, dt, motors) -> dict:
+def _study(graph, model, experiment, sets, t_end, dt, motors, inertia_ratio=None) -> dict:
     """What the points of a sweep were computed from besides their own values: the text of every
     file the model read, the model and experiment chosen, the --set values, t_end, dt and the motor
     catalogue. A resumed sweep keeps the points of an earlier run only where these are the same."""
@@ -1536,10 +1551,16 @@ def _study(graph, model, experiment, sets, t_end, dt, motors) -> dict:
             catalogue = digest(Path(motors).read_bytes())
         except OSError:
             catalogue = str(motors)
-    return {"model files": digest(json.dumps(texts).encode("utf-8")), "model": model, "experiment": experiment,
-            "--set": [item if isinstance(item, str) else getattr(getattr(item, "source", None), "text", repr(item))
-                      for item in sets or ()],
-            "t_end": t_end, "dt": dt, "motor catalogue": catalogue}
+    study = {"model files": digest(json.dumps(texts).encode("utf-8")), "model": model, "experiment": experiment,
+             "--set": [item if isinstance(item, str) else getattr(getattr(item, "source", None), "text", repr(item))
+                       for item in sets or ()],
+             "t_end": t_end, "dt": dt, "motor catalogue": catalogue}
+    if motors is not None:
+        # the motors column depends on the sizing rules and the inertia-ratio limit: a study made
+        # with other rules (before the inertia ratio was one) is not resumed with these
+        study["motor rules"] = MOTOR_RULES
+        study["--inertia-ratio"] = inertia_ratio
+    return study
 
 
 def study_file(output) -> Path:

@@ -162,7 +162,8 @@ def default_output(path: str | Path, run: PipelineRun) -> Path:
 def build_report(path: str | Path, *, model: str | None = None, experiment: str | None = None,
                  sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                  motors: str | Path | None = None, output: str | Path | None = None,
-                 t_end: float | None = None, date: str | None = None, progress: bool = False) -> Path:
+                 t_end: float | None = None, date: str | None = None, progress: bool = False,
+                 inertia_ratio: float | None = None) -> Path:
     """``bondc report``: run the pipeline and write one self-contained HTML report; returns its path.
 
     ``data`` (a measured CSV) with ``compare`` (``OUT=COLUMN[:nrmse=0.05]``
@@ -171,6 +172,8 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     report judges its motors against the cycle (a model with signals named
     ``torque`` and ``omega`` always gets the motor requirements). ``output``
     defaults to :func:`default_output`; missing directories are made.
+    ``inertia_ratio`` is the load/rotor inertia-ratio limit of every motor
+    (``--inertia-ratio``; default: the catalogue's, else 10).
     ``t_end`` [s] overrides the experiment's end time, ``date`` the date in
     the header (ISO, default today).
 
@@ -179,12 +182,13 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     is written and an earlier report stays as it was.
     """
     target, _, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
-                          motors=motors, output=output, t_end=t_end, date=date, progress=progress)
+                          motors=motors, output=output, t_end=t_end, date=date, progress=progress,
+                          inertia_ratio=inertia_ratio)
     return target
 
 
 def _build(path, *, model, experiment, sets, data, compare, motors, output, t_end, date,
-           progress) -> tuple[Path, PipelineRun, list[SignalResult]]:
+           progress, inertia_ratio=None) -> tuple[Path, PipelineRun, list[SignalResult]]:
     specs, measured = _measured(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     target = Path(output) if output is not None else default_output(path, run)
@@ -194,7 +198,8 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
         if specs:
             results = compare_run(run, measured, specs)
             validation = validation_section(run, results, data)
-        write_report(report_context(run, validation=validation, motors=motors, date=date), target)
+        write_report(report_context(run, validation=validation, motors=motors, date=date,
+                                    inertia_ratio=inertia_ratio), target)
     except KeyboardInterrupt as interrupt:
         _keep_simulation(run, target, interrupt)
         raise
@@ -224,7 +229,7 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
                sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
                date: str | None = None, progress: bool = False,
-               errors: TextIO | None = None) -> tuple[Path, int]:
+               errors: TextIO | None = None, inertia_ratio: float | None = None) -> tuple[Path, int]:
     """``bondc report`` for the command line: :func:`build_report`, then tell the user; returns (path, exit code).
 
     Prints the run's warnings (and an incomplete simulation's diagnostic)
@@ -238,7 +243,7 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
         check_output(output, "the report", make_folder=True)
     target, run, results = _build(path, model=model, experiment=experiment, sets=sets, data=data,
                                   compare=compare, motors=motors, output=output, t_end=t_end, date=date,
-                                  progress=progress)
+                                  progress=progress, inertia_ratio=inertia_ratio)
     _print_diagnostics(run, errors)
     failing = [result.name for result in results if not result.passed]
     print(f"wrote {target}" + ("" if run.complete else " (incomplete simulation)")
@@ -433,7 +438,8 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
                  junit: str | Path | None = None, output: str | Path | None = None, model: str | None = None,
                  experiment: str | None = None, sets: Sequence = (), t_end: float | None = None,
                  motors: str | Path | None = None, date: str | None = None, stream: TextIO | None = None,
-                 errors: TextIO | None = None, progress: bool = False) -> tuple[list[SignalResult], int]:
+                 errors: TextIO | None = None, progress: bool = False,
+                 inertia_ratio: float | None = None) -> tuple[list[SignalResult], int]:
     """``bondc validate``: simulate, compare with the measured data, report; returns (results, exit code).
 
     Prints :func:`validation_table` to ``stream`` (stdout) and the run's
@@ -470,7 +476,8 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
     if output is not None:
         section = validation_section(run, results, data, junit)
         try:
-            write_report(report_context(run, validation=section, motors=motors, date=date), Path(output))
+            write_report(report_context(run, validation=section, motors=motors, date=date,
+                                        inertia_ratio=inertia_ratio), Path(output))
         except KeyboardInterrupt as interrupt:
             _keep_simulation(run, Path(output), interrupt)
             raise
@@ -499,7 +506,8 @@ def _diagram(graph, causal):
 
 
 def report_context(run: PipelineRun, *, validation: ValidationSection | None = None,
-                   motors: str | Path | None = None, date: str | None = None) -> ReportContext:
+                   motors: str | Path | None = None, date: str | None = None,
+                   inertia_ratio: float | None = None) -> ReportContext:
     """Everything the report of ``run`` shows (see the module docstring)."""
     graph, result = run.graph, run.result
     equations, laws, state_table = state_equations(run.state_space)
@@ -514,13 +522,13 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
 
     plots, result_tables, power_plots, power_tables = [], [], [], []
     summary: list[tuple[str, Any, str | None]] = []
-    motor_requirements = motor_candidates = None
+    motor_requirements = motor_candidates = verdict = None
     if result is not None and result.t.size >= 2:
         plots = output_plots(graph, result, run.experiment)
         result_tables = _result_tables(run)
         power_plots, power_tables, energy_summary, energy_warnings = _energy_sections(run)
         warnings += energy_warnings
-        motor_requirements, motor_candidates, motor_summary = _motor_sections(run, motors)
+        motor_requirements, motor_candidates, motor_summary, verdict = _motor_sections(run, motors, inertia_ratio)
         summary = (motor_summary or _summary(run)) + energy_summary
     return ReportContext(
         header=_header(run, date),
@@ -545,6 +553,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         warnings=warnings,
         incomplete=incomplete,
         summary=summary,
+        verdict=verdict,
     )
 
 
@@ -1064,8 +1073,11 @@ def _motor_plot(run: PipelineRun, motors):
         return figure_svg(figure, title, key)
 
 
-def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | None, list]:
-    """Motor requirements when the model has signals ``torque`` and ``omega``; candidates from ``motors``.
+def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
+                    ) -> tuple[Table | None, Table | None, list, str | None]:
+    """Motor requirements when the model has signals ``torque`` and ``omega``; candidates from ``motors``,
+    and the verdict (:meth:`bondc.analysis.motors.Selection.verdict`, the same paragraph as
+    ``bondc simulate --motors``) that the report shows first.
 
     Raises UsageError (E927) when a catalogue is given but the signals are missing.
     """
@@ -1079,9 +1091,10 @@ def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | Non
     except UsageError:
         if motors is not None:
             raise
-        return None, None, []
+        return None, None, [], None
     if motors is not None:
-        _, data = motor_report(result, graph, motors, torque=MOTOR_TORQUE, speed=MOTOR_SPEED)
+        _, data = motor_report(result, graph, motors, torque=MOTOR_TORQUE, speed=MOTOR_SPEED,
+                               inertia_limit=inertia_ratio)
         need, load_inertia = data["requirements"], data["load_inertia"]
     else:
         window = cycle_window(result, graph)
@@ -1096,6 +1109,7 @@ def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | Non
         ("RMS torque", need["rms_torque"], "N·m"),
         ("peak speed", need["peak_speed"], "rad/s"),
         ("peak speed", need["peak_speed_rpm"], "rpm"),
+        ("RMS speed", need["rms_speed_rpm"], "rpm"),
         ("peak power |τ·ω|", need["peak_power"], "W"),
         ("peak motoring power", need["peak_power_motoring"], "W"),
         ("peak regenerative power", need["peak_power_regenerative"], "W"),
@@ -1120,64 +1134,57 @@ def _motor_sections(run: PipelineRun, motors) -> tuple[Table | None, Table | Non
     summary = [("peak torque", need["peak_torque"], "N*m"), ("RMS torque", need["rms_torque"], "N*m"),
                ("peak power", need["peak_power"], "W"), ("motor energy per cycle", need["energy_net"], "J")]
     if data is None:
-        return requirements_table, None, summary
-    return requirements_table, _candidates_table(data, motors), summary + _motor_choice(data)
-
-
-def _recommended(data: Mapping) -> Mapping | None:
-    """The smallest qualifying motor without warnings (inertia ratio), else the smallest qualifying one."""
-    qualified = [c for c in data["candidates"] if c["qualifies"]]
-    clean = [c for c in qualified if not c["warnings"]]
-    return (clean or qualified or [None])[0]
+        return requirements_table, None, summary, None
+    return requirements_table, _candidates_table(data, motors), summary + _motor_choice(data), data["verdict"]
 
 
 def _motor_choice(data: Mapping) -> list:
-    choice = _recommended(data)
-    return [("smallest qualifying motor", data.get("best") or "none in the catalogue", None),
-            ("recommended motor", choice["motor"]["name"] if choice is not None else "none in the catalogue", None),
-            ("why", data.get("recommendation") or "", None)]
+    return [("motor", data.get("best") or "none of the catalogue qualifies", None)]
 
 
 def _candidates_table(data: Mapping, catalogue) -> Table:
-    from bondc.analysis.motors import MAX_INERTIA_RATIO
-
     rows = []
-    choice = _recommended(data)
     for candidate in data["candidates"]:
-        motor, margins = candidate["motor"], candidate["margins"]
-        ratio = candidate.get("inertia_ratio")
-        if candidate is choice:
+        motor, checks = candidate["motor"], candidate["checks"]
+        if candidate["motor"]["name"] == data.get("best"):
             verdict = "the choice"
         elif candidate["qualifies"]:
-            verdict = "qualifies" + (f"; J ratio > {MAX_INERTIA_RATIO:g}" if candidate["warnings"] else "")
+            verdict = "qualifies"
         else:
-            failed = [label for key, label in MARGIN_LABELS if (margins.get(key) or math.inf) < 1]
-            verdict = "too small: " + ", ".join(failed)
+            verdict = "fails: " + ", ".join(label for key, label in MARGIN_LABELS if checks[key]["passed"] is False)
         rows.append((motor["name"], motor["rated_power"])
-                    + tuple(_two_decimals(margins.get(key)) for key, _ in MARGIN_LABELS)
-                    + (_two_decimals(ratio), verdict))
-    notes = ["A margin is available / required: peak τ, the catalogue's peak torque over the cycle's peak "
-             "|τ|; RMS τ, the rated torque over the RMS torque (the thermal check); speed, the rated speed over "
-             "the peak speed; power, the rated power over the peak |τ·ω|. A motor qualifies when every margin "
-             "is at least 1."]
+                    + tuple(_two_decimals(checks[key]["margin"]) for key, _ in MARGIN_LABELS)
+                    + (_two_decimals(candidate.get("inertia_ratio")), _two_decimals(checks["power"]["margin"]),
+                       verdict))
+    limit = data.get("inertia_limit")
+    limit_text = (f"{limit:g} (--inertia-ratio)" if limit is not None
+                  else "the catalogue's max_inertia_ratio for the motor, else 10")
+    notes = ["The rules, each a margin available / required (a motor qualifies when every margin is at least 1): "
+             "peak τ, the peak (intermittent) torque envelope at each instant's speed over |τ| (the worst "
+             "instant); RMS τ, the continuous envelope at the RMS speed over the RMS torque (the thermal check); "
+             "speed, the top speed (max_speed, else the rated speed) over the peak speed; J limit, the "
+             f"inertia-ratio limit ({limit_text}) over the load/rotor inertia ratio. Power, the rated power over "
+             "the peak |τ·ω|, is information, not a rule."]
     if data.get("include_rotor_inertia"):
         notes.append("Each motor is judged with its own rotor inertia added to the torque: τ + J_rotor·dω/dt.")
     if data.get("load_inertia") is not None:
         notes.append(f"J ratio: the load inertia at the motor shaft ({data['load_inertia']:.4g} kg·m², "
-                     f"{data.get('load_inertia_source') or 'given'}) over the rotor inertia; above 10 the servo "
-                     "loop is hard to tune.")
-    if choice is not None:
-        notes.append(f"Choice: {choice['motor']['name']}, the smallest motor that qualifies"
-                     + (" with no warning." if not choice["warnings"] else "."))
+                     f"{data.get('load_inertia_source') or 'given'}) over the rotor inertia.")
     else:
-        notes.append("No motor of the catalogue qualifies.")
+        notes.append(f"The load inertia is unknown ({data.get('load_inertia_unknown_because')}): no inertia-ratio "
+                     "check was made.")
+    best = data.get("best")
+    notes.append(f"Choice: {best}, the smallest motor that passes every rule." if best is not None
+                 else "No motor of the catalogue qualifies.")
     return Table(f"Motors of {Path(catalogue).name}, qualifying first, smallest first",
-                 ("motor", "rated power [W]") + tuple(label for _, label in MARGIN_LABELS) + ("J ratio", "verdict"),
-                 rows, caption="The columns peak τ, RMS τ, speed and power are margins: available / required",
+                 ("motor", "rated power [W]") + tuple(label for _, label in MARGIN_LABELS)
+                 + ("J ratio", "power (info)", "verdict"),
+                 rows, caption="The columns peak τ, RMS τ, speed, J limit and power are margins: available / required",
                  notes=notes)
 
 
-MARGIN_LABELS = (("peak_torque", "peak τ"), ("rms_torque", "RMS τ"), ("speed", "speed"), ("power", "power"))
+MARGIN_LABELS = (("peak_torque", "peak τ"), ("rms_torque", "RMS τ"), ("speed", "speed"),
+                 ("inertia_ratio", "J limit"))
 
 
 def _two_decimals(value):

@@ -210,6 +210,7 @@ class ReportContext:
     warnings: Sequence[str] = ()                # diagnostics worth a reader's attention
     incomplete: str | None = None               # the diagnostic of a simulation that stopped early
     summary: Sequence[tuple[str, Any, str | None]] = ()   # key results under the header: (label, value, unit)
+    verdict: str | None = None                  # the motor sizing's answer in sentences, shown first
     equation_tables: Sequence[Table] = ()       # e.g. the states with their initial values
     laws: Sequence[Equation] = ()               # "where": the laws the state equations name
     result_tables: Sequence[Table] = ()         # e.g. statistics of the outputs

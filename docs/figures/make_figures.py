@@ -133,7 +133,7 @@ def numbers(graph, state_space, result) -> dict:
             "table": account.to_text(),
         },
         "motors": {k: motors[k] for k in ("load_inertia", "load_inertia_source", "include_rotor_inertia", "best",
-                                          "cycle")},
+                                          "cycle", "verdict")},
         "motor_candidates": [
             {"name": c["motor"]["name"], "qualifies": c["qualifies"], "margins": c["margins"],
              "inertia_ratio": c["inertia_ratio"], "reasons": c["reasons"]}

@@ -362,12 +362,15 @@ d("E915", "pressure not above atmospheric (warning)",
   "give a wrong piston force. The fit is still made and printed, with this warning after it.",
   "For gauge data pass `--patm 0`; if the chamber really is below atmospheric, ignore it.")
 d("E920", "motor catalogue header",
-  "A motor catalogue (`--motors FILE`) must have exactly the header "
-  "`name,rated_torque,peak_torque,rated_speed,rated_power,rotor_inertia` (units N*m, N*m, rpm, W, kg*m^2). "
-  "The message lists missing and unexpected columns, with a guess for a misspelt one.",
-  "Write the header exactly as the hint shows, in that order.")
+  "A motor catalogue (`--motors FILE`) must start with exactly the header "
+  "`name,rated_torque,peak_torque,rated_speed,rated_power,rotor_inertia` (units N*m, N*m, rpm, W, kg*m^2); "
+  "the optional columns `max_speed` (rpm) and `max_inertia_ratio` may follow, in any order. The message lists "
+  "missing, unexpected and repeated columns, with a guess for a misspelt one.",
+  "Write the six columns exactly as the hint shows, in that order, then any optional ones.")
 d("E921", "motor catalogue value out of range",
-  "A catalogue row has no name, a value that is not positive, or a peak torque below the rated torque.",
+  "A catalogue row has no name, a value that is not positive, a peak torque below the rated torque, or a "
+  "maximum speed below the rated speed. An empty cell in an optional column means the catalogue gives no "
+  "value for that motor.",
   "Fix the row; if the two torque columns are swapped, swap them back.")
 d("E922", "motor listed twice",
   "Two catalogue rows have the same motor name.",
@@ -386,16 +389,23 @@ d("E925", "motor cycle window",
   "lies outside the record. (`bondc simulate --motors` takes the window from the experiment's `cycle`, "
   "clipped to the run.)",
   "Give t_start < t_end inside the record.")
-d("E926", "inertia ratio above 10 (warning)",
-  "A warning, despite its `E` code: for a catalogue motor, the load inertia seen by the motor shaft is more "
-  "than 10 times its rotor inertia, which makes the servo loop hard to tune. It does not disqualify the "
-  "motor; `bondc simulate --motors` prints it under the motor as a line starting with `!`.",
-  "Prefer a motor with a larger rotor inertia (the `M` variants), or a gearbox.")
+d("E926", "inertia ratio above 10 (retired)",
+  "No longer emitted. It was a warning under a motor whose load/rotor inertia ratio was above 10; the ratio "
+  "is now one of the sizing rules, so such a motor does not qualify and the verdict says why (\"SV-100 is "
+  "smaller but its load/rotor inertia ratio is 11.9, above 10.\"). The code is kept so that it is not reused.",
+  "Nothing: see the verdict of `bondc simulate --motors`; the limit is set with `--inertia-ratio` or the "
+  "catalogue's `max_inertia_ratio` column.")
 d("E927", "no torque or speed signal for motor selection",
   "`bondc simulate --motors` (and `report --motors`) sizes the motor from an output named `torque` and an "
   "output or input named `omega` (or `speed`); the model lacks one of them. The run itself is unaffected: the error "
   "is printed and the selection is left out.",
   "Add the outputs, e.g. `output torque [N*m] = coupling.e` and `output omega [rad/s] = rotor.f`.")
+d("E928", "inertia-ratio limit not positive",
+  "`--inertia-ratio` (of `simulate`, `report`, `validate` and `sweep`), or `inertia_limit` of the Python API "
+  "(`bondc.analysis.motors.select`, `judge`), is not a positive number. It is the largest load/rotor inertia "
+  "ratio a motor may have; the command stops before any work.",
+  "Give a positive number, e.g. `--inertia-ratio 10` (the default when neither it nor the catalogue's "
+  "`max_inertia_ratio` is given).")
 d("E930", "result of another model",
   "Python API (`bondc.analysis.energy.energy_account(ss, result)`): the simulation result's states are not "
   "the model's, i.e. it was simulated from another StateSpace.",
@@ -729,11 +739,8 @@ live("E924", Api("from bondc.analysis.motors import requirements\n"
                  "requirements([0.0, 0.5, 0.5], [0.2, 0.3, 0.4], [100.0, 150.0, 200.0])"))
 live("E925", Api("from bondc.analysis.motors import requirements\n"
                  "requirements([0.0, 0.5, 1.0], [0.2, 0.3, 0.4], [100.0, 150.0, 200.0], cycle=(0.5, 2.0))"))
-live("E926", Cli("bondc simulate spin.bg --motors motors.csv",
-                 {"spin.bg": SPIN, "motors.csv": CATALOGUE_HEADER + "SV-100,0.32,0.95,3000,100,5e-6\n"},
-                 stream="stdout", lines="inertia ratio", expect="inertia ratio",
-                 note="The rotor has 2e-4 kg*m^2, 40 times SV-100's. Of the selection, only the line under the "
-                      "motor is shown here; `bondc simulate --json --motors` gives the warning in full."))
+live("E928", Cli("bondc simulate spin.bg --motors motors.csv --inertia-ratio -5",
+                 {"spin.bg": SPIN, "motors.csv": CATALOGUE}))
 live("E927", Cli("bondc simulate spin.bg --motors motors.csv", {"spin.bg": SPIN_NO_TORQUE, "motors.csv": CATALOGUE}))
 
 _IMPORTS = ("from bondc import semantic\n"
@@ -905,7 +912,7 @@ caret under them), never sent to the terminal; of a file that is not a model
 or a CSV table, nothing is quoted.
 
 A code's letter is its severity: `E` an error, `W` a warning, `I` information
-(two warnings have an `E` code: E915 and E926). Errors stop the command with
+(one warning has an `E` code: E915; E926 is retired). Errors stop the command with
 exit status 1, or 2 when the command line is at fault (a bad option, a file that
 cannot be read); warnings and information are printed and the command goes on.
 
