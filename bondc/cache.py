@@ -5,8 +5,8 @@ An :class:`Entry` is a folder ``<cache_dir>/models/<key>/`` (``cache_dir`` is
 ``$BONDC_CACHE_DIR`` or the user cache directory from platformdirs, never the
 model's folder). The key is a SHA-256 of
 
-- bondc's own code (every source file of the package and its grammar), so that a
-  new or edited bondc never reuses an old result;
+- bondc's own code (every source file of the package, its grammar and its C and C++
+  sources), so that a new or edited bondc never reuses an old result;
 - the model file's resolved path and its bytes;
 - the ``--model``, ``--experiment`` and ``--set`` values (overrides can change structure).
 
@@ -66,12 +66,14 @@ def cache_dir() -> Path:
 
 
 def code_hash() -> str:
-    """SHA-256 of bondc's own source files, grammar and component library (``std:`` models are
-    read from the package, not from a file the cache could check) (computed once per process)."""
+    """SHA-256 of bondc's own source files, grammar, component library (``std:`` models are
+    read from the package, not from a file the cache could check) and C and C++ sources (a
+    generated module carries them) (computed once per process)."""
     if not _CODE_HASH:
         package = Path(__file__).resolve().parent
         digest = hashlib.sha256(_LAYOUT.encode())
-        files = sorted(p for pattern in ("**/*.py", "**/*.lark", "std/*.bg") for p in package.glob(pattern))
+        files = sorted(p for pattern in ("**/*.py", "**/*.lark", "std/*.bg", "native/*.c", "native/*.h", "native/*.cpp")
+                       for p in package.glob(pattern))
         grammar = package.parent / "grammar"
         if grammar.is_dir():
             files += sorted(grammar.glob("*.lark"))

@@ -9,6 +9,7 @@ standalone run.
 
 import ast
 import hashlib
+import json
 import os
 import re
 import subprocess
@@ -371,6 +372,40 @@ def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     np.testing.assert_allclose(data[:, 1], reference.outputs["v"], rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(data[:, 3], reference.states["mass.p"], rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(data[:, 4], reference.states["x"], rtol=1e-13, atol=1e-15)
+    # the module carries bondc's C and C++ sources: in an empty cache folder it builds the CVODE
+    # driver from them, where a C compiler and scikit-sundae's SUNDIALS are at hand (as here)
+    from bondc import runtime
+
+    (work / "native.py").write_text(textwrap.dedent("""
+        import hashlib, importlib.abc, json, runpy, sys
+
+        class Block(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in ("bondc", "sympy", "lark"):
+                    raise ImportError(name + " is not available here")
+                return None
+
+        sys.meta_path.insert(0, Block())
+        module = runpy.run_path("friction_gen.py")
+        assert "bondc" not in sys.modules
+        run = module["simulate"]()
+        print(json.dumps({"code": run.stats["code"], "note": run.stats.get("code_note", ""),
+                          "driver_segments": run.stats.get("driver_segments", 0),
+                          "files": sorted(module["_NATIVE_FILES"]),
+                          "erk": hashlib.sha256(module["native_build_text"]("erk.cpp").encode()).hexdigest()}))
+    """))
+    env["BONDC_CACHE_DIR"] = str(tmp_path / "empty cache")
+    out = subprocess.run([sys.executable, "-I", "native.py"], cwd=work, env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr
+    told = json.loads(out.stdout.splitlines()[-1])
+    assert told["files"] == sorted(p.name for p in (ROOT / "bondc" / "native").iterdir()
+                                   if p.suffix in (".c", ".h", ".cpp"))
+    assert told["erk"] == hashlib.sha256(runtime.native_build_text("erk.cpp").encode()).hexdigest()
+    if runtime.find_compiler("c")[0] is not None and runtime._sundials_link() is not None:
+        assert told["code"] == "native", told["note"]
+        assert told["driver_segments"] >= 1
+        assert list((tmp_path / "empty cache" / "native").glob("model_*.so"))
 
 
 @pytest.mark.slow

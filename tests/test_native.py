@@ -1295,3 +1295,44 @@ def test_the_modes_a_loop_models_laws_read_are_found_without_solving_the_loop(fi
             finally:
                 namespace["_READING_MODES"], namespace["solve_loop"] = False, solve
         assert read.read == solved.read and read.read
+
+
+# ------------------------------------------------------------ bondc's C and C++ sources (bondc/native)
+
+NATIVE = ROOT / "bondc" / "native"
+
+
+def test_the_engines_sources_are_files_of_the_package_and_are_built_with_their_headers_inlined():
+    """The CVODE driver and the explicit stepper are package files (bondc/native), each with one job;
+    a build inlines their ``#include "..."`` headers, so the compiled text (what the cache key
+    hashes) holds every file, and cffi's cdef reads driver.h as it is."""
+    assert sorted(p.name for p in NATIVE.iterdir() if p.suffix in (".c", ".h", ".cpp")) == [
+        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "model.h", "sundials.h"]
+    for name in ("driver.c", "erk.cpp"):
+        built = runtime.native_build_text(name)
+        assert not [line for line in built.splitlines() if line.startswith('#include "')], name
+        assert built.count("typedef struct {\n    int version;") == 1, name     # erk_api.h's table, once
+    driver = runtime.native_build_text("driver.c")
+    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h"):
+        assert runtime.native_file(header) in driver, header
+    assert "bondc_driver_new" in runtime.native_file("driver.h")
+    assert "#" not in runtime.native_file("driver.h")        # no preprocessor line: cffi's cdef reads it
+    import cffi
+
+    cffi.FFI().cdef(runtime.native_file("driver.h"))
+    # model.h declares the model's functions the driver calls, as the code generation defines them
+    assert runtime.native_file("model.h").count("void bondc_") == len(runtime._NATIVE_FUNCTIONS)
+    for name in runtime._NATIVE_FUNCTIONS:
+        assert (f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
+                in runtime.native_file("model.h")), name
+
+
+@needs_cc
+def test_the_driver_compiles_on_its_own_as_an_editor_sees_it(tmp_path):
+    """driver.c with its headers beside it, and no model: what an editor or IDE checks (every
+    warning of -Wall -Wextra is an error)."""
+    compiler = runtime.find_compiler("c")[0]
+    assert compiler is not None
+    done = subprocess.run([*compiler.command, "-fsyntax-only", "-std=c99", "-Wall", "-Wextra", "-Werror",
+                           str(NATIVE / "driver.c")], capture_output=True, text=True, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr

@@ -4,7 +4,8 @@
 differentiates the frozen assignments in forward mode for the analytic
 Jacobian, runs common-subexpression elimination, prints every expression
 through :class:`~bondc.codegen.printer.BondcPrinter`, and appends the model
-code to a verbatim copy of :mod:`bondc.runtime` (``standalone``: the module
+code to a verbatim copy of :mod:`bondc.runtime` and of bondc's C and C++
+sources, ``bondc/native`` (``standalone``: the module
 imports only numpy, scipy, the standard library and, where CVODE runs,
 scikit-sundae, and runs where bondc is not installed) or to an import of it
 (what ``bondc compile`` writes by default). Either is byte-identical for the
@@ -62,7 +63,7 @@ from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,
                                    relative_data_path)
 from bondc.model import readable, readable_names
-from bondc.runtime import LOOP_START_OFFSETS, UNIT_MARK
+from bondc.runtime import LOOP_START_OFFSETS, UNIT_MARK, native_file
 from bondc.symbolic import as_sympy, partial_derivative
 
 RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
@@ -89,6 +90,30 @@ _RUNTIME_MODULES = frozenset({"atexit", "math", "os", "sys", "np", "_csv", "impo
 def runtime_source() -> str:
     """The text of ``bondc/runtime.py``, which every generated module carries verbatim."""
     return RUNTIME_PATH.read_text(encoding="utf-8")
+
+
+# -- bondc's native sources in a standalone module
+
+#: bondc's C and C++ sources (the CVODE driver, the explicit stepper, their headers): package data
+NATIVE_PATH = RUNTIME_PATH.parent / "native"
+NATIVE_SUFFIXES = (".c", ".h", ".cpp")
+
+
+def native_files_source() -> str:
+    """``_NATIVE_FILES = {name: text}`` of every file of ``bondc/native``, which a standalone module
+    writes after its copy of the runtime: the runtime then builds its CVODE driver and explicit
+    stepper from these texts (``runtime.native_file``) where bondc is not installed. Each line of a
+    file is one literal, so the module reads as the files do; sorted by name, the same text for the
+    same files."""
+    rule = "# " + "=" * 76
+    lines = [rule, "# bondc's native sources: verbatim copies of bondc/native/*, from which the runtime",
+             "# above builds its CVODE driver and explicit stepper (runtime.native_file).", rule,
+             "_NATIVE_FILES = {"]
+    for name in sorted(p.name for p in NATIVE_PATH.iterdir() if p.suffix in NATIVE_SUFFIXES):
+        lines.append(f"    {name!r}: (")
+        lines += [f"        {line!r}" for line in native_file(name).splitlines(keepends=True)]
+        lines.append("    ),")
+    return "\n".join(lines + ["}"])
 
 
 @functools.lru_cache(maxsize=4)
@@ -770,7 +795,7 @@ class _Emitter:
         model_name = getattr(graph, "name", None) or "model"
         if self.standalone:
             parts = [self.header(model_name), self.runtime_banner(), runtime_source().rstrip("\n"),
-                     self.model_banner()]
+                     native_files_source(), self.model_banner()]
         else:
             parts = [self.header(model_name), self.runtime_import(), self.model_banner()]
         self.share()
