@@ -23,6 +23,13 @@ value jumps needs a frozen mode and a located switch; the solver's error
 control handles the kinks of continuous ones (and ``sign(e)*sqrt(abs(e))``
 stays finite on both sides of its frozen ``sign``: it is continuous at 0).
 
+The same holds for every other switch across which the law stays continuous, a *kink*
+(LANGUAGE.md section 7): an ``if`` of one comparison whose two branches agree on its surface (a
+relief valve ``if p > p_cr then K*(p - p_cr) else 0``, a diode, a backlash), and a ``sign(a)``
+whose product's other factors vanish at ``a = 0`` (a turbulent orifice). :func:`continuous_across`
+decides, from the law alone; a kink is kept as written (recorded in :attr:`Freezer.kinks`, no
+mode, no event), and everything it cannot show continuous stays a jump.
+
 A condition's ``abs``, ``min`` or ``max`` term is taken apart instead: ``abs(v) < v_th`` is
 ``v < v_th and -v < v_th`` (:func:`_split_kink`), two switches with smooth switching functions. A
 velocity that crosses the whole band within one solver step changes the sign of each once, where
