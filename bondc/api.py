@@ -327,14 +327,15 @@ class Simulation:
 
     def plot(self, names: Sequence[str] | None = None) -> Figure:
         """A matplotlib Figure of the outputs ``names`` (default: every output) against time, each in
-        its declared unit, one axis per unit."""
-        from matplotlib.figure import Figure
+        its declared unit, one axis per unit. It is not pyplot's (``figure.savefig(...)`` to write
+        it); a notebook shows it as a picture, without ``%matplotlib``."""
+        from bondc.figure import SimulationFigure
 
         names = list(names) if names is not None else list(self.result.outputs)
         by_unit: dict[str, list[str]] = {}
         for name in names:
             by_unit.setdefault(self.result.units.get(name, ("", 1.0))[0] or "", []).append(name)
-        figure = Figure(figsize=(7, 2.4 * max(len(by_unit), 1)), layout="constrained")
+        figure = SimulationFigure(figsize=(7, 2.4 * max(len(by_unit), 1)), layout="constrained")
         axes_list = figure.subplots(max(len(by_unit), 1), 1, sharex=True, squeeze=False)[:, 0]
         for axes, (unit, group) in zip(axes_list, by_unit.items()):
             for name in group:

@@ -1,5 +1,6 @@
 """The Python API (docs/api.md): its examples run as written, and its results convert."""
 
+import base64
 import doctest
 import importlib
 import inspect
@@ -169,6 +170,29 @@ def test_the_example_notebook_runs(tmp_path):
     assert not [o for o in outputs if o.output_type == "error"]
     assert any("text/html" in o.get("data", {}) for o in outputs)           # the summary tables
     assert any("image/png" in o.get("data", {}) or "image/svg+xml" in o.get("data", {}) for o in outputs)
+
+
+def test_a_plot_shows_in_a_fresh_notebook_kernel_without_matplotlib_magic(tmp_path):
+    """sim.plot() ending a cell showed only '<Figure size 700x480 with 1 Axes>' in a fresh kernel: its
+    Figure is not pyplot's, and nothing had set up the inline backend's formatters."""
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    notebook = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell("import bondc"),
+        nbformat.v4.new_code_cell(f"sim = bondc.simulate({str(MSD_PATH)!r}, dt=0.01)\nsim.plot(['x', 'v'])"),
+        nbformat.v4.new_code_cell("import sys\n'matplotlib.pyplot' in sys.modules"),
+    ])
+    client = nbclient.NotebookClient(notebook, timeout=300, kernel_name="python3",
+                                     resources={"metadata": {"path": str(tmp_path)}})
+    client.execute()
+    outputs = notebook.cells[1].outputs
+    assert not [o for o in outputs if o.output_type == "error"], outputs
+    (shown,) = [o for o in outputs if o.output_type == "execute_result"]
+    assert "image/png" in shown.data, shown.data
+    png = base64.b64decode(shown.data["image/png"])
+    assert png.startswith(b"\x89PNG") and len(png) > 5000          # a picture of the two axes
+    assert notebook.cells[2].outputs[0].data["text/plain"] == "False"   # shown without pyplot
 
 
 @pytest.mark.parametrize("call, words", [
