@@ -4,22 +4,52 @@ The compiler is a pipeline of typed stages, each one function in one module::
 
     text --parse--> ast.File --build--> BondGraph --assign_causality--> CausalGraph
          --derive--> StateSpace --emit--> Python module --simulate--> SimResult --render--> HTML
+
+The Python API (``docs/api.md``) is exported from here: :func:`load`, :func:`check`,
+:func:`equations`, :func:`linearize`, :func:`compile`, :func:`simulate` and their results
+:class:`Model`, :class:`CheckResult`, :class:`Simulation` (all defined in :mod:`bondc.api`).
 """
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "__version__"]
+__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation",
+           "__version__"]
+
+#: The API's names, imported from :mod:`bondc.api` on first use so that ``import bondc`` stays light.
+_API = ("load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation")
+
+if TYPE_CHECKING:       # what type checkers see: the functions and classes themselves
+    from bondc.api import (CheckResult as CheckResult, Model as Model, Simulation as Simulation, check as check,
+                           compile as compile, equations as equations, linearize as linearize, load as load,
+                           simulate as simulate)
+else:
+    def __getattr__(name):
+        if name in _API:
+            from bondc import api
+
+            return getattr(api, name)
+        raise AttributeError(f"module 'bondc' has no attribute {name!r}")
 
 
-def __getattr__(name):
-    """The API (``bondc.simulate(...)``, ``docs/api.md``), imported on first use so that ``import
-    bondc`` stays light."""
-    if name in ("simulate", "equations"):       # modules of the pipeline too: calling them calls the API
-        import importlib
+class _Package(types.ModuleType):
+    """``bondc.simulate`` and ``bondc.equations`` are the API's functions, although bondc has modules
+    of those names (stages of the pipeline, ``from bondc.simulate import SimResult``).
 
-        return importlib.import_module(f"bondc.{name}")
-    if name in ("load", "check", "linearize", "compile", "Model", "CheckResult", "Simulation"):
-        from bondc import api
+    Importing a submodule makes it an attribute of its package: ``bondc.simulate`` would become the
+    module once anything imported it. The package keeps the function instead; the modules are
+    reached by importing them (``import bondc.simulate`` then ``sys.modules["bondc.simulate"]``,
+    ``importlib.import_module``, ``from bondc.simulate import ...``)."""
 
-        return getattr(api, name)
-    raise AttributeError(f"module 'bondc' has no attribute {name!r}")
+    def __setattr__(self, name: str, value: object) -> None:
+        if name in _API and isinstance(value, types.ModuleType) and value.__name__ == f"{__name__}.{name}":
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -13,15 +13,28 @@ from __future__ import annotations
 
 import html
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence, Union
 
 import numpy as np
 
 from bondc.errors import BondcError, Diagnostic, UsageError
 
-__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation"]
+if TYPE_CHECKING:
+    import pandas
+    from matplotlib.figure import Figure
+
+    from bondc.analysis.linearize import Linearization
+    from bondc.model import BondGraph
+    from bondc.simulate import SimResult
+
+#: A model file: a path as a string or a :class:`pathlib.Path`.
+PathLike = Union[str, os.PathLike[str]]
+
+__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation",
+           "PathLike"]
 
 
 def _usage(message: str, hint: str | None = None) -> UsageError:
@@ -74,7 +87,7 @@ def _text(text):
     return text
 
 
-def _source(path, text):
+def _source(path: PathLike | None, text: str | None) -> tuple[Path, str | None]:
     """The path to load and, for an in-memory text, the text."""
     return Path(path) if path is not None else Path("<text>.bg"), text
 
@@ -83,7 +96,7 @@ def _source(path, text):
 class Model:
     """A checked model: its graph and the warnings of checking it."""
 
-    graph: Any
+    graph: BondGraph
     warnings: tuple[Diagnostic, ...]
 
     @property
@@ -115,7 +128,7 @@ class Model:
                 f"<table><tr><th>parameter</th><th>SI value</th></tr>{rows}</table>")
 
 
-def load(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+def load(path: PathLike | None = None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
          overrides: Mapping[str, Any] | None = None) -> Model:
     """Read and check a model; raises :class:`BondcError` with every problem.
 
@@ -158,7 +171,7 @@ class CheckResult:
         return f"<table><tr><th></th><th>code</th><th>where</th><th>message</th></tr>{rows}</table>"
 
 
-def check(path=None, *, text: str | None = None, model: str | None = None) -> CheckResult:
+def check(path: PathLike | None = None, *, text: str | None = None, model: str | None = None) -> CheckResult:
     """Check a model (names, units, dimensions, causality, equations); never raises for the model.
 
     >>> result = check(text="model M\\n  C c : e = q\\n  Se s : e = 1\\n  s -> c\\n  output y [m/s] = s.e\\nend\\n")
@@ -205,7 +218,7 @@ def _derived(path, text, model, experiment, overrides):
     return Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment), tuple(sets))
 
 
-def equations(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+def equations(path: PathLike | None = None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
               overrides: Mapping[str, Any] | None = None, format: str = "text") -> str:
     """The state and output equations as ``bondc equations`` prints them (text, latex or json).
 
@@ -220,8 +233,8 @@ def equations(path=None, *, text: str | None = None, model: str | None = None, e
     return format_equations(_derived(path, text, model, experiment, overrides).state_space, format)
 
 
-def linearize(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
-              overrides: Mapping[str, Any] | None = None, at: str = "initial", time: float = 0.0):
+def linearize(path: PathLike | None = None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+              overrides: Mapping[str, Any] | None = None, at: str = "initial", time: float = 0.0) -> Linearization:
     """A, B, C, D and the eigenvalues (:class:`bondc.analysis.linearize.Linearization`).
 
     >>> lin = linearize("models/mass_spring_damper.bg")
@@ -236,7 +249,7 @@ def linearize(path=None, *, text: str | None = None, model: str | None = None, e
     return linearise(_derived(path, text, model, experiment, overrides).state_space, time=time, at=at)
 
 
-def compile(path, output=None, *, model: str | None = None, experiment: str | None = None,
+def compile(path: PathLike, output: PathLike | None = None, *, model: str | None = None, experiment: str | None = None,
             overrides: Mapping[str, Any] | None = None, standalone: bool = False) -> Path:
     """Write the model's Python module (``bondc compile``); returns its path. ``standalone``: the
     module carries bondc's runtime (it runs where bondc is not installed)."""
@@ -255,8 +268,8 @@ class Simulation:
     ``sim["x"]`` is an output, state or bond variable (SI); ``sim.t`` the times.
     """
 
-    result: Any                                  # bondc.simulate.SimResult
-    warnings: tuple = field(default_factory=tuple)
+    result: SimResult
+    warnings: tuple[Diagnostic, ...] = field(default_factory=tuple)
 
     @property
     def t(self) -> np.ndarray:
@@ -298,7 +311,7 @@ class Simulation:
         _, scale = self.result.units.get(name, (None, 1.0))
         return np.asarray(self[name]) / scale
 
-    def to_dataframe(self, all_bonds: bool = False):
+    def to_dataframe(self, all_bonds: bool = False) -> pandas.DataFrame:
         """A pandas DataFrame indexed by time, one column per output and state, named with their units
         (``P_kPa [kPa]``) and in those units, as the csv; needs pandas."""
         try:
@@ -312,16 +325,17 @@ class Simulation:
                 for n, c in zip(names[1:], columns[1:])}
         return pandas.DataFrame(data, index=pandas.Index(self.result.t, name="t [s]"))
 
-    def plot(self, names: Sequence[str] | None = None):
+    def plot(self, names: Sequence[str] | None = None) -> Figure:
         """A matplotlib Figure of the outputs ``names`` (default: every output) against time, each in
-        its declared unit, one axis per unit."""
-        from matplotlib.figure import Figure
+        its declared unit, one axis per unit. It is not pyplot's (``figure.savefig(...)`` to write
+        it); a notebook shows it as a picture, without ``%matplotlib``."""
+        from bondc.figure import SimulationFigure
 
         names = list(names) if names is not None else list(self.result.outputs)
         by_unit: dict[str, list[str]] = {}
         for name in names:
             by_unit.setdefault(self.result.units.get(name, ("", 1.0))[0] or "", []).append(name)
-        figure = Figure(figsize=(7, 2.4 * max(len(by_unit), 1)), layout="constrained")
+        figure = SimulationFigure(figsize=(7, 2.4 * max(len(by_unit), 1)), layout="constrained")
         axes_list = figure.subplots(max(len(by_unit), 1), 1, sharex=True, squeeze=False)[:, 0]
         for axes, (unit, group) in zip(axes_list, by_unit.items()):
             for name in group:
@@ -332,7 +346,7 @@ class Simulation:
         axes_list[-1].set_xlabel("t [s]")
         return figure
 
-    def summary(self) -> list[dict]:
+    def summary(self) -> list[dict[str, Any]]:
         """Per output: unit, min, max, final (in its unit)."""
         rows = []
         for name in self.result.outputs:
@@ -354,7 +368,7 @@ class Simulation:
                 f"<th>max</th><th>final</th></tr>{rows}</table>")
 
 
-def simulate(path=None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
+def simulate(path: PathLike | None = None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
              overrides: Mapping[str, Any] | None = None, t_end: float | None = None,
              dt: float | None = None) -> Simulation:
     """Simulate (``bondc simulate``); a run that stops early raises SimulationError with the partial

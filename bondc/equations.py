@@ -43,8 +43,6 @@ import heapq
 import json
 import math
 import re
-import sys
-import types
 from pathlib import Path
 from typing import Mapping
 
@@ -980,16 +978,3 @@ def _format_latex(ss: StateSpace, show) -> str:
     lines.append(" \\\\\n".join(f"  {row}" for row in rows))
     lines.append(r"\end{align*}")
     return "\n".join(lines) + "\n"
-
-
-class _CallableModule(types.ModuleType):
-    """``bondc.equations(...)`` is the API function (:func:`bondc.api.equations`), although ``bondc.equations`` is
-    also this module: calling the module calls the function."""
-
-    def __call__(self, *args, **kwargs):
-        from bondc import api
-
-        return api.equations(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule

@@ -21,9 +21,12 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping
+from typing import TYPE_CHECKING, Iterable, Mapping
 
 from bondc.source import NO_SPAN, Source, Span
+
+if TYPE_CHECKING:
+    from bondc.simulate import SimResult
 
 SEVERITIES = ("error", "warning", "info")
 
@@ -91,7 +94,18 @@ class BondcError(Exception):
         self.diagnostics: list[Diagnostic] = list(diagnostics)
         # The texts the diagnostics point into, for rendering (files are re-read otherwise).
         self.sources: dict[str, Source] = dict(sources or {})
-        super().__init__("; ".join(d.message for d in self.diagnostics))
+        super().__init__(_message(self.diagnostics))
+
+
+def _message(diagnostics: list[Diagnostic]) -> str:
+    """``str(error)``: where the first diagnostic is (``file:line:col``), then every message."""
+    text = "; ".join(d.message for d in diagnostics)
+    span = diagnostics[0].span if diagnostics else NO_SPAN
+    if span.line > 0:
+        return f"{span.file}:{span.line}:{span.column}: {text}"
+    if span.file and span.file != NO_SPAN.file:
+        return f"{span.file}: {text}"
+    return text
 
 
 class UsageError(BondcError):
@@ -115,7 +129,12 @@ class EquationError(BondcError):
 
 
 class SimulationError(BondcError):
+    """A run that stopped early; ``result`` is what it computed up to there (every SimulationError
+    bondc raises carries it)."""
+
     stage = "simulation"
+    #: the incomplete run (``result.t``, ``result.outputs``, ... up to the failure)
+    result: SimResult | None = None
 
 
 class AnalysisError(BondcError):

@@ -50,7 +50,6 @@ import math
 import io
 import sys
 import time
-import types
 import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -619,16 +618,3 @@ def run(path, *, model: str | None = None, experiment: str | None = None, sets: 
     if error is not None:
         raise error
     return result
-
-
-class _CallableModule(types.ModuleType):
-    """``bondc.simulate(...)`` is the API function (:func:`bondc.api.simulate`), although ``bondc.simulate`` is
-    also this module: calling the module calls the function."""
-
-    def __call__(self, *args, **kwargs):
-        from bondc import api
-
-        return api.simulate(*args, **kwargs)
-
-
-sys.modules[__name__].__class__ = _CallableModule

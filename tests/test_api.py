@@ -1,13 +1,19 @@
 """The Python API (docs/api.md): its examples run as written, and its results convert."""
 
+import base64
 import doctest
+import importlib
+import inspect
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import bondc
+from bondc import api
 
 ROOT = Path(__file__).resolve().parent.parent
 MSD_PATH = ROOT / "models" / "mass_spring_damper.bg"
@@ -30,7 +36,91 @@ def test_the_api_docstrings_run(monkeypatch):
 def test_every_exported_name_is_there():
     for name in bondc.__all__:
         assert getattr(bondc, name) is not None
-    assert callable(bondc.simulate) and callable(bondc.equations)     # modules of the pipeline, callable
+
+
+API_FUNCTIONS = ("load", "check", "equations", "linearize", "compile", "simulate")
+
+
+def _assert_the_api_functions(namespace):
+    for name in API_FUNCTIONS:
+        function = getattr(namespace, name)
+        assert inspect.isfunction(function) and function is getattr(api, name), name
+        assert function.__doc__ and "path" in inspect.signature(function).parameters, name
+        assert inspect.signature(function).return_annotation not in (inspect.Signature.empty, "Any"), name
+
+
+def test_the_api_functions_are_functions_with_signatures_and_docstrings():
+    """bondc.simulate and bondc.equations were the pipeline's modules made callable, with the
+    signature (*args, **kwargs) and the module's docstring; the modules stay importable."""
+    import bondc.equations
+    import bondc.simulate
+    from bondc.simulate import SimResult
+
+    _assert_the_api_functions(bondc)
+    assert list(inspect.signature(bondc.simulate).parameters) == ["path", "text", "model", "experiment",
+                                                                     "overrides", "t_end", "dt"]
+    assert inspect.signature(bondc.equations).parameters["format"].default == "text"
+    assert sys.modules["bondc.simulate"].SimResult is SimResult
+    assert hasattr(importlib.import_module("bondc.equations"), "derive")
+
+
+def test_the_api_functions_stay_functions_whatever_was_imported_first():
+    """In a fresh interpreter, the stage modules imported before and after the package's names."""
+    code = ("import inspect, bondc.simulate, bondc.equations, bondc\n"
+            "from bondc.simulate import simulate as stage\n"
+            "print(inspect.isfunction(bondc.simulate), inspect.isfunction(bondc.equations), "
+            "bondc.simulate.__module__, stage.__module__, list(inspect.signature(bondc.simulate).parameters)[:2])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True", "True", "bondc.api", "bondc.simulate", "['path',", "'text']"]
+
+
+def test_bondc_ships_its_types():
+    """PEP 561: without py.typed in the installed package, mypy ignores bondc's annotations."""
+    tomllib = pytest.importorskip("tomllib")
+    assert (ROOT / "bondc" / "py.typed").is_file()
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    assert "py.typed" in project["tool"]["setuptools"]["package-data"]["bondc"]
+    assert any(requirement.startswith("mypy") for requirement in project["project"]["optional-dependencies"]["test"])
+
+
+def test_a_user_script_type_checks_with_mypy_strict(tmp_path):
+    """tests/fixtures/api/user_script.py uses the API as docs/api.md shows, with assert_type on what it
+    returns: mypy --strict finds nothing in it (an untyped or Any-returning API function fails it).
+    bondc is read from the repository (an editable install is an import hook mypy cannot follow);
+    errors inside bondc's own modules are not the script's (--follow-imports=silent), as for an
+    installed package."""
+    pytest.importorskip("mypy")
+    script = ROOT / "tests" / "fixtures" / "api" / "user_script.py"
+    out = subprocess.run([sys.executable, "-m", "mypy", "--strict", "--follow-imports=silent", "--no-color-output",
+                          "--cache-dir", str(tmp_path / "cache"), str(script)],
+                         capture_output=True, text=True, timeout=600, cwd=tmp_path,
+                         env={**os.environ, "MYPYPATH": str(ROOT)})
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "Success: no issues found in 1 source file" in out.stdout
+    # and it runs as typed
+    ran = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert ran.returncode == 0, ran.stderr
+    assert "E810 0.5" in ran.stdout and "<text>.bg:2:20: unknown unit 'mm2'" in ran.stdout
+
+
+def test_a_model_error_says_where_in_its_message(tmp_path):
+    """str(error) was only the messages: a script printing it did not say where the problem is."""
+    path = tmp_path / "spring.bg"
+    path.write_text("model M\n  param k = 800 [N/mm2]\n  C c : e = k*q\n  Se s : e = 1\n  s -> c\nend\n")
+    with pytest.raises(bondc.errors.ModelError) as raised:
+        bondc.load(path)
+    first = raised.value.diagnostics[0]
+    assert (first.span.line, first.span.column) == (2, 20)      # the unit mm2
+    assert str(raised.value).startswith(f"{path}:2:20: ") and first.message in str(raised.value)
+    assert not str(bondc.errors.ModelError("no model")).startswith(":")      # no place: the message only
+
+
+def test_a_simulation_error_declares_its_result():
+    from bondc.errors import SimulationError
+
+    assert "result" in inspect.get_annotations(SimulationError)
+    assert SimulationError("stopped").result is None
 
 
 @pytest.mark.slow
@@ -80,6 +170,29 @@ def test_the_example_notebook_runs(tmp_path):
     assert not [o for o in outputs if o.output_type == "error"]
     assert any("text/html" in o.get("data", {}) for o in outputs)           # the summary tables
     assert any("image/png" in o.get("data", {}) or "image/svg+xml" in o.get("data", {}) for o in outputs)
+
+
+def test_a_plot_shows_in_a_fresh_notebook_kernel_without_matplotlib_magic(tmp_path):
+    """sim.plot() ending a cell showed only '<Figure size 700x480 with 1 Axes>' in a fresh kernel: its
+    Figure is not pyplot's, and nothing had set up the inline backend's formatters."""
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    notebook = nbformat.v4.new_notebook(cells=[
+        nbformat.v4.new_code_cell("import bondc"),
+        nbformat.v4.new_code_cell(f"sim = bondc.simulate({str(MSD_PATH)!r}, dt=0.01)\nsim.plot(['x', 'v'])"),
+        nbformat.v4.new_code_cell("import sys\n'matplotlib.pyplot' in sys.modules"),
+    ])
+    client = nbclient.NotebookClient(notebook, timeout=300, kernel_name="python3",
+                                     resources={"metadata": {"path": str(tmp_path)}})
+    client.execute()
+    outputs = notebook.cells[1].outputs
+    assert not [o for o in outputs if o.output_type == "error"], outputs
+    (shown,) = [o for o in outputs if o.output_type == "execute_result"]
+    assert "image/png" in shown.data, shown.data
+    png = base64.b64decode(shown.data["image/png"])
+    assert png.startswith(b"\x89PNG") and len(png) > 5000          # a picture of the two axes
+    assert notebook.cells[2].outputs[0].data["text/plain"] == "False"   # shown without pyplot
 
 
 @pytest.mark.parametrize("call, words", [
