@@ -1003,10 +1003,12 @@ class _Emitter:
         lines.append("TIME_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event and s.time_only))
         lines.append(f"VECTORIZED = {plan.blocks == 0}")
         # the top model's external inputs: the host sets {name: (times, values) or f(t)} here (see
-        # runtime.simulate_model's inputs); an input nothing supplies takes its default
-        lines.append("EXTERNAL_INPUT_NAMES = " + _tuple(name for name, (_, expr) in (plan.ss.inputs or {}).items()
-                                                         if type(expr).__name__ == "External"))
-        lines.append("EXTERNAL_INPUTS = {}")
+        # runtime.simulate_model's inputs); an input nothing supplies takes its default. (A model
+        # without them has neither name: its module stays as it was.)
+        external = [name for name, (_, expr) in (plan.ss.inputs or {}).items() if type(expr).__name__ == "External"]
+        if external:
+            lines.append("EXTERNAL_INPUT_NAMES = " + _tuple(external))
+            lines.append("EXTERNAL_INPUTS = {}")
         native, reason = _NativeEmitter(self).native_source()
         lines.append(f"NATIVE_SOURCE = {_text_literal(native)}")
         lines.append(f"NATIVE_UNAVAILABLE = {reason!r}")
