@@ -191,7 +191,9 @@ def check(path: PathLike | None = None, *, text: str | None = None, model: str |
         return CheckResult(False, tuple(error.diagnostics))
     if states is None:
         return CheckResult(False, found)
-    diagnostics = list(loaded.warnings)
+    from bondc.model import external_input_notes
+
+    diagnostics = list(loaded.warnings) + external_input_notes(loaded.graph)
     diagnostics += [d for d in list(causal.diagnostics) + list(found) if d not in diagnostics]
     return CheckResult(not any(d.is_error for d in diagnostics), tuple(diagnostics), loaded)
 
@@ -370,9 +372,13 @@ class Simulation:
 
 def simulate(path: PathLike | None = None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
              overrides: Mapping[str, Any] | None = None, t_end: float | None = None,
-             dt: float | None = None) -> Simulation:
+             dt: float | None = None, inputs: Mapping[str, Any] | None = None) -> Simulation:
     """Simulate (``bondc simulate``); a run that stops early raises SimulationError with the partial
     result as ``.result``.
+
+    ``inputs`` supplies the model's external inputs (``input u [V] external``): ``{name: (times,
+    values)}`` (linearly interpolated, held at the ends, SI) or ``{name: f}`` with ``f(t)`` a number;
+    one not given takes its default (the warnings say so, I346).
 
     >>> sim = simulate("models/mass_spring_damper.bg", overrides={"k": (1.6, "kN/m")}, dt=0.5)
     >>> sim.complete, abs(float(sim["x"][-1]) - 10/1600) < 1e-4    # x settles at F0/k
@@ -385,7 +391,7 @@ def simulate(path: PathLike | None = None, *, text: str | None = None, model: st
     t_end = None if t_end is None else _number(t_end, "t_end")
     dt = None if dt is None else _number(dt, "dt")
     derived = _derived(path, text, model, experiment, overrides)
-    result = run_simulation(derived.state_space, derived.experiment, t_end=t_end, dt=dt)
+    result = run_simulation(derived.state_space, derived.experiment, t_end=t_end, dt=dt, inputs=inputs)
     error = result.error()
     if error is not None:
         raise error

@@ -224,10 +224,11 @@ class BondChain:
 class Input:
     name: str
     unit: Unit | None
-    value: Expr | None          # None: a component's input that every instance must bind
+    value: Expr | None          # None: a component's input that every instance must bind (or, external, 0)
     description: str | None
     span: Span = _span()
     name_span: Span = _span()
+    external: bool = False      # ``input u [V] external = default``: supplied by the host (section 15)
 
 
 @dataclass(frozen=True)

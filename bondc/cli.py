@@ -135,6 +135,10 @@ def _check_one(args, model: str | None, component: bool, loaded=None) -> tuple:
     try:
         graph, warnings = semantic.load(Path(args.file), model=model, sets=_parse_sets(args.set), loaded=loaded)
         diagnostics += warnings
+        if not component:       # I346: an external input that check sees nothing supply takes its default
+            from bondc.model import external_input_notes
+
+            diagnostics += external_input_notes(graph)
         sources = graph.sources
         if not component:
             from bondc.causality import assign_causality
@@ -357,7 +361,11 @@ def _cmd_simulate(args) -> int:
         load_catalogue(args.motors)     # a catalogue that cannot be read is an error before the run
     derived = _derived(args, light=True)
     graph, state_space, experiment = derived.graph, derived.state_space, derived.experiment
-    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json)
+    from bondc.simulate import read_input_files
+
+    inputs = read_input_files(state_space, args.input)      # --input u=FILE.csv[:COLUMN]
+    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json,
+                      inputs=inputs)
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:
         write(result, Path(args.output), args.all)
@@ -571,6 +579,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--dt", type=float, help="output sampling interval, s")
     sim.add_argument("-o", "--output", help="write results: .csv (columns t, outputs, states) or .npz")
     sim.add_argument("--all", action="store_true", help="also write every bond's effort and flow")
+    sim.add_argument("--input", action="append", default=[], metavar="NAME=FILE.csv[:COLUMN]",
+                     help="supply external input NAME from a CSV file (time column t, time or the first; units "
+                          "in the header; COLUMN defaults to NAME); repeatable")
     sim.add_argument("--json", action="store_true", help="print a JSON summary")
     sim.add_argument("--motors", metavar="CATALOGUE.csv",
                      help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")

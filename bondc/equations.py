@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import Mapping
 
 import sympy
+from sympy.core.symbol import Str as _SymStr
 from sympy.printing.str import StrPrinter
 
 from bondc import ast
@@ -57,9 +58,10 @@ from bondc.evaluate import ExpansionBudget
 from bondc.model import ElementNode, JunctionNode, readable_names
 from bondc.source import NO_SPAN
 from bondc.statespace import AlgebraicBlock, StateInfo, StateSpace
-from bondc.symbolic import (TRANSLATION_IN_ALL, Csv, Step, Table, Translator, discontinuities, strip_impulses, as_sympy)
+from bondc.symbolic import (TRANSLATION_IN_ALL, Csv, External, Step, Table, Translator, discontinuities, strip_impulses,
+                            as_sympy)
 
-_OPAQUE = (sympy.Piecewise, sympy.Abs, sympy.sign, sympy.Min, sympy.Max, sympy.Heaviside, Table, Step, Csv)
+_OPAQUE = (sympy.Piecewise, sympy.Abs, sympy.sign, sympy.Min, sympy.Max, sympy.Heaviside, Table, Step, Csv, External)
 _ENERGY_VARIABLE = sympy.Dummy("s", real=True)      # the integration variable of stored-energy functions
 
 
@@ -256,7 +258,10 @@ class _Deriver:
     def build(self) -> None:
         graph = self.graph
         for name, signal in graph.inputs.items():
-            self.add(self.input_symbols[name], self.translate(signal.expr), name, "input")
+            value = self.translate(signal.expr)
+            if getattr(signal, "external", False):     # supplied by the host; its default otherwise
+                value = External(self.t, _SymStr(name), value)
+            self.add(self.input_symbols[name], value, name, "input")
         for element in graph.elements.values():
             getattr(self, "_" + ROLES[element.kind])(element)
         for junction in graph.junctions.values():
@@ -939,7 +944,8 @@ def _format_text(ss: StateSpace, show) -> str:
         cells = [s.name.ljust(width)] + ([unit.ljust(unit_width)] if unit_width else []) + [f"initial {shown}"]
         rows.append("  ".join(cells))
     section("states", rows)
-    section("inputs", [f"{name} = {bg_text(expr)}" for name, (_, expr) in ss.inputs.items()])
+    section("inputs", [f"{name} = external (default {bg_text(expr.default)})" if isinstance(expr, External)
+                       else f"{name} = {bg_text(expr)}" for name, (_, expr) in ss.inputs.items()])
     section("parameters (SI)", [f"{name} = {value!r}" for name, (_, value) in ss.parameters.items()])
     section("state equations", [f"der({name}) = {bg_text(show(expr))}" for name, expr in ss.derivatives.items()])
     section("outputs", [f"{name} = {bg_text(show(expr))}" for name, expr in ss.outputs.items()])

@@ -336,7 +336,7 @@ class _Flattener:
                                                    f"'{port.name} -> j'"))
         if not prefix:
             for name, item in x.inputs.items():
-                if item.value is None and not self.standalone:
+                if item.value is None and not item.external and not self.standalone:
                     self.report(_error("E334", f"input '{name}' has no value", item.name_span,
                                        hint=f"give it one ('input {name} = ...') or use model '{model.name}' as "
                                             f"a component whose instances bind it"))
@@ -423,7 +423,7 @@ class _Flattener:
                                                f"it can bind: {', '.join(kinds)}" if kinds else
                                                "it has no parameters or inputs")))
         for name, item in sub.inputs.items():
-            if item.value is None and name not in bound:
+            if item.value is None and not item.external and name not in bound:
                 self.report(_error("E334", f"instance '{path}' must bind input '{name}' of '{sub.model.name}' "
                                            f"(it has no default)", statement.name_span,
                                    hint=f"add '{name} = ...' to the instance's bindings",
@@ -649,6 +649,11 @@ class _Renamer:
             return dataclasses.replace(s, name=self.name(s.name), value=self.expr(s.value))
         if isinstance(s, ast.Input):
             value = None if s.value is None else self.expr(s.value)
+            if s.external and p:
+                # a component's external input is an input with a default, which its instance may
+                # bind: only the top model's external inputs are supplied by the host (section 15)
+                value = value if value is not None else ast.Num(0.0, "0", s.name_span)
+                return dataclasses.replace(s, name=self.name(s.name), value=value, external=False)
             return dataclasses.replace(s, name=self.name(s.name), value=value)
         if isinstance(s, ast.StateDecl):
             return dataclasses.replace(s, name=self.name(s.name), laws=self.laws(s.laws, frozenset()))
@@ -700,8 +705,8 @@ def flatten(model: ast.Model, files: Sequence[ast.File], *, standalone: bool = F
     body = [s for s in x.statements if not isinstance(s, _InstanceMark)] + x.bonds
     if flattener.aliases:
         body = [_realias(s, flattener.aliases) for s in body]
-    body = [dataclasses.replace(s, value=ast.Num(0.0, "0", s.span)) if isinstance(s, ast.Input) and s.value is None
-            else s for s in body]
+    body = [dataclasses.replace(s, value=ast.Num(0.0, "0", s.name_span if s.external else s.span))
+            if isinstance(s, ast.Input) and s.value is None else s for s in body]
     flat.model = dataclasses.replace(model, body=tuple(body))
     return flat
 

@@ -725,7 +725,7 @@ class _Formatter:
         return {
             "keyword": max(len(_keyword(s)) for s in run),
             "name": _column([s.name for s in run]),
-            "unit": _column([_unit(s.unit) for s in run]),
+            "unit": _column([_signal_unit(s) for s in run]),
             "value": _column([format_expr(s.value) for s in run if s.description is not None and s.value is not None],
                              VALUE_ALIGN_MAX),
         }
@@ -733,10 +733,11 @@ class _Formatter:
     def _signal(self, stmt, indent, widths, attached) -> None:
         keyword = _pad(_keyword(stmt), widths.get("keyword", 0))
         name = _pad(stmt.name, widths.get("name", 0))
-        unit = _pad(_unit(stmt.unit), widths.get("unit", 0))
-        if stmt.value is None:    # a component's input without a default
+        bare = _signal_unit(stmt)       # input NAME [UNIT] external = DEFAULT: the keyword stays with the unit
+        unit = _pad(bare, widths.get("unit", 0))
+        if stmt.value is None:    # a component's input without a default (or an external one: 0)
             self.code(indent, _words(keyword, name if stmt.description else stmt.name, unit if stmt.description else
-                                     _unit(stmt.unit), _desc(stmt.description)), attached.trailing)
+                                     bare, _desc(stmt.description)), attached.trailing)
             return
         prefix = " ".join(part for part in (keyword, name, unit) if part) + " = "
         value = _value(stmt.value, len(indent + prefix))
@@ -756,6 +757,12 @@ class _Formatter:
         prefix = f"{_pad(stmt.name, widths.get('name', 0))} = "
         text = _words(prefix + _value(stmt.value, len(indent + prefix)), _unit(stmt.unit))
         self.code(indent, text, attached.trailing)
+
+
+def _signal_unit(stmt) -> str:
+    """An input's or output's unit as printed, with ``external`` after it for an external input."""
+    return " ".join(part for part in (_unit(stmt.unit), "external" if getattr(stmt, "external", False) else "")
+                    if part)
 
 
 def _keyword(stmt) -> str:

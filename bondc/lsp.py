@@ -54,7 +54,7 @@ MAX_HEADER_BYTES = 8192
 MAX_DOCUMENT_LINES = 20_000
 MAX_DOCUMENT_CHARS = 1_000_000
 KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment", "import", "if", "then",
-            "else", "and", "or", "not", "port", "defaults", "discrete", "when")
+            "else", "and", "or", "not", "port", "defaults", "discrete", "when", "external")
 _DOCS = Path(__file__).resolve().parent.parent / "docs" / "diagnostics.md"
 
 

@@ -82,13 +82,19 @@ class Function:
 
 @dataclass(frozen=True)
 class Signal:
-    """An ``input``: a named signal of ``t`` and parameters, in SI."""
+    """An ``input``: a named signal of ``t`` and parameters, in SI.
+
+    ``external``: the host supplies it (a table, a function of ``t``, a CSV file); ``expr`` is then
+    its default, a constant, used when nothing supplies it."""
 
     name: str
     expr: ast.Expr
     unit_text: str | None
     description: str | None
     span: Span = NO_SPAN
+    external: bool = False
+    default: float | None = None    # an external input's default, SI (None: not known)
+    name_span: Span = NO_SPAN
 
 
 @dataclass(frozen=True)
@@ -299,3 +305,22 @@ def readable(names: Mapping[str, str], text):
     if not names or not text:
         return text
     return _BOND_VARIABLE.sub(lambda match: names.get(match.group(0), match.group(0)), text)
+
+
+def external_input_notes(graph, supplied=()) -> list:
+    """I346 for each external input of ``graph`` that nothing supplies (not in ``supplied``): its
+    default is used. ``bondc check`` and ``bondc simulate`` print it once."""
+    from bondc.errors import Diagnostic
+
+    notes = []
+    for name, signal in getattr(graph, "inputs", {}).items():
+        if not getattr(signal, "external", False) or name in supplied:
+            continue
+        value = getattr(signal, "default", None)
+        shown = "" if value is None else f" {value:g}" + (f" {signal.unit_text}" if signal.unit_text else "")
+        notes.append(Diagnostic("info", "I346", f"input {name} is external: nothing supplies it, so its default"
+                                                f"{shown} is used",
+                                signal.name_span if signal.name_span != NO_SPAN else signal.span,
+                                hint=f"supply it: bondc simulate --input {name}=FILE.csv[:COLUMN], or "
+                                     f"simulate(..., inputs={{{name!r}: (times, values)}}) in Python"))
+    return notes

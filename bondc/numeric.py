@@ -92,6 +92,7 @@ NUMERIC_FUNCTIONS: Mapping[str, Callable] = {
     "Table": lambda x, xs, vs: table_value(x, xs, vs),
     "Step": step_value,
     "Csv": csv_value,
+    "External": lambda x, name, default: float(default),     # an external input at its default
     "Pwm": pwm_value,
     "Coulomb": coulomb_value,
 }

@@ -393,8 +393,9 @@ class _ToAst(Transformer):
 
     @v_args(meta=True)
     def input(self, meta, children):
-        name, unit, value, description = children
-        return ast.Input(str(name), unit, value, _opt_str(description), self._meta(meta), self._tok(name))
+        name, unit, external, value, description = children
+        return ast.Input(str(name), unit, value, _opt_str(description), self._meta(meta), self._tok(name),
+                         external=external is not None)
 
     @v_args(meta=True)
     def output(self, meta, children):

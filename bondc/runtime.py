@@ -503,6 +503,104 @@ def csv_times(base_dir, path, column, time_scale=1.0):
     return load_csv(os.path.join(base_dir, path), column)[0] * time_scale
 
 
+# -------------------------------------------------------- external inputs
+
+class InputError(ValueError):
+    """A signal given for an external input that cannot be used (not a table or a function of t)."""
+
+
+def external_signal(x, store, name, default):
+    """An external input (``input u [V] external = default``) at ``x``: what the host put in the
+    module's ``EXTERNAL_INPUTS`` (``store``) under ``name`` -- a table ``(times, values)``, linearly
+    interpolated and held at the ends as a csv signal is, or a function of t -- else ``default``."""
+    source = store.get(name)
+    if source is None:
+        return default if np.ndim(x) == 0 else np.zeros(np.shape(x)) + default
+    if callable(source):
+        return _call_input(source, x, name)
+    times, values = source
+    return np.interp(x, times, values)
+
+
+def _call_input(function, x, name):
+    """A host's function of t at a time or at an array of times (called point by point where it
+    does not take an array)."""
+    if np.ndim(x) == 0:
+        return _input_number(function(float(x)), name, x)
+    times = np.asarray(x, dtype=float)
+    try:
+        values = np.asarray(function(times), dtype=float)
+        if values.shape == times.shape:
+            return values
+    except Exception:
+        pass
+    return np.array([_input_number(function(float(v)), name, v) for v in times.ravel()]).reshape(times.shape)
+
+
+def _input_number(value, name, t):
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"the function given for external input {name!r} returned {value!r} at t={float(t):g}, "
+                         "not a number") from None
+    return value
+
+
+def external_times(store, name):
+    """The sample times of the table the host gave external input ``name`` (none for a function):
+    segment boundaries, as a csv signal's samples are."""
+    source = store.get(name)
+    if source is None or callable(source):
+        return ()
+    return source[0]
+
+
+def external_inputs(inputs, names):
+    """``{name: (times, values) or f(t)}`` checked and made ready for ``external_signal``: times and
+    values are 1-D float arrays of one length (at least one sample), finite, times not decreasing.
+    Raises InputError naming what is wrong."""
+    prepared = {}
+    for name, source in dict(inputs or {}).items():
+        if name not in names:
+            known = ", ".join(names) if names else "none"
+            raise InputError(f"{name!r} is not an external input of this model (its external inputs: {known})")
+        if callable(source):
+            prepared[name] = source
+            continue
+        try:
+            times, values = source
+            times, values = np.asarray(times, dtype=float), np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"external input {name!r} takes a pair (times, values) of number sequences or a "
+                             f"function of t, not {type(source).__name__}") from None
+        if times.ndim != 1 or values.ndim != 1 or times.size != values.size or times.size == 0:
+            raise InputError(f"external input {name!r}: times and values must be two 1-D sequences of one length "
+                             f"(at least one sample), not shapes {times.shape} and {values.shape}")
+        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
+            raise InputError(f"external input {name!r}: times and values must be finite numbers (no nan or inf)")
+        if np.any(np.diff(times) < 0):
+            i = int(np.flatnonzero(np.diff(times) < 0)[0])
+            raise InputError(f"external input {name!r}: times must not decrease: t = {times[i + 1]:g} comes after "
+                             f"{times[i]:g} (sample {i + 2})")
+        prepared[name] = (times, values)
+    return prepared
+
+
+def _with_inputs(store, inputs, task):
+    """``task`` run with ``store`` holding ``inputs`` (a run's lazily evaluated variables read the
+    signals of their run, whatever later runs of the model set)."""
+    def run(*args):
+        saved = dict(store)
+        store.clear()
+        store.update(inputs)
+        try:
+            return task(*args)
+        finally:
+            store.clear()
+            store.update(saved)
+    return run
+
+
 # -------------------------------------------------------- algebraic loops
 
 _BLOCK_SOLUTIONS = {}
@@ -698,6 +796,9 @@ class _Model:
         self.loop_values = optional("_loop_values", lambda f: f, None)
         self.NATIVE_SOURCE = optional("NATIVE_SOURCE", lambda text: "".join(text), "")
         self.NATIVE_UNAVAILABLE = optional("NATIVE_UNAVAILABLE", str, "")
+        # the external inputs the host supplies: the module's own dict, which its functions read
+        self.EXTERNAL_INPUT_NAMES = optional("EXTERNAL_INPUT_NAMES", tuple, ())
+        self.EXTERNAL_INPUTS = optional("EXTERNAL_INPUTS", lambda store: store, None)
         self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
         self.when_offsets = None        # clause k sets targets offsets[k]:offsets[k + 1], where C runs them
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
@@ -5000,7 +5101,7 @@ def attach_native(model, native=None):
 
 def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=None, atol=None,
                    max_step=None, first_step=None, dt=None, t_start=0.0, progress=None,
-                   max_events=100000, max_event_rate=100, native=None):
+                   max_events=100000, max_event_rate=100, native=None, inputs=None):
     """Simulate a generated model from ``t_start`` to ``t_end``; see the module docstring.
 
     ``p``: None, a dict of parameter overrides or a full parameter array.
@@ -5011,9 +5112,15 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     ``atol`` is absolute, in the SI unit of each state: a charge in microcoulombs
     needs a smaller one. ``progress(t)`` is called after every step. ``native``: None runs the
     model's compiled C code where it can (else numpy), False always numpy; ``stats["code"]``
-    says which ran and ``stats["code_note"]`` why not C.
+    says which ran and ``stats["code_note"]`` why not C. ``inputs``: ``{name: (times, values) or
+    f(t)}`` for the model's external inputs (EXTERNAL_INPUT_NAMES, SI); one not given takes its default.
     """
     model = _Model(model)       # a copy: the native functions are attached to this run's only
+    store = model.EXTERNAL_INPUTS
+    supplied = external_inputs(inputs, model.EXTERNAL_INPUT_NAMES)
+    if store is not None:       # a run never depends on the signals given to the runs before it
+        store.clear()
+        store.update(supplied)
     _BLOCK_SOLUTIONS.clear()    # algebraic loops start from their guesses: a run never depends on the runs before it
     padded = not model.STATE_NAMES
     if padded:
@@ -5059,6 +5166,14 @@ def simulate_model(model, t_end=None, p=None, t_eval=None, *, method=None, rtol=
     else:
         run.stats["compiler"] = compiler_label("c")
     result = run.run()
+    if store is not None and model.EXTERNAL_INPUT_NAMES:
+        # which signal each external input took ("u: table, F_ext: default")
+        result.stats["external_inputs"] = ", ".join(
+            f"{name}: " + (("function" if callable(supplied[name]) else "table") if name in supplied else "default")
+            for name in model.EXTERNAL_INPUT_NAMES)
+        deferred = getattr(result.variables, "_deferred", None)
+        if deferred is not None and deferred.tasks:
+            deferred.tasks = [_with_inputs(store, supplied, task) for task in deferred.tasks]
     if padded:
         result.states.pop(_PADDING, None)
         result.jumps = [(time, {}, {}) for time, _, _ in result.jumps]

@@ -698,6 +698,7 @@ class _Scope:
     params_before: "_Above | frozenset[str] | None" = None   # in a parameter declaration: those above it
     current: str | None = None              # the name being defined (a parameter's self-reference)
     constant_locals: bool = False           # locals are constants (function arguments)
+    code: str = "E316"                      # the code of a name this place may not use
 
     def constant(self, what: str) -> "_Scope":
         """The scope of a table's breakpoints inside this one: constants only."""
@@ -756,7 +757,8 @@ class _ExpressionChecker:
 
     # names -------------------------------------------------------------------
     def _not_allowed(self, node, phrase: str) -> None:
-        self.report(_error("E316", f"{self.scope.what} cannot use {phrase}", node.span, hint=self.scope.rule))
+        self.report(_error(self.scope.code, f"{self.scope.what} cannot use {phrase}", node.span,
+                           hint=self.scope.rule))
 
     def _check_Name(self, node: ast.Name) -> None:
         scope, name = self.scope, node.name
@@ -1117,6 +1119,8 @@ _CONSTANT_RULE = "{} is a constant: numbers, parameters, pi and functions"
 _INPUT_RULE = ("an input is a signal of t, parameters and other inputs (table, step, csv, functions); "
                "feedback from the states goes into an element's law, a modulated source's for a controller "
                "(MSe drive : e = Kp*(x_ref - mass.q))")
+_EXTERNAL_RULE = ("an external input's default is a constant: numbers, parameters, pi and functions; the host "
+                  "supplies the signal itself (a table of times and values, a function of t or a CSV file)")
 _GENERAL_RULE = ("an expression may use parameters, inputs, outputs, model states, t, functions and graph "
                  "variables (X.e, X.f, X.q, J.e, b3.f)")
 
@@ -1220,7 +1224,11 @@ def check_expressions(m: _Model) -> None:
                        params_before=_Above(order, index), current=param.name)
         _check_expr(m, param.value, scope)
     for signal in m.inputs:
-        _check_expr(m, signal.value, _scope(m, "an input", SIGNAL, _INPUT_RULE))
+        if signal.external:
+            _check_expr(m, signal.value, _scope(m, f"the default of external input '{signal.name}'", CONSTANT,
+                                                _EXTERNAL_RULE, code="E344"))
+        else:
+            _check_expr(m, signal.value, _scope(m, "an input", SIGNAL, _INPUT_RULE))
     for output in m.outputs:
         _check_expr(m, output.value, _scope(m, "an output", GENERAL, _GENERAL_RULE))
     for element in m.elements:
@@ -1647,6 +1655,7 @@ def check_constants(m: _Model, values: Mapping[str, float]) -> None:
     for laws in m.element_laws.values():
         constants += [law.value for law in laws.initials.values()]
     constants += [laws.initial.value for laws in m.model_states.values() if laws.initial is not None]
+    constants += [signal.value for signal in m.inputs if signal.external]      # external inputs' defaults
     for expr in constants:
         _try_evaluate(m, expr, values)
     for expr in _all_expressions(m):
@@ -1836,6 +1845,11 @@ def _check_input_replacement(m: _Model, plan: _ExperimentPlan, item: ast.Input, 
                         related=[Related(plan.inputs[item.name].name_span, "first replaced here")]))
         return
     m.used.add(item.name)
+    if item.external:
+        m.report(_error("E345", f"{where} declares input '{item.name}' external", item.name_span,
+                        hint=f"'external' belongs on the model's input ('input {item.name} [UNIT] external = ...'); "
+                             f"an experiment replaces an input with a signal ('input {item.name} = ...')"))
+        return
     _require_coherent(m, item.unit, f"input '{item.name}'", "an input is computed in SI")
     _check_expr(m, item.value, _scope(m, "an input", SIGNAL, _INPUT_RULE))
     plan.inputs[item.name] = item
@@ -1924,7 +1938,7 @@ def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
 
 def _signal(item: ast.Input, description: str | None = None) -> Signal:
     return Signal(item.name, item.value, item.unit.text if item.unit else None,
-                  item.description or description, item.span)
+                  item.description or description, item.span, external=item.external, name_span=item.name_span)
 
 
 def _experiment_def(m: _Model, plan: _ExperimentPlan, base_values: Mapping[str, float],
@@ -2100,6 +2114,9 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     if any(d.is_error for d in diagnostics):
         return None, diagnostics
     inputs = {i.name: _signal(i) for i in m.inputs}
+    for i in m.inputs:
+        if i.external:          # its default's value (SI), for the note that says it is used
+            inputs[i.name] = dataclasses.replace(inputs[i.name], default=_try_evaluate(m, i.value, chosen_values))
     if selected is not None:
         inputs.update(experiment_defs[selected.name].inputs)
     graph = _graph(m, _parameters(m, chosen_definitions, chosen_values), inputs, experiment_defs)

@@ -265,19 +265,134 @@ def _check_bound_divisors(ss, namespace, overrides: Mapping[str, float]) -> None
         raise ModelError(found, getattr(ss.graph, "sources", None))
 
 
+# ------------------------------------------------------------ external inputs
+
+
+def _input_error(code: str, message: str, hint: str | None = None) -> UsageError:
+    return UsageError(Diagnostic("error", code, message, hint=hint))
+
+
+def external_inputs(ss, inputs) -> dict:
+    """The signals a host gives the external inputs of ``ss`` (``input u [V] external``), checked:
+    ``{name: (times, values) or f(t)}``, SI. E805 for a name that is no input, E806 for an input
+    the model computes itself, E807 for a signal that is not a table of numbers or a function."""
+    if inputs is None:
+        return {}
+    if not isinstance(inputs, Mapping):
+        raise _input_error("E807", f"inputs must be a dict {{name: (times, values) or f(t)}}, not "
+                                   f"{type(inputs).__name__}", hint='e.g. inputs={"u": ([0, 1], [0, 10])}')
+    graph = getattr(ss, "graph", None)
+    signals = dict(getattr(graph, "inputs", None) or {})
+    external = [name for name, signal in signals.items() if getattr(signal, "external", False)]
+    listed = ", ".join(external) if external else "none"
+    from bondc.runtime import InputError, external_inputs as prepare
+
+    for name in inputs:
+        if name not in signals:
+            close = difflib.get_close_matches(str(name), external, n=1)
+            raise _input_error("E805", f"the model has no input '{name}' to supply",
+                               hint=(f"did you mean '{close[0]}'? " if close else "") + f"its external inputs: {listed}")
+        if name not in external:
+            raise _input_error("E806", f"input '{name}' is not external: the model computes it",
+                               hint=f"declare it 'input {name} [UNIT] external' to supply it from outside; "
+                                    f"the external inputs: {listed}")
+    try:
+        return prepare(inputs, tuple(external))
+    except InputError as error:
+        raise _input_error("E807", f"cannot use the signal given for an external input: {error}",
+                           hint="give (times, values): two sequences of numbers of one length, times not "
+                                "decreasing, in SI; or a function of t") from None
+
+
+def read_input_files(ss, specs: Sequence[str]) -> dict:
+    """``bondc simulate --input u=FILE.csv[:COLUMN]``: each external input's table from a CSV file,
+    read by the reader of ``csv()`` (time column ``t`` or ``time``, else the first; units in the
+    header applied; rows as csv() reads them). COLUMN defaults to the input's name, or to the only
+    column besides time. Names are checked as :func:`external_inputs` does (E805, E806); a file
+    or column that cannot be read is E807."""
+    from bondc.numeric import csv_scales
+    from bondc.runtime import CsvError, csv_columns, load_csv
+
+    graph = getattr(ss, "graph", None)
+    signals = dict(getattr(graph, "inputs", None) or {})
+    tables: dict = {}
+    for spec in specs or ():
+        name, equals, target = spec.partition("=")
+        name = name.strip()
+        if not equals or not name or not target:
+            raise _input_error("E807", f"--input takes NAME=FILE.csv[:COLUMN], not '{spec}'",
+                               hint="e.g. --input u=drive.csv:voltage")
+        if name in tables:
+            raise _input_error("E807", f"--input gives input '{name}' twice")
+        external_inputs(ss, {name: lambda t: 0.0})          # the name: E805, E806
+        path, column = target, None
+        if not Path(target).is_file() and ":" in target:
+            path, _, column = target.rpartition(":")
+        if not Path(path).is_file():
+            raise _input_error("E807", f"--input {name}: no file '{path}'",
+                               hint="the file is read relative to the current directory")
+        try:
+            columns = [c for c, _ in csv_columns(path)]
+        except (OSError, UnicodeDecodeError, ValueError) as error:
+            raise _input_error("E807", f"--input {name}: cannot read '{path}': {error}") from None
+        if column is None:
+            lowered = [c.lower() for c in columns]
+            time_index = lowered.index("t") if "t" in lowered else (lowered.index("time") if "time" in lowered else 0)
+            others = [c for i, c in enumerate(columns) if i != time_index]
+            column = name if name in columns else (others[0] if len(others) == 1 else None)
+            if column is None:
+                raise _input_error("E807", f"--input {name}: '{path}' has no column '{name}'",
+                                   hint=f"name the column: --input {name}={path}:COLUMN (its columns: "
+                                        f"{', '.join(columns)})")
+        elif column not in columns:
+            close = difflib.get_close_matches(column, columns, n=1)
+            raise _input_error("E807", f"--input {name}: '{path}' has no column '{column}'",
+                               hint=(f"did you mean '{close[0]}'? " if close else "") + f"its columns: "
+                                    f"{', '.join(columns)}")
+        try:
+            time_scale, value_scale = csv_scales(path, column)
+            times, values = load_csv(path, column)
+        except (CsvError, ValueError, OSError) as error:
+            raise _input_error("E807", f"--input {name}: {error}",
+                               hint="a header line (time first, units in brackets as 't [ms]'), then rows of "
+                                    "numbers; times must not decrease") from None
+        _check_header_unit(name, signals.get(name), path, column)
+        tables[name] = (times * time_scale, values * value_scale)
+    return external_inputs(ss, tables)
+
+
+def _check_header_unit(name, signal, path, column) -> None:
+    """E807 when the unit a file's header gives a column is not of the input's declared dimension."""
+    from bondc.numeric import unit_of
+    from bondc.runtime import csv_columns
+
+    declared = getattr(signal, "unit_text", None)
+    written = dict(csv_columns(path)).get(column)
+    if not declared or not written:
+        return
+    have, want = unit_of(written), unit_of(declared)
+    if have is not None and want is not None and tuple(have.dims) != tuple(want.dims):
+        raise _input_error("E807", f"--input {name}: column '{column}' of '{path}' is in [{written}], which is not "
+                                   f"a unit of input '{name}' [{declared}]",
+                           hint="give the column's unit in its header in a unit of the input's dimension")
+
+
 def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | None = None,
              overrides: Mapping[str, float] | None = None, progress: bool = False, t_eval=None,
              method: str | None = None, rtol: float | None = None, atol: float | None = None,
-             max_step: float | None = None, first_step: float | None = None) -> SimResult:
+             max_step: float | None = None, first_step: float | None = None, inputs=None) -> SimResult:
     """Simulate ``ss`` with the settings of ``experiment`` (an ExperimentDef or None).
 
     Keyword arguments override the experiment: ``t_end`` [s], ``dt`` (report
     on a regular grid instead of at every solver step), ``overrides``
     (parameter name -> SI value), ``t_eval`` (report at these times),
     ``method``/``rtol``/``atol``/``max_step``/``first_step``. ``progress``: draw a progress
-    bar on stderr when the run takes more than 2 s and stderr is a terminal.
-    Never raises for a failed run: see ``SimResult.complete``.
+    bar on stderr when the run takes more than 2 s and stderr is a terminal. ``inputs``: the
+    signals of the model's external inputs, ``{name: (times, values) or f(t)}`` in SI (see
+    :func:`external_inputs`); one not given takes its default, and the result's warnings say so
+    (I346). Never raises for a failed run: see ``SimResult.complete``.
     """
+    supplied = external_inputs(ss, inputs)
     settings = _settings(experiment, t_end, dt, method, rtol, atol, max_step, first_step)
     if settings["t_end"] is None:
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
@@ -294,15 +409,23 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
         raw = namespace["simulate_model"](
             namespace["_MODEL"], float(settings["t_end"]), p or None, t_eval, method=settings["method"],
             rtol=settings["rtol"], atol=settings["atol"], max_step=settings["max_step"],
-            first_step=settings["first_step"], dt=settings["dt"], progress=bar)
+            first_step=settings["first_step"], dt=settings["dt"], progress=bar,
+            **({"inputs": supplied} if supplied else {}))
     except ValueError as error:
         if type(error).__name__ == "CsvError":      # the generated module's own class
             raise DataError(Diagnostic("error", "E804", f"cannot read a measured signal: {error}")) from None
+        if type(error).__name__ == "InputError":    # a host's function of t that returned no number
+            raise UsageError(Diagnostic("error", "E807", f"cannot use the signal given for an external input: "
+                                                         f"{error}")) from None
         raise UsageError(Diagnostic("error", "E803", f"cannot simulate: {error}")) from None
     finally:
         if bar is not None:
             bar.close()
-    return _result(ss, experiment, namespace, raw, settings)
+    result = _result(ss, experiment, namespace, raw, settings)
+    from bondc.model import external_input_notes
+
+    result.warnings = external_input_notes(getattr(ss, "graph", None), supplied) + list(result.warnings)
+    return result
 
 
 def result_units(graph) -> dict:
@@ -593,12 +716,13 @@ def write(result: SimResult, path, all_bonds: bool = False) -> None:
 
 def run(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
         t_end: float | None = None, dt: float | None = None, output=None, all_bonds: bool = False,
-        progress: bool = False) -> SimResult:
+        progress: bool = False, inputs=None, input_files: Sequence[str] = ()) -> SimResult:
     """``bondc simulate``: load, check, derive, simulate and write; returns the result.
 
     ``experiment`` None uses the model's first experiment (if any); ``sets``
     are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
-    ``ast.SetValue``; ``output`` a ``.csv`` or ``.npz`` path (None: write
+    ``ast.SetValue``; ``inputs``/``input_files`` supply external inputs (``{name: (times, values)
+    or f(t)}``; ``"u=FILE.csv[:COLUMN]"`` texts as ``--input``); ``output`` a ``.csv`` or ``.npz`` path (None: write
     nothing). Raises ModelError/CausalityError/EquationError/UsageError for a
     model or usage problem. A failed run writes what it computed, then raises
     :class:`SimulationError` whose ``.result`` is the incomplete result.
@@ -610,7 +734,9 @@ def run(path, *, model: str | None = None, experiment: str | None = None, sets: 
         check_result_path(output)
         check_output(output)        # before any work: a bad path is not found after the run
     derived = derive_file(path, model=model, experiment=experiment, sets=sets)
-    result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress)
+    supplied = {**read_input_files(derived.state_space, input_files), **dict(inputs or {})}
+    result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress,
+                      inputs=supplied or None)
     result.warnings = list(derived.notes) + result.warnings
     if output is not None:
         write(result, output, all_bonds)

@@ -225,6 +225,55 @@ class Csv(sympy.Function):
     _pythoncode = _numpycode
 
 
+class External(sympy.Function):
+    """An external input (``input u [V] external = default``): a signal of time the host running
+    the model supplies (a table of times and values, a function of ``t``, a CSV file), ``default``
+    (a constant) where nothing supplies it.
+
+    ``args`` are ``(t, Str(name), default)``; use :attr:`name` and :attr:`default`. Evaluated at a
+    number (``bondc check``, linearisation) it is its default; the generated module reads the
+    host's signal (``bondc.runtime.external_signal``).
+    """
+
+    nargs = 3
+    is_real = True
+
+    @property
+    def name(self) -> str:
+        return self.args[1].name
+
+    @property
+    def default(self) -> sympy.Expr:
+        return self.args[2]
+
+    def fdiff(self, argindex=1):
+        raise EquationError(Diagnostic(
+            "error", "E703",
+            f"the time derivative of the external input '{self.name}' is needed (derivative causality) but "
+            "a signal the host supplies cannot be differentiated"))
+
+    def _eval_derivative(self, symbol):
+        if symbol not in self.args[0].free_symbols:
+            return sympy.Integer(0)
+        return self.fdiff(1)
+
+    def _eval_evalf(self, prec):
+        if not self.default.is_number:
+            return None
+        return self.default.evalf(prec)
+
+    def _sympystr(self, printer):
+        return f"external({self.name}, default {printer._print(self.default)})"
+
+    def _latex(self, printer):
+        return r"\operatorname{%s}\left(%s\right)" % (self.name.replace("_", r"\_"), printer._print(self.args[0]))
+
+    def _numpycode(self, printer):
+        return f"External({printer._print(self.args[0])}, {self.name!r}, {printer._print(self.default)})"
+
+    _pythoncode = _numpycode
+
+
 # --------------------------------------------------- numeric implementations
 
 def as_sympy(value):
@@ -701,7 +750,7 @@ def _kink_secant(product, symbol, leaf):
 
 
 def _held_diff(expr, symbol):
-    opaque = sorted(expr.atoms(Table, Csv), key=sympy.default_sort_key)
+    opaque = sorted(expr.atoms(Table, Csv, External), key=sympy.default_sort_key)
     if not opaque:
         return strip_impulses(sympy.diff(expr, symbol))
     held = {f: sympy.Symbol(f"_held{i}", real=True) for i, f in enumerate(opaque)}

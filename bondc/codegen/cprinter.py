@@ -234,3 +234,7 @@ class NativePrinter(BondcPrinting, C99CodePrinter):
 
     def _print_Csv(self, expr):
         raise UnsupportedExpression("a measured csv signal has no native form")
+
+    def _print_External(self, expr):
+        raise UnsupportedExpression(f"the external input '{expr.name}' is supplied by the host at run time, "
+                                    "which the numpy code reads (no native form yet)")

@@ -77,6 +77,7 @@ MODULE_NAMES = (
     "MODEL_NAME", "SOURCE_FILE", "DATA_DIR", "VECTORIZED", "x0", "rhs", "jacobian", "outputs", "variables",
     "modes", "event_functions", "simulate", "main", "_derive_parameters", "_rhs", "_jac", "_outputs", "_variables", "_switches",
     "_time_breaks", "_MODEL", "_dae", "_loop_values", "_za", "_ra", "DAE_SIZE", "_time_switches",
+    "EXTERNAL_INPUTS", "EXTERNAL_INPUT_NAMES",
 )
 _INDENT = "    "
 _LAW_LIMIT = 200
@@ -1001,6 +1002,13 @@ class _Emitter:
         lines.append("WHEN_SWITCHES = " + _tuple(when_switches))
         lines.append("TIME_SWITCHES = " + _tuple(s.index for s in plan.switches if s.event and s.time_only))
         lines.append(f"VECTORIZED = {plan.blocks == 0}")
+        # the top model's external inputs: the host sets {name: (times, values) or f(t)} here (see
+        # runtime.simulate_model's inputs); an input nothing supplies takes its default. (A model
+        # without them has neither name: its module stays as it was.)
+        external = [name for name, (_, expr) in (plan.ss.inputs or {}).items() if type(expr).__name__ == "External"]
+        if external:
+            lines.append("EXTERNAL_INPUT_NAMES = " + _tuple(external))
+            lines.append("EXTERNAL_INPUTS = {}")
         native, reason = _NativeEmitter(self).native_source()
         lines.append(f"NATIVE_SOURCE = {_text_literal(native)}")
         lines.append(f"NATIVE_UNAVAILABLE = {reason!r}")
@@ -1027,7 +1035,12 @@ class _Emitter:
         printer = self.printer()
         items, csvs, used = [], [], set()
         for item in self.plan.time_breaks:
-            if item.csv is not None:
+            if item.external is not None:
+                text = (f"[(time, {self.label(item.label)!r}, 'csv') for time in external_times(EXTERNAL_INPUTS, "
+                        f"{item.external!r})]")
+                if text not in csvs:
+                    csvs.append(text)
+            elif item.csv is not None:
                 csv = item.csv
                 path = self.data_paths.get(csv.path, csv.path)
                 scale = f", {csv.time_scale!r}" if csv.time_scale != 1.0 else ""

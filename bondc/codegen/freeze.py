@@ -43,7 +43,8 @@ Switches of time only are *known in advance*: when ``g`` (with the inputs it
 uses substituted) is linear in ``t``, its zero is a parameter expression, a
 segment boundary rather than an event; a ``table`` of such an argument is left
 as it is (``np.interp`` is continuous, its corners are segment boundaries),
-and the sample times of a ``csv`` signal are listed the same way.
+and the sample times of a ``csv`` signal (and of the table the host gives an external
+input) are listed the same way.
 
 >>> import sympy
 >>> t, f, v0 = sympy.symbols("t f v0", real=True)
@@ -62,7 +63,7 @@ import numpy as np
 import sympy
 from sympy.core.relational import Relational
 
-from bondc.symbolic import Csv, Table, as_sympy
+from bondc.symbolic import Csv, External, Table, as_sympy
 
 _LABEL_LIMIT = 120
 
@@ -98,6 +99,7 @@ class TimeBreak:
     label: str
     kind: str                       # "step", "table", "if", "csv", ...
     csv: Csv | None = None
+    external: str | None = None     # the samples of the table the host gives this external input
 
 
 @dataclass(frozen=True)
@@ -452,4 +454,9 @@ class Freezer:
 
     def _freeze_Csv(self, expr):
         self.time_breaks.append(TimeBreak(None, f"csv sample of {expr.column}", "csv", csv=expr))
+        return expr
+
+    def _freeze_External(self, expr):
+        # the host's table is known when the run starts: its samples are listed as a csv's are
+        self.time_breaks.append(TimeBreak(None, f"sample of external input {expr.name}", "csv", external=expr.name))
         return expr

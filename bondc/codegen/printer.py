@@ -7,8 +7,8 @@
 - prints floats exactly (``repr``), ``numpy`` as ``np``;
 - prints powers as ``x**2``, ``1/x``, ``np.sqrt(x)`` and, for a non-integer
   exponent, ``np.power(x, a)`` (nan for a negative base, never a complex number);
-- prints the bondc signals ``Table``/``Step``/``Csv`` as calls of
-  ``bondc.runtime``'s ``table``/``step``/``csv_signal``;
+- prints the bondc signals ``Table``/``Step``/``Csv``/``External`` as calls of
+  ``bondc.runtime``'s ``table``/``step``/``csv_signal``/``external_signal``;
 - prints a ``Piecewise`` whose conditions only test modes (the frozen laws)
   as a Python conditional expression, so only the active branch is evaluated;
   any other ``Piecewise`` as nested ``np.where``; ``Min``/``Max`` as
@@ -333,6 +333,11 @@ class BondcPrinter(BondcPrinting, NumPyPrinter):
         path = self.data_paths.get(expr.path, expr.path)
         scales = f", {expr.time_scale!r}, {expr.value_scale!r}" if len(expr.args) > 3 else ""
         return f"csv_signal({self._print(expr.args[0])}, DATA_DIR, {path!r}, {expr.column!r}{scales})"
+
+    def _print_External(self, expr):
+        # the host's table or function of t, from the module's EXTERNAL_INPUTS; the default otherwise
+        return (f"external_signal({self._print(expr.args[0])}, EXTERNAL_INPUTS, {expr.name!r}, "
+                f"{self._print(expr.default)})")
 
 
 

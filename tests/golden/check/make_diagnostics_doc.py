@@ -111,6 +111,21 @@ d("E342", "port directions disagree", "The bond at a port outside and the bond a
 
 d("E343", "instance port not bonded", "A port of a component instance is reached by no bond outside (`Damper d` declared, but no `v -> d.a`). Reported once per port at the instance; inside, the port is then taken as a boundary of zero effort so that the component's own elements are not reported as unbonded too.", "Bond the port once outside: `j -> d.a` (power into the component) or `d.a -> j`; or remove the instance.")
 
+d("E344", "external input's default is not a constant",
+  "An external input (`input u [V] external = default`, section 15) takes its signal from the host running the "
+  "model; its default, used when nothing supplies it, is a constant: numbers, parameters, `pi` and functions. "
+  "The default uses time `t`, an input, a state or `csv(...)`.",
+  "Give a constant default (`external = V0`); a signal of time belongs to a plain input (`input u [V] = "
+  "V0*step(t, 0.1)`), or supply it from the host (a table, a function of t, `--input u=FILE.csv`).")
+d("E345", "external in an experiment",
+  "An experiment's `input` replaces one of the model's inputs with a signal for that experiment; `external` "
+  "is declared on the model's own input, not in an experiment.",
+  "Write `external` on the model's input; in the experiment write `input u = ...` (the experiment's signal).")
+d("I346", "external input without a source",
+  "Information, not a problem: the model has an external input and nothing supplies it (`bondc check`, or "
+  "`bondc simulate` without `--input`), so its default is used. Said once per input.",
+  "Supply it when it matters: `bondc simulate --input u=drive.csv`, or `simulate(..., inputs={\"u\": "
+  "(times, values)})` in Python.")
 d("E401", "one-port element without exactly one bond", "An `Se Sf MSe MSf R C I` element has no bond, or two or more. Notes list each bond.", "Connect it with exactly one bond; where several bonds meet, put a 0- or 1-junction and connect the element to it.")
 d("E402", "two-port ports", "A `TF`/`GY`/`MTF`/`MGY` does not have exactly two bonds; or both its bonds point into it (or both out of it) and its ports are not named; or one port is used by both bonds; or a port name other than `p1`/`p2`; or a port name on a one-port or junction. Without port names, the bond pointing in is `p1` and the one leaving is `p2`.", "Name the ports: `a -> screw.p1` and `b -> screw.p2`; use `p1`/`p2` only on two-ports.")
 d("E403", "junction with fewer than two bonds", "A 0- or 1-junction has no bond or only one: it joins nothing.", "Connect it or remove it.")
@@ -236,6 +251,22 @@ d("E804", "measured signal unreadable at run time",
   "comes from the compile cache or, through the Python API, from a state space derived earlier. The message "
   "gives the file's absolute path and the row; it has no source location.",
   "Fix the row the message names; the time column (`t`, `time`, or else the first) must not decrease.")
+d("E805", "no such input to supply",
+  "`bondc simulate --input NAME=...` or the API's `inputs={NAME: ...}` names something that is not an input of "
+  "the model.",
+  "Use one of the external inputs the hint lists.")
+d("E806", "input is not external",
+  "A host tried to supply an input that the model computes itself (`input w [V] = ...`); only inputs "
+  "declared `external` are supplied from outside (section 15).",
+  "Declare the input `external` (with its constant default), or supply one of the external inputs the hint "
+  "lists.")
+d("E807", "external input's signal cannot be used",
+  "The signal given for an external input cannot be used: an `--input` that is not `NAME=FILE.csv[:COLUMN]`, a "
+  "file that is missing or not a CSV table, a column it does not have, a header unit of another dimension than "
+  "the input's, times that decrease; through the API, a table whose times and values differ in length or hold "
+  "nan, or a function that returns no number.",
+  "Give a table of times (not decreasing) and values of one length, in SI, or a function of t; a file as "
+  "`csv()` reads one: a header line (time first, units in brackets), then rows of numbers.")
 d("E810", "a value became nan or inf",
   "The run stopped because a state, a variable or a state derivative became `nan` or `inf`. The message "
   "names the first non-finite variable in causal order, its law and the time; the caret is under that law, and "
@@ -763,6 +794,29 @@ live("E804", Api(_IMPORTS
                                "  I   mass : f = p/2\n  push -> mass\n  experiment run\n    t_end = 1 [s]\n"
                                "  end\nend\n",
                   "push.csv": "t,force\n0,1\n0.5,1.5\n1,2\n"}))
+
+
+_DRIVE = """model Drive
+  input u [V] external    "drive voltage, supplied by the host"
+  input w [V] = 0
+  Se supply : e = u + w
+  R  load   : e = 10*f
+  C  c      : e = q/1e-3
+  1  j
+  supply -> j -> load
+  j -> c
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+_DRIVE_CSV = "t,u [V]\n0,0\n0.1,12\n1,12\n"
+live("I346", Cli("bondc check drive.bg", {"drive.bg": _DRIVE}, lines="I346"))
+live("E805", Cli("bondc simulate drive.bg --input v=drive.csv", {"drive.bg": _DRIVE, "drive.csv": _DRIVE_CSV}))
+live("E806", Cli("bondc simulate drive.bg --input w=drive.csv", {"drive.bg": _DRIVE, "drive.csv": _DRIVE_CSV}))
+live("E807", Cli("bondc simulate drive.bg --input u=drive.csv:volts", {"drive.bg": _DRIVE, "drive.csv": _DRIVE_CSV}),
+     Api("import bondc\nbondc.simulate(\"drive.bg\", inputs={\"u\": ([0, 1, 0.5], [0, 12, 12])})",
+         {"drive.bg": _DRIVE}))
 
 
 def _with(imports: str, code: str) -> str:
