@@ -58,7 +58,7 @@ def test_the_api_functions_are_functions_with_signatures_and_docstrings():
 
     _assert_the_api_functions(bondc)
     assert list(inspect.signature(bondc.simulate).parameters) == ["path", "text", "model", "experiment",
-                                                                     "overrides", "t_end", "dt"]
+                                                                     "overrides", "t_end", "dt", "inputs"]
     assert inspect.signature(bondc.equations).parameters["format"].default == "text"
     assert sys.modules["bondc.simulate"].SimResult is SimResult
     assert hasattr(importlib.import_module("bondc.equations"), "derive")
