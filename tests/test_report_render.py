@@ -387,3 +387,36 @@ def test_plot_labels_from_data_are_text_never_mathtext():
     root = ET.fromstring(svg)
     texts = "".join(root.itertext())
     assert "$\\foo$" in texts and "x_1^2 $" in texts and "$\\bar{y}$ [m]" in texts
+
+
+def test_plot_draws_each_series_thinned_to_its_extremes_and_carries_zoom_data():
+    from bondc.report.render import DISPLAY_POINTS, ZOOM_POINTS
+
+    t = np.linspace(0.0, 1.0, 200_001)
+    square = np.where(np.sin(2 * np.pi * 2000 * t) > 0, 1.0, -1.0) + 0.001 * t      # a 2 kHz PWM-like signal
+    ramp = t.copy()
+    svg = str(plot_svg(t, {"pwm": square, "ramp": ramp}, "Two", "u"))
+    for number in (0, 1):
+        d = re.search(rf'id="[^"]*-zoomline{number}">\s*<path d="([^"]*)"', svg).group(1)
+        assert 2 <= d.count("L") + 1 <= DISPLAY_POINTS                  # each series on its own budget
+    zoom = json.loads(html_module.unescape(re.search(r'data-zoom="([^"]*)"', svg).group(1)))
+    assert zoom["x"] == [0.0, 1.0] and len(zoom["lines"]) == 2
+    import base64
+
+    q = np.frombuffer(base64.b64decode(zoom["lines"][0][1]), dtype="<u2")
+    assert len(q) <= ZOOM_POINTS and q.max() > 60000 and q.min() < 5000       # both levels of the PWM kept
+    clip = re.search(r'<clipPath[^>]*>\s*<rect x="([^"]*)" y="([^"]*)" width="([^"]*)" height="([^"]*)"', svg)
+    assert zoom["box"] == pytest.approx([float(v) for v in clip.groups()], abs=0.01)   # the data area
+    # markers cannot be redrawn by the zoom: such a plot has no data-zoom
+    assert "data-zoom" not in str(plot_svg(t[:100], {"m": t[:100]}, "M", "m", styles={"m": {"marker": "."}}))
+
+
+def test_only_a_report_with_zoomable_plots_has_a_script(model):
+    graph, causal = model
+    html = render_report(ReportContext(ReportHeader.for_graph(graph, SOURCE, date="2024-05-01"),
+                                       highlight_bg(SOURCE)))
+    assert "<script" not in html and "script-src &#39;none&#39;" in html
+    without_zoom_script(html)
+    html = render_report(full_context(graph, causal))
+    assert html.count("<script>") == 1 and "script-src &#39;sha256-" in html
+    without_zoom_script(html)
