@@ -297,6 +297,10 @@ def test_plots_zoom_pan_and_reset_in_chromium(browser):
     report = pwm_report()
     url = report.resolve().as_uri()
     browser.open(url)
+    deadline = time.monotonic() + TIMEOUT                      # the zoom data are inflated once loaded
+    while browser.evaluate('document.querySelectorAll("svg.plot[data-zoom]:not([data-zoom-ready])").length'):
+        assert time.monotonic() < deadline, "the plots' zoom data were never ready"
+        time.sleep(0.05)
     geometry = json.loads(browser.evaluate("""JSON.stringify((() => {
       const svg = document.querySelector("svg.plot[data-zoom]");
       svg.scrollIntoView();

@@ -6,10 +6,16 @@
   "use strict";
   var NS = "http://www.w3.org/2000/svg", XMAX = 4294967295, YMAX = 65534, GAP = 65535;
 
-  function decode(text, Type) {                 // base64 of little-endian integers -> a typed array
-    var bytes = atob(text), buffer = new Uint8Array(bytes.length);
-    for (var i = 0; i < bytes.length; i++) buffer[i] = bytes.charCodeAt(i);
-    return new Type(buffer.buffer);
+  function inflate(text) {                      // base64 of zlib data -> a promise of its bytes
+    var bytes = Uint8Array.from(atob(text), function (c) { return c.charCodeAt(0); });
+    return new Response(new Blob([bytes]).stream().pipeThrough(new DecompressionStream("deflate"))).arrayBuffer();
+  }
+
+  function samples(line, buffer) {              // differences of uint32 x, then of uint16 y -> the values
+    var n = buffer.byteLength / 6, t = new Uint32Array(buffer, 0, n), y = new Uint16Array(buffer, 4 * n, n);
+    for (var i = 1; i < n; i++) { t[i] += t[i - 1]; y[i] += y[i - 1]; }
+    line.t = t;
+    line.y = y;
   }
 
   function first(t, f) {                        // the first index with t[i] >= f (binary search)
@@ -36,10 +42,15 @@
   function setup(svg) {
     var zoom = JSON.parse(svg.getAttribute("data-zoom"));
     var x0 = zoom.box[0], y0 = zoom.box[1], w = zoom.box[2], h = zoom.box[3];
-    var lines = zoom.lines.map(function (pair, i) {
+    var lines = zoom.lines.map(function (text, i) {
       var path = svg.querySelector('[id$="-zoomline' + i + '"] path');
-      return path && {path: path, d: path.getAttribute("d"), t: decode(pair[0], Uint32Array), y: decode(pair[1], Uint16Array)};
-    }).filter(Boolean);
+      return {path: path, d: path && path.getAttribute("d"), t: null, y: null};
+    });
+    Promise.all(zoom.lines.map(inflate)).then(function (buffers) {
+      buffers.forEach(function (buffer, i) { samples(lines[i], buffer); });
+      svg.setAttribute("data-zoom-ready", "");
+      draw();
+    });
     var xticks = Array.prototype.slice.call(svg.querySelectorAll('g[id*="-xtick_"]'));
     var label = xticks.length && xticks[0].querySelector("text");
     var axis = element("g", {"class": "zoom-ticks"});
@@ -55,6 +66,7 @@
       xticks.forEach(function (g) { g.style.display = whole ? "" : "none"; });
       while (axis.firstChild) axis.removeChild(axis.firstChild);
       lines.forEach(function (line) {
+        if (!line.path || !line.t) return;
         if (whole) { line.path.setAttribute("d", line.d); return; }
         var t = line.t, y = line.y, end = Math.min(first(t, b) + 1, t.length), d = [], pen = "M";
         for (var i = Math.max(first(t, a) - 1, 0); i < end; i++) {
