@@ -11,6 +11,9 @@ but the standard library and the ``chromium`` binary (Debian package
   non-zero size, and the equations are laid out as MathML (not as text),
 
 and keeps a full-page screenshot in ``tests/artifacts/`` for a human to look at.
+The report of a 2 kHz PWM drive is zoomed and panned with the mouse (real input
+events) and reset with a double-click; screenshots of its first plot before and
+after the zoom are kept there too.
 
 Without Chromium the test is skipped, except in CI (``CI`` set to anything but
 empty, 0, false or no), where it fails: the CI image must install it
@@ -32,7 +35,7 @@ from pathlib import Path
 
 import pytest
 
-from test_report_build import flagship_report
+from test_report_build import flagship_report, pwm_report
 
 ARTIFACTS = Path(__file__).parent / "artifacts"
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
@@ -145,6 +148,8 @@ class DevTools:
     # -- the page
 
     def open(self, url: str) -> None:
+        """Open ``url`` in a new page; the events of pages opened before are forgotten."""
+        self.events = []
         target = self.call("Target.createTarget", {"url": "about:blank"}, page=False)["targetId"]
         self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True},
                                  page=False)["sessionId"]
@@ -245,7 +250,7 @@ def test_flagship_report_in_chromium(browser):
     assert requests and set(requests) == {url}, requests          # the page loads nothing but itself
 
     assert measured["title"].startswith("ElectroPneumaticHybrid")
-    assert measured["scripts"] == 0
+    assert measured["scripts"] == 1                              # zoom.js, bondc's own
     [diagram] = measured["diagram"]
     assert diagram[0] > 300 and diagram[1] > 300
     assert len(measured["plots"]) >= 8                           # outputs, power, validation-free flagship
@@ -258,3 +263,101 @@ def test_flagship_report_in_chromium(browser):
     assert len(measured["fractions"]) >= 6 and all(height > 25 for _, height in measured["fractions"][:6])
     assert all(width > 0 and height > 0 for width, height in measured["fractions"])
     assert measured["page"][0] <= WIDTH                          # nothing forces a horizontal scroll
+
+
+def _problems(events) -> list[str]:
+    problems = []
+    for event in events:
+        method, params = event["method"], event.get("params", {})
+        if method == "Runtime.consoleAPICalled":
+            problems.append(f"console.{params.get('type')}: {params.get('args')}")
+        elif method == "Runtime.exceptionThrown":
+            problems.append(f"exception: {params.get('exceptionDetails')}")
+        elif method == "Log.entryAdded" and params["entry"]["level"] in ("error", "warning"):
+            problems.append(f"log {params['entry']['level']}: {params['entry'].get('text')}")
+    return problems
+
+
+PLOT_STATE = """JSON.stringify((() => {
+  const svg = document.querySelectorAll("svg.plot[data-zoom]")[%d];
+  const visible = (g) => getComputedStyle(g).display !== "none";
+  return {
+    view: svg.getAttribute("data-view").split(" ").map(Number),
+    d: svg.querySelector('[id$="-zoomline0"] path').getAttribute("d").length,
+    ticks: Array.from(svg.querySelectorAll('g[id*="-xtick_"]')).filter(visible)
+      .map((g) => g.querySelector("text").textContent)
+      .concat(Array.from(svg.querySelectorAll("g.zoom-ticks text")).map((t) => t.textContent)),
+  };
+})())"""
+
+
+def test_plots_zoom_pan_and_reset_in_chromium(browser):
+    """Drag across the PWM report's first plot: its time range narrows, the line is redrawn from the
+    finer samples and the x ticks follow; Shift+drag pans; a double-click shows the whole run again."""
+    report = pwm_report()
+    url = report.resolve().as_uri()
+    browser.open(url)
+    deadline = time.monotonic() + TIMEOUT                      # the zoom data are inflated once loaded
+    while browser.evaluate('document.querySelectorAll("svg.plot[data-zoom]:not([data-zoom-ready])").length'):
+        assert time.monotonic() < deadline, "the plots' zoom data were never ready"
+        time.sleep(0.05)
+    geometry = json.loads(browser.evaluate("""JSON.stringify((() => {
+      const svg = document.querySelector("svg.plot[data-zoom]");
+      svg.scrollIntoView();
+      const r = svg.getBoundingClientRect(), box = JSON.parse(svg.getAttribute("data-zoom")).box;
+      const k = r.width / svg.viewBox.baseVal.width;
+      return {rect: [r.left, r.top + window.scrollY, r.width, r.height], left: r.left + box[0] * k,
+              top: r.top + box[1] * k, width: box[2] * k, height: box[3] * k};
+    })())"""))
+    x, y, width, height = geometry["rect"]
+    clip = {"x": x, "y": y, "width": width, "height": height, "scale": 1}
+
+    def shot(name: str) -> None:
+        data = browser.call("Page.captureScreenshot", {"format": "png", "clip": clip})["data"]
+        (ARTIFACTS / name).write_bytes(base64.b64decode(data))
+
+    def state() -> dict:
+        return json.loads(browser.evaluate(PLOT_STATE % 0))
+
+    def drag(start: float, end: float, modifiers: int = 0) -> None:
+        middle = geometry["top"] + geometry["height"] / 2
+        at = [geometry["left"] + f * geometry["width"] for f in (start, (start + end) / 2, end)]
+        for kind, where, buttons in (("mouseMoved", at[0], 0), ("mousePressed", at[0], 1), ("mouseMoved", at[1], 1),
+                                     ("mouseMoved", at[2], 1), ("mouseReleased", at[2], 0)):
+            browser.call("Input.dispatchMouseEvent", {"type": kind, "x": where, "y": middle, "button": "left",
+                                                      "buttons": buttons, "clickCount": 1, "modifiers": modifiers})
+
+    ARTIFACTS.mkdir(exist_ok=True)
+    whole = state()
+    t_end = whole["view"][1]
+    assert whole["view"] == [0.0, t_end] and t_end > 0
+    shot("pwm_plot_whole.png")
+
+    drag(0.40, 0.42)                                            # 2 % of the run: some 40 PWM periods
+    zoomed = state()
+    shot("pwm_plot_zoomed.png")
+    assert zoomed["view"][0] == pytest.approx(0.40 * t_end, abs=0.003 * t_end)
+    assert zoomed["view"][1] == pytest.approx(0.42 * t_end, abs=0.003 * t_end)
+    assert zoomed["d"] != whole["d"] and zoomed["ticks"] != whole["ticks"]
+    assert len(zoomed["ticks"]) >= 3
+    assert all(zoomed["view"][0] <= float(t) <= zoomed["view"][1] for t in zoomed["ticks"])
+
+    drag(0.6, 0.4, modifiers=8)                                 # Shift+drag to the left: later times
+    panned = state()
+    span = zoomed["view"][1] - zoomed["view"][0]
+    assert panned["view"][0] == pytest.approx(zoomed["view"][0] + 0.2 * span, rel=0.05)
+    assert panned["view"][1] - panned["view"][0] == pytest.approx(span, rel=1e-6)
+
+    middle = (geometry["left"] + geometry["width"] / 2, geometry["top"] + geometry["height"] / 2)
+    for count in (1, 2):                                        # a double-click: two clicks, then dblclick
+        for kind in ("mousePressed", "mouseReleased"):
+            browser.call("Input.dispatchMouseEvent", {"type": kind, "x": middle[0], "y": middle[1], "button": "left",
+                                                      "buttons": 1 if kind == "mousePressed" else 0,
+                                                      "clickCount": count})
+    assert state() == whole
+
+    other = json.loads(browser.evaluate(PLOT_STATE % 1))          # the other plots were left as they were
+    assert other["view"] == [0.0, t_end]
+    assert _problems(browser.events) == []                      # no script error, no CSP violation
+    requests = [e["params"]["request"]["url"] for e in browser.events if e["method"] == "Network.requestWillBeSent"]
+    assert set(requests) == {url}

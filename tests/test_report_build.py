@@ -16,7 +16,7 @@ from bondc.errors import DataError, ModelError, UsageError
 from bondc.report import build
 from bondc.report.build import build_report, default_output, output_groups, run_pipeline, state_equations
 from bondc.report.render import source_sha256
-from test_report_render import check_html
+from test_report_render import check_html, without_zoom_script
 
 ROOT = Path(__file__).parent.parent
 MODELS = ROOT / "models"
@@ -34,7 +34,9 @@ def flagship_report() -> Path:
 
 
 def assert_self_contained(html: str) -> None:
-    """No script, no stylesheet link, nothing fetched: the only URLs are xmlns namespace names."""
+    """No script but bondc's own zoom.js, no stylesheet link, nothing fetched: the only URLs are xmlns
+    namespace names."""
+    html = without_zoom_script(html)
     without_namespaces = re.sub(r'\sxmlns(:[\w-]+)?="[^"]*"', "", html)
     lowered = without_namespaces.lower()
     for forbidden in ("http://", "https://", "<script", "<link", "@import", "<iframe", "<object", "<embed",
@@ -178,7 +180,7 @@ def test_hostile_text_is_shown_as_text(tmp_path):
     check_html(html)
     assert_self_contained(html)
     assert "Description &lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; &lt;b&gt;bold&lt;/b&gt;" in html
-    assert "<script" not in html and "<b>bold" not in html and "<img" not in html
+    assert "<script" not in without_zoom_script(html) and "<b>bold" not in html and "<img" not in html
     assert "&lt;style&gt;body{display:none}&lt;/style&gt;" in html
     assert html.count("<style>") == 1
 
@@ -351,3 +353,73 @@ def test_the_states_of_a_component_model_are_described_by_their_own_element():
     _, _, states = state_equations(run.state_space)
     text = " ".join(str(cell) for row in states.rows for cell in row)
     assert "generalised momentum of I mass.body" in text and "state of C cylinder.chamber" in text
+
+
+# ---------------------------------------------------------------- heavy runs stay light
+
+PWM_MOTOR = Path(__file__).parent / "fixtures" / "report" / "pwm_motor.bg"
+
+
+@functools.lru_cache(maxsize=None)
+def pwm_report() -> Path:
+    """The report of a DC motor on a 2 kHz PWM drive (12 000 solver points, 48 000 operating points),
+    built once per test session (the browser test zooms it)."""
+    ARTIFACTS.mkdir(exist_ok=True)
+    return build_report(PWM_MOTOR, motors=CATALOGUE, output=ARTIFACTS / "pwm_motor_report.html", date=DATE)
+
+
+def _plot(html: str, title: str) -> str:
+    [svg] = [svg for svg in re.findall(r'<svg class="plot".*?</svg>', html, flags=re.S)
+             if f"<title>{title}</title>" in svg]
+    return svg
+
+
+def _vertices(d: str) -> np.ndarray:
+    return np.array([[float(x), float(y)] for x, y in re.findall(r"[ML]\s*(-?[\d.]+)\s+(-?[\d.]+)", d)])
+
+
+def _y_axis(svg: str):
+    """Value at an SVG y, from the plot's own y tick labels (the axis a reader sees)."""
+    ticks = re.findall(r'<g id="[^"]*-ytick_\d+">.*?<use [^>]*\by="([-\d.]+)".*?<text [^>]*>([^<]*)</text>',
+                       svg, flags=re.S)
+    (y_a, label_a), (y_b, label_b) = ticks[0], ticks[-1]
+    value_a, value_b = (float(label.replace("−", "-")) for label in (label_a, label_b))
+    y_a, y_b = float(y_a), float(y_b)
+    return lambda y: value_a + (np.asarray(y) - y_a) * (value_b - value_a) / (y_b - y_a)
+
+
+def test_a_pwm_drive_report_stays_light_and_keeps_every_extreme(tmp_path):
+    import html as html_module
+    import json
+
+    from bondc.cli import main
+    from bondc.report.render import DISPLAY_POINTS, MAX_MARKERS, ZOOM_POINTS, zoom_samples
+
+    html = pwm_report().read_text(encoding="utf-8")
+    assert len(html.encode("utf-8")) < 3_000_000              # it was 6.3 MB: 48 021 markers in one plot
+    assert_self_contained(html)
+    # the independent expectation: the CSV `bondc simulate` writes, every solver point
+    assert main(["simulate", str(PWM_MOTOR), "-o", str(tmp_path / "run.csv")]) == 0
+    csv = np.genfromtxt(tmp_path / "run.csv", delimiter=",", names=True)
+    assert csv.size > 4 * DISPLAY_POINTS
+    for name, column in (("current", "current_A"), ("torque", "torque_Nm"), ("omega", "omega_rads")):
+        svg = _plot(html, f"Output {name}")
+        value = _y_axis(svg)
+        low, high = float(np.min(csv[column])), float(np.max(csv[column]))
+        tolerance = 1e-3 * (high - low)
+        drawn = _vertices(re.search(r'id="[^"]*-zoomline0">\s*<path d="([^"]*)"', svg).group(1))
+        assert 100 < len(drawn) <= DISPLAY_POINTS
+        assert abs(float(value(drawn[:, 1]).min()) - low) < tolerance, name     # SVG y grows downwards
+        assert abs(float(value(drawn[:, 1]).max()) - high) < tolerance, name
+        # the finer samples the zoom draws from hold the same extremes
+        zoom = json.loads(html_module.unescape(re.search(r'data-zoom="([^"]*)"', svg).group(1)))
+        [line] = zoom["lines"]
+        times, q = zoom_samples(line)
+        assert len(q) == len(times) <= ZOOM_POINTS and np.all(np.diff(times.astype(float)) > 0)
+        x0, y0, w, h = zoom["box"]
+        fine = value(y0 + h * (1 - q / 65534.0))
+        assert abs(float(fine.min()) - low) < tolerance and abs(float(fine.max()) - high) < tolerance, name
+    # the operating points: a few thousand markers of the 48 000, and the caption says so
+    motor = _plot(html, "torque against speed over the motors' envelopes")
+    assert 100 < motor.count("<use ") <= MAX_MARKERS + 50
+    assert re.search(r"\d[\d\u2009]* of the 48\u2009\d{3} operating points are drawn", html)

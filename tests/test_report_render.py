@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import html as html_module
+import json
 import re
 import xml.etree.ElementTree as ET
 from html.parser import HTMLParser
@@ -19,7 +21,7 @@ from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
     Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection, causality_notes,
     causality_rows, environment, equation_markup, format_number, format_unit, math_markup, parameter_rows,
-    plot_svg, render_report, source_sha256,
+    content_security_policy, plot_svg, render_report, source_sha256, zoom_script,
 )
 from bondc.report.validate import compare, parse_compare_spec
 from bondc.semantic import build
@@ -182,8 +184,31 @@ def test_text_is_escaped(html):
     assert "<b>mass</b>" not in html and "<i>response" not in html
 
 
+def without_zoom_script(html: str) -> str:
+    """``html`` without bondc's own script (``zoom.js`` exactly as packaged, at most once), which its
+    Content-Security-Policy names by hash; anything else that would script the page is still there."""
+    script = f"<script>{zoom_script()}</script>"
+    assert html.count("<script") == html.count(script) <= 1
+    policy = content_security_policy(str(zoom_script()) if script in html else None)
+    assert html.count('<meta http-equiv="Content-Security-Policy"') == 1
+    assert f'<meta http-equiv="Content-Security-Policy" content="{policy.replace(chr(39), "&#39;")}">' in html
+    return re.sub(r'data-zoom="([^"]*)"', _zoom_data_checked, html.replace(script, ""))
+
+
+def _zoom_data_checked(match: re.Match) -> str:
+    """A plot's data-zoom is numbers and base64 only (no text of the model); emptied, so that its
+    base64 (which may hold e.g. "src=") is not taken for markup."""
+    data = json.loads(html_module.unescape(match.group(1)))
+    assert set(data) == {"box", "x", "lines"}
+    assert all(isinstance(v, (int, float)) for v in data["box"] + data["x"])
+    assert all(re.fullmatch(r"[A-Za-z0-9+/]*={0,2}", line) for line in data["lines"])
+    return 'data-zoom=""'
+
+
+
 def test_report_is_self_contained(html):
-    """No scripts and nothing fetched: the only URIs allowed are namespace names in xmlns attributes."""
+    """No script but bondc's own and nothing fetched: the only URIs allowed are namespace names in xmlns attributes."""
+    html = without_zoom_script(html)
     without_namespaces = re.sub(r'\sxmlns(:[\w-]+)?="[^"]*"', "", html)
     lowered = without_namespaces.lower()
     for forbidden in ("http://", "https://", "src=", "<script", "<link", "@import", "<iframe", "<object",
@@ -362,3 +387,35 @@ def test_plot_labels_from_data_are_text_never_mathtext():
     root = ET.fromstring(svg)
     texts = "".join(root.itertext())
     assert "$\\foo$" in texts and "x_1^2 $" in texts and "$\\bar{y}$ [m]" in texts
+
+
+def test_plot_draws_each_series_thinned_to_its_extremes_and_carries_zoom_data():
+    from bondc.report.render import DISPLAY_POINTS, ZOOM_POINTS, zoom_samples
+
+    t = np.linspace(0.0, 1.0, 200_001)
+    square = np.where(np.sin(2 * np.pi * 2000 * t) > 0, 1.0, -1.0) + 0.001 * t      # a 2 kHz PWM-like signal
+    ramp = t.copy()
+    svg = str(plot_svg(t, {"pwm": square, "ramp": ramp}, "Two", "u"))
+    for number in (0, 1):
+        d = re.search(rf'id="[^"]*-zoomline{number}">\s*<path d="([^"]*)"', svg).group(1)
+        assert 2 <= d.count("L") + 1 <= DISPLAY_POINTS                  # each series on its own budget
+    zoom = json.loads(html_module.unescape(re.search(r'data-zoom="([^"]*)"', svg).group(1)))
+    assert zoom["x"] == [0.0, 1.0] and len(zoom["lines"]) == 2
+    x, q = zoom_samples(zoom["lines"][0])
+    assert len(q) == len(x) <= ZOOM_POINTS and q.max() > 60000 and q.min() < 5000    # both levels of the PWM
+    assert x[0] == 0 and x[-1] == 2 ** 32 - 1 and np.all(np.diff(x.astype(float)) > 0)
+    clip = re.search(r'<clipPath[^>]*>\s*<rect x="([^"]*)" y="([^"]*)" width="([^"]*)" height="([^"]*)"', svg)
+    assert zoom["box"] == pytest.approx([float(v) for v in clip.groups()], abs=0.01)   # the data area
+    # markers cannot be redrawn by the zoom: such a plot has no data-zoom
+    assert "data-zoom" not in str(plot_svg(t[:100], {"m": t[:100]}, "M", "m", styles={"m": {"marker": "."}}))
+
+
+def test_only_a_report_with_zoomable_plots_has_a_script(model):
+    graph, causal = model
+    html = render_report(ReportContext(ReportHeader.for_graph(graph, SOURCE, date="2024-05-01"),
+                                       highlight_bg(SOURCE)))
+    assert "<script" not in html and "script-src &#39;none&#39;" in html
+    without_zoom_script(html)
+    html = render_report(full_context(graph, causal))
+    assert html.count("<script>") == 1 and "script-src &#39;sha256-" in html
+    without_zoom_script(html)

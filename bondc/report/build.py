@@ -32,8 +32,8 @@ variable (``b3.e``).
 >>> model = Path(__file__).parents[2] / "tests/fixtures/sim/rc.bg"
 >>> target = build_report(model, output=Path(tempfile.mkdtemp()) / "rc.html", date="2024-01-01")
 >>> html = target.read_text(encoding="utf-8")
->>> html.startswith("<!DOCTYPE html>"), "<script" in html, "<math" in html
-(True, False, True)
+>>> html.startswith("<!DOCTYPE html>"), html.count("<script"), "<math" in html   # the script: zoom.js
+(True, 1, True)
 """
 
 from __future__ import annotations
@@ -530,6 +530,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         warnings += energy_warnings
         motor_requirements, motor_candidates, motor_summary, verdict = _motor_sections(run, motors, inertia_ratio)
         summary = (motor_summary or _summary(run)) + energy_summary
+    motor_plot, motor_plot_caption = _motor_plot(run, motors) if motor_candidates is not None else (None, "")
     return ReportContext(
         header=_header(run, date),
         source_html=highlight_bg(run.source_text),
@@ -548,7 +549,8 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         power_tables=power_tables,
         motor_requirements=motor_requirements,
         motor_candidates=motor_candidates,
-        motor_plot=_motor_plot(run, motors) if motor_candidates is not None else None,
+        motor_plot=motor_plot,
+        motor_plot_caption=motor_plot_caption,
         validation=validation,
         warnings=warnings,
         incomplete=incomplete,
@@ -1040,9 +1042,10 @@ def _energy_sections(run: PipelineRun) -> tuple[list[Plot], list[Table], list, l
 MOTOR_TORQUE, MOTOR_SPEED = "torque", "omega"
 
 
-def _motor_plot(run: PipelineRun, motors):
+def _motor_plot(run: PipelineRun, motors) -> tuple[Markup, str]:
     """The cycle's operating points (|speed| in rpm, torque) and RMS torque over each catalogue motor's
-    continuous and peak envelopes."""
+    continuous and peak envelopes, and a note for the caption when the points were thinned for display
+    (at most :data:`~bondc.report.render.MAX_MARKERS`, see :func:`~bondc.report.render.scatter_indices`)."""
     import hashlib
     import math
 
@@ -1051,7 +1054,7 @@ def _motor_plot(run: PipelineRun, motors):
 
     from bondc.analysis.motor_report import cycle_window, find_signal
     from bondc.analysis.motors import load_catalogue, requirements
-    from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, figure_svg
+    from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, figure_svg, scatter_indices
 
     result = run.steps
     _, _, torque = find_signal(result, (MOTOR_TORQUE,), "torque")
@@ -1065,12 +1068,19 @@ def _motor_plot(run: PipelineRun, motors):
         figure = Figure(figsize=(6.4, 3.6), layout="constrained")
         axes = figure.add_subplot()
         rpm = np.abs(np.asarray(speed)[inside]) * 60 / (2 * math.pi)
-        axes.plot(rpm, np.abs(np.asarray(torque)[inside]), ".", markersize=2, color="#cf222e",
-                  label="operating points |τ|")
+        load = np.abs(np.asarray(torque)[inside])
+        kept = scatter_indices(rpm, load)
+        axes.plot(rpm[kept], load[kept], ".", markersize=2, color="#cf222e", label="operating points |τ|")
         axes.plot([need.peak_speed * 60 / (2 * math.pi)], [need.rms_torque], "o", color="#0969da",
                   label="RMS torque at peak speed")
         draw_motor_envelopes(axes, load_catalogue(motors))
-        return figure_svg(figure, title, key)
+        note = ""
+        if kept.size < rpm.size:
+            shown, total = (f"{n:,}".replace(",", "\u2009") for n in (kept.size, rpm.size))
+            note = (f"{shown} of the {total} operating points are drawn, one in each small cell of the plot the "
+                    "points fall in (those of the largest and smallest torque and speed among them): the cloud "
+                    "all of them draw")
+        return figure_svg(figure, title, key), note
 
 
 def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None

@@ -6,12 +6,21 @@ plots, power/energy tables, optional motor and validation sections);
 :func:`render_report` fills ``templates/report.html`` with it.
 
 The HTML is self-contained: CSS inline, figures as inline SVG, equations as
-MathML, no scripts, no external fonts, images or links. Templates are files
+MathML, no external fonts, images or links, and no script but bondc's own
+``templates/zoom.js`` (zoom and pan of the plots' time axis, inlined when a
+plot can be zoomed), which the page's Content-Security-Policy names by its
+hash: nothing is fetched and no other script can run. Templates are files
 loaded by one Jinja :func:`environment` with autoescaping forced on and
 ``StrictUndefined``; the only strings that reach the page unescaped are the
 ``Markup`` values made by bondc itself (:func:`~bondc.report.lexer.highlight_bg`,
 :func:`~bondc.report.diagram.bond_graph_svg`, :func:`plot_svg`,
-:func:`math_markup`), each of which escapes the text it contains.
+:func:`math_markup`), each of which escapes the text it contains, and
+:func:`zoom_script`, bondc's own script, which holds no text of a model.
+
+Plots stay light: each series is drawn thinned to every interval's extremes
+(:func:`decimation_indices`, about one interval a pixel) and carries a finer
+thinning for zooming (:func:`zoom_data`); scatter plots draw at most
+:data:`MAX_MARKERS` points (:func:`scatter_indices`).
 
 Helpers that build the pieces: :func:`plot_svg` (matplotlib, Agg/SVG),
 :func:`math_markup` / :func:`equation_markup` (sympy presentation MathML),
@@ -206,6 +215,7 @@ class ReportContext:
     motor_requirements: Table | None = None
     motor_candidates: Table | None = None
     motor_plot: Markup | None = None            # the torque-speed operating points against the motors' envelopes
+    motor_plot_caption: str = ""                # e.g. how many of the operating points the motor plot shows
     validation: ValidationSection | None = None
     warnings: Sequence[str] = ()                # diagnostics worth a reader's attention
     incomplete: str | None = None               # the diagnostic of a simulation that stopped early
@@ -329,8 +339,37 @@ def _sections(context: ReportContext) -> list[tuple[str, str]]:
     return sections
 
 
+@functools.lru_cache(maxsize=1)
+def zoom_script() -> Markup:
+    """The report's one script, ``templates/zoom.js`` (zoom and pan of the plots): bondc's own text,
+    inserted as it is in a ``<script>`` when a plot can be zoomed; no text of a model reaches it."""
+    env = environment()
+    text = env.loader.get_source(env, "zoom.js")[0]
+    if re.search(r"</|<!--", text):
+        raise ValueError("zoom.js must not contain '</' or '<!--' (it is inlined in a <script>)")
+    return Markup(text)
+
+
+def content_security_policy(script: str | None) -> str:
+    """The report's Content-Security-Policy: nothing is fetched, inline styles are allowed and the one
+    script that runs is bondc's own, named by its SHA-256 (no script at all without one)."""
+    import base64
+
+    scripts = "'none'" if script is None else \
+        "'sha256-" + base64.b64encode(hashlib.sha256(script.encode("utf-8")).digest()).decode("ascii") + "'"
+    return f"default-src 'none'; style-src 'unsafe-inline'; script-src {scripts}"
+
+
+def _zoomable(context: ReportContext) -> bool:
+    plots = list(context.plots) + list(context.power_plots)
+    if context.validation is not None:
+        plots += list(context.validation.plots)
+    return any(str(plot.svg).startswith('<svg class="plot" data-zoom="') for plot in plots)
+
+
 def render_report(context: ReportContext) -> str:
     """The report as one HTML document (a string)."""
+    script = zoom_script() if _zoomable(context) else None
     sections = _sections(context)
     numbers_ = {section_id: index for index, (section_id, _) in enumerate(sections, start=1)}
     template = environment().get_template("report.html")
@@ -341,6 +380,8 @@ def render_report(context: ReportContext) -> str:
         number=numbers_,
         setting_units=SETTING_UNITS,
         lexer_css=Markup(lexer_css()),
+        zoom_script=script,
+        csp=content_security_policy(script),
     )
 
 
@@ -420,14 +461,71 @@ def decimation_indices(t: np.ndarray, series: Sequence[np.ndarray], max_points: 
     return np.unique(np.concatenate(kept).astype(int))
 
 
+#: Most markers of a scatter plot (e.g. a cycle's operating points): more are thinned by
+#: :func:`scatter_indices` and the caption says how many of how many are shown.
+MAX_MARKERS = 2500
+
+
+def scatter_indices(x: Sequence[float], y: Sequence[float], max_points: int = MAX_MARKERS,
+                    cells: tuple[int, int] = (400, 225)) -> np.ndarray:
+    """Indices of at most ``max_points`` of the points (x, y) that draw the same cloud: one point per
+    occupied cell of a grid over their range (the grid halved until few enough cells are occupied),
+    and always the points with the smallest and largest x and y. Non-finite points are left out.
+
+    A grid of 400 x 225 cells over a 6.4 x 3.6 in plot is about a point (1/72 in) a cell, less than
+    a 2-point marker: what is drawn looks like all the points, at a fraction of the size.
+
+    >>> rng = np.random.default_rng(0)
+    >>> x, y = rng.normal(size=100_000), rng.normal(size=100_000)
+    >>> kept = scatter_indices(x, y, 2000)
+    >>> len(kept) <= 2000, bool(x[kept].max() == x.max() and y[kept].min() == y.min())
+    (True, True)
+    """
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    finite = np.flatnonzero(np.isfinite(x) & np.isfinite(y))
+    if finite.size <= max_points:
+        return finite
+    fx, fy = x[finite], y[finite]
+    extremes = finite[[np.argmin(fx), np.argmax(fx), np.argmin(fy), np.argmax(fy)]]
+    nx, ny = cells
+    while True:
+        def cell(values, n):
+            low, span = values.min(), np.ptp(values)
+            return np.zeros(values.size, dtype=np.int64) if span == 0 else \
+                np.minimum(((values - low) / span * n).astype(np.int64), n - 1)
+        _, first = np.unique(cell(fx, nx) * ny + cell(fy, ny), return_index=True)
+        if first.size + 4 <= max_points or (nx == 1 and ny == 1):
+            break
+        nx, ny = max(nx // 2, 1), max(ny // 2, 1)
+    return np.unique(np.concatenate([finite[first], extremes]))
+
+
+#: Most samples a plot draws of each series (the rest thinned by :func:`decimation_indices`, which
+#: keeps every interval's extremes: about 750 intervals, more than a full-width plot has pixels).
+DISPLAY_POINTS = 3000
+
+#: Most samples of each series a plot carries for zooming (``data-zoom``): the zoomed view is drawn from
+#: them, so a tenfold zoom still shows each interval's extremes at about the screen's resolution.
+ZOOM_POINTS = 16000
+
+
 def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: str, ylabel: str,
              xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = FULL_SIZE,
-             max_points: int = 4000, styles: Mapping[str, Mapping[str, Any]] | None = None) -> Markup:
+             max_points: int = DISPLAY_POINTS, styles: Mapping[str, Mapping[str, Any]] | None = None,
+             zoom_points: int = ZOOM_POINTS) -> Markup:
     """A line plot of ``series`` (label -> values over ``t``) as an inline SVG element.
 
-    More than ``max_points`` samples are thinned with :func:`decimation_indices`
-    (extremes kept). ``styles`` gives matplotlib line properties per label
-    (e.g. ``{"measured": {"linestyle": "none", "marker": "."}}``).
+    Each series is drawn with at most ``max_points`` of its samples, thinned
+    with :func:`decimation_indices` (every interval's first, last, smallest and
+    largest sample: peaks survive, a 2 kHz PWM keeps its extremes). ``styles``
+    gives matplotlib line properties per label (e.g. ``{"measured": {"color":
+    "#8c959f"}}``).
+
+    A plot of lines (no markers) can be zoomed along x in the report (see
+    ``templates/zoom.js``): the ``<svg>`` carries ``data-zoom``, a JSON of
+    numbers only (no label or other text of the model or data) with the data
+    area, the x range and each series thinned to ``zoom_points`` samples
+    (:func:`zoom_data`); ``zoom_points=0`` leaves it out.
 
     Drawn with matplotlib's object-oriented API and its SVG canvas, never
     through pyplot, so no GUI backend is selected whatever ``MPLBACKEND`` says
@@ -441,7 +539,7 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
     from matplotlib.figure import Figure
 
     t = np.asarray(t, dtype=float)
-    digest = hashlib.sha256(repr((title, ylabel, xlabel)).encode())
+    digest = hashlib.sha256(repr((title, ylabel, xlabel, max_points, zoom_points)).encode())
     digest.update(t.tobytes())
     arrays = {}
     for label, values in series.items():
@@ -452,18 +550,20 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
         digest.update(str(label).encode())
         digest.update(values.tobytes())
     key = digest.hexdigest()
-    kept = decimation_indices(t, list(arrays.values()), max_points)
-    if kept is not None:
-        t = t[kept]
-        arrays = {label: values[kept] for label, values in arrays.items()}
     styles = styles or {}
+    zoomable = zoom_points > 0 and t.size >= 2 and bool(arrays) and float(t.max()) > float(t.min()) and not any(
+        str(style.get("marker", "none")).lower() not in ("", "none") for style in styles.values())
 
-    # text.parse_math off: labels come from model and data files; a header "$\\foo$" is not mathtext
-    with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key}):
+    # text.parse_math off: labels come from model and data files; a header "$\\foo$" is not mathtext.
+    # path.simplify off: the samples are thinned already, and every extreme kept must be drawn.
+    with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key, "path.simplify": False}):
         figure = Figure(figsize=size, layout="constrained")
         axes = figure.add_subplot()
-        for label, values in arrays.items():
-            axes.plot(t, values, label=str(label), **dict(styles.get(label, {})))
+        for number, (label, values) in enumerate(arrays.items()):
+            kept = decimation_indices(t, [values], max_points)
+            shown = slice(None) if kept is None else kept
+            axes.plot(t[shown], values[shown], label=str(label), gid=f"zoomline{number}",
+                      **dict(styles.get(label, {})))
         axes.set_xlabel(xlabel)
         axes.set_ylabel(ylabel)
         if t.size:
@@ -475,7 +575,61 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
                 axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
             else:
                 axes.legend(loc="best")
-        return figure_svg(figure, title, key)
+        svg = figure_svg(figure, title, key)
+        if not zoomable:
+            return svg
+        attribute = html.escape(zoom_data(figure, axes, t, list(arrays.values()), zoom_points), quote=True)
+        return Markup(str(svg).replace('<svg class="plot" ', f'<svg class="plot" data-zoom="{attribute}" ', 1))
+
+
+def zoom_data(figure, axes, t: np.ndarray, series: Sequence[np.ndarray], max_points: int) -> str:
+    """The JSON a zoomable plot carries (after ``figure`` was drawn, so its layout is final).
+
+    ``box``: the data area in the SVG's units (x, y of its top left corner, width, height);
+    ``x``: the x range it shows; ``lines``: per series (in order: the ``zoomline<i>`` groups) its
+    samples thinned to ``max_points`` with :func:`decimation_indices`, in one base64 string
+    (:func:`zoom_samples` reads it): zlib of the differences of x as uint32 fractions of the x
+    range (0 to 2**32 - 1), then of y as uint16 fractions of the data area's height from its
+    bottom (0 to 65534; 65535 is a gap: NaN), little-endian, each difference modulo 2**32 or 2**16.
+    Differences compress some sevenfold. Only numbers and base64: nothing of the model's or the
+    data's text.
+    """
+    import base64
+    import json
+    import zlib
+
+    width, height = figure.get_size_inches() * 72.0          # the SVG's units are points
+    box = axes.get_position()
+    x0, x1 = (float(v) for v in axes.get_xlim())
+    y0, y1 = (float(v) for v in axes.get_ylim())
+    lines = []
+    for values in series:
+        kept = decimation_indices(t, [values], max_points)
+        times, values = (t, values) if kept is None else (t[kept], values[kept])
+        fx = np.clip((times - x0) / (x1 - x0), 0.0, 1.0)
+        fy = np.clip((values - y0) / (y1 - y0) if y1 > y0 else np.full(values.shape, 0.5), 0.0, 1.0)
+        qx = np.round(fx * 4294967295.0).astype(np.uint32)
+        qy = np.where(np.isfinite(values), np.round(np.nan_to_num(fy) * 65534.0), 65535).astype(np.uint16)
+        raw = (np.diff(qx, prepend=np.uint32(0)).astype("<u4").tobytes()
+               + np.diff(qy, prepend=np.uint16(0)).astype("<u2").tobytes())
+        lines.append(base64.b64encode(zlib.compress(raw, 9)).decode("ascii"))
+    data = {"box": [round(box.x0 * width, 3), round((1.0 - box.y1) * height, 3), round(box.width * width, 3),
+                    round(box.height * height, 3)],
+            "x": [x0, x1], "lines": lines}
+    return json.dumps(data, separators=(",", ":"), allow_nan=False)
+
+
+def zoom_samples(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """One line of :func:`zoom_data` back as arrays: x as uint32 fractions of the x range, y as uint16
+    fractions of the data area's height (65535: a gap), as ``templates/zoom.js`` reads them."""
+    import base64
+    import zlib
+
+    raw = zlib.decompress(base64.b64decode(text))
+    n = len(raw) // 6
+    x = np.cumsum(np.frombuffer(raw[:4 * n], dtype="<u4"), dtype=np.uint32)
+    y = np.cumsum(np.frombuffer(raw[4 * n:], dtype="<u2"), dtype=np.uint16)
+    return x, y
 
 
 PLOT_STYLE = {"svg.fonttype": "none", "text.parse_math": False, "axes.spines.top": False,
@@ -500,6 +654,13 @@ def draw_motor_envelopes(axes, catalogue, speed_label: str = "speed [rpm]") -> N
     axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
 
 
+def _short_path(match: re.Match) -> str:
+    """A path's ``d`` on one line with coordinates to 0.01 pt (matplotlib writes 1e-6 pt, a line each):
+    a third of the size, the same drawing."""
+    d = re.sub(r"-?\d+\.\d+", lambda m: f"{float(m.group()):.2f}".rstrip("0").rstrip("."), match.group(1))
+    return f' d="{" ".join(d.split())}"'
+
+
 def figure_svg(figure, title: str, key: str) -> Markup:
     """A matplotlib ``Figure`` as an inline SVG element, as :func:`plot_svg` makes them: text as
     text, ids deterministic (from ``key``) and unique, no prolog, metadata or external reference,
@@ -512,6 +673,7 @@ def figure_svg(figure, title: str, key: str) -> Markup:
     svg = re.sub(r'\s*<defs>\s*<style type="text/css">[^<]*</style>\s*</defs>', "", svg, count=1)
     svg = svg.replace("<svg ", '<svg class="plot" role="img" stroke-linejoin="round" stroke-linecap="butt" ', 1)
     svg = _svg_ids_prefixed(svg, "plot" + key[:8])
+    svg = re.sub(r'\sd="([^"]*)"', _short_path, svg)
     # A <title> as the first child names the figure for screen readers and tooltips.
     head_end = svg.index(">", svg.index("<svg")) + 1
     svg = svg[:head_end] + f"\n <title>{html.escape(title, quote=False)}</title>" + svg[head_end:]
