@@ -404,7 +404,7 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
         p = {**{name: value for name, (_, value) in ss.parameters.items()}, **p}
     if p:
         _check_bound_divisors(ss, namespace, p)
-    bar = ProgressBar(0.0, float(settings["t_end"])) if progress else None
+    bar = ProgressBar(0.0, float(settings["t_end"]), note=_solver_note(settings["method"])) if progress else None
     try:
         raw = namespace["simulate_model"](
             namespace["_MODEL"], float(settings["t_end"]), p or None, t_eval, method=settings["method"],
@@ -585,12 +585,32 @@ def _no_span():
 # --------------------------------------------------------------- progress
 
 
-class ProgressBar:
-    """A one-line progress bar on stderr, drawn only after 2 s and only on a terminal."""
+def _solver_note(method) -> str | None:
+    """Why a run on one of scipy's solvers may be slow, for the progress bar: None for the others.
 
-    def __init__(self, t_start: float, t_end: float, stream=None, delay: float = 2.0):
+    >>> _solver_note("Radau")[:45]
+    "solver 'Radau' is scipy's: it takes its steps"
+    >>> _solver_note("CVODE") is None and _solver_note(None) is None
+    True
+    """
+    from bondc.runtime import SOLVER_NAMES
+
+    scipy_solvers = SOLVER_NAMES[SOLVER_NAMES.index("DOPRI5") + 1:]
+    name = next((known for known in scipy_solvers if str(method or "").lower() == known.lower()), None)
+    if name is None:
+        return None
+    return (f"solver '{name}' is scipy's: it takes its steps in Python, one call per step; CVODE (solver = "
+            f"\"auto\", the default, or \"CVODE\") takes them in C, often 10 to 100 times faster")
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr, drawn only after 2 s and only on a terminal; ``note``
+    (why the run may be slow) is written on its own line above the bar when it is first drawn."""
+
+    def __init__(self, t_start: float, t_end: float, stream=None, delay: float = 2.0, note: str | None = None):
         self.t_start, self.t_end = t_start, t_end
         self.stream = stream or sys.stderr
+        self.note = note
         self.delay = delay
         self.started = time.monotonic()
         self.last = 0.0
@@ -607,6 +627,8 @@ class ProgressBar:
         if now - self.started < self.delay or now - self.last < 0.1:
             return
         self.last = now
+        if self.note and not self.drawn:
+            self.stream.write(f"note: {self.note}\n")
         fraction = min(max((t - self.t_start) / (self.t_end - self.t_start), 0.0), 1.0)
         width = 30
         filled = int(round(fraction * width))
