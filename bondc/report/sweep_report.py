@@ -27,7 +27,7 @@ import numpy as np
 from markupsafe import Markup
 
 from bondc.errors import DataError, Diagnostic
-from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, environment, figure_svg
+from bondc.report.render import PLOT_STYLE, content_security_policy, draw_motor_envelopes, environment, figure_svg
 
 STATISTICS = ("min", "max", "mean", "rms", "final", "cycle_peak", "cycle_rms", "cycle_energy",
               "cycle_energy_positive", "cycle_energy_negative")
@@ -181,6 +181,7 @@ _TEMPLATE = """<!DOCTYPE html>
 <html lang="en">
 <head>
 <meta charset="utf-8">
+<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
 <meta name="viewport" content="width=device-width, initial-scale=1">
 <title>{{ name }} — bondc design study</title>
 <style>
@@ -250,7 +251,8 @@ def render_study(study: Study, catalogue=None) -> str:
               for name, unit in study.parameters] if study.rows else []
     template = environment().from_string(_TEMPLATE)
     return template.render(name=Path(study.path).stem, study=study, figures=figures, counts=counts,
-                           ranges=ranges, has_motors=has_motors, common=common)
+                           ranges=ranges, has_motors=has_motors, common=common,
+                           csp=content_security_policy(None))      # no script: it fetches and runs nothing
 
 
 def build_sweep_report(table, output=None, motors=None) -> Path:
