@@ -31,7 +31,9 @@ the end that receives the effort (:meth:`CausalGraph.stroke_end`).
 
 Diagnostics: ``E601`` causal conflict (raised as
 :class:`~bondc.errors.CausalityError` with every conflict found), ``W602``
-derivative causality, ``I603`` algebraic loop.
+derivative causality, ``I603`` algebraic loop. :func:`structural_conflicts`
+gives the ``E601`` of a model whose laws have errors (the semantic stage reports
+them with those errors).
 """
 
 from __future__ import annotations

@@ -6,7 +6,10 @@ applies an experiment's and the command line's overrides and builds the graph;
 ``check_<what>`` function below on the chosen model; each collects diagnostics instead of stopping, so one run
 reports every problem. If any is an error, :class:`bondc.errors.ModelError`
 is raised carrying all of them, sorted by position; otherwise the graph is
-returned with the warnings.
+returned with the warnings. Errors in laws, parameters or experiments leave the
+graph's structure known: unless the structural checks (names, kinds, bonds,
+ports) found an error too, the causal conflicts (E601) of that structure are
+among them (:func:`_structural_conflicts`), so one run reports both.
 
 What the checks enforce is the language reference (``docs/language.md``); the
 codes are listed in ``docs/diagnostics.md``.
@@ -2280,7 +2283,8 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
                      divisors=getattr(m, "divisors", ()))
 
 
-def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], dict[str, JunctionNode], tuple[Bond, ...]]:
+def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], dict[str, JunctionNode],
+                                                          tuple[Bond, ...]]:
     """The graph's elements, junctions and bonds; ``states``: with the storage elements' states
     (False: a model whose laws have errors, where they may be incomplete)."""
     labels = {bond.label for bond in m.bonds if bond.label}
