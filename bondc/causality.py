@@ -31,7 +31,9 @@ the end that receives the effort (:meth:`CausalGraph.stroke_end`).
 
 Diagnostics: ``E601`` causal conflict (raised as
 :class:`~bondc.errors.CausalityError` with every conflict found), ``W602``
-derivative causality, ``I603`` algebraic loop.
+derivative causality, ``I603`` algebraic loop. :func:`structural_conflicts`
+gives the ``E601`` of a model whose laws have errors (the semantic stage reports
+them with those errors).
 """
 
 from __future__ import annotations
@@ -349,9 +351,13 @@ class _Assignment:
         return [(other, other_setter)]
 
 
-def _one_port_options(element: ElementNode) -> tuple[tuple[str, bool], ...]:
+def _one_port_options(element: ElementNode, conductance: bool | None = None) -> tuple[tuple[str, bool], ...]:
+    """The causalities of a one-port, preferred first; ``conductance`` (an R): prefer conductance
+    (True) or resistance (False) whatever its laws say (:func:`structural_conflicts`)."""
     options = ONE_PORT_CAUSALITIES[element.kind]
-    if element.kind == "R" and "e" not in element.laws and "f" in element.laws:
+    if conductance is None:
+        conductance = element.kind == "R" and "e" not in element.laws and "f" in element.laws
+    if element.kind == "R" and conductance:
         options = tuple(reversed(options))
     return options
 
@@ -361,10 +367,12 @@ def _setter_for(graph: BondGraph, element: ElementNode, sets_effort: bool) -> st
 
 
 class _Procedure:
-    def __init__(self, graph: BondGraph):
+    def __init__(self, graph: BondGraph, conductance: Mapping[str, bool] | None = None):
         self.graph = graph
         self.state = _Assignment(graph)
         self.errors: list[Diagnostic] = []
+        self.conductance = conductance or {}    # R name -> preferred causality, over its laws
+        self.fixed_errors = 0       # how many of the errors the sources and storage elements met
 
     def run(self) -> _Assignment:
         graph = self.graph
@@ -375,6 +383,7 @@ class _Procedure:
         for element in elements:
             if ROLES.get(element.kind) == "storage":
                 self._decide_element(element)
+        self.fixed_errors = len(self.errors)
         for element in elements:
             if ROLES.get(element.kind) == "resistor":
                 self._decide_element(element)
@@ -390,7 +399,7 @@ class _Procedure:
         if element.bond in self.state.setter and ROLES.get(element.kind) != "source":
             return      # forced by an earlier choice: storage in derivative causality, or an R either way
         options = tuple((_setter_for(self.graph, element, sets), element.name)
-                        for _, sets in _one_port_options(element))
+                        for _, sets in _one_port_options(element, self.conductance.get(element.name)))
         self._decide(element.bond, options, subject=element)
 
     def _decide(self, bond: int, options, subject: ElementNode | None) -> None:
@@ -813,6 +822,43 @@ def assign_causality(graph: BondGraph) -> CausalGraph:
     return CausalGraph(graph=graph, effort_setter=setter, storage=storage, resistors=resistors,
                        dependencies=dependencies, algebraic_loops=loops,
                        diagnostics=tuple(sorted(diagnostics, key=sort_key)))
+
+
+#: At most this many resistors of unknown law are tried both ways by :func:`structural_conflicts`.
+MAX_UNKNOWN_RESISTORS = 4
+
+
+def structural_conflicts(graph: BondGraph, unknown: Iterable[str] = ()) -> list[Diagnostic]:
+    """The causal conflicts (``E601``) of ``graph``'s structure, for a model whose laws have errors.
+
+    Only what is certain whatever the laws will say: ``unknown`` are the elements whose laws have
+    an error, so a resistor among them may be written either way (``e = ...`` or ``f = ...``) and
+    prefer either causality. The procedure runs for each preference of those resistors and keeps the
+    conflicts met in every run; beyond :data:`MAX_UNKNOWN_RESISTORS` of them, only the conflicts met
+    before any resistor is decided (those of the sources and storage elements). Nothing here reads
+    an expression: the derivative causality (``W602``) and algebraic loops (``I603``) depend on what
+    the laws read and are left to :func:`assign_causality` once the laws are right.
+
+    >>> from bondc.parse import parse_text
+    >>> from bondc.semantic import build
+    >>> text = "model M\\n Sf a : f = 1\\n Sf b : f = 2\\n R r : e = f\\n 1 j\\n" \\
+    ...        " a -> j\\n b -> j\\n j -> r\\nend\\n"
+    >>> [(d.code, d.span.line) for d in structural_conflicts(build(parse_text(text, "m.bg"))[0], ["r"])]
+    [('E601', 3)]
+    """
+    resistors = [name for name in dict.fromkeys(unknown)
+                 if name in graph.elements and ROLES.get(graph.elements[name].kind) == "resistor"]
+    if len(resistors) > MAX_UNKNOWN_RESISTORS:
+        procedure = _Procedure(graph)
+        procedure.run()
+        return sorted(procedure.errors[:procedure.fixed_errors], key=sort_key)
+    common: list[Diagnostic] | None = None
+    for choice in range(2 ** len(resistors)):
+        conductance = {name: bool(choice >> i & 1) for i, name in enumerate(resistors)}
+        procedure = _Procedure(graph, conductance)
+        procedure.run()
+        common = procedure.errors if common is None else [d for d in common if d in procedure.errors]
+    return sorted(dict.fromkeys(common or ()), key=sort_key)
 
 
 # ------------------------------------------------------------------ display

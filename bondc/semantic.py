@@ -6,7 +6,10 @@ applies an experiment's and the command line's overrides and builds the graph;
 ``check_<what>`` function below on the chosen model; each collects diagnostics instead of stopping, so one run
 reports every problem. If any is an error, :class:`bondc.errors.ModelError`
 is raised carrying all of them, sorted by position; otherwise the graph is
-returned with the warnings.
+returned with the warnings. Errors in laws, parameters or experiments leave the
+graph's structure known: unless the structural checks (names, kinds, bonds,
+ports) found an error too, the causal conflicts (E601) of that structure are
+among them (:func:`_structural_conflicts`), so one run reports both.
 
 What the checks enforce is the language reference (``docs/language.md``); the
 codes are listed in ``docs/diagnostics.md``.
@@ -30,6 +33,7 @@ codes are listed in ``docs/diagnostics.md``.
 
 from __future__ import annotations
 
+import bisect
 import csv
 import dataclasses
 import difflib
@@ -2075,7 +2079,8 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     chosen, problems = _select_model(files, model)
     if chosen is None:
         return None, problems
-    flat = flatten(chosen, files, standalone=bool(ports_of(chosen)))
+    component = bool(ports_of(chosen))     # (its causality is checked where it is used)
+    flat = flatten(chosen, files, standalone=component)
     if flat.too_large:
         return None, list(flat.diagnostics)
     m = _Model(files[0], sources, _with_defaults(flat.model), tuple(files))
@@ -2090,6 +2095,9 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     check_kinds(m)
     check_bonds(m)
     check_ports(m)
+    # what the structural checks found: with no error there, the causality of the graph's
+    # structure is known whatever the laws' errors (_structural_conflicts)
+    structure_known = not any(d.is_error for d in m.diagnostics)
     check_laws(m)
     check_model_states(m)
     check_shadowing(m)
@@ -2112,6 +2120,8 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
 
     diagnostics = _unique(m.diagnostics)
     if any(d.is_error for d in diagnostics):
+        if structure_known and not component:
+            diagnostics = _unique(diagnostics + _structural_conflicts(m, diagnostics))
         return None, diagnostics
     inputs = {i.name: _signal(i) for i in m.inputs}
     for i in m.inputs:
@@ -2122,11 +2132,44 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     graph = _graph(m, _parameters(m, chosen_definitions, chosen_values), inputs, experiment_defs)
     dimension_errors, si_units = check_dimensions(m, graph, chosen_values)
     if dimension_errors:
+        if not component:    # (the laws' targets are right: only their dimensions are not)
+            from bondc.causality import structural_conflicts
+
+            dimension_errors += structural_conflicts(graph)
         return None, _unique(diagnostics + dimension_errors)
     from bondc.scope import build_scope
 
     return dataclasses.replace(graph, si_units=si_units, instances=tuple(m.instances),
                                scope=build_scope(m.model, m.all_decls)), diagnostics
+
+
+def _structural_conflicts(m: _Model, diagnostics: Sequence[Diagnostic]) -> list[Diagnostic]:
+    """E601: the causal conflicts of a model whose structure (elements, junctions, bonds, ports) is
+    right and whose laws, parameters or experiments have errors, so that one run reports both.
+
+    The graph is built from the structure only: no parameter, input or experiment is evaluated and
+    no law is read but for which of ``e``/``f`` a resistor gives; an element with an error in its
+    statement (its laws) is of unknown law, a resistor among them either way
+    (:func:`bondc.causality.structural_conflicts`)."""
+    from bondc.causality import structural_conflicts
+
+    starts: dict[tuple[str, str], list[int]] = {}      # where the errors are, by file and instance
+    for d in diagnostics:
+        if d.is_error:
+            starts.setdefault((d.span.file, d.span.instance), []).append(d.span.start)
+    for offsets in starts.values():
+        offsets.sort()
+
+    def has_error(span: Span) -> bool:
+        offsets = starts.get((span.file, span.instance), [])
+        index = bisect.bisect_left(offsets, span.start)
+        return index < len(offsets) and offsets[index] < max(span.end, span.start + 1)
+
+    unknown = [element.name for element in m.elements if has_error(element.span)]
+    elements, junctions, bonds = _structure(m, states=False)
+    graph = BondGraph(m.model.name, m.model.description, m.file.path, {}, {}, {}, {}, elements, junctions, bonds,
+                      (), {}, sources=dict(m.sources), span=m.model.span)
+    return structural_conflicts(graph, unknown)
 
 
 def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -> tuple[list[Diagnostic], dict]:
@@ -2208,34 +2251,7 @@ def _unique(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
 
 def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, Signal],
            experiments: Mapping[str, ExperimentDef]) -> BondGraph:
-    labels = {bond.label for bond in m.bonds if bond.label}
-    # A label "b9" on another bond takes the name bond 9 would have (W305 says so).
-    bonds = [dataclasses.replace(bond, default_name=f"bond{bond.number}")
-             if bond.label is None and f"b{bond.number}" in labels else bond for bond in m.bonds]
-    elements = {}
-    for element in m.elements:
-        laws = m.element_laws[element.name]
-        if KINDS[element.kind].ports == 2:
-            (p1, p2), signs = m.ports[element.name]
-            for number, port in ((p1, "p1"), (p2, "p2")):
-                bond = bonds[number - 1]
-                side = "tail_port" if bond.tail == element.name else "head_port"
-                bonds[number - 1] = dataclasses.replace(bond, **{side: port})
-            bond_numbers = (p1, p2)
-        else:
-            (end,) = m.ends[element.name]
-            bond_numbers, signs = (end.bond,), (1 if end.side == "head" else -1,)
-        elements[element.name] = ElementNode(
-            element.kind, element.name, element.description,
-            laws={target: law.value for target, law in laws.assigns.items()},
-            law_spans={target: law.span for target, law in laws.assigns.items()},
-            states=_element_states(element, laws), bonds=bond_numbers, port_signs=signs,
-            span=element.span, name_span=element.name_span)
-    junctions = {}
-    for junction in m.statements(ast.Junction):
-        spans = junction.name_spans or (junction.span,) * len(junction.names)
-        for name, span in zip(junction.names, spans):
-            junctions[name] = JunctionNode(junction.kind, name, tuple(end.bond for end in m.ends[name]), span)
+    elements, junctions, bonds = _structure(m)
     model_states = []
     for state in m.statements(ast.StateDecl):
         laws = m.model_states[state.name]
@@ -2262,9 +2278,44 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
                                          output.description, output.span,
                                          resolved.factor if resolved is not None else 1.0)
     return BondGraph(m.model.name, m.model.description, m.file.path, parameters, functions, inputs, outputs,
-                     elements, junctions, tuple(bonds), tuple(model_states), experiments,
+                     elements, junctions, bonds, tuple(model_states), experiments,
                      sources=dict(m.sources), span=m.model.span, discrete=tuple(discrete), whens=tuple(whens),
                      divisors=getattr(m, "divisors", ()))
+
+
+def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], dict[str, JunctionNode],
+                                                          tuple[Bond, ...]]:
+    """The graph's elements, junctions and bonds; ``states``: with the storage elements' states
+    (False: a model whose laws have errors, where they may be incomplete)."""
+    labels = {bond.label for bond in m.bonds if bond.label}
+    # A label "b9" on another bond takes the name bond 9 would have (W305 says so).
+    bonds = [dataclasses.replace(bond, default_name=f"bond{bond.number}")
+             if bond.label is None and f"b{bond.number}" in labels else bond for bond in m.bonds]
+    elements = {}
+    for element in m.elements:
+        laws = m.element_laws[element.name]
+        if KINDS[element.kind].ports == 2:
+            (p1, p2), signs = m.ports[element.name]
+            for number, port in ((p1, "p1"), (p2, "p2")):
+                bond = bonds[number - 1]
+                side = "tail_port" if bond.tail == element.name else "head_port"
+                bonds[number - 1] = dataclasses.replace(bond, **{side: port})
+            bond_numbers = (p1, p2)
+        else:
+            (end,) = m.ends[element.name]
+            bond_numbers, signs = (end.bond,), (1 if end.side == "head" else -1,)
+        elements[element.name] = ElementNode(
+            element.kind, element.name, element.description,
+            laws={target: law.value for target, law in laws.assigns.items()},
+            law_spans={target: law.span for target, law in laws.assigns.items()},
+            states=_element_states(element, laws) if states else (), bonds=bond_numbers, port_signs=signs,
+            span=element.span, name_span=element.name_span)
+    junctions = {}
+    for junction in m.statements(ast.Junction):
+        spans = junction.name_spans or (junction.span,) * len(junction.names)
+        for name, span in zip(junction.names, spans):
+            junctions[name] = JunctionNode(junction.kind, name, tuple(end.bond for end in m.ends[name]), span)
+    return elements, junctions, tuple(bonds)
 
 
 def _when_text(m: _Model, when: ast.When) -> str:

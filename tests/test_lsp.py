@@ -138,6 +138,22 @@ def test_diagnostics_as_you_type_with_codes_and_ranges(client, tmp_path):
     assert client.diagnostics(uri) == []
 
 
+def test_a_law_error_and_a_causal_conflict_are_both_published(client, tmp_path):
+    """Every problem at once: an undefined name in one law, two flow sources on one 1-junction."""
+    path = tmp_path / "issue.bg"
+    text = ("model Issue\n  param m = 2 [kg]\n  Sf pump : f = 1\n  Sf fan : f = 2\n  I mass : f = p/mm\n"
+            "  1 j\n  pump -> j\n  fan -> j\n  j -> mass\nend\n")
+    uri = client.open(path, text)
+    problems = client.diagnostics(uri)
+    assert [(d["code"], d["range"]["start"]) for d in problems] == [
+        ("E601", {"line": 3, "character": 5}), ("E301", {"line": 4, "character": 17})]
+    assert "flow source 'pump' and flow source 'fan'" in problems[0]["message"]
+    # the name fixed: the conflict alone, as the causality stage reports it
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": text.replace("p/mm", "p/m")}]})
+    assert [(d["code"], d["message"]) for d in client.diagnostics(uri)] == [("E601", problems[0]["message"])]
+
+
 def test_the_flagship_is_checked_quickly_after_an_edit(client):
     uri = client.open(FLAGSHIP)
     assert [d for d in client.diagnostics(uri) if d["severity"] == 1] == []

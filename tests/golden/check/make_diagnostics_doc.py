@@ -154,7 +154,11 @@ d("E601", "causal conflict",
   "(both set its common flow), two effort sources on one 0-junction, effort sources on both sides of a "
   "transformer, or a storage element squeezed between such constraints. The error points at the element whose "
   "causality could not be assigned; notes show the other element(s), the junction or two-port, and the bonds "
-  "involved. Every conflict in the graph is reported.",
+  "involved. Every conflict in the graph is reported, also beside errors in the laws (an undefined name, a "
+  "missing law, dimensions): causality depends on the graph's structure only, so it is assigned while the laws "
+  "are wrong (a resistor whose law has an error is tried in both causalities, and a conflict is reported only if "
+  "both meet it). An error in the structure itself (an unknown kind, a bond to nothing, a name defined twice, a "
+  "syntax error) is reported alone: the conflicts wait for it to be fixed.",
   "Remove one of the sources, or put what really sits between them in the graph: a resistor (a pipe, a "
   "contact) or a storage element (a compliance, an inertia). If both describe one physical source, keep one.")
 d("W602", "storage element in derivative causality",
