@@ -120,6 +120,16 @@ def _derived(args, light: bool = False):
     return derived
 
 
+def _status(diagnostics) -> int:
+    """0 without errors; 2 when an error is about a value given on the command line (``--set k=abc``:
+    the command line is at fault); else 1."""
+    from bondc.pipeline import on_command_line
+
+    if not any(d.is_error for d in diagnostics):
+        return EXIT_OK
+    return EXIT_USAGE if on_command_line(diagnostics) else EXIT_ERRORS
+
+
 # ------------------------------------------------------------------ commands
 
 def _check_one(args, model: str | None, component: bool, loaded=None) -> tuple:
@@ -256,7 +266,7 @@ def _cmd_check(args) -> int:
         if len(summaries) > 1:
             data["models"] = summaries
         print(json.dumps(data, indent=2))
-        return EXIT_OK if ok else EXIT_ERRORS
+        return _status(diagnostics)
     _print_diagnostics(diagnostics, sources)
     for graph, causal, component, state_space in results:
         if graph is None:
@@ -280,7 +290,7 @@ def _cmd_check(args) -> int:
     errors = sum(d.is_error for d in diagnostics)
     if errors:
         print(f"{args.file}: {errors} error{'s' if errors != 1 else ''}", file=sys.stderr)
-    return EXIT_OK if ok else EXIT_ERRORS
+    return _status(diagnostics)
 
 
 def _cmd_fmt(args) -> int:
@@ -801,7 +811,9 @@ def _main(argv: list[str], debug: bool) -> int:
     except BondcError as error:
         _print_diagnostics(error.diagnostics, error.sources)
         _json_failure(args, error)
-        return EXIT_USAGE if getattr(error, "io", False) else EXIT_ERRORS    # (a file that cannot be read)
+        if getattr(error, "io", False):     # (a file that cannot be read)
+            return EXIT_USAGE
+        return _status(error.diagnostics) if error.diagnostics else EXIT_ERRORS
     except KeyboardInterrupt as interrupt:
         terminated = isinstance(interrupt, Terminated)
         print(f"bondc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
