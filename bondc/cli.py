@@ -89,6 +89,11 @@ def _json_failure(args, error: BondcError) -> None:
         _print_json({"complete": False, "diagnostics": [d.to_json() for d in error.diagnostics]})
 
 
+def _note(text: str) -> None:
+    """A line about what was done (``wrote report.html``), on stderr."""
+    print(text, file=sys.stderr)
+
+
 def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
     if diagnostics:
         print(render_all(diagnostics, sources or {}), file=stream or sys.stderr)
@@ -239,6 +244,38 @@ def _models_to_check(args) -> tuple[list[tuple[str | None, bool]], tuple | None]
 
 
 def _cmd_check(args) -> int:
+    """``bondc check FILE...``: each file in turn; the exit status is the worst of them. With
+    ``--json``, one file's object, or for several files an array of them, each with its ``file``."""
+    _parse_sets(args.set)       # a bad --set is E007 once, before any file
+    return _each_file(args, _check_file)
+
+
+def _each_file(args, run) -> int:
+    """``run(args with one file) -> (status, JSON data or None)`` for each of ``args.file``; prints
+    the JSON (an object for one file, an array for several) and returns the worst status. A file
+    that cannot be read (E002) is reported and the others are still done."""
+    files = args.file
+    if isinstance(files, str):
+        files = [files]
+    worst, rows = EXIT_OK, []
+    for name in files:
+        one = argparse.Namespace(**{**vars(args), "file": name})
+        try:
+            status, data = run(one)
+        except UsageError as error:
+            if len(files) == 1:
+                raise
+            _print_diagnostics(error.diagnostics, error.sources)
+            status, data = EXIT_USAGE, {"ok": False, "diagnostics": [d.to_json() for d in error.diagnostics]}
+        worst = max(worst, status)
+        if data is not None:
+            rows.append({"file": name, **data} if len(files) > 1 else data)
+    if getattr(args, "json", False):
+        print(json.dumps(json_safe(rows if len(files) > 1 else rows[0]), indent=2, allow_nan=False))
+    return worst
+
+
+def _check_file(args) -> tuple[int, dict | None]:
     diagnostics: list[Diagnostic] = []
     sources: dict = {}
     results = []
@@ -265,8 +302,7 @@ def _cmd_check(args) -> int:
         data = {"ok": ok, "diagnostics": [d.to_json() for d in diagnostics], "model": summaries[0]}
         if len(summaries) > 1:
             data["models"] = summaries
-        print(json.dumps(data, indent=2))
-        return _status(diagnostics)
+        return _status(diagnostics), data
     _print_diagnostics(diagnostics, sources)
     for graph, causal, component, state_space in results:
         if graph is None:
@@ -290,25 +326,49 @@ def _cmd_check(args) -> int:
     errors = sum(d.is_error for d in diagnostics)
     if errors:
         print(f"{args.file}: {errors} error{'s' if errors != 1 else ''}", file=sys.stderr)
-    return _status(diagnostics)
+    return _status(diagnostics), None
 
 
 def _cmd_fmt(args) -> int:
+    """``bondc fmt FILE...``: print one file formatted, or ``--check``/``--write`` each of several;
+    the exit status is the worst of them (1: a file would be reformatted, or does not parse)."""
+    if len(args.file) > 1 and not (args.check or args.write):
+        raise UsageError(Diagnostic("error", "E001", "bondc fmt: several files need --check or --write",
+                                    hint="give one file to print it formatted"))
+    return _each_file(args, _fmt_file)
+
+
+def _fmt_file(args) -> tuple[int, dict | None]:
     from bondc.fmt import format_path
     from bondc.io import atomic_write_text
 
-    original, formatted = format_path(Path(args.file))
+    try:
+        original, formatted = format_path(Path(args.file))
+    except UsageError:
+        raise
+    except BondcError as error:         # a file that does not parse: the others are still formatted
+        _print_diagnostics(error.diagnostics, error.sources)
+        return EXIT_ERRORS, {"ok": False, "formatted": False, "changed": False, "written": False,
+                             "diagnostics": [d.to_json() for d in error.diagnostics]}
+    changed = original != formatted
+    data = {"ok": True, "formatted": not changed, "changed": changed, "written": False, "diagnostics": []}
     if args.check:
-        if original != formatted:
+        if changed:
             print(f"{args.file}: would be reformatted", file=sys.stderr)
-            return EXIT_ERRORS
-        return EXIT_OK
+            data["ok"] = False
+            return EXIT_ERRORS, data
+        return EXIT_OK, data
     if args.write:
-        if original != formatted:
+        if changed:
             atomic_write_text(Path(args.file), formatted)
-        return EXIT_OK
-    sys.stdout.write(formatted)
-    return EXIT_OK
+            data["written"] = True
+            _note(f"{args.file}: reformatted")
+        return EXIT_OK, data
+    if args.json:
+        data["text"] = formatted
+    else:
+        sys.stdout.write(formatted)
+    return EXIT_OK, data
 
 
 def _cmd_equations(args) -> int:
@@ -529,8 +589,11 @@ def _cmd_fit_friction(args) -> int:
 
 # ------------------------------------------------------------------- parser
 
-def _add_model_args(parser, *, sets=True, optional=False) -> None:
-    parser.add_argument("file", help="the .bg model file", nargs="?" if optional else None)
+def _add_model_args(parser, *, sets=True, optional=False, several=False) -> None:
+    if several:
+        parser.add_argument("file", help="the .bg model files", nargs="+", metavar="FILE")
+    else:
+        parser.add_argument("file", help="the .bg model file", nargs="?" if optional else None)
     parser.add_argument("--model", help="the model to use when the file holds several")
     parser.add_argument("--no-cache", action="store_true",
                         help="derive and compile again instead of reusing the compile cache")
@@ -545,17 +608,21 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show a traceback on an internal error")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_ArgumentParser)
 
-    check = commands.add_parser("check", help="parse and check a model; report every problem")
-    _add_model_args(check)
+    check = commands.add_parser("check", help="parse and check models; report every problem (the exit status "
+                                              "is the worst of the files)")
+    _add_model_args(check, several=True)
     check.add_argument("--json", action="store_true", help="machine-readable diagnostics")
     check.add_argument("--causality", action="store_true", help="print the causality table")
     check.set_defaults(run=_cmd_check)
 
-    fmt = commands.add_parser("fmt", help="print a model in the canonical layout")
-    fmt.add_argument("file")
+    fmt = commands.add_parser("fmt", help="print a model in the canonical layout; check or rewrite models")
+    fmt.add_argument("file", nargs="+", metavar="FILE", help="the .bg model files (several with --check or --write)")
     group = fmt.add_mutually_exclusive_group()
-    group.add_argument("--check", action="store_true", help="exit 1 if the file is not formatted")
-    group.add_argument("--write", action="store_true", help="rewrite the file in place")
+    group.add_argument("--check", action="store_true", help="exit 1 if a file is not formatted")
+    group.add_argument("--write", action="store_true", help="rewrite the files in place")
+    fmt.add_argument("--json", action="store_true",
+                     help="print what was done as JSON: per file, formatted, changed, written (and the text "
+                          "without --check or --write)")
     fmt.set_defaults(run=_cmd_fmt)
 
     equations = commands.add_parser("equations", help="print the state equations")

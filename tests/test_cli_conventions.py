@@ -59,3 +59,66 @@ def test_a_good_set_value_and_a_model_error_keep_their_statuses(capsys, tmp_path
     broken.write_text("model M\n  Se s : e = 1\n  R r : f = e/2\n  s -> r\n  output y = nothing\nend\n")
     assert _run(capsys, "check", broken, "--set", "nothing=3")[0] == 2     # (not a parameter: the --set)
     assert _run(capsys, "check", broken)[0] == 1
+
+
+# ------------------------------------------------------------------ 2. several files
+
+UNFORMATTED = "model M\n  param k=3\n  Se s : e = k\n  R r : f = e/2\n  s -> r\nend\n"
+BROKEN = "model M\n  Se s : e = 1\n  R r : f = e/2\n  s -> r\n  output y = nothing\nend\n"
+
+
+def test_check_takes_several_files_and_exits_with_the_worst(capsys, tmp_path):
+    (tmp_path / "broken.bg").write_text(BROKEN)
+    status, out, err = _run(capsys, "check", MSD, ROOT / "models" / "series_rlc.bg")
+    assert status == 0
+    assert "MassSpringDamper:" in out and "SeriesRLC:" in out
+    status, out, err = _run(capsys, "check", MSD, tmp_path / "broken.bg")
+    assert status == 1
+    assert "MassSpringDamper:" in out and "error[E301]" in err
+    # a file that cannot be read is reported, and the others are still checked
+    status, out, err = _run(capsys, "check", tmp_path / "missing.bg", tmp_path / "broken.bg", MSD)
+    assert status == 2
+    assert "error[E002]" in err and "error[E301]" in err and "MassSpringDamper:" in out
+
+
+def test_check_json_of_several_files_is_an_array_keyed_by_file(capsys, tmp_path):
+    (tmp_path / "broken.bg").write_text(BROKEN)
+    status, out, _ = _run(capsys, "check", "--json", MSD, tmp_path / "broken.bg", tmp_path / "missing.bg")
+    assert status == 2
+    rows = json.loads(out)
+    assert [row["file"] for row in rows] == [str(MSD), str(tmp_path / "broken.bg"), str(tmp_path / "missing.bg")]
+    assert [row["ok"] for row in rows] == [True, False, False]
+    assert rows[0]["model"]["name"] == "MassSpringDamper"
+    assert rows[1]["diagnostics"][0]["code"] == "E301" and rows[2]["diagnostics"][0]["code"] == "E002"
+    # one file: the object as before
+    status, out, _ = _run(capsys, "check", "--json", MSD)
+    assert status == 0 and json.loads(out)["model"]["name"] == "MassSpringDamper"
+
+
+def test_fmt_check_takes_several_files_and_exits_with_the_worst(capsys, tmp_path):
+    good = tmp_path / "good.bg"
+    good.write_text(MSD.read_text())
+    (tmp_path / "messy.bg").write_text(UNFORMATTED)
+    (tmp_path / "broken.bg").write_text("model M\n")
+    assert _run(capsys, "fmt", "--check", good)[0] == 0
+    status, _, err = _run(capsys, "fmt", "--check", good, tmp_path / "messy.bg", tmp_path / "broken.bg")
+    assert status == 1
+    assert "messy.bg: would be reformatted" in err and "error[E103]" in err and "good.bg" not in err
+    status, out, _ = _run(capsys, "fmt", "--check", "--json", good, tmp_path / "messy.bg")
+    assert status == 1
+    assert [(row["file"].rsplit("/", 1)[-1], row["formatted"]) for row in json.loads(out)] == \
+        [("good.bg", True), ("messy.bg", False)]
+
+
+def test_fmt_write_rewrites_several_files(capsys, tmp_path):
+    for name in ("a.bg", "b.bg"):
+        (tmp_path / name).write_text(UNFORMATTED)
+    status, out, err = _run(capsys, "fmt", "--write", "--json", tmp_path / "a.bg", tmp_path / "b.bg")
+    assert status == 0
+    assert [row["written"] for row in json.loads(out)] == [True, True]
+    assert _run(capsys, "fmt", "--check", tmp_path / "a.bg", tmp_path / "b.bg")[0] == 0
+
+
+def test_fmt_prints_only_one_file(capsys, tmp_path):
+    status, out, err = _run(capsys, "fmt", MSD, MSD)
+    assert status == 2 and "error[E001]" in err and out == ""
