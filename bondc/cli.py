@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 import sys
+import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,12 +90,29 @@ def _json_failure(args, error: BondcError) -> None:
         _print_json({"complete": False, "diagnostics": [d.to_json() for d in error.diagnostics]})
 
 
+#: -1 with -q (only errors), 1 with -v (notes on what was done too), else 0; set by main()
+_VERBOSITY = [0]
+
+
+def _quiet() -> bool:
+    return _VERBOSITY[0] < 0
+
+
+def _verbose(text: str) -> None:
+    """A note printed with -v only (on stderr): where the caches are, how long the command took."""
+    if _VERBOSITY[0] > 0:
+        print(f"note: {text}", file=sys.stderr)
+
+
 def _note(text: str) -> None:
-    """A line about what was done (``wrote report.html``), on stderr."""
-    print(text, file=sys.stderr)
+    """A line about what was done (``reformatted m.bg``), on stderr; not with -q."""
+    if not _quiet():
+        print(text, file=sys.stderr)
 
 
 def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
+    if _quiet():        # -q: only errors
+        diagnostics = [d for d in diagnostics if d.is_error]
     if diagnostics:
         print(render_all(diagnostics, sources or {}), file=stream or sys.stderr)
 
@@ -305,7 +323,7 @@ def _check_file(args) -> tuple[int, dict | None]:
         return _status(diagnostics), data
     _print_diagnostics(diagnostics, sources)
     for graph, causal, component, state_space in results:
-        if graph is None:
+        if graph is None or (_quiet() and not args.causality):
             continue
         counts = graph.summary()
         line = (f"{graph.name}: {counts['elements']} elements, {counts['junctions']} junctions, "
@@ -434,7 +452,7 @@ def _cmd_simulate(args) -> int:
     from bondc.simulate import read_input_files
 
     inputs = read_input_files(state_space, args.input)      # --input u=FILE.csv[:COLUMN]
-    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json,
+    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json and not _quiet(),
                       inputs=inputs)
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:
@@ -511,7 +529,8 @@ def _cmd_compile(args) -> int:
     output = Path(args.output) if args.output else default_output(args.file)
     compile_file(Path(args.file), output, model=args.model, experiment=args.experiment,
                  sets=_parse_sets(args.set), standalone=args.standalone)
-    print(f"wrote {output}")
+    if not _quiet():
+        print(f"wrote {output}")
     return EXIT_OK
 
 
@@ -523,14 +542,15 @@ def _cmd_report(args) -> int:
         from bondc.report.sweep_report import build_sweep_report
 
         target = build_sweep_report(args.sweep, args.output, args.motors)
-        print(f"wrote {target}")
+        if not _quiet():
+            print(f"wrote {target}")
         return EXIT_OK
     if not args.file:
         raise UsageError(Diagnostic("error", "E001", "bondc report: give a model file, or --sweep STUDY.csv",
                                     hint="see 'bondc report --help'"))
     _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
                          data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
-                         t_end=args.t_end, progress=True, inertia_ratio=inertia_ratio)
+                         t_end=args.t_end, progress=not _quiet(), inertia_ratio=inertia_ratio)
     return code  # run_report prints the diagnostics and where it wrote the report
 
 
@@ -539,7 +559,7 @@ def _cmd_validate(args) -> int:
 
     _, code = run_validate(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
                            output=args.output, model=args.model, experiment=args.experiment,
-                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=True,
+                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=not _quiet(),
                            inertia_ratio=_inertia_ratio(args))
     return code
 
@@ -551,7 +571,7 @@ def _cmd_sweep(args) -> int:
         result = run_sweep(args.file, model=args.model, experiment=args.experiment, sets=args.set or (),
                            vary=args.vary or (), samples=args.samples, ranges=args.ranges or (), seed=args.seed,
                            metrics=args.metric, output=args.output, jobs=args.jobs, t_end=args.t_end, dt=args.dt,
-                           rederive=args.rederive, progress=not args.json, point_timeout=args.point_timeout,
+                           rederive=args.rederive, progress=not args.json and not _quiet(), point_timeout=args.point_timeout,
                            motors=args.motors, executor=args.executor, scheduler=args.scheduler,
                            inertia_ratio=_inertia_ratio(args))
     except KeyboardInterrupt as interrupt:
@@ -602,11 +622,29 @@ def _add_model_args(parser, *, sets=True, optional=False, several=False) -> None
                             help='override a parameter, e.g. --set M=40 or --set "M=40 [kg]" (repeatable)')
 
 
+def _add_verbosity(parser, default) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-q", "--quiet", action="store_true", default=default,
+                       help="print only errors: no warnings, notes, progress or summary lines")
+    group.add_argument("-v", "--verbose", action="store_true", default=default,
+                       help="also print notes on what was done: the cache folder, the time taken")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _ArgumentParser(prog="bondc", description="bondc — a bond-graph modelling compiler")
     parser.add_argument("--version", action="version", version=f"bondc {__version__}")
     parser.add_argument("--debug", action="store_true", help="show a traceback on an internal error")
+    _add_verbosity(parser, argparse.SUPPRESS)
+    parser.set_defaults(quiet=False, verbose=False)
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_ArgumentParser)
+    add_parser = commands.add_parser
+
+    def add_command(*args, **kwargs):       # -q and -v after the command too (bondc check -q m.bg)
+        command = add_parser(*args, **kwargs)
+        _add_verbosity(command, argparse.SUPPRESS)
+        return command
+
+    commands.add_parser = add_command
 
     check = commands.add_parser("check", help="parse and check models; report every problem (the exit status "
                                               "is the worst of the files)")
@@ -781,6 +819,7 @@ def main(argv: list[str] | None = None) -> int:
         with fewer_collections():
             return _main(argv, debug)
     finally:
+        _VERBOSITY[0] = 0
         sys.stdout, sys.stderr = streams
         for guard, stream in zip(guards, streams):
             if guard.broken:
@@ -869,8 +908,19 @@ def _main(argv: list[str], debug: bool) -> int:
         if not getattr(args, "run", None):
             parser.print_help(sys.stderr)
             return EXIT_USAGE
+        if args.quiet and args.verbose:
+            raise UsageError(Diagnostic("error", "E001", "bondc: -q and -v cannot be given together",
+                                        hint="-q prints only errors, -v notes too"))
+        _VERBOSITY[0] = -1 if args.quiet else 1 if args.verbose else 0
         _refuse_inputs_as_outputs(args)         # before any work
-        return args.run(args)
+        if args.verbose:
+            from bondc import cache
+
+            _verbose(f"cache folder {cache.cache_dir()}" + ("" if cache.enabled() else " (off: BONDC_CACHE=0)"))
+        started = time.perf_counter()
+        status = args.run(args)
+        _verbose(f"bondc {args.command} took {time.perf_counter() - started:.3g} s (exit status {status})")
+        return status
     except UsageError as error:
         _print_diagnostics(error.diagnostics, error.sources)
         _json_failure(args, error)

@@ -122,3 +122,26 @@ def test_fmt_write_rewrites_several_files(capsys, tmp_path):
 def test_fmt_prints_only_one_file(capsys, tmp_path):
     status, out, err = _run(capsys, "fmt", MSD, MSD)
     assert status == 2 and "error[E001]" in err and out == ""
+
+
+# ------------------------------------------------------------------ 3. -q and -v
+
+def test_quiet_prints_only_errors(capsys, tmp_path):
+    gear = ROOT / "models" / "dc_motor_gear.bg"         # a warning (W602) and a summary line
+    status, out, err = _run(capsys, "check", gear)
+    assert status == 0 and "warning[W602]" in err and "DCMotorGear:" in out
+    for argv in (("-q", "check", gear), ("check", "-q", gear), ("check", "--quiet", gear)):
+        assert _run(capsys, *argv) == (0, "", "")
+    (tmp_path / "broken.bg").write_text(BROKEN)
+    status, out, err = _run(capsys, "-q", "check", gear, tmp_path / "broken.bg")
+    assert status == 1 and "error[E301]" in err and "W602" not in err and out == ""
+
+
+def test_verbose_adds_notes_and_quiet_with_verbose_is_a_usage_error(capsys, tmp_path, monkeypatch):
+    monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "cache"))
+    status, out, err = _run(capsys, "-v", "check", MSD)
+    assert status == 0 and "MassSpringDamper:" in out
+    assert f"note: cache folder {tmp_path / 'cache'}" in err and "note: bondc check took" in err
+    status, _, err = _run(capsys, "-q", "-v", "check", MSD)
+    assert status == 2 and "error[E001]" in err
+    assert "note:" not in _run(capsys, "check", MSD)[2]        # (not left on for the next run)
