@@ -145,3 +145,35 @@ def test_verbose_adds_notes_and_quiet_with_verbose_is_a_usage_error(capsys, tmp_
     status, _, err = _run(capsys, "-q", "-v", "check", MSD)
     assert status == 2 and "error[E001]" in err
     assert "note:" not in _run(capsys, "check", MSD)[2]        # (not left on for the next run)
+
+
+# ------------------------------------------------------------------ 4. licence and metadata
+
+def test_the_licence_is_mit_in_the_repository_and_the_metadata():
+    tomllib = pytest.importorskip("tomllib")
+    text = (ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert text.startswith("MIT License") and "Copyright (c) the bondc authors" in text
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    project = pyproject["project"]
+    assert project["license"] == "MIT"              # SPDX (PEP 639), not the deprecated table
+    assert project["license-files"] == ["LICENSE"]
+    assert project["authors"] == [{"name": "the bondc authors"}]
+    assert project["classifiers"] and not any(c.startswith("License ::") for c in project["classifiers"])
+    assert "setuptools>=77" in pyproject["build-system"]["requires"]
+
+
+@pytest.mark.slow
+def test_the_wheel_carries_the_licence_without_a_deprecation_warning(tmp_path):
+    import subprocess
+    import sys
+    import zipfile
+
+    out = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-v", "-w", str(tmp_path), str(ROOT)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "SetuptoolsDeprecationWarning" not in out.stdout + out.stderr
+    [wheel] = tmp_path.glob("bondc-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert any(name.endswith(".dist-info/licenses/LICENSE") for name in names)
+    metadata = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
+    assert "License-Expression: MIT" in metadata
