@@ -529,7 +529,10 @@ def _cmd_compile(args) -> int:
     output = Path(args.output) if args.output else default_output(args.file)
     compile_file(Path(args.file), output, model=args.model, experiment=args.experiment,
                  sets=_parse_sets(args.set), standalone=args.standalone)
-    if not _quiet():
+    if args.json:
+        _print_json({"complete": True, "file": args.file, "model": args.model, "experiment": args.experiment,
+                     "standalone": args.standalone, "written": [str(output)]})
+    elif not _quiet():
         print(f"wrote {output}")
     return EXIT_OK
 
@@ -685,6 +688,7 @@ def build_parser() -> argparse.ArgumentParser:
     compile_.add_argument("-o", "--output", help="the module to write (default: MODEL_gen.py beside the model)")
     compile_.add_argument("--standalone", action="store_true",
                           help="copy bondc's runtime into the module, so that it runs where bondc is not installed")
+    compile_.add_argument("--json", action="store_true", help="print what was written as JSON")
     compile_.set_defaults(run=_cmd_compile)
 
     sim = commands.add_parser("simulate", help="simulate an experiment; statistics, energy per cycle, CSV/NPZ")

@@ -177,3 +177,15 @@ def test_the_wheel_carries_the_licence_without_a_deprecation_warning(tmp_path):
     assert any(name.endswith(".dist-info/licenses/LICENSE") for name in names)
     metadata = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith(".dist-info/METADATA"))).decode()
     assert "License-Expression: MIT" in metadata
+
+
+# ------------------------------------------------------------------ 6. --json summaries
+
+def test_compile_json_says_what_it_wrote(capsys, tmp_path):
+    target = tmp_path / "msd_gen.py"
+    status, out, _ = _run(capsys, "compile", MSD, "-o", target, "--json")
+    assert status == 0 and target.is_file()
+    data = json.loads(out)
+    assert data["complete"] is True and data["written"] == [str(target)] and data["standalone"] is False
+    status, out, _ = _run(capsys, "compile", MSD, "-o", target, "--json", "--set", "k=")
+    assert status == 2 and json.loads(out)["diagnostics"][0]["code"] == "E007"
