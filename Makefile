@@ -19,7 +19,7 @@ report: install
 	$(BIN)/bondc report $(FLAGSHIP) --motors models/data/motors.csv -o reports/electro_pneumatic_hybrid.html
 
 check: install
-	@for f in models/*.bg; do $(BIN)/bondc check $$f || exit 1; done
+	$(BIN)/bondc check models/*.bg
 
 # Python's bytecode written even where PYTHONDONTWRITEBYTECODE says not to: without it pytest
 # rewrites the asserts of every test module again in every run (10 s of a worker's collection)

@@ -12,6 +12,7 @@ import argparse
 import json
 import os
 import sys
+import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,7 +90,29 @@ def _json_failure(args, error: BondcError) -> None:
         _print_json({"complete": False, "diagnostics": [d.to_json() for d in error.diagnostics]})
 
 
+#: -1 with -q (only errors), 1 with -v (notes on what was done too), else 0; set by main()
+_VERBOSITY = [0]
+
+
+def _quiet() -> bool:
+    return _VERBOSITY[0] < 0
+
+
+def _verbose(text: str) -> None:
+    """A note printed with -v only (on stderr): where the caches are, how long the command took."""
+    if _VERBOSITY[0] > 0:
+        print(f"note: {text}", file=sys.stderr)
+
+
+def _note(text: str) -> None:
+    """A line about what was done (``reformatted m.bg``), on stderr; not with -q."""
+    if not _quiet():
+        print(text, file=sys.stderr)
+
+
 def _print_diagnostics(diagnostics, sources=None, stream=None) -> None:
+    if _quiet():        # -q: only errors
+        diagnostics = [d for d in diagnostics if d.is_error]
     if diagnostics:
         print(render_all(diagnostics, sources or {}), file=stream or sys.stderr)
 
@@ -118,6 +141,16 @@ def _derived(args, light: bool = False):
                           cache=False if getattr(args, "no_cache", False) else None, light=light)
     _print_diagnostics(derived.notes, derived.graph.sources)
     return derived
+
+
+def _status(diagnostics) -> int:
+    """0 without errors; 2 when an error is about a value given on the command line (``--set k=abc``:
+    the command line is at fault); else 1."""
+    from bondc.pipeline import on_command_line
+
+    if not any(d.is_error for d in diagnostics):
+        return EXIT_OK
+    return EXIT_USAGE if on_command_line(diagnostics) else EXIT_ERRORS
 
 
 # ------------------------------------------------------------------ commands
@@ -229,6 +262,38 @@ def _models_to_check(args) -> tuple[list[tuple[str | None, bool]], tuple | None]
 
 
 def _cmd_check(args) -> int:
+    """``bondc check FILE...``: each file in turn; the exit status is the worst of them. With
+    ``--json``, one file's object, or for several files an array of them, each with its ``file``."""
+    _parse_sets(args.set)       # a bad --set is E007 once, before any file
+    return _each_file(args, _check_file)
+
+
+def _each_file(args, run) -> int:
+    """``run(args with one file) -> (status, JSON data or None)`` for each of ``args.file``; prints
+    the JSON (an object for one file, an array for several) and returns the worst status. A file
+    that cannot be read (E002) is reported and the others are still done."""
+    files = args.file
+    if isinstance(files, str):
+        files = [files]
+    worst, rows = EXIT_OK, []
+    for name in files:
+        one = argparse.Namespace(**{**vars(args), "file": name})
+        try:
+            status, data = run(one)
+        except UsageError as error:
+            if len(files) == 1:
+                raise
+            _print_diagnostics(error.diagnostics, error.sources)
+            status, data = EXIT_USAGE, {"ok": False, "diagnostics": [d.to_json() for d in error.diagnostics]}
+        worst = max(worst, status)
+        if data is not None:
+            rows.append({"file": name, **data} if len(files) > 1 else data)
+    if getattr(args, "json", False):
+        print(json.dumps(json_safe(rows if len(files) > 1 else rows[0]), indent=2, allow_nan=False))
+    return worst
+
+
+def _check_file(args) -> tuple[int, dict | None]:
     diagnostics: list[Diagnostic] = []
     sources: dict = {}
     results = []
@@ -255,11 +320,10 @@ def _cmd_check(args) -> int:
         data = {"ok": ok, "diagnostics": [d.to_json() for d in diagnostics], "model": summaries[0]}
         if len(summaries) > 1:
             data["models"] = summaries
-        print(json.dumps(data, indent=2))
-        return EXIT_OK if ok else EXIT_ERRORS
+        return _status(diagnostics), data
     _print_diagnostics(diagnostics, sources)
     for graph, causal, component, state_space in results:
-        if graph is None:
+        if graph is None or (_quiet() and not args.causality):
             continue
         counts = graph.summary()
         line = (f"{graph.name}: {counts['elements']} elements, {counts['junctions']} junctions, "
@@ -280,25 +344,49 @@ def _cmd_check(args) -> int:
     errors = sum(d.is_error for d in diagnostics)
     if errors:
         print(f"{args.file}: {errors} error{'s' if errors != 1 else ''}", file=sys.stderr)
-    return EXIT_OK if ok else EXIT_ERRORS
+    return _status(diagnostics), None
 
 
 def _cmd_fmt(args) -> int:
+    """``bondc fmt FILE...``: print one file formatted, or ``--check``/``--write`` each of several;
+    the exit status is the worst of them (1: a file would be reformatted, or does not parse)."""
+    if len(args.file) > 1 and not (args.check or args.write):
+        raise UsageError(Diagnostic("error", "E001", "bondc fmt: several files need --check or --write",
+                                    hint="give one file to print it formatted"))
+    return _each_file(args, _fmt_file)
+
+
+def _fmt_file(args) -> tuple[int, dict | None]:
     from bondc.fmt import format_path
     from bondc.io import atomic_write_text
 
-    original, formatted = format_path(Path(args.file))
+    try:
+        original, formatted = format_path(Path(args.file))
+    except UsageError:
+        raise
+    except BondcError as error:         # a file that does not parse: the others are still formatted
+        _print_diagnostics(error.diagnostics, error.sources)
+        return EXIT_ERRORS, {"ok": False, "formatted": False, "changed": False, "written": False,
+                             "diagnostics": [d.to_json() for d in error.diagnostics]}
+    changed = original != formatted
+    data = {"ok": True, "formatted": not changed, "changed": changed, "written": False, "diagnostics": []}
     if args.check:
-        if original != formatted:
+        if changed:
             print(f"{args.file}: would be reformatted", file=sys.stderr)
-            return EXIT_ERRORS
-        return EXIT_OK
+            data["ok"] = False
+            return EXIT_ERRORS, data
+        return EXIT_OK, data
     if args.write:
-        if original != formatted:
+        if changed:
             atomic_write_text(Path(args.file), formatted)
-        return EXIT_OK
-    sys.stdout.write(formatted)
-    return EXIT_OK
+            data["written"] = True
+            _note(f"{args.file}: reformatted")
+        return EXIT_OK, data
+    if args.json:
+        data["text"] = formatted
+    else:
+        sys.stdout.write(formatted)
+    return EXIT_OK, data
 
 
 def _cmd_equations(args) -> int:
@@ -364,7 +452,7 @@ def _cmd_simulate(args) -> int:
     from bondc.simulate import read_input_files
 
     inputs = read_input_files(state_space, args.input)      # --input u=FILE.csv[:COLUMN]
-    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json,
+    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json and not _quiet(),
                       inputs=inputs)
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:
@@ -441,7 +529,11 @@ def _cmd_compile(args) -> int:
     output = Path(args.output) if args.output else default_output(args.file)
     compile_file(Path(args.file), output, model=args.model, experiment=args.experiment,
                  sets=_parse_sets(args.set), standalone=args.standalone)
-    print(f"wrote {output}")
+    if args.json:
+        _print_json({"complete": True, "file": args.file, "model": args.model, "experiment": args.experiment,
+                     "standalone": args.standalone, "written": [str(output)]})
+    elif not _quiet():
+        print(f"wrote {output}")
     return EXIT_OK
 
 
@@ -453,14 +545,15 @@ def _cmd_report(args) -> int:
         from bondc.report.sweep_report import build_sweep_report
 
         target = build_sweep_report(args.sweep, args.output, args.motors)
-        print(f"wrote {target}")
+        if not _quiet():
+            print(f"wrote {target}")
         return EXIT_OK
     if not args.file:
         raise UsageError(Diagnostic("error", "E001", "bondc report: give a model file, or --sweep STUDY.csv",
                                     hint="see 'bondc report --help'"))
     _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
                          data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
-                         t_end=args.t_end, progress=True, inertia_ratio=inertia_ratio)
+                         t_end=args.t_end, progress=not _quiet(), inertia_ratio=inertia_ratio)
     return code  # run_report prints the diagnostics and where it wrote the report
 
 
@@ -469,7 +562,7 @@ def _cmd_validate(args) -> int:
 
     _, code = run_validate(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
                            output=args.output, model=args.model, experiment=args.experiment,
-                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=True,
+                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=not _quiet(),
                            inertia_ratio=_inertia_ratio(args))
     return code
 
@@ -481,7 +574,7 @@ def _cmd_sweep(args) -> int:
         result = run_sweep(args.file, model=args.model, experiment=args.experiment, sets=args.set or (),
                            vary=args.vary or (), samples=args.samples, ranges=args.ranges or (), seed=args.seed,
                            metrics=args.metric, output=args.output, jobs=args.jobs, t_end=args.t_end, dt=args.dt,
-                           rederive=args.rederive, progress=not args.json, point_timeout=args.point_timeout,
+                           rederive=args.rederive, progress=not args.json and not _quiet(), point_timeout=args.point_timeout,
                            motors=args.motors, executor=args.executor, scheduler=args.scheduler,
                            inertia_ratio=_inertia_ratio(args))
     except KeyboardInterrupt as interrupt:
@@ -519,8 +612,11 @@ def _cmd_fit_friction(args) -> int:
 
 # ------------------------------------------------------------------- parser
 
-def _add_model_args(parser, *, sets=True, optional=False) -> None:
-    parser.add_argument("file", help="the .bg model file", nargs="?" if optional else None)
+def _add_model_args(parser, *, sets=True, optional=False, several=False) -> None:
+    if several:
+        parser.add_argument("file", help="the .bg model files", nargs="+", metavar="FILE")
+    else:
+        parser.add_argument("file", help="the .bg model file", nargs="?" if optional else None)
     parser.add_argument("--model", help="the model to use when the file holds several")
     parser.add_argument("--no-cache", action="store_true",
                         help="derive and compile again instead of reusing the compile cache")
@@ -529,23 +625,45 @@ def _add_model_args(parser, *, sets=True, optional=False) -> None:
                             help='override a parameter, e.g. --set M=40 or --set "M=40 [kg]" (repeatable)')
 
 
+def _add_verbosity(parser, default) -> None:
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("-q", "--quiet", action="store_true", default=default,
+                       help="print only errors: no warnings, notes, progress or summary lines")
+    group.add_argument("-v", "--verbose", action="store_true", default=default,
+                       help="also print notes on what was done: the cache folder, the time taken")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _ArgumentParser(prog="bondc", description="bondc — a bond-graph modelling compiler")
     parser.add_argument("--version", action="version", version=f"bondc {__version__}")
     parser.add_argument("--debug", action="store_true", help="show a traceback on an internal error")
+    _add_verbosity(parser, argparse.SUPPRESS)
+    parser.set_defaults(quiet=False, verbose=False)
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_ArgumentParser)
+    add_parser = commands.add_parser
 
-    check = commands.add_parser("check", help="parse and check a model; report every problem")
-    _add_model_args(check)
+    def add_command(*args, **kwargs):       # -q and -v after the command too (bondc check -q m.bg)
+        command = add_parser(*args, **kwargs)
+        _add_verbosity(command, argparse.SUPPRESS)
+        return command
+
+    commands.add_parser = add_command
+
+    check = commands.add_parser("check", help="parse and check models; report every problem (the exit status "
+                                              "is the worst of the files)")
+    _add_model_args(check, several=True)
     check.add_argument("--json", action="store_true", help="machine-readable diagnostics")
     check.add_argument("--causality", action="store_true", help="print the causality table")
     check.set_defaults(run=_cmd_check)
 
-    fmt = commands.add_parser("fmt", help="print a model in the canonical layout")
-    fmt.add_argument("file")
+    fmt = commands.add_parser("fmt", help="print a model in the canonical layout; check or rewrite models")
+    fmt.add_argument("file", nargs="+", metavar="FILE", help="the .bg model files (several with --check or --write)")
     group = fmt.add_mutually_exclusive_group()
-    group.add_argument("--check", action="store_true", help="exit 1 if the file is not formatted")
-    group.add_argument("--write", action="store_true", help="rewrite the file in place")
+    group.add_argument("--check", action="store_true", help="exit 1 if a file is not formatted")
+    group.add_argument("--write", action="store_true", help="rewrite the files in place")
+    fmt.add_argument("--json", action="store_true",
+                     help="print what was done as JSON: per file, formatted, changed, written (and the text "
+                          "without --check or --write)")
     fmt.set_defaults(run=_cmd_fmt)
 
     equations = commands.add_parser("equations", help="print the state equations")
@@ -570,6 +688,7 @@ def build_parser() -> argparse.ArgumentParser:
     compile_.add_argument("-o", "--output", help="the module to write (default: MODEL_gen.py beside the model)")
     compile_.add_argument("--standalone", action="store_true",
                           help="copy bondc's runtime into the module, so that it runs where bondc is not installed")
+    compile_.add_argument("--json", action="store_true", help="print what was written as JSON")
     compile_.set_defaults(run=_cmd_compile)
 
     sim = commands.add_parser("simulate", help="simulate an experiment; statistics, energy per cycle, CSV/NPZ")
@@ -704,6 +823,7 @@ def main(argv: list[str] | None = None) -> int:
         with fewer_collections():
             return _main(argv, debug)
     finally:
+        _VERBOSITY[0] = 0
         sys.stdout, sys.stderr = streams
         for guard, stream in zip(guards, streams):
             if guard.broken:
@@ -792,8 +912,19 @@ def _main(argv: list[str], debug: bool) -> int:
         if not getattr(args, "run", None):
             parser.print_help(sys.stderr)
             return EXIT_USAGE
+        if args.quiet and args.verbose:
+            raise UsageError(Diagnostic("error", "E001", "bondc: -q and -v cannot be given together",
+                                        hint="-q prints only errors, -v notes too"))
+        _VERBOSITY[0] = -1 if args.quiet else 1 if args.verbose else 0
         _refuse_inputs_as_outputs(args)         # before any work
-        return args.run(args)
+        if args.verbose:
+            from bondc import cache
+
+            _verbose(f"cache folder {cache.cache_dir()}" + ("" if cache.enabled() else " (off: BONDC_CACHE=0)"))
+        started = time.perf_counter()
+        status = args.run(args)
+        _verbose(f"bondc {args.command} took {time.perf_counter() - started:.3g} s (exit status {status})")
+        return status
     except UsageError as error:
         _print_diagnostics(error.diagnostics, error.sources)
         _json_failure(args, error)
@@ -801,7 +932,9 @@ def _main(argv: list[str], debug: bool) -> int:
     except BondcError as error:
         _print_diagnostics(error.diagnostics, error.sources)
         _json_failure(args, error)
-        return EXIT_USAGE if getattr(error, "io", False) else EXIT_ERRORS    # (a file that cannot be read)
+        if getattr(error, "io", False):     # (a file that cannot be read)
+            return EXIT_USAGE
+        return _status(error.diagnostics) if error.diagnostics else EXIT_ERRORS
     except KeyboardInterrupt as interrupt:
         terminated = isinstance(interrupt, Terminated)
         print(f"bondc: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)

@@ -42,12 +42,40 @@ def fewer_collections():
         gc.set_threshold(*previous)
 
 
+#: The hint of every problem with a ``--set`` value: what one looks like.
+SET_HINT = 'a --set value is NAME=VALUE: a number, with a unit in [ ] or in the parameter\'s declared unit ' \
+           '(--set k=800, --set "k=0.8 [kN/m]"), or an expression of the model\'s parameters (--set "k=2*k0")'
+
+
 def parse_sets(sets: Sequence) -> list[ast.SetValue]:
-    """``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) parsed; already parsed values pass through."""
+    """``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) parsed; already parsed values pass through.
+
+    A text that is not ``NAME=VALUE [unit]`` is the command line's fault: a UsageError (E007, exit
+    status 2), not a ParseError of the model.
+    """
+    from bondc.errors import Diagnostic, ParseError, UsageError
     from bondc.parse import parse_set_value
 
-    return [parse_set_value(item, f"--set #{index}") if isinstance(item, str) else item
-            for index, item in enumerate(sets or (), 1)]
+    parsed = []
+    for index, item in enumerate(sets or (), 1):
+        if not isinstance(item, str):
+            parsed.append(item)
+            continue
+        try:
+            parsed.append(parse_set_value(item, f"--set #{index}"))
+        except ParseError as error:
+            first = error.diagnostics[0]
+            detail = first.message[:1].lower() + first.message[1:]
+            raise UsageError(Diagnostic("error", "E007", f"--set {item!r} is not NAME=VALUE [unit]: {detail}",
+                                        first.span, hint=SET_HINT), error.sources) from None
+    return parsed
+
+
+def on_command_line(diagnostics) -> bool:
+    """Whether an error among ``diagnostics`` is about a value given on the command line (``--set``,
+    ``--vary``): the command line is at fault, and the command exits with status 2."""
+    return any(d.is_error and (d.span.file.startswith("--set #") or d.span.file.startswith("--vary "))
+               for d in diagnostics)
 
 
 def chosen_experiment(graph, name: str | None):

@@ -813,6 +813,10 @@ class _ExpressionChecker:
             owners = [o for o, laws in self.m.element_laws.items() if name in laws.state_names]
             if owners:
                 hint = f"'{name}' is a state of '{owners[0]}': write {owners[0]}.{name}"
+        if node.span.file.startswith("--set #"):     # --set k=abc
+            from bondc.pipeline import SET_HINT
+
+            hint = f"{hint}; {SET_HINT}" if hint else SET_HINT
         self.report(_error("E301", f"undefined name '{name}'", node.span, hint=hint))
 
     def _variables_of(self, name: str) -> list[str]:

@@ -1018,7 +1018,6 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     carries the partial result as ``sweep_result``.
     """
     from bondc import semantic
-    from bondc.parse import parse_set_value
 
     if not vary and not samples:
         raise _usage("E960", "nothing to vary", hint='give --vary, e.g. --vary "k=400,800,1600", or --samples N '
@@ -1047,8 +1046,9 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
         shape = f" ({' x '.join(str(len(axis.values)) for axis in axes)})" if len(axes) > 1 and not samples else ""
         raise _usage("E964", f"the sweep has {runs} runs{shape}; at most {MAX_RUNS} are allowed",
                      hint="use fewer values, or split the sweep")
-    parsed_sets = tuple(parse_set_value(item, f"--set #{number}") if isinstance(item, str) else item
-                        for number, item in enumerate(sets or (), 1))
+    from bondc.pipeline import parse_sets
+
+    parsed_sets = tuple(parse_sets(sets))
 
     # load to check the request before deriving anything
     graph, warnings = semantic.load(Path(path), model=model,

@@ -654,6 +654,15 @@ d("E006", "document too large to analyse",
   "definitions, completion and formatting give nothing for it. Every other document is served as "
   "before, and the document is analysed again once an edit brings it under the limits.",
   "Run `bondc check FILE` on the file, or split it into files that import each other.")
+d("E007", "--set value is not NAME=VALUE",
+  "A `--set` option's text does not read as `NAME=VALUE [unit]`: no `=`, nothing after it, or a value that "
+  "is not an expression. The command exits with status 2 and computes nothing. Every other problem with a "
+  "`--set` value is reported with its own code at the `--set` text (`--set #1` is the first `--set`): a name "
+  "that is not a parameter or a value naming something undefined (`--set k=abc`) is E301, a unit of another "
+  "quantity E204, a value that cannot be evaluated E311; as the command line is at fault, these too exit "
+  "with status 2.",
+  "Write `--set k=800` (the value in the parameter's declared unit), `--set \"k=0.8 [kN/m]\"` (quote a value "
+  "with a unit or spaces), or an expression of the model's parameters, `--set \"b=2*J\"`.")
 # ================================================================== examples
 
 PARSE_EXAMPLES = {
@@ -925,6 +934,7 @@ live("E001", Cli("bondc simulate --t-end 2"), Cli("bondc report spin.bg --compar
 live("E002", Cli("bondc check spin.gb", {"spin.bg": SPIN}))
 live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
 live("E003", Cli("bondc compile spin.bg -o spin.bg", {"spin.bg": SPIN}))
+live("E007", Cli("bondc check spin.bg --set b=", {"spin.bg": SPIN}))
 
 # ================================================================== the page
 
@@ -972,7 +982,8 @@ or a CSV table, nothing is quoted.
 A code's letter is its severity: `E` an error, `W` a warning, `I` information
 (one warning has an `E` code: E915; E926 is retired). Errors stop the command with
 exit status 1, or 2 when the command line is at fault (a bad option, a file that
-cannot be read); warnings and information are printed and the command goes on.
+cannot be read, a bad `--set` value); warnings and information are printed and
+the command goes on.
 
 This page lists every code bondc can emit, by stage, each with what it means,
 an example and how to fix it. The examples are the golden test cases of
