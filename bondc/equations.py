@@ -353,6 +353,19 @@ class _Deriver:
         (b1, b2), (s1, s2) = element.bonds, element.port_signs
         return b1, b2, sympy.Integer(s1), sympy.Integer(s2), self.law(element, "r")
 
+    def _divisor(self, element: ElementNode, r):
+        """``r``, the ratio a two-port's equations divide by in its causality: E606 where it is 0
+        whatever the values (``r = 0``, ``0/Ar``): the equations would divide by zero."""
+        if r.is_zero:
+            kind, law = (("transformer", "p2.e = p1.e/r") if element.kind in ("TF", "MTF")
+                         else ("gyrator", "p2.f = p1.e/r"))
+            raise _error("E606", f"the ratio r of {kind} '{element.name}' is 0, and its causality (it is given "
+                                 f"port 1's effort) makes its equations divide by r: {law}",
+                         element.law_spans.get("r") if element.law_spans else element.span,
+                         hint="a ratio of 0 connects nothing: give the ratio it has (r = 1/Ar for a piston of "
+                              "area Ar), or draw the model without the two-port")
+        return r
+
     def _transformer(self, element: ElementNode) -> None:
         # p1.e = r*p2.e, p2.f = r*p1.f with port flows = sign * bond flows.
         b1, b2, s1, s2, r = self._ports(element)
@@ -361,6 +374,7 @@ class _Deriver:
             self.add(self.e(b1), r * self.e(b2), name, "transformer")
             self.add(self.f(b2), s2 * r * s1 * self.f(b1), name, "transformer")
         else:
+            r = self._divisor(element, r)
             self.add(self.e(b2), self.e(b1) / r, name, "transformer")
             self.add(self.f(b1), s1 * (s2 * self.f(b2)) / r, name, "transformer")
 
@@ -372,6 +386,7 @@ class _Deriver:
             self.add(self.e(b1), r * s2 * self.f(b2), name, "gyrator")
             self.add(self.e(b2), r * s1 * self.f(b1), name, "gyrator")
         else:
+            r = self._divisor(element, r)
             self.add(self.f(b2), s2 * self.e(b1) / r, name, "gyrator")
             self.add(self.f(b1), s1 * self.e(b2) / r, name, "gyrator")
 

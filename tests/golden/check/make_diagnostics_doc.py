@@ -187,6 +187,11 @@ d("W604", "nonlinear algebraic loop",
   "or the Newton step it leaves, is at rounding level.",
   "Usually nothing: the run is slower, and where the solve fails its unknowns become nan and the run stops "
   "(E810). To remove the loop, add a small storage element, or give the resistor's law in the form the loop needs.")
+d("E606", "two-port ratio is zero",
+  "A transformer's or gyrator's ratio `r` is 0 for every value of the parameters (`r = 0`, `r = 0/Ar`), and "
+  "its causality gives it port 1's effort, so its equations divide by `r` (`p2.e = p1.e/r` for a "
+  "transformer, `p2.f = p1.e/r` for a gyrator). The caret is under the ratio's law.",
+  "Give the ratio the element has (a piston of area `Ar` is `r = 1/Ar`), or remove the two-port.")
 d("E605", "law cannot be inverted",
   "Causality needs a law in the other form than the one written: a resistor in conductance causality "
   "(it receives the effort and must give the flow) with only `e = ...`, or a storage element in derivative "
