@@ -407,7 +407,11 @@ class _Verdict:
         """``first`` or ``otherwise`` (whether the element sets its first bond's effort): pairs of
         (variable, port) it sets and (variable, port) that variable reads, besides its law."""
         bonds, r = element.bonds, self.law(element, "r")
-        for (kind, i), (read, j) in (first if self.causal.sets_effort(bonds[0], element.name) else otherwise):
+        sets_first = self.causal.sets_effort(bonds[0], element.name)
+        if not sets_first:      # the equations divide by r (E606 where it is 0 for every value)
+            walk = _Walk(self, element)
+            walk.nonzero(walk.value(element.laws["r"]), "the ratio r, which the equations divide by,")
+        for (kind, i), (read, j) in (first if sets_first else otherwise):
             add((kind, bonds[i]), r | {(read, bonds[j])})
 
     def _transformer(self, element, add) -> None:
