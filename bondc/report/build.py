@@ -1066,10 +1066,8 @@ def _answer(selection) -> Answer | None:
     rows = [CandidateRow(c.motor.name, tuple((c.check(rule).margin, c.check(rule).passed) for rule in RULES),
                          "the choice" if c is chosen else "qualifies" if c.qualifies else "fails", c is chosen)
             for c in by_size]
-    notes = ["Margins are available / required: a motor qualifies when each is at least 1. "
-             "See the motor candidates section for each rule and every figure."]
     return Answer(selection.verdict(), chosen.motor.name if chosen is not None else None, shown.motor.name,
-                  _rule_margins(shown), torque_plot, speed_plot, rows, notes=notes)
+                  _rule_margins(shown), torque_plot, speed_plot, rows)
 
 
 def _rule_margins(candidate) -> list[RuleMargin]:

@@ -227,8 +227,8 @@ class Answer:
     torque_plot: Plot                           # torque over time against the motor's limits (zoomable)
     speed_plot: Plot                            # torque against speed on the motor's envelope
     candidates: Sequence[CandidateRow] = ()
-    rules: Sequence[str] = ("peak τ", "RMS τ", "speed", "J ratio")
-    notes: Sequence[str] = ()
+    rules: Sequence[str] = ("peak τ", "RMS τ", "speed", "J limit")      # the columns of ``candidates``
+    notes: Sequence[str] = ()                   # sentences after the compact table's caption
 
     def __post_init__(self) -> None:
         for plot in (self.torque_plot, self.speed_plot):
