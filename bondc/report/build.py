@@ -1061,8 +1061,8 @@ def _answer(selection) -> Answer | None:
         from bondc.analysis.motors import motor_torque
 
         torque = motor_torque(shown.motor, need)
-    who = shown.motor.name if chosen is not None else f"the largest motor, {shown.motor.name}, which fails"
-    torque_plot, speed_plot = _answer_plots(selection, shown, need, torque, who)
+    why = "" if chosen is not None else f". No motor qualifies: {shown.motor.name} is the largest"
+    torque_plot, speed_plot = _answer_plots(selection, shown, need, torque, why)
     rows = [CandidateRow(c.motor.name, tuple((c.check(rule).margin, c.check(rule).passed) for rule in RULES),
                          "the choice" if c is chosen else "qualifies" if c.qualifies else "fails", c is chosen)
             for c in by_size]
@@ -1095,8 +1095,9 @@ def _rule_margins(candidate) -> list[RuleMargin]:
     return rows
 
 
-def _answer_plots(selection, shown, need, torque: np.ndarray, who: str) -> tuple[Plot, Plot]:
-    """(the torque over the cycle against the motor's limits, the torque-speed points on its envelope)."""
+def _answer_plots(selection, shown, need, torque: np.ndarray, why: str = "") -> tuple[Plot, Plot]:
+    """(the torque over the cycle against the motor's limits, the torque-speed points on its envelope);
+    ``why`` ends both captions (why this motor is shown when none qualifies)."""
     import hashlib
     import math
 
@@ -1132,8 +1133,8 @@ def _answer_plots(selection, shown, need, torque: np.ndarray, who: str) -> tuple
                           ylim=(-1.15 * peak, 1.15 * peak), legend_above=True)
     delivered = (f"The torque at the coupling + {motor.name}'s rotor inertia × dω/dt"
                  if selection.include_rotor_inertia else "The motor torque")
-    torque_caption = (f"{delivered}, against {who}'s continuous (rated) and peak torque, and the cycle's RMS "
-                      "torque; drag to zoom")
+    torque_caption = (f"{delivered}, against {motor.name}'s continuous (rated) and peak torque, and the cycle's "
+                      f"RMS torque; drag to zoom{why}")
     torque_plot = Plot(title, torque_svg, torque_caption)
 
     rpm = np.abs(np.asarray(need.speed, dtype=float)) / (2 * math.pi / 60)
@@ -1158,11 +1159,12 @@ def _answer_plots(selection, shown, need, torque: np.ndarray, who: str) -> tuple
         legend_on_top(axes)
         speed_svg = figure_svg(chart, title, key)
     caption = (f"The cycle's operating points (the torque beside) and its RMS torque at the RMS speed, on "
-               f"{who}'s continuous (solid) and peak (dashed) envelope")
+               f"{motor.name}'s continuous (solid) and peak (dashed) envelope")
     if kept.size < rpm.size:
         shown_n, total = (f"{n:,}".replace(",", "\u202f") for n in (kept.size, rpm.size))
         caption += (f"; {shown_n} of the {total} operating points are drawn, one in each small cell: the cloud "
                     "of them all")
+    caption += why
     return torque_plot, Plot(title, speed_svg, caption)
 
 
