@@ -10,7 +10,10 @@ but the standard library and the ``chromium`` binary (Debian package
 - the bond graph, the SVG plots and the MathML equations are laid out with a
   non-zero size, and the equations are laid out as MathML (not as text),
 
-and keeps a full-page screenshot in ``tests/artifacts/`` for a human to look at.
+and keeps a full-page screenshot in ``tests/artifacts/`` for a human to look at. On a 1280 x 800
+screen the report leads with the answer: the verdict, the chosen motor's margins and the two plots
+of the answer are all above the fold (their boxes from ``DOM.getBoxModel``); that first screen is
+kept as a screenshot too.
 The report of a 2 kHz PWM drive is zoomed and panned with the mouse (real input
 events) and reset with a double-click; screenshots of its first plot before and
 after the zoom are kept there too.
@@ -147,8 +150,9 @@ class DevTools:
 
     # -- the page
 
-    def open(self, url: str) -> None:
-        """Open ``url`` in a new page; the events of pages opened before are forgotten."""
+    def open(self, url: str, width: int = WIDTH, height: int = HEIGHT) -> None:
+        """Open ``url`` in a new page of ``width`` x ``height`` CSS pixels; the events of pages opened
+        before are forgotten."""
         self.events = []
         target = self.call("Target.createTarget", {"url": "about:blank"}, page=False)["targetId"]
         self.session = self.call("Target.attachToTarget", {"targetId": target, "flatten": True},
@@ -156,7 +160,7 @@ class DevTools:
         for domain in ("Page", "Runtime", "Log", "Network"):
             self.call(f"{domain}.enable")
         self.call("Emulation.setDeviceMetricsOverride",
-                  {"width": WIDTH, "height": HEIGHT, "deviceScaleFactor": 1, "mobile": False})
+                  {"width": width, "height": height, "deviceScaleFactor": 1, "mobile": False})
         self.call("Page.navigate", {"url": url})
         self.wait_for("Page.loadEventFired")
 
@@ -165,6 +169,16 @@ class DevTools:
         if "exceptionDetails" in reply:
             raise RuntimeError(f"evaluation failed: {reply['exceptionDetails']}")
         return reply["result"]["value"]
+
+    def box(self, selector: str) -> tuple[float, float, float, float]:
+        """(left, top, right, bottom) of the border box of the first element matching ``selector``, in
+        CSS pixels of the page (not scrolled), from the DevTools protocol's DOM.getBoxModel."""
+        root = self.call("DOM.getDocument", {"depth": 0})["root"]["nodeId"]
+        node = self.call("DOM.querySelector", {"nodeId": root, "selector": selector})["nodeId"]
+        assert node, f"no element matches {selector!r}"
+        quad = self.call("DOM.getBoxModel", {"nodeId": node})["model"]["border"]
+        xs, ys = quad[0::2], quad[1::2]
+        return min(xs), min(ys), max(xs), max(ys)
 
     def screenshot(self, path: Path) -> None:
         size = self.call("Page.getLayoutMetrics")["cssContentSize"]
@@ -263,6 +277,37 @@ def test_flagship_report_in_chromium(browser):
     assert len(measured["fractions"]) >= 6 and all(height > 25 for _, height in measured["fractions"][:6])
     assert all(width > 0 and height > 0 for width, height in measured["fractions"])
     assert measured["page"][0] <= WIDTH                          # nothing forces a horizontal scroll
+
+
+FOLD_WIDTH, FOLD_HEIGHT = 1280, 800
+
+
+@pytest.mark.slow
+def test_flagship_report_leads_with_the_answer_above_the_fold(browser):
+    """At 1280 x 800 the first screen holds the answer: the verdict, the chosen motor's rule margins,
+    the torque over time against its limits and the torque-speed points on its envelope; the model's
+    sections (bond graph, parameters, ...) come after it."""
+    report = flagship_report()
+    browser.open(report.resolve().as_uri(), FOLD_WIDTH, FOLD_HEIGHT)
+    assert browser.evaluate("window.scrollY") == 0
+    ARTIFACTS.mkdir(exist_ok=True)
+    shot = browser.call("Page.captureScreenshot", {"format": "png", "clip": {
+        "x": 0, "y": 0, "width": FOLD_WIDTH, "height": FOLD_HEIGHT, "scale": 1}})
+    (ARTIFACTS / "flagship_report_top.png").write_bytes(base64.b64decode(shot["data"]))
+
+    left, top, right, bottom = browser.box("#answer p.verdict-text")
+    assert 0 <= top < bottom <= FOLD_HEIGHT and right - left > 400
+    assert browser.evaluate('document.querySelector("#answer p.verdict-text").textContent').startswith(
+        "SV-200 is the smallest motor that qualifies")
+    for selector in ("#answer table.margins", "#answer .answer-figures figure:nth-child(1) svg.plot",
+                     "#answer .answer-figures figure:nth-child(2) svg.plot"):
+        left, top, right, bottom = browser.box(selector)
+        assert bottom <= FOLD_HEIGHT and right <= FOLD_WIDTH and right - left > 300, selector
+    plots = [browser.box(f"#answer .answer-figures figure:nth-child({n}) svg.plot") for n in (1, 2)]
+    assert plots[0][2] <= plots[1][0]                               # side by side
+    for section in ("#bond-graph", "#parameters", "#equations"):
+        assert browser.box(section)[1] > FOLD_HEIGHT, section       # the model comes after the answer
+    assert _problems(browser.events) == []
 
 
 def _problems(events) -> list[str]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import functools
 import io
 import os
@@ -85,7 +86,7 @@ def test_flagship_report():
     checker = check_html(html)
     assert len(checker.ids) == len(set(checker.ids))
     assert_self_contained(html)
-    assert sections(html) == ["bond-graph", "parameters", "causality", "equations", "results", "power",
+    assert sections(html) == ["answer", "bond-graph", "parameters", "causality", "equations", "results", "power",
                               "motor-requirements", "motor-candidates", "source"]
     header = html[:html.index("<nav")]
     assert "ElectroPneumaticHybrid" in header and "electro_pneumatic_hybrid.bg" in header
@@ -121,8 +122,153 @@ def test_flagship_report():
     assert verdict.endswith("and its load/rotor inertia ratio is 24.3, above 10.")
     assert "SV-100 is smaller but its load/rotor inertia ratio is 11.9, above 10." in verdict
     assert "<dt>motor</dt><dd>SV-200</dd>" in top
-    assert "torque against speed over the motors" in motors and "operating points" in motors
+    assert "Torque against speed on SV-200&#39;s envelope" in top and "operating points" in top
     assert len(html) < 3_000_000
+
+
+# ---------------------------------------------------------------- the answer first
+
+def catalogue_motors(path: Path = CATALOGUE) -> dict[str, dict[str, float]]:
+    """The catalogue read with the csv module (not bondc's reader): name -> its numeric columns."""
+    lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line and not line.startswith("#")]
+    return {row["name"]: {key: float(value) for key, value in row.items() if key != "name" and value}
+            for row in csv.DictReader(lines)}
+
+
+def _x_axis(svg: str):
+    """Value at an SVG x, from the plot's own x tick labels."""
+    ticks = re.findall(r'<g id="[^"]*-xtick_\d+">.*?<use [^>]*\bx="([-\d.]+)".*?<text [^>]*>([^<]*)</text>',
+                       svg, flags=re.S)
+    (x_a, label_a), (x_b, label_b) = ticks[0], ticks[-1]
+    value_a, value_b = (float(label.replace("−", "-")) for label in (label_a, label_b))
+    x_a, x_b = float(x_a), float(x_b)
+    return lambda x: value_a + (np.asarray(x) - x_a) * (value_b - value_a) / (x_b - x_a)
+
+
+def _line_level(svg: str, gid: str) -> float:
+    """The SVG y of the horizontal line drawn in the group ``gid`` (both ends at the same height)."""
+    d = re.search(r'<g id="[^"]*-%s">\s*<path d="([^"]*)"' % re.escape(gid), svg).group(1)
+    points = _vertices(d)
+    assert len(points) == 2 and points[0, 1] == points[1, 1], d
+    return float(points[0, 1])
+
+
+def _data_area(svg: str) -> tuple[float, float, float, float]:
+    """(left, top, right, bottom) of the axes' background, in SVG units."""
+    d = re.search(r'<g id="[^"]*-patch_2">\s*<path d="([^"]*)"', svg).group(1)
+    points = _vertices(d)
+    return (float(points[:, 0].min()), float(points[:, 1].min()), float(points[:, 0].max()),
+            float(points[:, 1].max()))
+
+
+def check_answer_first(html: str, catalogue: Path = CATALOGUE) -> dict:
+    """The report leads with the answer: the verdict and the torque-time plot come before the model's
+    sections; the plot's limit lines are the chosen motor's catalogue values; the torque-speed plot is
+    zoomed to the operating region with the chosen motor's envelope only. Returns what it measured."""
+    chosen = re.search(r'<h2 class="summary-title">The answer: ([^<]+)</h2>', html).group(1)
+    verdict = re.search(r'<p class="verdict-text">(.*?)</p>', html, flags=re.S).group(1)
+    assert verdict.startswith(f"{chosen} is the smallest motor that qualifies: ")
+    torque_svg = _plot(html, f"Torque over the cycle against {chosen}'s limits")
+    speed_svg = _plot(html, f"Torque against speed on {chosen}'s envelope")
+    # first: the verdict and both plots before every section of the model
+    first = max(html.index('<p class="verdict-text">'), html.index(torque_svg), html.index(speed_svg))
+    found = sections(html)
+    assert found[0] == "answer" and {"bond-graph", "parameters", "source"} <= set(found)
+    for section in found[1:]:
+        assert first < html.index(f'<section id="{section}"'), section
+    assert html.index('<nav class="toc"') > first and html.index('<table class="meta">') > first
+    # the limit lines at the chosen motor's catalogue values (read here with the csv module)
+    motors = catalogue_motors(catalogue)
+    motor = motors[chosen]
+    value = _y_axis(torque_svg)
+    tolerance = 2e-3 * motor["peak_torque"]
+    for gid, expected in (("limit-peak", motor["peak_torque"]), ("limit-peak-negative", -motor["peak_torque"]),
+                          ("limit-continuous", motor["rated_torque"]),
+                          ("limit-continuous-negative", -motor["rated_torque"])):
+        assert abs(float(value(_line_level(torque_svg, gid))) - expected) < tolerance, gid
+    rms = float(re.search(r"RMS torque ([\d.]+) of ", verdict).group(1))
+    assert float(value(_line_level(torque_svg, "rms"))) == pytest.approx(rms, rel=5e-3, abs=tolerance)
+    assert "data-zoom" in torque_svg                               # the torque over time zooms like the others
+    drawn = _vertices(re.search(r'id="[^"]*-zoomline0">\s*<path d="([^"]*)"', torque_svg).group(1))
+    peak = float(re.search(r"peak torque ([\d.]+) of ", verdict).group(1))
+    assert float(np.max(np.abs(value(drawn[:, 1])))) == pytest.approx(peak, rel=5e-3)
+    # torque against speed: zoomed to the operating points and the chosen motor's limits, not the catalogue's
+    left, top, right, bottom = _data_area(speed_svg)
+    x_value, y_value = _x_axis(speed_svg), _y_axis(speed_svg)
+    x_range = (float(x_value(left)), float(x_value(right)))
+    y_range = (float(y_value(bottom)), float(y_value(top)))
+    group = speed_svg[speed_svg.index("-operating-points\">"):speed_svg.index("-rms-point\">")]
+    points = np.array([[float(x), float(y)] for x, y in re.findall(r'<use [^>]*\bx="([-\d.]+)" y="([-\d.]+)"', group)])
+    speeds, torques = x_value(points[:, 0]), y_value(points[:, 1])
+    assert len(points) > 10
+    assert abs(x_range[0]) < 1e-4 * x_range[1] and abs(y_range[0]) < 1e-4 * y_range[1]     # from 0 (to 0.01 pt)
+    assert speeds.max() <= x_range[1] and torques.max() <= y_range[1]          # every point inside
+    assert float(torques.max()) == pytest.approx(peak, rel=5e-3)
+    assert motor["peak_torque"] < y_range[1] <= 1.5 * max(float(torques.max()), motor["peak_torque"])
+    assert motor["rated_speed"] < x_range[1] <= 1.5 * max(float(speeds.max()), motor["rated_speed"])
+    # the chosen motor's envelope alone, in the legend; the points in a colour no envelope uses
+    legend = re.findall(r"<text [^>]*>([^<]*)</text>", speed_svg)
+    assert f"{chosen} continuous" in legend and f"{chosen} peak" in legend
+    assert not any(name in text for name in motors if name != chosen and name not in chosen for text in legend)
+    envelope_colours = set(re.findall(r'-envelope-[a-z]+">\s*<path [^>]*stroke: (#[0-9a-f]{6})', speed_svg))
+    point_colours = set(re.findall(r"fill: (#[0-9a-f]{6})", group))
+    assert len(envelope_colours) == 1 and len(point_colours) == 1 and not envelope_colours & point_colours
+    # the other motors: a compact table, each with its rules' margins
+    table = html[html.index('<table class="data candidates">'):]
+    table = table[:table.index("</table>")]
+    assert sorted(re.findall(r"<tr[^>]*><td>([^<]+)</td>", table)) == sorted(motors)
+    assert re.search(r'<tr class="chosen"><td>%s</td>' % re.escape(chosen), table)
+    assert table.count("<tr") == len(motors) + 1
+    return {"chosen": chosen, "x_range": x_range, "y_range": y_range, "peak": peak, "speeds": speeds}
+
+
+@pytest.mark.slow
+def test_flagship_report_leads_with_the_answer():
+    html = flagship_report().read_text(encoding="utf-8")
+    found = check_answer_first(html)
+    assert found["chosen"] == "SV-200"
+    # not the 0-10 N·m of the whole catalogue: SV-200's peak 1.91 N·m with room, the points no longer
+    # in the bottom 4 % of the axis
+    assert found["y_range"][1] < 3.0 and found["peak"] / found["y_range"][1] > 0.15
+    # the rule margins of SV-200, as the verdict states them
+    margins = html[html.index('<table class="data margins">'):]
+    margins = margins[:margins.index("</table>")]
+    for words in ("1.91 N·m", "0.64 N·m", "3000 rpm", "1000 rpm", "load/rotor 4.33", "up to 10", "✓ 4.44× (77 %)"):
+        assert words in margins, words
+
+
+def test_a_pwm_drive_report_leads_with_the_answer():
+    check_answer_first(pwm_report().read_text(encoding="utf-8"))
+
+
+SPINDLE = Path(__file__).parent / "fixtures" / "motors" / "spindle.bg"
+
+
+def test_an_answer_without_a_known_load_inertia(tmp_path):
+    html = build_report(SPINDLE, motors=CATALOGUE, output=tmp_path / "r.html", date=DATE).read_text(encoding="utf-8")
+    assert check_answer_first(html)["chosen"] == "SV-200"
+    margins = html[html.index('<table class="data margins">'):]
+    assert "load inertia unknown: not checked" in margins[:margins.index("</table>")]
+
+
+def test_when_no_motor_qualifies_the_largest_is_shown(tmp_path):
+    small = tmp_path / "small.csv"
+    small.write_text("\n".join(line for line in CATALOGUE.read_text(encoding="utf-8").splitlines()
+                               if not line.startswith("SV-") or line.split(",")[0] in ("SV-50", "SV-100")) + "\n",
+                     encoding="utf-8")
+    html = build_report(SPINDLE, motors=small, output=tmp_path / "r.html", date=DATE).read_text(encoding="utf-8")
+    check_html(html)
+    verdict = re.search(r'<p class="verdict-text">(.*?)</p>', html, flags=re.S).group(1)
+    assert verdict.startswith("No motor of the catalogue qualifies: the largest, SV-100, fails because ")
+    assert '<h2 class="summary-title">The answer</h2>' in html and 'class="chosen"' not in html
+    svg = _plot(html, "Torque over the cycle against SV-100's limits")
+    value, motor = _y_axis(svg), catalogue_motors(small)["SV-100"]
+    assert float(value(_line_level(svg, "limit-continuous"))) == pytest.approx(motor["rated_torque"], abs=2e-3)
+    assert float(value(_line_level(svg, "limit-peak"))) == pytest.approx(motor["peak_torque"], abs=2e-3)
+    margins = html[html.index('<table class="data margins">'):]
+    margins = margins[:margins.index("</table>")]
+    assert '<td class="fail">✗ ' in margins and "(−" in margins           # RMS torque: a negative headroom
+    assert html.count("No motor qualifies: SV-100 is the largest.") == 2   # both captions say why it is shown
 
 
 @pytest.mark.slow
@@ -420,6 +566,20 @@ def test_a_pwm_drive_report_stays_light_and_keeps_every_extreme(tmp_path):
         fine = value(y0 + h * (1 - q / 65534.0))
         assert abs(float(fine.min()) - low) < tolerance and abs(float(fine.max()) - high) < tolerance, name
     # the operating points: a few thousand markers of the 48 000, and the caption says so
-    motor = _plot(html, "torque against speed over the motors' envelopes")
+    motor = _plot(html, "Torque against speed on SV-200's envelope")
     assert 100 < motor.count("<use ") <= MAX_MARKERS + 50
-    assert re.search(r"\d[\d\u2009]* of the 48\u2009\d{3} operating points are drawn", html)
+    assert re.search(r"\d[\d\u202f]* of the 48\u202f\d{3} operating points are drawn", html)
+    # the torque over time against the motor's limits: thinned for display, finer for zooming, same extremes
+    svg = _plot(html, "Torque over the cycle against SV-200's limits")
+    value = _y_axis(svg)
+    drawn = value(_vertices(re.search(r'id="[^"]*-zoomline0">\s*<path d="([^"]*)"', svg).group(1))[:, 1])
+    assert 100 < len(drawn) <= DISPLAY_POINTS
+    zoom = json.loads(html_module.unescape(re.search(r'data-zoom="([^"]*)"', svg).group(1)))
+    [line] = zoom["lines"]
+    times, q = zoom_samples(line)
+    assert DISPLAY_POINTS < len(q) <= ZOOM_POINTS
+    x0, y0, w, h = zoom["box"]
+    fine = value(y0 + h * (1 - q / 65534.0))
+    span = float(drawn.max() - drawn.min())
+    assert abs(float(fine.max()) - float(drawn.max())) < 2e-3 * span
+    assert abs(float(fine.min()) - float(drawn.min())) < 2e-3 * span

@@ -19,6 +19,7 @@ from bondc.parse import parse_text
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
+    ANSWER_SIZE, Answer, CandidateRow, HLine, RuleMargin,
     Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection, causality_notes,
     causality_rows, environment, equation_markup, format_number, format_unit, math_markup, parameter_rows,
     content_security_policy, plot_svg, render_report, source_sha256, zoom_script,
@@ -418,4 +419,64 @@ def test_only_a_report_with_zoomable_plots_has_a_script(model):
     without_zoom_script(html)
     html = render_report(full_context(graph, causal))
     assert html.count("<script>") == 1 and "script-src &#39;sha256-" in html
+    without_zoom_script(html)
+
+
+# ---------------------------------------------------------------- the answer first
+
+def hostile_answer() -> Answer:
+    """An answer whose every text could be markup: a motor named ``MX-<1>``."""
+    t = np.linspace(0.0, 1.0, 5001)
+    torque = 0.4 * np.sin(2 * np.pi * 3 * t)
+    limits = [HLine(1.2, "peak <±1.2>", (("color", "#0550ae"), ("linestyle", "--")), "limit-peak"),
+              HLine(-1.2, "peak", (("color", "#0550ae"), ("linestyle", "--")), "limit-peak-negative", legend=False)]
+    torque_plot = Plot("Torque of MX-<1>", plot_svg(t, {"motor <torque>": torque}, "Torque of MX-<1>", "τ [N·m]",
+                                                    size=ANSWER_SIZE, hlines=limits, ylim=(-1.4, 1.4),
+                                                    legend_above=True, max_points=1000), "limits <b>bold</b>")
+    speed_plot = Plot("Speed <i>plot</i>", plot_svg(t, {"s": np.abs(torque)}, "Speed <i>plot</i>", "τ", zoom_points=0,
+                                                    size=ANSWER_SIZE), "caption & more")
+    margins = [RuleMargin("peak torque", "0.4 N·m at <300> rpm", "1.2 N·m", 3.0, 2 / 3, True),
+               RuleMargin("inertia ratio", "load inertia unknown: not checked", "up to 10", None, None, None),
+               RuleMargin("peak power", "12 W", "<50> W rated", 50 / 12, 1 - 12 / 50, None)]
+    rows = [CandidateRow("MX-<0>", ((0.8, False), (1.5, True), (2.0, True), (None, None)), "fails"),
+            CandidateRow("MX-<1>", ((3.0, True), (2.5, True), (2.0, True), (None, None)), "the choice", True)]
+    return Answer("MX-<1> is the smallest motor that <b>qualifies</b>.", "MX-<1>", "MX-<1>", margins, torque_plot,
+                  speed_plot, rows)
+
+
+def test_the_answer_comes_first_escaped(model):
+    html = render_report(full_context(*model, answer=hostile_answer(), verdict="the verdict as a plain paragraph"))
+    check_html(html)
+    answer = html.index('<section id="answer"')
+    for later in ('<table class="meta">', '<nav class="toc"', '<section id="bond-graph">',
+                  '<section id="parameters">', '<section id="equations">', '<section id="source"'):
+        assert answer < html.index(later), later
+    assert html.index('<header class="report-header">') < answer
+    assert html.count('<p class="verdict-text">') == 1                     # the answer's, not a second one
+    top = html[answer:html.index("</section>", answer)]
+    assert "MX-&lt;1&gt; is the smallest motor that &lt;b&gt;qualifies&lt;/b&gt;." in top
+    assert "The answer: MX-&lt;1&gt;" in top and "0.4 N·m at &lt;300&gt; rpm" in top and "&lt;50&gt; W rated" in top
+    assert "limits &lt;b&gt;bold&lt;/b&gt;" in top and "Speed &lt;i&gt;plot&lt;/i&gt;." in top
+    assert '<tr class="chosen"><td>MX-&lt;1&gt;</td>' in top and "<td>MX-&lt;0&gt;</td>" in top
+    assert '<td class="pass">✓ 3×' in top and '<td class="num fail">✗ 0.8</td>' in top
+    assert "not checked" in top and "information" in top
+    assert "<b>" not in top and "<i>plot" not in top
+    # the SVG's own texts are escaped by plot_svg: the legend of the limit, the title
+    assert "peak &lt;±1.2&gt;" in top and "<title>Torque of MX-&lt;1&gt;</title>" in top
+    assert re.search(r'<g id="plot[0-9a-f]{8}-limit-peak">', top)
+
+
+def test_the_answers_torque_plot_zooms(model):
+    """The torque over time is thinned for display and carries zoom data, and its limit lines are no
+    zoom lines (they stay across the plot); a report whose only zoomable plot is it has the script."""
+    graph, causal = model
+    answer = hostile_answer()
+    svg = str(answer.torque_plot.svg)
+    zoom = json.loads(html_module.unescape(re.search(r'data-zoom="([^"]*)"', svg).group(1)))
+    assert len(zoom["lines"]) == 1 and zoom["x"] == [0.0, 1.0]
+    drawn = re.search(r'id="[^"]*-zoomline0">\s*<path d="([^"]*)"', svg).group(1)
+    assert len(re.findall(r"[ML]", drawn)) <= 1000
+    html = render_report(ReportContext(ReportHeader.for_graph(graph, SOURCE, date="2024-05-01"),
+                                       highlight_bg(SOURCE), answer=answer))
+    assert html.count("<script>") == 1
     without_zoom_script(html)

@@ -191,6 +191,12 @@ def motor_report(result, graph, catalogue_path, *, load_inertia: float | None = 
     """
     selection = size_motors(result, graph, catalogue_path, load_inertia=load_inertia, inertia_limit=inertia_limit,
                             include_rotor_inertia=include_rotor_inertia, torque=torque, speed=speed)
+    return selection_report(selection, catalogue_path)
+
+
+def selection_report(selection, catalogue_path) -> tuple[str, dict]:
+    """:func:`motor_report` of a :func:`size_motors` selection already made (the report keeps the
+    :class:`~bondc.analysis.motors.Selection` too, to draw the chosen motor's limits)."""
     (torque_name, torque_where), (speed_name, speed_where) = selection.signals
     source, window = selection.load_inertia_source, selection.cycle
     head = [f"motor selection from {Path(catalogue_path).name} ({len(selection)} motors)",

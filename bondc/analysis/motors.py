@@ -614,6 +614,19 @@ def _peak_torque_check(motor: Motor, need: MotorRequirements) -> Check:
     return Check("peak_torque", required, offered, "N*m", offered >= required, float(speed[worst]))
 
 
+def motor_torque(motor: Motor, need: MotorRequirements) -> np.ndarray:
+    """The torque ``motor`` delivers over the cycle when it also accelerates its own rotor:
+    tau + J_rotor*d(omega)/dt at ``need.time`` (what :func:`judge` checks with
+    ``include_rotor_inertia``; the report plots it against the motor's limits).
+
+    Raises DataError E923 when ``need`` carries no profile.
+    """
+    if need.time is None:
+        raise DataError(Diagnostic("error", "E923", "these requirements carry no profile to add rotor inertia to",
+                                   hint="make them with requirements(t, torque, speed)"))
+    return need.torque + motor.rotor_inertia * np.gradient(need.speed, need.time)
+
+
 def judge(motor: Motor, need: MotorRequirements, *, load_inertia: float | None = None,
           inertia_limit: float | None = None, include_rotor_inertia: bool = False,
           unknown_inertia: str | None = None) -> Candidate:
@@ -636,11 +649,7 @@ def judge(motor: Motor, need: MotorRequirements, *, load_inertia: float | None =
     tau + J_rotor*d(omega)/dt (the profile is the torque delivered to the load).
     """
     if include_rotor_inertia:
-        if need.time is None:
-            raise DataError(Diagnostic("error", "E923", "these requirements carry no profile to add rotor inertia to",
-                                       hint="make them with requirements(t, torque, speed)"))
-        acceleration = np.gradient(need.speed, need.time)
-        need = requirements(need.time, need.torque + motor.rotor_inertia * acceleration, need.speed)
+        need = requirements(need.time, motor_torque(motor, need), need.speed)
     checks = [
         _peak_torque_check(motor, need),
         Check("rms_torque", need.rms_torque, float(motor.continuous_torque_at(need.rms_speed_rpm)), "N*m",

@@ -55,7 +55,8 @@ from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
-    FULL_SIZE, HALF_SIZE, Equation, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection,
+    FULL_SIZE, HALF_SIZE, Answer, CandidateRow, Equation, HLine, ParameterRow, Plot, ReportContext, ReportHeader,
+    RuleMargin, Table, ValidationSection,
     causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
 )
 from bondc.report.validate import (
@@ -522,15 +523,15 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
 
     plots, result_tables, power_plots, power_tables = [], [], [], []
     summary: list[tuple[str, Any, str | None]] = []
-    motor_requirements = motor_candidates = verdict = None
+    motor_requirements = motor_candidates = verdict = answer = None
     if result is not None and result.t.size >= 2:
         plots = output_plots(graph, result, run.experiment)
         result_tables = _result_tables(run)
         power_plots, power_tables, energy_summary, energy_warnings = _energy_sections(run)
         warnings += energy_warnings
-        motor_requirements, motor_candidates, motor_summary, verdict = _motor_sections(run, motors, inertia_ratio)
+        motor_requirements, motor_candidates, motor_summary, verdict, answer = _motor_sections(
+            run, motors, inertia_ratio)
         summary = (motor_summary or _summary(run)) + energy_summary
-    motor_plot, motor_plot_caption = _motor_plot(run, motors) if motor_candidates is not None else (None, "")
     return ReportContext(
         header=_header(run, date),
         source_html=highlight_bg(run.source_text),
@@ -549,13 +550,12 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         power_tables=power_tables,
         motor_requirements=motor_requirements,
         motor_candidates=motor_candidates,
-        motor_plot=motor_plot,
-        motor_plot_caption=motor_plot_caption,
         validation=validation,
         warnings=warnings,
         incomplete=incomplete,
         summary=summary,
         verdict=verdict,
+        answer=answer,
     )
 
 
@@ -1042,56 +1042,143 @@ def _energy_sections(run: PipelineRun) -> tuple[list[Plot], list[Table], list, l
 MOTOR_TORQUE, MOTOR_SPEED = "torque", "omega"
 
 
-def _motor_plot(run: PipelineRun, motors) -> tuple[Markup, str]:
-    """The cycle's operating points (|speed| in rpm, torque) and RMS torque over each catalogue motor's
-    continuous and peak envelopes, and a note for the caption when the points were thinned for display
-    (at most :data:`~bondc.report.render.MAX_MARKERS`, see :func:`~bondc.report.render.scatter_indices`)."""
+def _answer(selection) -> Answer | None:
+    """The design answer the report leads with, from the catalogue's :class:`~bondc.analysis.motors.Selection`:
+    the verdict, the chosen motor's rule margins, the cycle's torque over time against its continuous and
+    peak limits, the torque-speed points on its envelope (zoomed to the operating region) and every motor
+    in a compact table. When no motor qualifies, the largest (the one the verdict names) is shown.
+    None for an empty catalogue."""
+    from bondc.analysis.motors import RULES
+
+    by_size = sorted(selection, key=lambda candidate: candidate.motor.size)
+    if not by_size:
+        return None
+    chosen = selection.best
+    shown = chosen if chosen is not None else by_size[-1]
+    need = selection.requirements
+    torque = need.torque
+    if selection.include_rotor_inertia:
+        from bondc.analysis.motors import motor_torque
+
+        torque = motor_torque(shown.motor, need)
+    why = "" if chosen is not None else f". No motor qualifies: {shown.motor.name} is the largest"
+    torque_plot, speed_plot = _answer_plots(selection, shown, need, torque, why)
+    rows = [CandidateRow(c.motor.name, tuple((c.check(rule).margin, c.check(rule).passed) for rule in RULES),
+                         "the choice" if c is chosen else "qualifies" if c.qualifies else "fails", c is chosen)
+            for c in by_size]
+    return Answer(selection.verdict(), chosen.motor.name if chosen is not None else None, shown.motor.name,
+                  _rule_margins(shown), torque_plot, speed_plot, rows)
+
+
+def _rule_margins(candidate) -> list[RuleMargin]:
+    """The rules of one motor as the answer's table shows them, with units (the verdict's figures)."""
+    from bondc.analysis.motors import figure
+
+    rows = []
+    for check in candidate.checks:
+        speed = f" at {figure(check.speed)} rpm" if check.speed is not None and check.speed > 0 else ""
+        if check.rule == "peak_torque":
+            row = ("peak torque", f"{figure(check.required)} N·m{speed}", f"{figure(check.available)} N·m")
+        elif check.rule == "rms_torque":
+            row = ("RMS torque", f"{figure(check.required)} N·m{speed}",
+                   f"{figure(check.available)} N·m")
+        elif check.rule == "speed":
+            row = ("top speed", f"{figure(check.required)} rpm", f"{figure(check.available)} rpm")
+        elif check.rule == "inertia_ratio":
+            needed = (f"load/rotor {figure(check.required)}" if check.required is not None
+                      else "load inertia unknown: not checked")
+            row = ("inertia ratio", needed, f"up to {figure(check.available)}")
+        else:
+            row = ("peak power", f"{figure(check.required or 0.0)} W",
+                   f"{figure(check.available)} W rated")
+        rows.append(RuleMargin(*row, check.margin, check.headroom, check.passed))
+    return rows
+
+
+def _answer_plots(selection, shown, need, torque: np.ndarray, why: str = "") -> tuple[Plot, Plot]:
+    """(the torque over the cycle against the motor's limits, the torque-speed points on its envelope);
+    ``why`` ends both captions (why this motor is shown when none qualifies)."""
     import hashlib
     import math
 
     import matplotlib
     from matplotlib.figure import Figure
 
-    from bondc.analysis.motor_report import cycle_window, find_signal
-    from bondc.analysis.motors import load_catalogue, requirements
-    from bondc.report.render import PLOT_STYLE, draw_motor_envelopes, figure_svg, scatter_indices
+    from bondc.analysis.motors import figure as fig_text
+    from bondc.report.render import (
+        ANSWER_SIZE, LIMIT_COLOR, PLOT_STYLE, POINTS_COLOR, RMS_COLOR, draw_motor_envelope, figure_svg,
+        legend_on_top, scatter_indices,
+    )
 
-    result = run.steps
-    _, _, torque = find_signal(result, (MOTOR_TORQUE,), "torque")
-    _, _, speed = find_signal(result, (MOTOR_SPEED,), "speed")
-    window = cycle_window(result, run.graph)
-    need = requirements(result.t, torque, speed, cycle=window)
-    inside = (result.t >= window[0]) & (result.t <= window[1])
-    title = "torque against speed over the motors' envelopes"
-    key = hashlib.sha256((title + run.graph.name).encode()).hexdigest()
+    motor = shown.motor
+    rms = shown.check("rms_torque")
+    time = np.asarray(need.time, dtype=float)
+    torque = np.asarray(torque, dtype=float)
+    peak = max(float(motor.peak_torque), float(np.max(np.abs(torque))))
+    limits = [HLine(motor.peak_torque, f"peak ±{fig_text(motor.peak_torque)} N·m",
+                    (("color", LIMIT_COLOR), ("linestyle", "--"), ("linewidth", 1.2)), "limit-peak"),
+              HLine(-motor.peak_torque, "peak", (("color", LIMIT_COLOR), ("linestyle", "--"), ("linewidth", 1.2)),
+                    "limit-peak-negative", legend=False),
+              HLine(motor.rated_torque, f"continuous ±{fig_text(motor.rated_torque)} N·m",
+                    (("color", LIMIT_COLOR), ("linewidth", 1.2)), "limit-continuous"),
+              HLine(-motor.rated_torque, "continuous", (("color", LIMIT_COLOR), ("linewidth", 1.2)),
+                    "limit-continuous-negative", legend=False),
+              HLine(rms.required, f"RMS {fig_text(rms.required)} N·m",
+                    (("color", RMS_COLOR), ("linestyle", ":"), ("linewidth", 1.2)), "rms"),
+              HLine(-rms.required, "RMS", (("color", RMS_COLOR), ("linestyle", ":"), ("linewidth", 1.2)),
+                    "rms-negative", legend=False)]
+    title = f"Torque over the cycle against {motor.name}'s limits"
+    torque_svg = plot_svg(time, {"motor torque": torque}, title, "torque [N·m]", size=ANSWER_SIZE,
+                          styles={"motor torque": {"color": POINTS_COLOR, "linewidth": 1.1}}, hlines=limits,
+                          ylim=(-1.15 * peak, 1.15 * peak), legend_above=True)
+    delivered = (f"The torque at the coupling + {motor.name}'s rotor inertia × dω/dt"
+                 if selection.include_rotor_inertia else "The motor torque")
+    torque_caption = (f"{delivered}, against {motor.name}'s continuous (rated) and peak torque, and the cycle's "
+                      f"RMS torque; drag to zoom{why}")
+    torque_plot = Plot(title, torque_svg, torque_caption)
+
+    rpm = np.abs(np.asarray(need.speed, dtype=float)) / (2 * math.pi / 60)
+    load = np.abs(torque)
+    title = f"Torque against speed on {motor.name}'s envelope"
+    key = hashlib.sha256((title + repr((rpm.tobytes(), load.tobytes()))).encode()).hexdigest()
     with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key}):
-        figure = Figure(figsize=(6.4, 3.6), layout="constrained")
-        axes = figure.add_subplot()
-        rpm = np.abs(np.asarray(speed)[inside]) * 60 / (2 * math.pi)
-        load = np.abs(np.asarray(torque)[inside])
+        chart = Figure(figsize=ANSWER_SIZE, layout="constrained")
+        axes = chart.add_subplot()
+        draw_motor_envelope(axes, motor, LIMIT_COLOR)
         kept = scatter_indices(rpm, load)
-        axes.plot(rpm[kept], load[kept], ".", markersize=2, color="#cf222e", label="operating points |τ|")
-        axes.plot([need.peak_speed * 60 / (2 * math.pi)], [need.rms_torque], "o", color="#0969da",
-                  label="RMS torque at peak speed")
-        draw_motor_envelopes(axes, load_catalogue(motors))
-        note = ""
-        if kept.size < rpm.size:
-            shown, total = (f"{n:,}".replace(",", "\u2009") for n in (kept.size, rpm.size))
-            note = (f"{shown} of the {total} operating points are drawn, one in each small cell of the plot the "
-                    "points fall in (those of the largest and smallest torque and speed among them): the cloud "
-                    "all of them draw")
-        return figure_svg(figure, title, key), note
+        axes.plot(rpm[kept], load[kept], ".", markersize=2.5, color=POINTS_COLOR, label="operating points",
+                  gid="operating-points")
+        axes.plot([rms.speed or 0.0], [rms.required], "D", markersize=5, color=RMS_COLOR,
+                  label="RMS torque at RMS speed", gid="rms-point")
+        top_speed = max(float(np.max(rpm)), float(motor.top_speed))
+        top_torque = max(float(np.max(load)), float(motor.peak_torque))
+        axes.set_xlim(0, 1.3 * top_speed)
+        axes.set_ylim(0, 1.3 * top_torque)
+        axes.set_xlabel("speed |ω| [rpm]")
+        axes.set_ylabel("torque |τ| [N·m]")
+        legend_on_top(axes)
+        speed_svg = figure_svg(chart, title, key)
+    caption = (f"The cycle's operating points (the torque beside) and its RMS torque at the RMS speed, on "
+               f"{motor.name}'s continuous (solid) and peak (dashed) envelope")
+    if kept.size < rpm.size:
+        shown_n, total = (f"{n:,}".replace(",", "\u202f") for n in (kept.size, rpm.size))
+        caption += (f"; {shown_n} of the {total} operating points are drawn, one in each small cell: the cloud "
+                    "of them all")
+    caption += why
+    return torque_plot, Plot(title, speed_svg, caption)
 
 
 def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
-                    ) -> tuple[Table | None, Table | None, list, str | None]:
+                    ) -> tuple[Table | None, Table | None, list, str | None, Answer | None]:
     """Motor requirements when the model has signals ``torque`` and ``omega``; candidates from ``motors``,
-    and the verdict (:meth:`bondc.analysis.motors.Selection.verdict`, the same paragraph as
-    ``bondc simulate --motors``) that the report shows first.
+    the verdict (:meth:`bondc.analysis.motors.Selection.verdict`, the same paragraph as
+    ``bondc simulate --motors``) and the answer (:func:`_answer`) that the report leads with.
 
     Raises UsageError (E927) when a catalogue is given but the signals are missing.
     """
-    from bondc.analysis.motor_report import cycle_window, estimate_load_inertia, find_signal, motor_report
+    from bondc.analysis.motor_report import (
+        cycle_window, estimate_load_inertia, find_signal, selection_report, size_motors,
+    )
     from bondc.analysis.motors import requirements
 
     result, graph = run.steps, run.graph
@@ -1101,11 +1188,14 @@ def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
     except UsageError:
         if motors is not None:
             raise
-        return None, None, [], None
+        return None, None, [], None, None
+    answer = None
     if motors is not None:
-        _, data = motor_report(result, graph, motors, torque=MOTOR_TORQUE, speed=MOTOR_SPEED,
-                               inertia_limit=inertia_ratio)
+        selection = size_motors(result, graph, motors, torque=MOTOR_TORQUE, speed=MOTOR_SPEED,
+                                inertia_limit=inertia_ratio)
+        _, data = selection_report(selection, motors)
         need, load_inertia = data["requirements"], data["load_inertia"]
+        answer = _answer(selection)
     else:
         window = cycle_window(result, graph)
         need = requirements(result.t, torque[2], speed[2], cycle=window).to_json()
@@ -1144,8 +1234,9 @@ def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
     summary = [("peak torque", need["peak_torque"], "N*m"), ("RMS torque", need["rms_torque"], "N*m"),
                ("peak power", need["peak_power"], "W"), ("motor energy per cycle", need["energy_net"], "J")]
     if data is None:
-        return requirements_table, None, summary, None
-    return requirements_table, _candidates_table(data, motors), summary + _motor_choice(data), data["verdict"]
+        return requirements_table, None, summary, None, None
+    return (requirements_table, _candidates_table(data, motors), summary + _motor_choice(data), data["verdict"],
+            answer)
 
 
 def _motor_choice(data: Mapping) -> list:

@@ -58,7 +58,7 @@ from bondc.report.lexer import lexer_css
 
 __all__ = [
     "ReportHeader", "ParameterRow", "CausalityRow", "Table", "Equation", "Plot", "ValidationSection",
-    "ReportContext", "render_report", "environment", "plot_svg", "math_markup", "equation_markup",
+    "ReportContext", "Answer", "RuleMargin", "CandidateRow", "HLine", "render_report", "environment", "plot_svg", "math_markup", "equation_markup",
     "parameter_rows", "causality_rows", "causality_notes", "source_sha256", "format_number", "format_unit",
 ]
 
@@ -181,6 +181,60 @@ class Plot(NamedTuple):
 FULL_SIZE = (7.0, 2.9)
 HALF_SIZE = (4.6, 2.7)
 
+#: The size of the two plots of the answer, side by side on the report's first screen.
+ANSWER_SIZE = (4.6, 2.5)
+
+
+class HLine(NamedTuple):
+    """A horizontal line across a :func:`plot_svg` plot: a limit or a level."""
+
+    value: float
+    label: str
+    style: tuple[tuple[str, Any], ...] = ()    # matplotlib line properties, e.g. (("color", "#0550ae"),)
+    gid: str = ""                             # the SVG group's id (prefixed per plot): "limit-peak"
+    legend: bool = True                       # listed in the legend (a twin at -value is not)
+
+
+class RuleMargin(NamedTuple):
+    """One sizing rule of the answer's motor: what the cycle needs, what the motor offers, the margin."""
+
+    rule: str                       # "peak torque"
+    needed: str                     # "0.43 N·m at 996 rpm"
+    offered: str                    # "1.91 N·m"
+    margin: float | None            # available / required
+    headroom: float | None          # 1 - required / available (the verdict's "% margin")
+    passed: bool | None             # None: not applied, or information only
+
+
+class CandidateRow(NamedTuple):
+    """One catalogue motor in the answer's compact table: each rule's margin and whether it passes."""
+
+    motor: str
+    checks: tuple[tuple[float | None, bool | None], ...]     # (margin, passed) per rule of Answer.rules
+    verdict: str                                              # "the choice", "qualifies", "fails"
+    chosen: bool = False
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The design answer the report leads with: the verdict, the chosen motor's margins, the cycle's
+    torque over time against its limits, the torque-speed points on its envelope, the other motors."""
+
+    verdict: str
+    motor: str | None                           # the choice (None: no motor of the catalogue qualifies)
+    shown: str                                  # whose margins and limits are shown: the choice, else the largest
+    margins: Sequence[RuleMargin]
+    torque_plot: Plot                           # torque over time against the motor's limits (zoomable)
+    speed_plot: Plot                            # torque against speed on the motor's envelope
+    candidates: Sequence[CandidateRow] = ()
+    rules: Sequence[str] = ("peak τ", "RMS τ", "speed", "J limit")      # the columns of ``candidates``
+    notes: Sequence[str] = ()                   # sentences after the compact table's caption
+
+    def __post_init__(self) -> None:
+        for plot in (self.torque_plot, self.speed_plot):
+            if not isinstance(plot.svg, Markup):
+                raise TypeError(f"plot '{plot.title}': svg must be Markup from plot_svg")
+
 
 @dataclass(frozen=True)
 class ValidationSection:
@@ -192,7 +246,7 @@ class ValidationSection:
     junit_file: str | None = None
 
 
-_TRUSTED = ("source_html", "diagram_svg", "diagram_expanded_svg", "motor_plot")
+_TRUSTED = ("source_html", "diagram_svg", "diagram_expanded_svg")
 
 #: SI units of the experiment settings that have one (the model stores them in SI).
 SETTING_UNITS: Mapping[str, str] = {"t_end": "s", "max_step": "s", "cycle": "s", "first_step": "s", "dt": "s"}
@@ -214,13 +268,12 @@ class ReportContext:
     power_tables: Sequence[Table] = ()
     motor_requirements: Table | None = None
     motor_candidates: Table | None = None
-    motor_plot: Markup | None = None            # the torque-speed operating points against the motors' envelopes
-    motor_plot_caption: str = ""                # e.g. how many of the operating points the motor plot shows
     validation: ValidationSection | None = None
     warnings: Sequence[str] = ()                # diagnostics worth a reader's attention
     incomplete: str | None = None               # the diagnostic of a simulation that stopped early
     summary: Sequence[tuple[str, Any, str | None]] = ()   # key results under the header: (label, value, unit)
     verdict: str | None = None                  # the motor sizing's answer in sentences, shown first
+    answer: Answer | None = None                # the design answer with its margins and plots, shown first
     equation_tables: Sequence[Table] = ()       # e.g. the states with their initial values
     laws: Sequence[Equation] = ()               # "where": the laws the state equations name
     result_tables: Sequence[Table] = ()         # e.g. statistics of the outputs
@@ -362,6 +415,8 @@ def content_security_policy(script: str | None) -> str:
 
 def _zoomable(context: ReportContext) -> bool:
     plots = list(context.plots) + list(context.power_plots)
+    if context.answer is not None:
+        plots += [context.answer.torque_plot, context.answer.speed_plot]
     if context.validation is not None:
         plots += list(context.validation.plots)
     return any(str(plot.svg).startswith('<svg class="plot" data-zoom="') for plot in plots)
@@ -512,7 +567,8 @@ ZOOM_POINTS = 16000
 def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: str, ylabel: str,
              xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = FULL_SIZE,
              max_points: int = DISPLAY_POINTS, styles: Mapping[str, Mapping[str, Any]] | None = None,
-             zoom_points: int = ZOOM_POINTS) -> Markup:
+             zoom_points: int = ZOOM_POINTS, hlines: Sequence[HLine] = (),
+             ylim: tuple[float, float] | None = None, legend_above: bool = False) -> Markup:
     """A line plot of ``series`` (label -> values over ``t``) as an inline SVG element.
 
     Each series is drawn with at most ``max_points`` of its samples, thinned
@@ -520,6 +576,10 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
     largest sample: peaks survive, a 2 kHz PWM keeps its extremes). ``styles``
     gives matplotlib line properties per label (e.g. ``{"measured": {"color":
     "#8c959f"}}``).
+
+    ``hlines`` are horizontal lines across the whole plot (:class:`HLine`: a limit, a level); they
+    stay where they are when the plot is zoomed along x. ``ylim`` fixes the y range; ``legend_above``
+    puts the legend above the plot, in columns, where it hides nothing.
 
     A plot of lines (no markers) can be zoomed along x in the report (see
     ``templates/zoom.js``): the ``<svg>`` carries ``data-zoom``, a JSON of
@@ -539,7 +599,7 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
     from matplotlib.figure import Figure
 
     t = np.asarray(t, dtype=float)
-    digest = hashlib.sha256(repr((title, ylabel, xlabel, max_points, zoom_points)).encode())
+    digest = hashlib.sha256(repr((title, ylabel, xlabel, max_points, zoom_points, tuple(hlines), ylim)).encode())
     digest.update(t.tobytes())
     arrays = {}
     for label, values in series.items():
@@ -564,14 +624,21 @@ def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: s
             shown = slice(None) if kept is None else kept
             axes.plot(t[shown], values[shown], label=str(label), gid=f"zoomline{number}",
                       **dict(styles.get(label, {})))
+        for line in hlines:
+            axes.axhline(line.value, label=line.label if line.legend else "_" + line.label,
+                         gid=line.gid or None, **dict(line.style))
         axes.set_xlabel(xlabel)
         axes.set_ylabel(ylabel)
         if t.size:
             axes.set_xlim(float(t.min()), float(t.max()))
+        if ylim is not None:
+            axes.set_ylim(*ylim)
         if show_title:
             axes.set_title(title, loc="left")
-        if len(arrays) > 1:
-            if size[0] >= FULL_SIZE[0]:     # room beside a full-width plot: the legend never hides a curve
+        if len(arrays) + sum(line.legend for line in hlines) > 1:
+            if legend_above:
+                legend_on_top(axes)
+            elif size[0] >= FULL_SIZE[0]:     # room beside a full-width plot: the legend never hides a curve
                 axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
             else:
                 axes.legend(loc="best")
@@ -652,6 +719,32 @@ def draw_motor_envelopes(axes, catalogue, speed_label: str = "speed [rpm]") -> N
     axes.set_xlim(left=0)
     axes.set_ylim(bottom=0)
     axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7)
+
+
+#: Colours of the answer's plots: the motor's limits (its envelope), the cycle's operating points and
+#: its torque over time, and the RMS torque. The operating points' orange is no envelope's colour.
+LIMIT_COLOR, POINTS_COLOR, RMS_COLOR = "#0550ae", "#d4700a", "#1f2328"
+
+
+def legend_on_top(axes, columns: int = 2) -> None:
+    """The legend above the data area, in ``columns`` columns: it never hides a line or a point."""
+    axes.legend(loc="lower left", bbox_to_anchor=(0.0, 1.01, 1.0, 0.2), mode="expand", ncol=columns,
+                borderaxespad=0.0, fontsize=7.5, handlelength=2.2, columnspacing=1.0)
+
+
+def draw_motor_envelope(axes, motor, color: str = LIMIT_COLOR) -> None:
+    """One motor's continuous envelope (solid: the rated torque up to the rated speed, constant power
+    up to the top speed) and peak envelope (dashed, the same shape from the peak torque), both in the
+    legend, on torque-speed axes in N*m and rpm."""
+    top = float(motor.top_speed)
+    speeds = np.array([0.0, float(motor.rated_speed)])
+    if top > motor.rated_speed:
+        speeds = np.concatenate([speeds, np.linspace(motor.rated_speed, top, 24)[1:]])
+    for torque_at, label, style, gid in ((motor.continuous_torque_at, "continuous", "-", "envelope-continuous"),
+                                         (motor.peak_torque_at, "peak", "--", "envelope-peak")):
+        torques = np.asarray(torque_at(speeds), dtype=float)
+        axes.plot(np.append(speeds, top), np.append(torques, 0.0), color=color, linewidth=1.3, linestyle=style,
+                  label=f"{motor.name} {label}", gid=gid)
 
 
 def _short_path(match: re.Match) -> str:
