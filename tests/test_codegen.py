@@ -36,6 +36,18 @@ SIM = Path(__file__).parent / "fixtures" / "sim"
 ROOT = Path(__file__).parent.parent
 
 
+#: A script's lines that make bondc, sympy and lark unimportable (a machine without them).
+_WITHOUT_BONDC = textwrap.dedent("""
+    class Block(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name.split(".")[0] in ("bondc", "sympy", "lark"):
+                raise ImportError(name + " is not available here")
+            return None
+
+    sys.meta_path.insert(0, Block())
+""")
+
+
 def derive(name):
     graph, _ = semantic.load(SIM / f"{name}.bg", experiment=semantic.FIRST)
     ss = equations.derive(causality.assign_causality(graph))
@@ -342,15 +354,7 @@ def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     assert (work / "friction_gen.py").read_text(encoding="utf-8") == source == emit(ss, experiment)
     (work / "launch.py").write_text(textwrap.dedent("""
         import importlib.abc, runpy, sys
-
-        class Block(importlib.abc.MetaPathFinder):
-            def find_spec(self, name, path=None, target=None):
-                if name.split(".")[0] in ("bondc", "sympy", "lark"):
-                    raise ImportError(name + " is not available here")
-                return None
-
-        sys.meta_path.insert(0, Block())
-        try:
+    """) + _WITHOUT_BONDC + textwrap.dedent("""        try:
             import bondc
         except ImportError:
             print("bondc not importable")
@@ -383,15 +387,7 @@ def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
 
     (work / "native.py").write_text(textwrap.dedent("""
         import hashlib, importlib.abc, json, runpy, sys
-
-        class Block(importlib.abc.MetaPathFinder):
-            def find_spec(self, name, path=None, target=None):
-                if name.split(".")[0] in ("bondc", "sympy", "lark"):
-                    raise ImportError(name + " is not available here")
-                return None
-
-        sys.meta_path.insert(0, Block())
-        module = runpy.run_path("friction_gen.py")
+    """) + _WITHOUT_BONDC + textwrap.dedent("""        module = runpy.run_path("friction_gen.py")
         assert "bondc" not in sys.modules
         run = module["simulate"]()
         print(json.dumps({"code": run.stats["code"], "note": run.stats.get("code_note", ""),
