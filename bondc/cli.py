@@ -610,6 +610,54 @@ def _cmd_fit_friction(args) -> int:
     return code
 
 
+def _megabytes(size: int) -> str:
+    """A size for people: 0 B, 812 kB, 3.4 MB, 1.2 GB (powers of 1000, as BONDC_CACHE_MAX_MB)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if size >= scale:
+            return f"{size / scale:.3g} {unit}"
+    return f"{size} B"
+
+
+def _cmd_cache(args) -> int:
+    """``bondc cache info``: where each cache is, its entries and size; ``bondc cache clear``: remove
+    what bondc wrote there (nothing else: see :func:`bondc.cache.clear`)."""
+    from bondc import cache
+
+    if args.action is None:
+        raise UsageError(Diagnostic("error", "E001", "bondc cache: say what to do: info or clear",
+                                    hint="bondc cache info [--json], bondc cache clear [--json]"))
+    try:
+        cache.max_bytes()
+    except ValueError as error:
+        raise UsageError(Diagnostic("error", "E001", str(error),
+                                    hint="e.g. BONDC_CACHE_MAX_MB=500 (megabytes); 0 for no cap")) from None
+    if args.action == "clear":
+        removed = cache.clear()
+        if args.json:
+            _print_json({"complete": True, "folder": str(cache.cache_dir()),
+                         "removed": [{"name": name, "entries": count, "bytes": size}
+                                     for name, (count, size) in removed.items()]})
+        elif not _quiet():
+            count = sum(count for count, _ in removed.values())
+            size = sum(size for _, size in removed.values())
+            print(f"removed {count} cache entries ({_megabytes(size)}) from {cache.cache_dir()}")
+        return EXIT_OK
+    found = cache.info()
+    if args.json:
+        _print_json({"complete": True, **found})
+        return EXIT_OK
+    state = "on" if found["enabled"] else "off (BONDC_CACHE=0)"
+    cap = "no cap" if found["max_bytes"] is None else f"cap {_megabytes(found['max_bytes'])}"
+    print(f"cache folder {found['folder']} ({state}; compile cache {cap}, BONDC_CACHE_MAX_MB)")
+    width = max(len(item["name"]) for item in found["caches"])
+    for item in found["caches"]:
+        print(f"  {item['name']:<{width}}  {item['entries']:>6} entries  {_megabytes(item['bytes']):>9}  "
+              f"{item['folder']}")
+    print(f"  {'total':<{width}}  {sum(i['entries'] for i in found['caches']):>6} entries  "
+          f"{_megabytes(found['bytes']):>9}")
+    return EXIT_OK
+
+
 # ------------------------------------------------------------------- parser
 
 def _add_model_args(parser, *, sets=True, optional=False, several=False) -> None:
@@ -778,6 +826,17 @@ def build_parser() -> argparse.ArgumentParser:
     lsp_.add_argument("--stdio", action="store_true",
                       help="talk over stdin/stdout (the only transport; accepted because editors' clients pass it)")
     lsp_.set_defaults(run=_cmd_lsp)
+
+    cache_ = commands.add_parser("cache", help="bondc's caches: where they are and their size (info), or empty "
+                                                "them (clear)")
+    actions = cache_.add_subparsers(dest="action", metavar="ACTION", parser_class=_ArgumentParser)
+    for action, text in (("info", "each cache's folder, entries and size, and the compile cache's cap"),
+                         ("clear", "remove what bondc stored in its caches (compile, check, native libraries, "
+                                   "parser); other files in the folder stay")):
+        sub = actions.add_parser(action, help=text)
+        _add_verbosity(sub, argparse.SUPPRESS)
+        sub.add_argument("--json", action="store_true", help="print the result as JSON")
+    cache_.set_defaults(run=_cmd_cache, json=False)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")
