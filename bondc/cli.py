@@ -538,33 +538,44 @@ def _cmd_compile(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from bondc.report.build import run_report
+    from bondc.report.build import report_summary, report_text
 
     inertia_ratio = _inertia_ratio(args)
     if args.sweep:
         from bondc.report.sweep_report import build_sweep_report
 
         target = build_sweep_report(args.sweep, args.output, args.motors)
-        if not _quiet():
+        if args.json:
+            _print_json({"complete": True, "sweep": args.sweep, "written": [str(target)], "exit_status": EXIT_OK})
+        elif not _quiet():
             print(f"wrote {target}")
         return EXIT_OK
     if not args.file:
         raise UsageError(Diagnostic("error", "E001", "bondc report: give a model file, or --sweep STUDY.csv",
                                     hint="see 'bondc report --help'"))
-    _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
-                         data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
-                         t_end=args.t_end, progress=not _quiet(), inertia_ratio=inertia_ratio)
-    return code  # run_report prints the diagnostics and where it wrote the report
+    summary = report_summary(Path(args.file), model=args.model, experiment=args.experiment,
+                             sets=_parse_sets(args.set), data=args.data, compare=args.compare or (),
+                             motors=args.motors, output=args.output, t_end=args.t_end,
+                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio)
+    if args.json:
+        _print_json(summary)
+    elif not _quiet() or summary["exit_status"]:
+        print(report_text(summary), file=sys.stderr)
+    return summary["exit_status"]
 
 
 def _cmd_validate(args) -> int:
-    from bondc.report.build import run_validate
+    from bondc.report.build import validate_summary, validate_text
 
-    _, code = run_validate(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
-                           output=args.output, model=args.model, experiment=args.experiment,
-                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=not _quiet(),
-                           inertia_ratio=_inertia_ratio(args))
-    return code
+    results, summary = validate_summary(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
+                                        output=args.output, model=args.model, experiment=args.experiment,
+                                        sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors,
+                                        progress=not args.json and not _quiet(), inertia_ratio=_inertia_ratio(args))
+    if args.json:
+        _print_json(summary)
+    else:
+        print(validate_text(results, summary))
+    return summary["exit_status"]
 
 
 def _cmd_sweep(args) -> int:
@@ -769,6 +780,8 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
     report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
                                                    "reports/<file>-<experiment>.html for a non-first experiment)")
+    report.add_argument("--json", action="store_true",
+                        help="print a JSON summary: the file written, pass/fail per compared signal, diagnostics")
     report.set_defaults(run=_cmd_report)
 
     validate = commands.add_parser("validate", help="compare a simulation with measured data; pass/fail per signal")
@@ -782,6 +795,9 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--motors", metavar="CATALOGUE.csv", help=argparse.SUPPRESS)
     validate.add_argument("--inertia-ratio", metavar="LIMIT", help=argparse.SUPPRESS)
     validate.add_argument("-o", "--output", help="also write the HTML report with the validation section")
+    validate.add_argument("--json", action="store_true",
+                          help="print a JSON summary instead of the table: pass/fail and metrics per signal, "
+                               "the files written, diagnostics")
     validate.set_defaults(run=_cmd_validate)
 
     sweep = commands.add_parser("sweep", help="parameter study: simulate over a grid of parameter values")
