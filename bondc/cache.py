@@ -24,7 +24,7 @@ no sympy.
 An entry whose imports changed is a miss. The compiled C library is cached
 separately, by the hash of its text (``bondc.runtime.load_native``).
 
-The compile cache keeps at most ``BONDC_CACHE_MAX_MB`` megabytes (default 1024; 0: no cap):
+The compile cache keeps at most ``BONDC_CACHE_MAX_MB`` megabytes (default 1000: 1 GB; 0: no cap):
 a running total of what was stored (``models/.size.json``) says when to measure the folder and
 evict the least recently used entries (a hit marks its entry used). :func:`info` and
 :func:`clear` are ``bondc cache info`` and ``bondc cache clear``.
@@ -439,7 +439,7 @@ _OWN = {"models": rf"{_HEX}|\.size\.json|\.tmp-.*",
         "parser": r"lalr-[0-9a-f]+\.lark(\.tmp.*)?|\.tmp-.*"}
 
 #: The compile cache's default cap, in MB (``BONDC_CACHE_MAX_MB`` changes it; 0: no cap).
-DEFAULT_MAX_MB = 1024.0
+DEFAULT_MAX_MB = 1000.0
 _SIZE_FILE = ".size.json"
 
 
