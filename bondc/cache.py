@@ -24,6 +24,11 @@ no sympy.
 An entry whose imports changed is a miss. The compiled C library is cached
 separately, by the hash of its text (``bondc.runtime.load_native``).
 
+The compile cache keeps at most ``BONDC_CACHE_MAX_MB`` megabytes (default 1000: 1 GB; 0: no cap):
+a running total of what was stored (``models/.size.json``) says when to measure the folder and
+evict the least recently used entries (a hit marks its entry used). :func:`info` and
+:func:`clear` are ``bondc cache info`` and ``bondc cache clear``.
+
 Entries are written to a private temporary file and renamed into place, so
 concurrent runs never read half an entry; anything unreadable is a miss, never
 an error. ``BONDC_CACHE=0`` or ``--no-cache`` turn the cache off. The cache is
@@ -234,6 +239,7 @@ class Entry:
         """The cached ``Derived``, or None (a miss: absent, stale imports or unreadable)."""
         derived = self._read("derived.pickle") if self._current() else None
         if derived is not None:
+            _touch(self.folder)
             self.remember(derived.state_space)
         return derived
 
@@ -244,6 +250,7 @@ class Entry:
             return None
         derived = self._read("light.pickle")
         if derived is not None:
+            _touch(self.folder)
             derived.state_space.entry = self
             self.remember(derived.state_space)
         return derived
@@ -262,6 +269,7 @@ class Entry:
             _atomic_write(self.folder / "light.pickle", data)
         except Exception:       # noqa: BLE001  (a cache must never fail the run)
             return
+        _grown(len(data))
 
     def store(self, derived) -> None:
         """Write the entry; a failure (read-only cache, unpicklable value) only means no cache."""
@@ -288,9 +296,11 @@ class Entry:
             data = pickle.dumps(derived, protocol=pickle.HIGHEST_PROTOCOL)
             self.folder.mkdir(parents=True, exist_ok=True)
             _atomic_write(self.folder / "derived.pickle", data)
-            _atomic_write(self.folder / "depends.json", json.dumps(depends, indent=1).encode())
+            listed = json.dumps(depends, indent=1).encode()
+            _atomic_write(self.folder / "depends.json", listed)
         except Exception:       # noqa: BLE001  (a cache must never fail the run)
             return
+        _grown(len(data) + len(listed))
         self.remember(derived.state_space)
 
     # -- generated module
@@ -310,9 +320,11 @@ class Entry:
 
     def write_module(self, source: str) -> None:
         try:
-            _atomic_write(self.folder / "module.py", source.encode("utf-8"))
-        except OSError:
-            pass
+            data = source.encode("utf-8")
+            _atomic_write(self.folder / "module.py", data)
+        except (OSError, UnicodeEncodeError):
+            return
+        _grown(len(data))
 
     def module_code(self, source: str, filename: str):
         """``compile(source, filename, "exec")``, kept beside the module as Python keeps a ``.pyc``:
@@ -334,9 +346,11 @@ class Entry:
             pass
         code = compile(source, filename, "exec")
         try:
-            _atomic_write(path, stamp + marshal.dumps(code))
+            data = stamp + marshal.dumps(code)
+            _atomic_write(path, data)
         except (OSError, ValueError):
-            pass
+            return code
+        _grown(len(data))
         return code
 
 
@@ -401,3 +415,195 @@ def entry_of(state_space) -> Entry | None:
     if found is None or found[0]() is not state_space:
         return None
     return found[1]
+
+
+# ------------------------------------------------------------------ size cap and management
+#
+# ``bondc cache info`` and ``bondc cache clear`` see only what bondc writes: the subfolders below,
+# by name, and in each only the entries whose names bondc gives them (``_OWN``). A
+# ``BONDC_CACHE_DIR`` that points at a folder holding other files (a home folder, a project) keeps
+# them: nothing else is listed, counted or removed, and links are never followed.
+
+#: The caches, in the order ``bondc cache info`` lists them: (name, subfolder, what it holds).
+CACHES = (("compile", "models", "derived models, generated modules (the compile cache)"),
+          ("check", "check", "what bondc check's equations stage found"),
+          ("native", "native", "native libraries (models' C code, the explicit stepper) and compiler probes"),
+          ("parser", "parser", "the parser's tables"))
+
+_HEX = "[0-9a-f]{40}"
+#: subfolder -> the names of the entries bondc writes there (the temporary files of an interrupted
+#: write included)
+_OWN = {"models": rf"{_HEX}|\.size\.json|\.tmp-.*",
+        "check": rf"{_HEX}\.pickle|\.tmp-.*",
+        "native": r"(model|erk)_[0-9a-f]+\.so|compiler_[0-9a-f]+\.json|build-.*|\.tmp-.*",
+        "parser": r"lalr-[0-9a-f]+\.lark(\.tmp.*)?|\.tmp-.*"}
+
+#: The compile cache's default cap, in MB (``BONDC_CACHE_MAX_MB`` changes it; 0: no cap).
+DEFAULT_MAX_MB = 1000.0
+_SIZE_FILE = ".size.json"
+
+
+def max_bytes() -> int | None:
+    """The compile cache's cap in bytes from ``BONDC_CACHE_MAX_MB`` (default :data:`DEFAULT_MAX_MB`),
+    None for no cap (0). Raises ValueError for a value that is not a number of megabytes >= 0."""
+    import math
+
+    given = os.environ.get("BONDC_CACHE_MAX_MB", "").strip()
+    if not given:
+        return int(DEFAULT_MAX_MB * 1e6)
+    try:
+        value = float(given)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value < 0:
+        raise ValueError(f"BONDC_CACHE_MAX_MB must be a number of megabytes (0 for no cap), not {given!r}")
+    return None if value == 0 else int(value * 1e6)
+
+
+def _own(subfolder: str, name: str) -> bool:
+    import re
+
+    return re.fullmatch(_OWN[subfolder], name) is not None
+
+
+def _size(path: str) -> int:
+    """Bytes of a file, or of every file under a folder (links not followed, not counted)."""
+    try:
+        status = os.lstat(path)
+    except OSError:
+        return 0
+    import stat
+
+    if stat.S_ISLNK(status.st_mode):
+        return 0
+    if not stat.S_ISDIR(status.st_mode):
+        return status.st_size
+    total = 0
+    try:
+        with os.scandir(path) as items:
+            for item in items:
+                total += _size(item.path)
+    except OSError:
+        pass
+    return total
+
+
+def _entries(subfolder: str) -> list[os.DirEntry]:
+    """bondc's own entries of one subfolder of the cache (none when it is absent or a link)."""
+    folder = cache_dir() / subfolder
+    if folder.is_symlink() or not folder.is_dir():
+        return []
+    try:
+        with os.scandir(folder) as items:
+            return [item for item in items if _own(subfolder, item.name)]
+    except OSError:
+        return []
+
+
+def info() -> dict:
+    """What ``bondc cache info`` shows: the folder, whether the cache is on, the compile cache's
+    cap, and per cache its folder, entries (files or entry folders; temporary files not counted)
+    and bytes."""
+    try:
+        cap = max_bytes()
+    except ValueError:
+        cap = int(DEFAULT_MAX_MB * 1e6)
+    caches = []
+    for name, subfolder, what in CACHES:
+        entries = _entries(subfolder)
+        counted = [entry for entry in entries if not entry.name.startswith((".tmp-", "build-", ".size"))]
+        caches.append({"name": name, "folder": str(cache_dir() / subfolder), "what": what,
+                       "entries": len(counted), "bytes": sum(_size(entry.path) for entry in entries)})
+    return {"folder": str(cache_dir()), "enabled": enabled(), "max_bytes": cap, "caches": caches,
+            "bytes": sum(cache["bytes"] for cache in caches)}
+
+
+def clear() -> dict:
+    """Remove every entry bondc wrote in its caches (``bondc cache clear``): only the entries of
+    :data:`CACHES`' subfolders whose names bondc gives (anything else in the folder stays), and the
+    subfolders themselves when that leaves them empty. Returns {cache name: (entries, bytes) removed}
+    and "kept": the paths of other files found in bondc's subfolders (left as they are)."""
+    import shutil
+
+    removed: dict = {}
+    for name, subfolder, _ in CACHES:
+        count = size = 0
+        for entry in _entries(subfolder):
+            bytes_ = _size(entry.path)
+            try:
+                if entry.is_dir(follow_symlinks=False):
+                    shutil.rmtree(entry.path)
+                else:
+                    os.unlink(entry.path)
+            except FileNotFoundError:
+                continue
+            except OSError:
+                shutil.rmtree(entry.path, ignore_errors=True)
+                if os.path.lexists(entry.path):
+                    continue
+            count += not entry.name.startswith((".tmp-", "build-", ".size"))
+            size += bytes_
+        try:
+            (cache_dir() / subfolder).rmdir()       # only when empty: other files keep it
+        except OSError:
+            pass
+        removed[name] = (count, size)
+    return removed
+
+
+def _touch(folder: Path) -> None:
+    """Mark an entry used now (the cap evicts the least recently used)."""
+    try:
+        os.utime(folder)
+    except OSError:
+        pass
+
+
+def _grown(added: int) -> None:
+    """Count ``added`` bytes into the compile cache's running total (``models/.size.json``) and,
+    when the total passes the cap, measure the folder and evict the least recently used entries
+    (their folders' modification times) until it fits. The folder is measured only then, or when
+    the total is absent: a store costs a small read and write otherwise. Never fails a run."""
+    try:
+        cap = max_bytes()
+    except ValueError:
+        cap = int(DEFAULT_MAX_MB * 1e6)
+    if cap is None:
+        return
+    models = cache_dir() / "models"
+    record = models / _SIZE_FILE
+    try:
+        total = int(json.loads(record.read_text(encoding="utf-8"))["bytes"]) + added
+    except Exception:       # noqa: BLE001  (absent or partial: measure)
+        total = None
+    try:
+        if total is None or total > cap:
+            total = _trim(cap)
+        _atomic_write(record, json.dumps({"bytes": total}).encode())
+    except Exception:       # noqa: BLE001  (a cache must never fail the run)
+        return
+
+
+def _trim(cap: int) -> int:
+    """Evict the compile cache's least recently used entries until it holds at most ``cap`` bytes
+    (never the most recently used one); returns the bytes left."""
+    import shutil
+
+    entries = []
+    for entry in _entries("models"):
+        if entry.name.startswith(".") or not entry.is_dir(follow_symlinks=False):
+            continue
+        try:
+            used = entry.stat(follow_symlinks=False).st_mtime_ns
+        except OSError:
+            continue
+        entries.append((used, entry.path, _size(entry.path)))
+    entries.sort()
+    total = sum(size for _, _, size in entries)
+    for _, path, size in entries[:-1]:          # oldest first; the newest stays
+        if total <= cap:
+            break
+        shutil.rmtree(path, ignore_errors=True)
+        if not os.path.lexists(path):
+            total -= size
+    return total

@@ -538,33 +538,44 @@ def _cmd_compile(args) -> int:
 
 
 def _cmd_report(args) -> int:
-    from bondc.report.build import run_report
+    from bondc.report.build import report_summary, report_text
 
     inertia_ratio = _inertia_ratio(args)
     if args.sweep:
         from bondc.report.sweep_report import build_sweep_report
 
         target = build_sweep_report(args.sweep, args.output, args.motors)
-        if not _quiet():
+        if args.json:
+            _print_json({"complete": True, "sweep": args.sweep, "written": [str(target)], "exit_status": EXIT_OK})
+        elif not _quiet():
             print(f"wrote {target}")
         return EXIT_OK
     if not args.file:
         raise UsageError(Diagnostic("error", "E001", "bondc report: give a model file, or --sweep STUDY.csv",
                                     hint="see 'bondc report --help'"))
-    _, code = run_report(Path(args.file), model=args.model, experiment=args.experiment, sets=_parse_sets(args.set),
-                         data=args.data, compare=args.compare or (), motors=args.motors, output=args.output,
-                         t_end=args.t_end, progress=not _quiet(), inertia_ratio=inertia_ratio)
-    return code  # run_report prints the diagnostics and where it wrote the report
+    summary = report_summary(Path(args.file), model=args.model, experiment=args.experiment,
+                             sets=_parse_sets(args.set), data=args.data, compare=args.compare or (),
+                             motors=args.motors, output=args.output, t_end=args.t_end,
+                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio)
+    if args.json:
+        _print_json(summary)
+    elif not _quiet() or summary["exit_status"]:
+        print(report_text(summary), file=sys.stderr)
+    return summary["exit_status"]
 
 
 def _cmd_validate(args) -> int:
-    from bondc.report.build import run_validate
+    from bondc.report.build import validate_summary, validate_text
 
-    _, code = run_validate(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
-                           output=args.output, model=args.model, experiment=args.experiment,
-                           sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors, progress=not _quiet(),
-                           inertia_ratio=_inertia_ratio(args))
-    return code
+    results, summary = validate_summary(Path(args.file), data=args.data, compare=args.compare, junit=args.junit,
+                                        output=args.output, model=args.model, experiment=args.experiment,
+                                        sets=_parse_sets(args.set), t_end=args.t_end, motors=args.motors,
+                                        progress=not args.json and not _quiet(), inertia_ratio=_inertia_ratio(args))
+    if args.json:
+        _print_json(summary)
+    else:
+        print(validate_text(results, summary))
+    return summary["exit_status"]
 
 
 def _cmd_sweep(args) -> int:
@@ -608,6 +619,54 @@ def _cmd_fit_friction(args) -> int:
     stream = sys.stdout if code == EXIT_OK or args.json else sys.stderr
     print(text, file=stream)
     return code
+
+
+def _megabytes(size: int) -> str:
+    """A size for people: 0 B, 812 kB, 3.4 MB, 1.2 GB (powers of 1000, as BONDC_CACHE_MAX_MB)."""
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if size >= scale:
+            return f"{size / scale:.3g} {unit}"
+    return f"{size} B"
+
+
+def _cmd_cache(args) -> int:
+    """``bondc cache info``: where each cache is, its entries and size; ``bondc cache clear``: remove
+    what bondc wrote there (nothing else: see :func:`bondc.cache.clear`)."""
+    from bondc import cache
+
+    if args.action is None:
+        raise UsageError(Diagnostic("error", "E001", "bondc cache: say what to do: info or clear",
+                                    hint="bondc cache info [--json], bondc cache clear [--json]"))
+    try:
+        cache.max_bytes()
+    except ValueError as error:
+        raise UsageError(Diagnostic("error", "E001", str(error),
+                                    hint="e.g. BONDC_CACHE_MAX_MB=500 (megabytes); 0 for no cap")) from None
+    if args.action == "clear":
+        removed = cache.clear()
+        if args.json:
+            _print_json({"complete": True, "folder": str(cache.cache_dir()),
+                         "removed": [{"name": name, "entries": count, "bytes": size}
+                                     for name, (count, size) in removed.items()]})
+        elif not _quiet():
+            count = sum(count for count, _ in removed.values())
+            size = sum(size for _, size in removed.values())
+            print(f"removed {count} cache entries ({_megabytes(size)}) from {cache.cache_dir()}")
+        return EXIT_OK
+    found = cache.info()
+    if args.json:
+        _print_json({"complete": True, **found})
+        return EXIT_OK
+    state = "on" if found["enabled"] else "off (BONDC_CACHE=0)"
+    cap = "no cap" if found["max_bytes"] is None else f"cap {_megabytes(found['max_bytes'])}"
+    print(f"cache folder {found['folder']} ({state}; compile cache {cap}, BONDC_CACHE_MAX_MB)")
+    width = max(len(item["name"]) for item in found["caches"])
+    for item in found["caches"]:
+        print(f"  {item['name']:<{width}}  {item['entries']:>6} entries  {_megabytes(item['bytes']):>9}  "
+              f"{item['folder']}")
+    print(f"  {'total':<{width}}  {sum(i['entries'] for i in found['caches']):>6} entries  "
+          f"{_megabytes(found['bytes']):>9}")
+    return EXIT_OK
 
 
 # ------------------------------------------------------------------- parser
@@ -721,6 +780,8 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
     report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
                                                    "reports/<file>-<experiment>.html for a non-first experiment)")
+    report.add_argument("--json", action="store_true",
+                        help="print a JSON summary: the file written, pass/fail per compared signal, diagnostics")
     report.set_defaults(run=_cmd_report)
 
     validate = commands.add_parser("validate", help="compare a simulation with measured data; pass/fail per signal")
@@ -734,6 +795,9 @@ def build_parser() -> argparse.ArgumentParser:
     validate.add_argument("--motors", metavar="CATALOGUE.csv", help=argparse.SUPPRESS)
     validate.add_argument("--inertia-ratio", metavar="LIMIT", help=argparse.SUPPRESS)
     validate.add_argument("-o", "--output", help="also write the HTML report with the validation section")
+    validate.add_argument("--json", action="store_true",
+                          help="print a JSON summary instead of the table: pass/fail and metrics per signal, "
+                               "the files written, diagnostics")
     validate.set_defaults(run=_cmd_validate)
 
     sweep = commands.add_parser("sweep", help="parameter study: simulate over a grid of parameter values")
@@ -778,6 +842,17 @@ def build_parser() -> argparse.ArgumentParser:
     lsp_.add_argument("--stdio", action="store_true",
                       help="talk over stdin/stdout (the only transport; accepted because editors' clients pass it)")
     lsp_.set_defaults(run=_cmd_lsp)
+
+    cache_ = commands.add_parser("cache", help="bondc's caches: where they are and their size (info), or empty "
+                                                "them (clear)")
+    actions = cache_.add_subparsers(dest="action", metavar="ACTION", parser_class=_ArgumentParser)
+    for action, text in (("info", "each cache's folder, entries and size, and the compile cache's cap"),
+                         ("clear", "remove what bondc stored in its caches (compile, check, native libraries, "
+                                   "parser); other files in the folder stay")):
+        sub = actions.add_parser(action, help=text)
+        _add_verbosity(sub, argparse.SUPPRESS)
+        sub.add_argument("--json", action="store_true", help="print the result as JSON")
+    cache_.set_defaults(run=_cmd_cache, json=False)
 
     fit = commands.add_parser("fit-friction", help="identify C = a*|v|^b per direction from steady-speed tests "
                                                    "(the paper's eqs. 17-20)")

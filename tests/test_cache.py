@@ -539,3 +539,99 @@ def test_the_energy_account_of_a_run_with_set_values_uses_the_base_module(tmp_pa
     expected = energy_account(written.state_space, simulate(written.state_space, written.experiment))
     ours, theirs = account.to_json(), expected.to_json()
     assert json.dumps(ours["cycles"], sort_keys=True) == json.dumps(theirs["cycles"], sort_keys=True)
+
+
+# ------------------------------------------------------------------ bondc cache info / clear, the cap
+
+def _cache_cli(capsys, *argv):
+    from bondc.cli import main
+
+    status = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_cache_info_reports_what_a_run_stored_and_clear_empties_it(tmp_path, isolated, capsys, monkeypatch):
+    folder, loads = isolated
+    monkeypatch.setenv("BONDC_NATIVE", "0")
+    path = _write(tmp_path / "drive.bg")
+    status, out, _ = _cache_cli(capsys, "cache", "info", "--json")
+    assert status == 0 and json.loads(out)["bytes"] == 0             # nothing yet (no folder at all)
+    assert _cache_cli(capsys, "simulate", path)[0] == 0
+    status, out, _ = _cache_cli(capsys, "cache", "info", "--json")
+    found = json.loads(out)
+    assert status == 0 and found["folder"] == str(folder) and found["enabled"]
+    compile_ = next(c for c in found["caches"] if c["name"] == "compile")
+    assert compile_["entries"] == 1 and compile_["bytes"] > 0 and compile_["folder"] == str(folder / "models")
+    assert found["bytes"] >= compile_["bytes"]
+    status, out, _ = _cache_cli(capsys, "cache", "info")
+    assert status == 0 and str(folder) in out and "compile" in out and "1 entries" in out
+    status, out, _ = _cache_cli(capsys, "cache", "clear")
+    assert status == 0 and out.startswith("removed ")
+    assert json.loads(_cache_cli(capsys, "cache", "info", "--json")[1])["bytes"] == 0
+    before = len(loads)
+    derive_file(path)                                   # a miss: derived again, and stored again
+    assert len(loads) == before + 1
+    assert json.loads(_cache_cli(capsys, "cache", "info", "--json")[1])["caches"][0]["entries"] == 1
+
+
+def test_cache_clear_removes_only_what_bondc_wrote(tmp_path, isolated, capsys):
+    folder, _ = isolated
+    path = _write(tmp_path / "drive.bg")
+    derive_file(path)
+    # a BONDC_CACHE_DIR that is also someone's folder: their files, even in folders named as bondc's
+    theirs = [folder / "notes.txt", folder / "models" / "mine.bg", folder / "native" / "README",
+              folder / "check" / "keep.pickle", folder / "other" / "data.csv"]
+    for file in theirs:
+        file.parent.mkdir(parents=True, exist_ok=True)
+        file.write_text("not bondc's", encoding="utf-8")
+    (folder / "models" / ("a" * 40 + "-x")).mkdir()     # a name bondc never gives
+    found = json.loads(_cache_cli(capsys, "cache", "info", "--json")[1])
+    assert found["caches"][0]["entries"] == 1           # their files not counted
+    status, out, _ = _cache_cli(capsys, "cache", "clear", "--json")
+    removed = json.loads(out)["removed"]
+    assert status == 0 and removed[0]["name"] == "compile" and removed[0]["entries"] == 1
+    for file in theirs:
+        assert file.read_text(encoding="utf-8") == "not bondc's"
+    assert (folder / "models" / ("a" * 40 + "-x")).is_dir()
+    assert not [p for p in (folder / "models").iterdir() if p.name not in ("mine.bg", "a" * 40 + "-x")]
+
+
+def test_cache_clear_follows_no_link(tmp_path, isolated, capsys):
+    folder, _ = isolated
+    elsewhere = tmp_path / "elsewhere"
+    (elsewhere / ("b" * 40)).mkdir(parents=True)
+    (elsewhere / ("b" * 40) / "precious").write_text("x", encoding="utf-8")
+    folder.mkdir()
+    (folder / "models").symlink_to(elsewhere, target_is_directory=True)
+    assert _cache_cli(capsys, "cache", "clear")[0] == 0
+    assert (elsewhere / ("b" * 40) / "precious").is_file()
+
+
+def test_a_bad_cap_is_a_usage_error(isolated, capsys, monkeypatch):
+    monkeypatch.setenv("BONDC_CACHE_MAX_MB", "lots")
+    status, _, err = _cache_cli(capsys, "cache", "info")
+    assert status == 2 and "E001" in err and "BONDC_CACHE_MAX_MB" in err
+    assert _cache_cli(capsys, "cache")[0] == 2            # no action
+
+
+def test_the_cap_evicts_the_least_recently_used_entries_first(tmp_path, isolated, monkeypatch):
+    folder, loads = isolated
+    monkeypatch.setenv("BONDC_CACHE_MAX_MB", "0")         # no cap while filling it
+    paths = {name: _write(tmp_path / f"{name}.bg", b=b) for name, b in (("a", 1), ("b", 2), ("c", 3), ("d", 4))}
+    entries = {}
+    for name in "abc":
+        derive_file(paths[name])
+        entries[name] = cache.Entry.for_model(paths[name]).folder
+    for when, name in enumerate("abc"):                   # a oldest, then b, then c
+        os.utime(entries[name], (1000.0 + when, 1000.0 + when))
+    derive_file(paths["a"])                               # a hit: a is the most recently used now
+    assert len(loads) == 3
+    largest = max(cache._size(str(entry)) for entry in entries.values())
+    monkeypatch.setenv("BONDC_CACHE_MAX_MB", str(2.5 * largest / 1e6))
+    derive_file(paths["d"])                               # stored: over the cap, b then c go
+    entries["d"] = cache.Entry.for_model(paths["d"]).folder
+    assert {name for name, entry in entries.items() if entry.is_dir()} == {"a", "d"}
+    assert json.loads((folder / "models" / ".size.json").read_text())["bytes"] <= 2.5 * largest
+    derive_file(paths["b"])                               # evicted: derived again
+    assert len(loads) == 5

@@ -189,3 +189,49 @@ def test_compile_json_says_what_it_wrote(capsys, tmp_path):
     assert data["complete"] is True and data["written"] == [str(target)] and data["standalone"] is False
     status, out, _ = _run(capsys, "compile", MSD, "-o", target, "--json", "--set", "k=")
     assert status == 2 and json.loads(out)["diagnostics"][0]["code"] == "E007"
+
+
+# ------------------------------------------------------------------ validate --json, report --json
+
+def _rlc_measured(tmp_path, scale=1.0):
+    from bondc.simulate import run as simulate_run
+
+    result = simulate_run(ROOT / "models" / "series_rlc.bg")
+    lines = ["time,i_meas,v_C_meas"] + [f"{float(t)!r},{scale * float(i)!r},{float(v)!r}"
+                                         for t, i, v in zip(result.t, result.outputs["i"], result.outputs["v_C"])]
+    data = tmp_path / "bench.csv"
+    data.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return data
+
+
+def test_validate_json_says_pass_or_fail_per_signal_and_what_it_wrote(capsys, tmp_path):
+    data = _rlc_measured(tmp_path, scale=1.3)
+    junit = tmp_path / "out" / "junit.xml"
+    status, out, _ = _run(capsys, "validate", ROOT / "models" / "series_rlc.bg", "--data", data, "--json",
+                          "--compare", "i=i_meas", "--compare", "v_C=v_C_meas", "--junit", junit)
+    summary = json.loads(out)
+    assert status == 1 and summary["exit_status"] == 1 and summary["complete"] and not summary["passed"]
+    assert [(s["name"], s["passed"]) for s in summary["signals"]] == [("i=i_meas", False), ("v_C=v_C_meas", True)]
+    assert summary["signals"][0]["checks"][0]["metric"] and summary["signals"][0]["unit"] == "A"
+    assert summary["written"] == [str(junit)] and junit.is_file()
+    status, out, _ = _run(capsys, "validate", ROOT / "models" / "series_rlc.bg", "--data", _rlc_measured(tmp_path),
+                          "--compare", "i=i_meas")
+    assert status == 0 and "1 of 1 signal passed" in out and not out.lstrip().startswith("{")
+
+
+def test_validate_json_of_bad_input_is_json_with_the_code(capsys, tmp_path):
+    data = tmp_path / "bench.csv"
+    data.write_text("time,x\n0,1\n1,2\n", encoding="utf-8")
+    status, out, err = _run(capsys, "validate", ROOT / "models" / "series_rlc.bg", "--data", data, "--json",
+                            "--compare", "i=missing")
+    failure = json.loads(out)
+    assert status != 0 and failure["complete"] is False and failure["diagnostics"][0]["code"] in err
+
+
+@pytest.mark.slow       # a whole report
+def test_report_json_says_what_it_wrote(capsys, tmp_path):
+    target = tmp_path / "r.html"
+    status, out, _ = _run(capsys, "report", ROOT / "models" / "series_rlc.bg", "--json", "-o", target)
+    summary = json.loads(out)
+    assert status == 0 and summary["written"] == [str(target)] and target.is_file()
+    assert summary["complete"] and summary["signals"] == [] and summary["failing"] == []

@@ -65,7 +65,8 @@ from bondc.report.validate import (
 from bondc.symbolic import Translator, as_sympy
 
 __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
-           "write_report", "run_validate",
+           "write_report", "run_validate", "report_summary", "report_text", "validate_summary",
+           "validate_text", "signal_json",
            "compare_run", "validation_table", "state_equations", "output_groups", "REPORTS_DIR"]
 
 #: Where reports go unless ``output`` says otherwise (relative to the working directory).
@@ -240,20 +241,58 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
     notice and the validation section), as ``bondc validate`` exits.
     """
     errors = errors if errors is not None else sys.stderr
+    summary = report_summary(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
+                             motors=motors, output=output, t_end=t_end, date=date, progress=progress,
+                             errors=errors, inertia_ratio=inertia_ratio)
+    print(report_text(summary), file=errors)
+    return Path(summary["written"][0]), summary["exit_status"]
+
+
+def report_summary(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+                   sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
+                   motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
+                   date: str | None = None, progress: bool = False,
+                   errors: TextIO | None = None, inertia_ratio: float | None = None) -> dict:
+    """:func:`run_report` without its last line: builds and writes the report, prints the run's
+    warnings to ``errors``, and returns what ``bondc report --json`` prints: ``complete`` (the
+    simulation ran to its end), ``written`` (the report's path), ``signals`` (with ``--data``: each
+    compared signal, :func:`signal_json`), ``failing`` (their names), ``diagnostics`` and
+    ``exit_status`` (as :func:`run_report` returns it)."""
+    errors = errors if errors is not None else sys.stderr
     if output is not None:
         check_output(output, "the report", make_folder=True)
     target, run, results = _build(path, model=model, experiment=experiment, sets=sets, data=data,
                                   compare=compare, motors=motors, output=output, t_end=t_end, date=date,
                                   progress=progress, inertia_ratio=inertia_ratio)
-    _print_diagnostics(run, errors)
+    diagnostics = _print_diagnostics(run, errors)
     failing = [result.name for result in results if not result.passed]
-    print(f"wrote {target}" + ("" if run.complete else " (incomplete simulation)")
-          + (f"; validation failed: {', '.join(failing)}" if failing else ""), file=errors)
     interrupted = getattr(run.result, "exit_status", None) if run.result is not None else None
-    return target, interrupted or (0 if run.complete and not failing else 1)
+    return {"complete": run.complete, "file": str(path), "model": run.graph.name,
+            "experiment": run.experiment.name if run.experiment is not None else None,
+            "written": [str(target)],
+            "signals": [signal_json(result, _signal_unit(run.graph, result.output)[0]) for result in results],
+            "failing": failing, "diagnostics": [d.to_json() for d in diagnostics],
+            "exit_status": interrupted or (0 if run.complete and not failing else 1)}
 
 
-def _print_diagnostics(run: PipelineRun, stream: TextIO) -> None:
+def report_text(summary: Mapping) -> str:
+    """``bondc report``'s line: ``wrote PATH``, and whether the run or a comparison failed."""
+    failing = summary["failing"]
+    return (f"wrote {summary['written'][0]}" + ("" if summary["complete"] else " (incomplete simulation)")
+            + (f"; validation failed: {', '.join(failing)}" if failing else ""))
+
+
+def signal_json(result: SignalResult, unit: str | None = None) -> dict:
+    """One compared signal for ``--json``: its output and column, pass or fail, each metric and each
+    check (metric, value, limit, passed); RMSE and the largest error in ``unit`` (the output's)."""
+    return {"name": result.name, "output": result.output, "column": result.column, "passed": result.passed,
+            "unit": unit, "samples": result.n_samples, "t_start": result.t_start, "t_end": result.t_end,
+            "rmse": result.rmse, "nrmse": result.nrmse, "maxabs": result.maxabs, "r2": result.r2,
+            "checks": [{"metric": check.metric, "value": check.value, "limit": check.limit,
+                        "passed": check.passed} for check in result.checks]}
+
+
+def _print_diagnostics(run: PipelineRun, stream: TextIO) -> list[Diagnostic]:
     from bondc.errors import render_all
 
     diagnostics = list(run.warnings)
@@ -261,6 +300,7 @@ def _print_diagnostics(run: PipelineRun, stream: TextIO) -> None:
         diagnostics.append(_failure(run))
     if diagnostics:
         print(render_all(diagnostics, run.graph.sources), file=stream)
+    return diagnostics
 
 
 def write_report(context: ReportContext, target: str | Path) -> None:
@@ -453,6 +493,27 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
     stages' errors for a bad model; then nothing is written.
     """
     stream = stream if stream is not None else sys.stdout
+    results, summary = validate_summary(path, data=data, compare=compare, junit=junit, output=output, model=model,
+                                        experiment=experiment, sets=sets, t_end=t_end, motors=motors, date=date,
+                                        errors=errors, progress=progress, inertia_ratio=inertia_ratio)
+    print(validate_text(results, summary), file=stream)
+    return results, summary["exit_status"]
+
+
+def validate_text(results: Sequence[SignalResult], summary: Mapping) -> str:
+    """``bondc validate``'s table (:func:`validation_table`, each output in its declared unit)."""
+    return validation_table(results, {signal["output"]: signal["unit"] for signal in summary["signals"]})
+
+
+def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[str | CompareSpec],
+                     junit: str | Path | None = None, output: str | Path | None = None, model: str | None = None,
+                     experiment: str | None = None, sets: Sequence = (), t_end: float | None = None,
+                     motors: str | Path | None = None, date: str | None = None, errors: TextIO | None = None,
+                     progress: bool = False, inertia_ratio: float | None = None) -> tuple[list[SignalResult], dict]:
+    """:func:`run_validate` without its table: (results, what ``bondc validate --json`` prints):
+    ``complete`` (the simulation ran to its end), ``passed`` (every signal passed and the run is
+    complete), ``signals`` (:func:`signal_json`, pass or fail per signal), ``written`` (the JUnit XML
+    and the report, when asked for), ``data``, ``diagnostics`` and ``exit_status``."""
     errors = errors if errors is not None else sys.stderr
     for given, what in ((junit, "the JUnit XML"), (output, "the report")):
         if given is not None:
@@ -463,17 +524,18 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
                                     hint="--compare OUT=COLUMN[:nrmse=0.05]"))
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     results = compare_run(run, measured, specs)
-    _print_diagnostics(run, errors)
+    diagnostics = _print_diagnostics(run, errors)
     assumed = unit_warnings(run, measured, specs)
     if assumed:
         from bondc.errors import render_all
 
         print(render_all(assumed), file=errors)
-    print(validation_table(results, {r.output: _signal_unit(run.graph, r.output)[0] for r in results}), file=stream)
     suite = run.graph.name + (f".{run.experiment.name}" if run.experiment is not None else "")
+    written = []
     if junit is not None:
         Path(junit).parent.mkdir(parents=True, exist_ok=True)
         write_junit(results, suite, junit)
+        written.append(str(junit))
     if output is not None:
         section = validation_section(run, results, data, junit)
         try:
@@ -482,9 +544,15 @@ def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | 
         except KeyboardInterrupt as interrupt:
             _keep_simulation(run, Path(output), interrupt)
             raise
+        written.append(str(output))
     passed = all(result.passed for result in results) and run.complete
     interrupted = getattr(run.result, "exit_status", None)
-    return results, interrupted or (0 if passed else 1)
+    return results, {
+        "complete": run.complete, "passed": passed, "file": str(path), "model": run.graph.name,
+        "experiment": run.experiment.name if run.experiment is not None else None, "data": str(data),
+        "signals": [signal_json(result, _signal_unit(run.graph, result.output)[0]) for result in results],
+        "written": written, "diagnostics": [d.to_json() for d in [*diagnostics, *assumed]],
+        "exit_status": interrupted or (0 if passed else 1)}
 
 
 def _failure(run: PipelineRun) -> Diagnostic:
