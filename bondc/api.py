@@ -290,6 +290,12 @@ class Simulation:
         return self.result.states
 
     @property
+    def dependent_states(self) -> dict[str, np.ndarray]:
+        """States of storage elements in derivative causality (``load.p`` behind a rigid gear), SI:
+        computed from the independent :attr:`states` at every point."""
+        return self.result.dependent
+
+    @property
     def units(self) -> dict[str, tuple[str, float]]:
         """``{name: (unit, scale)}``: a column's value in its unit is the SI value / scale."""
         return self.result.units
@@ -297,13 +303,14 @@ class Simulation:
     def __getitem__(self, name: str) -> np.ndarray:
         if name == "t":
             return self.result.t
-        groups = (self.result.outputs, self.result.states, self.result.bonds, self.result.variables)
+        groups = (self.result.outputs, self.result.states, self.result.dependent, self.result.bonds,
+                  self.result.variables)
         for group in groups:
             if name in group:
                 return group[name]
         import difflib
 
-        shown = [*self.result.outputs, *self.result.states]
+        shown = [*self.result.outputs, *self.result.states, *self.result.dependent]
         close = difflib.get_close_matches(str(name), [n for group in groups for n in group], n=1)
         raise KeyError(f"{name!r} is not a signal of this run" + (f"; did you mean {close[0]!r}?" if close else "")
                        + f" (outputs and states: {', '.join(shown)}; bond variables too, as b3.e or element.f)")
@@ -314,7 +321,8 @@ class Simulation:
         return np.asarray(self[name]) / scale
 
     def to_dataframe(self, all_bonds: bool = False) -> pandas.DataFrame:
-        """A pandas DataFrame indexed by time, one column per output and state, named with their units
+        """A pandas DataFrame indexed by time, one column per output and state (dependent states, those in
+        derivative causality, after the others), named with their units
         (``P_kPa [kPa]``) and in those units, as the csv; needs pandas."""
         try:
             import pandas

@@ -27,7 +27,9 @@ pointing, when it can, at the law of the variable that went wrong.
 :meth:`SimResult.error` turns that into a :class:`~bondc.errors.SimulationError`.
 
 Files: :func:`write_csv` writes the columns ``t``, every output (SI), every
-state by qualified name and, with ``all_bonds``, every bond's effort and flow
+state by qualified name, then every dependent state (a storage element's in
+derivative causality, e.g. ``load.p`` behind a rigid gear, computed from the
+independent states) and, with ``all_bonds``, every bond's effort and flow
 (``b3.e``, ``b3.f`` or the bond's label); values are the shortest text that
 reads back to the same float. An incomplete run's csv is written the same way
 (no comment line, so every csv reader reads it); the command line says that it
@@ -68,6 +70,10 @@ _COMPILED: dict = {}
 class SimResult:
     """The trajectories of one simulation run, arrays by name, SI units.
 
+    ``states`` holds the independent states (what the solver integrates);
+    ``dependent`` the states of storage elements in derivative causality
+    (``load.p`` of an inertia rigidly geared to another), computed at every
+    point from the independent ones by the equations stage's assignment;
     ``bonds`` holds every bond's effort and flow (``b3.e``, ``label.f``);
     ``variables`` every assigned variable (inputs, bond variables, eliminated
     states); ``events`` is a list of ``(time, label)``; ``stats`` the solver's
@@ -97,6 +103,9 @@ class SimResult:
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
     units: dict = field(default_factory=dict)
+    # dependent states (storage in derivative causality), name -> values at every point (SI); they
+    # are also in ``variables``, and are not in ``states`` (which the solver integrates)
+    dependent: dict = field(default_factory=dict)
 
     @property
     def t_reached(self) -> float:
@@ -129,8 +138,9 @@ class SimResult:
             "points": int(self.t.size),
             "states": list(self.states),
             "outputs": list(self.outputs),
+            "dependent_states": list(self.dependent),
             "final": {name: _json_float(values[-1]) for name, values in
-                      {**self.outputs, **self.states}.items()} if self.t.size else {},
+                      {**self.outputs, **self.states, **self.dependent}.items()} if self.t.size else {},
             "events": [{"time": time_, "what": label} for time_, label in self.events],
             "stats": {k: (round(v, 6) if isinstance(v, float) else v) for k, v in self.stats.items()},
             "settings": self.settings,
@@ -450,6 +460,18 @@ def result_units(graph) -> dict:
     return units
 
 
+def dependent_states(ss, variables: Mapping) -> dict:
+    """The states of storage elements in derivative causality (``ss.eliminated``), name -> values:
+    the runtime evaluates their assignment (in the independent states) at every point, as it does
+    every bond variable; the energy account uses the same values."""
+    found = {}
+    for symbol in (getattr(ss, "eliminated", None) or {}).values():
+        values = variables.get(symbol.name)
+        if values is not None:
+            found[symbol.name] = values
+    return found
+
+
 def _all_finite(series) -> bool:
     """Whether every value of every series is finite, checked per matrix the series are rows of
     (the runtime's results are rows of one matrix: one sum instead of thousands). False when unsure."""
@@ -474,7 +496,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
         stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
         model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
-        sliding=list(getattr(raw, "sliding", ())),
+        sliding=list(getattr(raw, "sliding", ())), dependent=dependent_states(ss, raw.variables),
     )
     result.units = result_units(graph)
     if raw.failure is not None:
@@ -649,8 +671,11 @@ class ProgressBar:
 
 
 def _columns(result: SimResult, all_bonds: bool):
-    names = ["t"] + list(result.outputs) + [n for n in result.states if n not in result.outputs]
-    columns = [result.t] + list(result.outputs.values()) + [v for n, v in result.states.items()
+    """t, the outputs, the states, the dependent states (derivative causality), and with
+    ``all_bonds`` every bond variable."""
+    states = {**result.states, **{n: v for n, v in result.dependent.items() if n not in result.states}}
+    names = ["t"] + list(result.outputs) + [n for n in states if n not in result.outputs]
+    columns = [result.t] + list(result.outputs.values()) + [v for n, v in states.items()
                                                              if n not in result.outputs]
     if all_bonds:
         for name, values in result.bonds.items():
@@ -692,11 +717,12 @@ def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
 
 
 def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
-    """Write the arrays as a compressed ``.npz``, atomically: ``t``, ``states/NAME``, ``outputs/NAME``,
-    ``bonds/NAME``, ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
+    """Write the arrays as a compressed ``.npz``, atomically: ``t``, ``states/NAME``, ``dependent/NAME``
+    (states in derivative causality), ``outputs/NAME``, ``bonds/NAME``, ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
     ``parameter_values``."""
     arrays = {"t": result.t}
     arrays.update({f"states/{k}": v for k, v in result.states.items()})
+    arrays.update({f"dependent/{k}": v for k, v in result.dependent.items()})
     arrays.update({f"outputs/{k}": v for k, v in result.outputs.items()})
     if all_bonds:
         arrays.update({f"bonds/{k}": v for k, v in result.bonds.items()})

@@ -165,7 +165,9 @@ d("W602", "storage element in derivative causality",
   "A `C` whose effort, or an `I` whose flow, is fixed by the rest of the graph: a capacitor across an effort "
   "source, two inertias rigidly joined by a transformer. Its state is not independent; the equations stage "
   "expresses it through the others (two geared inertias become one state with the combined inertia). Notes "
-  "show what fixes it. Its initial value is ignored (W704).",
+  "show what fixes it. Its initial value is ignored (W704). `bondc equations` lists it under \"eliminated "
+  "states\", and a simulation's result still has it, computed from the other states at every point: a "
+  "column after the states in the csv and the DataFrame (`sim.dependent_states`).",
   "Nothing, if the parts are rigidly coupled on purpose. Otherwise put the compliance (`C`) or inertia (`I`) "
   "that really separates them into the graph, e.g. a shaft stiffness between the two inertias.")
 d("I603", "algebraic loop",
