@@ -542,10 +542,12 @@ def _cmd_report(args) -> int:
 
     inertia_ratio = _inertia_ratio(args)
     if args.sweep:
-        from bondc.report.sweep_report import build_sweep_report
+        from bondc.report.sweep_report import summary, sweep_report
 
-        target = build_sweep_report(args.sweep, args.output, args.motors)
+        target, study = sweep_report(args.sweep, args.output, args.motors)
         if not _quiet():
+            for line in summary(study):
+                print(line)
             print(f"wrote {target}")
         return EXIT_OK
     if not args.file:

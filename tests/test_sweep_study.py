@@ -278,7 +278,8 @@ def test_the_report_of_a_study_shows_its_metrics_heat_maps_failures_and_motors(t
     assert_self_contained(html)
     assert html.count('<figure class="plot">') == 4              # 2 metrics x (against k, heat map)
     assert html.count("failed or timed out") == 2 and "2 failed" in html
-    assert len(re.findall(r"<tr class=\"bad\">", html)) == 2 and "E311" in html     # f = p/m with m = 0
+    # f = p/m with m = 0: marked in the compact table and in the table of all columns
+    assert len(re.findall(r"<tr class=\"bad\">", html)) == 2 * 2 and "E311" in html
     # a motor study: the operating points against every catalogue motor's envelopes
     table = tmp_path / "motors.csv"
     run_sweep(MOTOR_MODEL, vary=["U_s=12,48"], metrics=["motor.peak_speed", "motor.peak_torque",
