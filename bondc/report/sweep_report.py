@@ -1,13 +1,21 @@
 """``bondc report --sweep study.csv``: the HTML report of a design study.
 
 Reads the table ``bondc sweep -o study.csv`` wrote (units in the header, SI
-values) and renders one self-contained page: the study's size and how its
-points ended; each metric against the first varied parameter, with the points
-that did not run marked on the axis; over two varied parameters on a grid, a
-heat map of each metric with those points crossed out; with motor metrics and a
-catalogue, every point's operating point (peak speed, peak and RMS torque)
-against each motor's continuous and peak envelope, and the motors that cover
-the whole study; then the table itself. Every text from the file is escaped.
+values) and the record of its study beside it (``study.csv.study``: the model's
+name and file, the experiment, and the unit each column is shown in -- a
+metric's is its output's declared unit, ``P_kPa.min`` in kPa). It renders one
+self-contained page titled by the model: the study's size and how its points
+ended; a compact table (the varied parameters, the status, the chosen motor and
+the key motor and per-cycle metrics), every column under a ``<details>``; each
+metric that varies over the study (motor and per-cycle ones first) against the
+first varied parameter, each point coloured by the second, the points that did
+not run marked on the axis; over two varied parameters on a grid, a heat map of
+each with those points crossed out; with motor metrics and a catalogue, every
+point's operating point (peak speed, peak and RMS torque, coloured by the first
+varied parameter) against each motor's continuous and peak envelope, whole and
+zoomed onto the points, and the motors that cover the whole study. Without the
+record (an older table) the page is titled by the file's name and shows SI
+units. Every text from the files is escaped.
 
 Which columns are the varied parameters: those between ``index`` and the first
 metric, a metric being ``OUTPUT.min/.max/.mean/.rms/.final``, ``energy.*`` or
