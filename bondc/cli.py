@@ -542,12 +542,15 @@ def _cmd_report(args) -> int:
 
     inertia_ratio = _inertia_ratio(args)
     if args.sweep:
-        from bondc.report.sweep_report import build_sweep_report
+        from bondc.report.sweep_report import summary as study_summary, sweep_report
 
-        target = build_sweep_report(args.sweep, args.output, args.motors)
+        target, study = sweep_report(args.sweep, args.output, args.motors)
         if args.json:
-            _print_json({"complete": True, "sweep": args.sweep, "written": [str(target)], "exit_status": EXIT_OK})
+            _print_json({"complete": True, "sweep": args.sweep, "written": [str(target)],
+                         "summary": study_summary(study), "exit_status": EXIT_OK})
         elif not _quiet():
+            for line in study_summary(study):
+                print(line)
             print(f"wrote {target}")
         return EXIT_OK
     if not args.file:

@@ -406,3 +406,36 @@ def test_plots_zoom_pan_and_reset_in_chromium(browser):
     assert _problems(browser.events) == []                      # no script error, no CSP violation
     requests = [e["params"]["request"]["url"] for e in browser.events if e["method"] == "Network.requestWillBeSent"]
     assert set(requests) == {url}
+
+
+EQUATION_BOXES = """JSON.stringify(Array.from(document.querySelectorAll('.equation')).map((equation) => {
+  const box = equation.getBoundingClientRect();
+  let top = Infinity, bottom = -Infinity;
+  const walker = document.createTreeWalker(equation, NodeFilter.SHOW_TEXT);
+  for (let text = walker.nextNode(); text; text = walker.nextNode()) {
+    const range = document.createRange();
+    range.selectNodeContents(text);
+    for (const rect of range.getClientRects()) {
+      if (rect.height) { top = Math.min(top, rect.top); bottom = Math.max(bottom, rect.bottom); }
+    }
+  }
+  return {text: equation.textContent.slice(0, 40), scroll: equation.scrollHeight, client: equation.clientHeight,
+          above: box.top - top, below: bottom - (box.top + equation.clientTop + equation.clientHeight)};
+}))"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("zoom", [1, 2])
+def test_no_equation_is_clipped_at_the_top_of_its_fractions(browser, zoom):
+    """The equations scroll sideways when wide; that makes their box clip vertically too, and the top of
+    a tall fraction's numerator (``p_mass`` over ``M``) was cut off, reading like rho. At 100 % and at
+    200 % zoom (half as many CSS pixels across, two device pixels each) every equation's content,
+    each glyph's line box included, lies inside its box."""
+    report = flagship_report()
+    browser.open(report.resolve().as_uri(), width=WIDTH // zoom)
+    browser.call("Emulation.setDeviceMetricsOverride",
+                 {"width": WIDTH // zoom, "height": HEIGHT // zoom, "deviceScaleFactor": zoom, "mobile": False})
+    equations = json.loads(browser.evaluate(EQUATION_BOXES))
+    assert len(equations) >= 6
+    clipped = [e for e in equations if e["scroll"] > e["client"] or e["above"] > 0.5 or e["below"] > 0.5]
+    assert clipped == []

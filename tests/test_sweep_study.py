@@ -278,7 +278,8 @@ def test_the_report_of_a_study_shows_its_metrics_heat_maps_failures_and_motors(t
     assert_self_contained(html)
     assert html.count('<figure class="plot">') == 4              # 2 metrics x (against k, heat map)
     assert html.count("failed or timed out") == 2 and "2 failed" in html
-    assert len(re.findall(r"<tr class=\"bad\">", html)) == 2 and "E311" in html     # f = p/m with m = 0
+    # f = p/m with m = 0: marked in the compact table and in the table of all columns
+    assert len(re.findall(r"<tr class=\"bad\">", html)) == 2 * 2 and "E311" in html
     # a motor study: the operating points against every catalogue motor's envelopes
     table = tmp_path / "motors.csv"
     run_sweep(MOTOR_MODEL, vary=["U_s=12,48"], metrics=["motor.peak_speed", "motor.peak_torque",
@@ -327,3 +328,98 @@ def test_every_power_output_gets_its_per_cycle_peak_rms_and_energies():
         assert point.metrics["power_el.cycle_peak"] == pytest.approx(first["peak"], rel=1e-9)
         assert point.metrics["power_el.cycle_rms"] == pytest.approx(first["rms"], rel=1e-9)
         assert point.metrics["power_el.cycle_energy"] == pytest.approx(first["net_energy"], rel=1e-9)
+
+
+RIG = """model PressureRig
+  param m = 2   [kg]
+  param k = 800 [N/m]
+  param b = 20  [N*s/m]
+  param x0 = 0.01 [m]
+  param A = 0.001 [m^2]
+  Se push : e = 10
+  I mass : f = p/m
+  C spring : e = k*q
+  R damper : e = b*f
+  1 j
+  push -> j
+  j -> mass
+  j -> spring
+  j -> damper
+  output x [m] = spring.q
+  output P_kPa [kPa] = (spring.e + k*x0)/A   "chamber pressure"
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+def _compact_header(html):
+    import re
+
+    table = re.search(r'<table class="data study compact">(.*?)</table>', html, re.S).group(1)
+    return re.findall(r"<th>(.*?)</th>", re.search(r"<thead>(.*?)</thead>", table, re.S).group(1))
+
+
+def test_the_report_of_a_study_is_titled_by_its_model_in_its_outputs_units_without_constant_metrics(tmp_path,
+                                                                                                     capsys):
+    from bondc.cli import main
+    from bondc.report.sweep_report import read_study
+
+    model = tmp_path / "rig.bg"
+    model.write_text(RIG, encoding="utf-8")
+    table = tmp_path / "results-2026.csv"
+    run_sweep(model, vary=["k=400,800,1600"], metrics=["P_kPa.min", "P_kPa.max", "x.min"], output=table,
+              point_timeout=0)
+    assert "P_kPa.min [kg/(m*s^2)]" in table.read_text()          # the csv stays SI
+    capsys.readouterr()
+    assert main(["report", "--sweep", str(table), "-o", str(tmp_path / "r.html")]) == 0
+    printed = capsys.readouterr().out
+    assert "3 points (3 ok)" in printed and "motors" not in printed
+    html = (tmp_path / "r.html").read_text(encoding="utf-8")
+    assert "<h1>PressureRig</h1>" in html and "<title>PressureRig — " in html and "results-2026</h1>" not in html
+    # a metric's unit is its output's declared unit: P = k*x0/A at rest, 400*0.01/0.001 Pa = 4 kPa
+    assert "P_kPa.min [kPa]" in html and "kg/(m*s^2)" not in html
+    assert [row["metrics"]["P_kPa.min"] for row in read_study(table).rows] == pytest.approx([4.0, 8.0, 16.0])
+    # compact: index, k, status and the two metrics that vary (x.min is 0 at every point)
+    assert _compact_header(html) == ["index", "k [N/m]", "status", "P_kPa.min [kPa]", "P_kPa.max [kPa]"]
+    assert "All 8 columns" in html and "x.min [m]" in html          # the rest: in the table of all columns
+    assert "P_kPa.max against k</figcaption>" in html and "x.min against k" not in html
+    assert html.count('<figure class="plot">') == 2
+
+
+def test_a_study_table_without_its_record_or_with_a_broken_one_still_gets_a_report(tmp_path, capsys):
+    from bondc.cli import main
+
+    table = tmp_path / "plain.csv"
+    table.write_text("index,k [N/m],power.final [W],x.max [m],status,message,wall_time [s]\n"
+                     "0,400,0,0.1,ok,,0.1\n1,800,0,0.05,ok,,0.1\n2,1600,,,failed,<b>E311</b>,0.1\n")
+    (tmp_path / "plain.csv.study").write_text("{not json")
+    assert main(["report", "--sweep", str(table), "-o", str(tmp_path / "p.html")]) == 0
+    html = (tmp_path / "p.html").read_text(encoding="utf-8")
+    assert "<h1>plain</h1>" in html and "&lt;b&gt;E311&lt;/b&gt;" in html and "<b>E311" not in html
+    assert "power.final against k" not in html and "x.max against k" in html       # power.final = 0 throughout
+    assert "3 points (2 ok, 1 failed)" in capsys.readouterr().out
+    table.write_text("index,k [N/m],x.max [m],status,message,wall_time [s]\nzero,400,0.1,ok,,0.1\n")
+    assert main(["report", "--sweep", str(table), "-o", str(tmp_path / "q.html")]) == 1     # no traceback
+
+
+@pytest.mark.slow
+def test_the_report_of_a_motor_study_shows_the_chosen_motor_and_the_motors_for_every_point(tmp_path, capsys):
+    from bondc.cli import main
+
+    table = tmp_path / "motors.csv"
+    study = run_sweep(MOTOR_MODEL, vary=["U_s=12,24,48"], motors=CATALOGUE, output=table, point_timeout=0)
+    common = study.motors_for_all()
+    capsys.readouterr()
+    assert main(["report", "--sweep", str(table), "--motors", str(CATALOGUE), "-o", str(tmp_path / "m.html")]) == 0
+    printed = capsys.readouterr().out
+    assert f"motors that cover every point: {', '.join(common)} (smallest: {common[0]})" in printed
+    html = (tmp_path / "m.html").read_text(encoding="utf-8")
+    header = _compact_header(html)
+    assert header[:4] == ["index", "U_s [V]", "status", "motor"]
+    assert "power_el.cycle_energy [J]" in header and any(name.startswith("motor.peak_torque") for name in header)
+    assert len(header) <= 4 + 6
+    assert "motor.peak_torque against U_s" in html and "power_el.cycle_energy against U_s" in html
+    for point in study.points:
+        assert f"<td>{point.chosen_motor}</td>" in html

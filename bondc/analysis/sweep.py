@@ -1109,7 +1109,8 @@ def run_sweep(path, *, model: str | None = None, experiment: str | None = None, 
     journal = None
     if output is not None and Path(output).suffix.lower() == ".csv":
         journal = _Journal(output, result_of(()).csv_header())
-        _write_study(output, settings["study"])
+        _write_study(output, settings["study"], _described(graph, path, chosen, axes, shown_units, converters,
+                                                            chosen_metrics))
     report = _progress_reporter(progress, len(tasks))
 
     def on_done(point: SweepPoint) -> None:
@@ -1568,10 +1569,30 @@ def study_file(output) -> Path:
     return Path(str(output) + ".study")
 
 
-def _write_study(output, study: dict) -> None:
+def _described(graph, path, experiment, axes, shown_units, converters, metrics) -> dict:
+    """What a study's report shows that its csv does not hold: the model's name and file, the
+    experiment, and the unit each varied parameter and metric is shown in (``shown = (si - offset) /
+    factor``; a metric's is its output's declared unit, ``P_kPa.min`` in kPa). Not part of the study's
+    identity: a resume does not compare it."""
+    parameters = []
+    for axis, unit, converter in zip(axes, shown_units, converters):
+        offset = float(converter.to_si(0.0))
+        parameters.append({"name": axis.name, "unit": unit, "factor": float(converter.to_si(1.0)) - offset,
+                           "offset": offset})
+    return {"model name": graph.name, "model file": str(path), "experiment": getattr(experiment, "name", None),
+            "parameters": parameters,
+            "metrics": [{"name": m.name, "si_unit": m.si_unit, "unit": m.unit, "factor": m.display_factor}
+                        for m in metrics]}
+
+
+def _write_study(output, study: dict, described: dict | None = None) -> None:
+    """The record of ``study`` beside the csv; ``described`` under "report" (see :func:`_described`)."""
     from bondc.io import atomic_write_text
 
-    atomic_write_text(study_file(output), json.dumps(study, indent=1) + "\n")
+    record = dict(study)
+    if described is not None:
+        record["report"] = described
+    atomic_write_text(study_file(output), json.dumps(record, indent=1) + "\n")
 
 
 def _check_study(output, study: dict) -> None:
