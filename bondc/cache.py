@@ -263,7 +263,8 @@ class Entry:
         ss = derived.state_space
         light = LightStateSpace(
             graph=ss.graph, diagnostics=tuple(ss.diagnostics), state_names=tuple(ss.state_names),
-            values={name: float(value) for name, (_, value) in ss.parameters.items()}, recipes=recipes)
+            values={name: float(value) for name, (_, value) in ss.parameters.items()}, recipes=recipes,
+            eliminated_names=tuple(ss.eliminated_names))
         try:
             data = pickle.dumps(dataclasses.replace(derived, state_space=light), protocol=pickle.HIGHEST_PROTOCOL)
             _atomic_write(self.folder / "light.pickle", data)
@@ -364,10 +365,11 @@ class LightStateSpace:
     sympy) on first use.
     """
 
-    def __init__(self, graph, diagnostics, state_names, values, recipes):
+    def __init__(self, graph, diagnostics, state_names, values, recipes, eliminated_names=()):
         self.graph = graph
         self.diagnostics = diagnostics
         self.state_names = state_names
+        self.eliminated_names = eliminated_names      # the dependent states (derivative causality)
         self.values = values                        # parameter name -> SI value
         self.recipes = recipes                      # element -> (kind, state name, recipe)
         self.bound_base = None

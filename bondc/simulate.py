@@ -461,14 +461,15 @@ def result_units(graph) -> dict:
 
 
 def dependent_states(ss, variables: Mapping) -> dict:
-    """The states of storage elements in derivative causality (``ss.eliminated``), name -> values:
-    the runtime evaluates their assignment (in the independent states) at every point, as it does
-    every bond variable; the energy account uses the same values."""
+    """The states of storage elements in derivative causality (``ss.eliminated_names``), name ->
+    values: the runtime evaluates their assignment (in the independent states) at every point, as
+    it does every bond variable; the energy account uses the same values. (The names only: a
+    cached run's light state space has them without sympy.)"""
     found = {}
-    for symbol in (getattr(ss, "eliminated", None) or {}).values():
-        values = variables.get(symbol.name)
+    for name in getattr(ss, "eliminated_names", ()):
+        values = variables.get(name)
         if values is not None:
-            found[symbol.name] = values
+            found[name] = values
     return found
 
 

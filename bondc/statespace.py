@@ -136,6 +136,11 @@ class StateSpace:
         return tuple(s.name for s in self.states)
 
     @property
+    def eliminated_names(self) -> tuple[str, ...]:
+        """The states of storage elements in derivative causality (``eliminated``), by name."""
+        return tuple(symbol.name for symbol in self.eliminated.values())
+
+    @property
     def state_symbols(self) -> tuple[sympy.Symbol, ...]:
         return tuple(s.symbol for s in self.states)
 
