@@ -1299,8 +1299,9 @@ def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
         caption=f"Torque: {described[0]}; speed: {described[1]}",
         notes=["Energies integrate τ·ω over the cycle, split at its zero crossings (regenerative energy is "
                "returned by the load to the motor)."])
-    summary = [("peak torque", need["peak_torque"], "N*m"), ("RMS torque", need["rms_torque"], "N*m"),
-               ("peak power", need["peak_power"], "W"), ("motor energy per cycle", need["energy_net"], "J")]
+    # the load's figures, without a motor's rotor inertia (the answer's are the chosen motor's, with it)
+    summary = [("peak load torque", need["peak_torque"], "N*m"), ("RMS load torque", need["rms_torque"], "N*m"),
+               ("peak load power", need["peak_power"], "W"), ("motor energy per cycle", need["energy_net"], "J")]
     if data is None:
         return requirements_table, None, summary, None, None
     return (requirements_table, _candidates_table(data, motors), summary + _motor_choice(data), data["verdict"],
