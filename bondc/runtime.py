@@ -442,6 +442,14 @@ def csv_columns(path):
     return [header_cell(cell) for cell in rows[0]] if rows else []
 
 
+
+def first_decrease(times) -> int | None:
+    """The index i of the first sample after which ``times`` decreases (times[i + 1] < times[i]),
+    or None: a csv signal's and an external input's times must not decrease."""
+    drops = np.flatnonzero(np.diff(times) < 0)
+    return int(drops[0]) if drops.size else None
+
+
 def load_csv(path, column):
     """Time and value arrays of ``column`` in a csv file (loaded once per path and column).
 
@@ -482,8 +490,8 @@ def load_csv(path, column):
     times, values = np.array(times), np.array(values)
     if times.size == 0:
         raise CsvError(f"{path}: no data rows")
-    if np.any(np.diff(times) < 0):
-        i = int(np.flatnonzero(np.diff(times) < 0)[0])
+    i = first_decrease(times)
+    if i is not None:
         raise CsvError(f"{path}: the time column must not decrease: row {i + 3} has t = {times[i + 1]:g} "
                        f"after {times[i]:g}")
     _CSV_CACHE[key] = (times, values)
@@ -578,8 +586,8 @@ def external_inputs(inputs, names):
                              f"(at least one sample), not shapes {times.shape} and {values.shape}")
         if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
             raise InputError(f"external input {name!r}: times and values must be finite numbers (no nan or inf)")
-        if np.any(np.diff(times) < 0):
-            i = int(np.flatnonzero(np.diff(times) < 0)[0])
+        i = first_decrease(times)
+        if i is not None:
             raise InputError(f"external input {name!r}: times must not decrease: t = {times[i + 1]:g} comes after "
                              f"{times[i]:g} (sample {i + 2})")
         prepared[name] = (times, values)
