@@ -433,6 +433,16 @@ def _inertia_ratio(args) -> float | None:
         raise UsageError(error.diagnostics) from None
 
 
+_RATIO_HELP = ('with --motors: the parameter that sets the transmission ratio and values to try, as sweep --vary '
+               '("lead=2,5,10,20 [mm]", "n_gear=5:40:8"); shows the smallest qualifying motor at each value and '
+               'the model\'s own')
+
+
+def _jobs() -> int:
+    """Processes for the points of a --ratio study: one per core."""
+    return max(1, os.cpu_count() or 1)
+
+
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import dense_steps, energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
@@ -443,6 +453,9 @@ def _cmd_simulate(args) -> int:
         check_result_path(args.output)
         check_output(args.output)       # before any work
     inertia_ratio = _inertia_ratio(args)
+    from bondc.analysis.ratio import check_ratio
+
+    check_ratio(args.ratio, args.motors)
     if args.motors:
         from bondc.analysis.motors import load_catalogue
 
@@ -495,6 +508,14 @@ def _cmd_simulate(args) -> int:
             _print_diagnostics(problem.diagnostics, graph.sources)
             summary.setdefault("diagnostics", []).extend(d.to_json() for d in problem.diagnostics)
             failed = any(d.is_error for d in problem.diagnostics)
+    study = None
+    if args.ratio and result.complete:
+        from bondc.analysis.ratio import ratio_study
+
+        study = ratio_study(args.file, args.ratio, motors=args.motors, model=args.model,
+                            experiment=args.experiment, sets=args.set or (), t_end=args.t_end,
+                            inertia_ratio=inertia_ratio, jobs=_jobs(), progress=not args.json and not _quiet())
+        summary["ratio"] = study.to_json()
     if args.json:
         _print_json(summary)
     else:
@@ -517,6 +538,9 @@ def _cmd_simulate(args) -> int:
         if motors_text:
             print()
             print(motors_text)
+        if study is not None:
+            print()
+            print(study.to_text())
     if error is not None:
         _print_diagnostics(error.diagnostics, graph.sources)
         return result.exit_status or EXIT_ERRORS
@@ -559,7 +583,8 @@ def _cmd_report(args) -> int:
     summary = report_summary(Path(args.file), model=args.model, experiment=args.experiment,
                              sets=_parse_sets(args.set), data=args.data, compare=args.compare or (),
                              motors=args.motors, output=args.output, t_end=args.t_end,
-                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio)
+                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio,
+                             ratio=args.ratio, jobs=_jobs())
     if args.json:
         _print_json(summary)
     elif not _quiet() or summary["exit_status"]:
@@ -767,6 +792,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--motors", metavar="CATALOGUE.csv",
                      help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")
     sim.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
+    sim.add_argument("--ratio", metavar="NAME=VALUES", help=_RATIO_HELP)
     sim.set_defaults(run=_cmd_simulate)
 
     report = commands.add_parser("report", help="one self-contained HTML report: model, bond graph, equations, "
@@ -781,6 +807,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="compare output OUT with the measured COLUMN (repeatable)")
     report.add_argument("--motors", metavar="CATALOGUE.csv", help="judge the motors of this catalogue against the cycle")
     report.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
+    report.add_argument("--ratio", metavar="NAME=VALUES", help=_RATIO_HELP)
     report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
                                                    "reports/<file>-<experiment>.html for a non-first experiment)")
     report.add_argument("--json", action="store_true",

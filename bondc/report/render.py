@@ -278,6 +278,7 @@ class ReportContext:
     laws: Sequence[Equation] = ()               # "where": the laws the state equations name
     result_tables: Sequence[Table] = ()         # e.g. statistics of the outputs
     power_plots: Sequence[Plot] = ()            # power of the elements against time
+    ratio: Any = None                           # --ratio: a bondc.analysis.ratio.RatioStudy, after the answer
 
     def __post_init__(self) -> None:
         # Trusted HTML must come from bondc's own producers, which return Markup; a

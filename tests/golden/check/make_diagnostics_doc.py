@@ -574,6 +574,11 @@ d("E972", "not a sweep table",
   "`bondc report --sweep FILE`: FILE cannot be read, or is not the csv `bondc sweep -o` wrote (its header "
   "starts with `index` and has a `status` column).",
   "Give the table the sweep wrote.")
+d("E973", "ratio study without a catalogue",
+  "`--ratio NAME=VALUES` (of `simulate` and `report`) shows how the smallest qualifying motor changes with the "
+  "transmission ratio, so it needs the motor catalogue to choose from; the command stops before any run.",
+  "Add `--motors CATALOGUE.csv`, or vary the parameter with `bondc sweep --vary NAME=VALUES` to see its metrics "
+  "without a motor choice.")
 d("E971", "sweep executor",
   "`--executor dask` (or `--scheduler`) needs `dask.distributed`, which is not installed; or the scheduler "
   "given with `--scheduler` cannot be reached; or the executor is neither `local` nor `dask`.",
@@ -792,6 +797,7 @@ live("E925", Api("from bondc.analysis.motors import requirements\n"
                  "requirements([0.0, 0.5, 1.0], [0.2, 0.3, 0.4], [100.0, 150.0, 200.0], cycle=(0.5, 2.0))"))
 live("E928", Cli("bondc simulate spin.bg --motors motors.csv --inertia-ratio -5",
                  {"spin.bg": SPIN, "motors.csv": CATALOGUE}))
+live("E973", Cli("bondc simulate spin.bg --ratio n=2,5", {"spin.bg": SPIN}))
 live("E927", Cli("bondc simulate spin.bg --motors motors.csv", {"spin.bg": SPIN_NO_TORQUE, "motors.csv": CATALOGUE}))
 
 _IMPORTS = ("from bondc import semantic\n"
