@@ -724,15 +724,6 @@ def test_power_units():
     assert not is_power_unit("J") and not is_power_unit("N*m") and not is_power_unit("nonsense")
 
 
-def test_doctests():
-    import doctest
-
-    from bondc.analysis import energy, stats
-
-    for module in (energy, stats):
-        assert doctest.testmod(module).failed == 0
-
-
 def test_a_cycle_too_short_for_the_run_is_refused_before_any_window():
     from bondc.analysis.energy import MAX_CYCLES, cycle_windows
     from bondc.errors import AnalysisError
