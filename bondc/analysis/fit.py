@@ -76,7 +76,7 @@ import numpy as np
 from bondc.errors import BondcError, DataError, Diagnostic, UsageError
 
 __all__ = ["FitCompare", "Estimate", "DataSet", "FitResult", "parse_compare", "parse_estimate", "parse_groups",
-           "run_fit", "FIT_RTOL", "FIT_ATOL", "RELATIVE_STEP", "CORRELATION_LIMIT"]
+           "run_fit", "prepare_fit", "FitProblem", "FIT_RTOL", "FIT_ATOL", "RELATIVE_STEP", "CORRELATION_LIMIT"]
 
 #: The relative and absolute tolerance of every run of a fit (the experiment's when tighter).
 FIT_RTOL = 1e-9
@@ -649,20 +649,56 @@ class _Progress:
             self.stream.flush()
 
 
-def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Estimate], model: str | None = None,
-            sets: Sequence = (), max_evaluations: int | None = None, output=None, write=None,
-            progress: bool | Callable = False, cache: bool | None = None) -> FitResult:
-    """``bondc fit``: estimate ``estimates`` from ``datasets`` (see the module docstring).
+@dataclass
+class FitProblem:
+    """A fit made ready (:func:`prepare_fit`): the compiled models, the measured data, the
+    estimated parameters (SI), and the residuals at the start."""
 
-    ``sets`` (``--set`` texts) fix other parameters and give the start value of an estimated one;
-    ``output``: the HTML report to write; ``write``: a copy of the model with the fitted values
-    (:func:`bondc.analysis.fit_write.write_fitted`). Raises UsageError/DataError for a bad request
-    (E880-E892); a fit that does not converge is a result with ``converged`` False."""
-    from scipy import stats
-    from scipy.optimize import least_squares
+    path: str
+    datasets: list[DataSet]
+    first: object                   # the Derived of the first data set's experiment
+    parameters: list[_Parameter]
+    groups: list[_Group]
+    evaluator: _Evaluator
+    diagnostics: list[Diagnostic]
+    r0: np.ndarray
 
-    from bondc.io import check_output
+    @property
+    def names(self) -> list[str]:
+        return [p.name for p in self.parameters]
 
+    @property
+    def x0(self) -> np.ndarray:
+        return np.array([p.initial for p in self.parameters], dtype=float)
+
+    @property
+    def scale(self) -> np.ndarray:
+        """The magnitude of each parameter: the optimiser works on x / scale."""
+        return np.array([abs(p.initial) if p.initial != 0 else
+                         (p.high - p.low if math.isfinite(p.high - p.low) else 1.0) for p in self.parameters])
+
+    def residuals(self, x) -> np.ndarray | None:
+        """The weighted residuals at parameter values ``x`` (SI), None where a run fails."""
+        return self.evaluator.residuals(np.asarray(x, dtype=float))
+
+    def jacobian(self, x, at_x: np.ndarray | None = None) -> np.ndarray | None:
+        """d residuals / d x (SI) at ``x`` by central differences (:data:`RELATIVE_STEP` times each
+        parameter's magnitude, one-sided at a bound); None where a run fails."""
+        x = np.asarray(x, dtype=float)
+        scale = self.scale
+        z = x / scale
+        low = np.array([p.low for p in self.parameters]) / scale
+        high = np.array([p.high for p in self.parameters]) / scale
+        found = finite_difference_jacobian(lambda zz: self.evaluator.residuals(zz * scale), z,
+                                           RELATIVE_STEP * np.maximum(np.abs(z), 1e-3), low, high, at_x=at_x)
+        return None if found is None else found / scale
+
+
+def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Estimate], model: str | None = None,
+                sets: Sequence = (), cache: bool | None = None, write=None) -> FitProblem:
+    """Everything a fit checks and builds before it starts (E880-E892 for a bad request): the models
+    derived and compiled once per experiment, the estimates resolved and checked to be late-bound,
+    the measured data read, a first run of every data set at the start values."""
     estimates = [e if isinstance(e, Estimate) else parse_estimate(e) for e in estimates]
     if not estimates:
         raise _usage("E889", "bondc fit needs at least one --estimate NAME[=LOW:HIGH]",
@@ -672,15 +708,6 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
                              d.experiment) for d in datasets]
     if not datasets:
         raise _usage("E889", "bondc fit needs measured data: --data FILE --compare OUT=COLUMN")
-    if max_evaluations is not None and max_evaluations < 1:
-        raise _usage("E889", f"--max-evaluations must be at least 1, not {max_evaluations}")
-    if output is not None:
-        check_output(output, "the report", make_folder=True)
-    if write is not None:
-        from bondc.analysis.fit_write import check_write_target
-
-        check_write_target(write, path, [d.data for d in datasets])
-
     # one derived (and compiled) model per experiment
     derived_of: dict = {}
     for dataset in datasets:
@@ -703,16 +730,8 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
     diagnostics: list[Diagnostic] = []
     for derived in derived_of.values():
         diagnostics += [d for d in derived.notes if d not in diagnostics and d.severity == "warning"]
-
-    bar = _Progress() if progress is True else (progress or None)
     evaluator = _Evaluator(groups, names)
     x0 = np.array([p.initial for p in parameters], dtype=float)
-    # the optimiser works on x / scale: every parameter of order 1
-    scale = np.array([abs(v) if v != 0 else (p.high - p.low if math.isfinite(p.high - p.low) else 1.0)
-                      for v, p in zip(x0, parameters)], dtype=float)
-    low = np.array([p.low for p in parameters]) / scale
-    high = np.array([p.high for p in parameters]) / scale
-
     # the start: every name checked against what the runs record, and a run that fails is an error
     for group in groups:
         result, signals = evaluator.simulate(group, x0)
@@ -730,16 +749,48 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
             raise DataError(Diagnostic(
                 "error", "E891", f"the run of '{group.dataset.data}' fails at the start values: "
                                  + (f"{cause.code}: {cause.message}" if cause else result.message),
-                cause.span if cause is not None else None or _no_span(),
+                cause.span if cause is not None else _no_span(),
                 hint="start from values with which the model runs (bondc simulate), e.g. with --set"))
     r0 = evaluator.residuals(x0)
     if r0 is None:
         raise DataError(Diagnostic("error", "E891", "the model gives no finite values at the start values",
                                    hint="start from values with which the model runs (bondc simulate)"))
-    m, n = r0.size, len(names)
-    if m <= n:
-        raise DataError(Diagnostic("error", "E889", f"{m} measured samples cannot determine {n} parameters",
+    if r0.size <= len(names):
+        raise DataError(Diagnostic("error", "E889", f"{r0.size} measured samples cannot determine {len(names)} "
+                                                    "parameters",
                                    hint="give more samples or estimate fewer parameters"))
+    return FitProblem(str(path), list(datasets), first, parameters, groups, evaluator, diagnostics, r0)
+
+
+def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Estimate], model: str | None = None,
+            sets: Sequence = (), max_evaluations: int | None = None, output=None, write=None,
+            progress: bool | Callable = False, cache: bool | None = None) -> FitResult:
+    """``bondc fit``: estimate ``estimates`` from ``datasets`` (see the module docstring).
+
+    ``sets`` (``--set`` texts) fix other parameters and give the start value of an estimated one;
+    ``output``: the HTML report to write; ``write``: a copy of the model with the fitted values
+    (:func:`bondc.analysis.fit_write.write_fitted`). Raises UsageError/DataError for a bad request
+    (E880-E892); a fit that does not converge is a result with ``converged`` False."""
+    from scipy.optimize import least_squares
+
+    from bondc.io import check_output
+
+    if max_evaluations is not None and max_evaluations < 1:
+        raise _usage("E889", f"--max-evaluations must be at least 1, not {max_evaluations}")
+    if output is not None:
+        check_output(output, "the report", make_folder=True)
+    if write is not None:
+        from bondc.analysis.fit_write import check_write_target
+
+        check_write_target(write, path, [d.data for d in datasets])
+    problem = prepare_fit(path, datasets=datasets, estimates=estimates, model=model, sets=sets, cache=cache,
+                          write=write)
+    names, parameters, r0 = problem.names, problem.parameters, problem.r0
+    m, n = r0.size, len(names)
+    x0, scale = problem.x0, problem.scale
+    low = np.array([p.low for p in parameters]) / scale
+    high = np.array([p.high for p in parameters]) / scale
+    bar = _Progress() if progress is True else (progress or None)
     penalty = max(float(np.sqrt(np.mean(r0 ** 2))), 1.0) * 10.0
     failed = [0]
     evaluations = [0]
@@ -749,7 +800,7 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
         key = z.tobytes()
         if key in cache_r:
             return cache_r[key]
-        r = evaluator.residuals(z * scale)
+        r = problem.residuals(z * scale)
         evaluations[0] += 1
         if r is None:
             failed[0] += 1
@@ -757,19 +808,15 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
         cache_r.clear()
         cache_r[key] = r
         if bar is not None:
-            bar(evaluations[0], 0.5 * float(r @ r), evaluator.runs)
+            bar(evaluations[0], 0.5 * float(r @ r), problem.evaluator.runs)
         return r
 
-    steps = np.full(n, RELATIVE_STEP)
-
     def jac(z):
-        at = fun(z)
-        found = finite_difference_jacobian(lambda zz: evaluator.residuals(zz * scale), z, steps * np.maximum(
-            np.abs(z), 1e-3), low, high, at_x=at)
+        found = problem.jacobian(z * scale, at_x=fun(z))
         if found is None:
             failed[0] += 1
             return np.zeros((m, n))
-        return found
+        return found * scale
 
     try:
         solution = least_squares(fun, x0 / scale, jac=jac, bounds=(low, high), method="trf", x_scale="jac",
@@ -777,18 +824,38 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
     finally:
         if bar is not None and hasattr(bar, "close"):
             bar.close()
-    z = solution.x
-    x = z * scale
-    r = fun(z)
+    x = solution.x * scale
+    r = fun(solution.x)
+    result = _summarise(problem, x, r, jac(solution.x), solution, evaluations[0], failed[0])
+    if output is not None:
+        from bondc.report.fit_report import write_fit_report
+
+        write_fit_report(result, output)
+        result.written.append(str(output))
+    if write is not None:
+        from bondc.analysis.fit_write import write_fitted
+
+        write_fitted(write, path, problem.first.graph, result, [d.experiment for d in problem.datasets], sets)
+        result.written.append(str(write))
+    return result
+
+
+def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed: int) -> FitResult:
+    """The result at the solution ``x`` (SI): intervals and correlations from ``Jz`` (the Jacobian
+    with respect to x / scale), warnings, each signal before and after."""
+    from scipy import stats
+
+    names, parameters, r0 = problem.names, problem.parameters, problem.r0
+    diagnostics = list(problem.diagnostics)
+    m, n = r0.size, len(names)
+    scale, x0 = problem.scale, problem.x0
     cost = 0.5 * float(r @ r)
     cost0 = 0.5 * float(r0 @ r0)
     converged = bool(solution.status > 0)
-    J = jac(z) / scale          # d r / d x (SI)
-    Jz = J * scale
     dof = m - n
     s2 = 2.0 * cost / dof
     U, S, Vt = np.linalg.svd(Jz, full_matrices=False)
-    tiny = S <= RANK_TOLERANCE * (S[0] if S.size else 1.0)
+    tiny = S <= RANK_TOLERANCE * (S[0] if S.size and S[0] > 0 else 1.0)
     inverse = np.where(tiny, 0.0, 1.0 / np.where(S > 0, S, 1.0) ** 2)
     cov_z = (Vt.T * inverse) @ Vt * s2
     cov = cov_z * np.outer(scale, scale)
@@ -800,10 +867,10 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
         undetermined.update(involved)
         diagnostics.append(Diagnostic(
             "warning", "W881", "the Jacobian is singular: " + _names([names[i] for i in involved])
-                               + " cannot be determined from this data (a change of "
+                               + " cannot be determined from this data (changing "
                                + ("them together" if len(involved) > 1 else "it") + " along "
                                + ", ".join(f"{direction[i]:+.2f} {names[i]}" for i in involved)
-                               + " (relative) changes no residual)",
+                               + ", relative to their values, changes no residual)",
             hint="fix all but one of them with --set, or add data that tells them apart"))
     for i in undetermined:
         stderr[i] = math.inf
@@ -837,20 +904,20 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
                                    (float(value - quantile * err), float(value + quantile * err)),
                                    None if not math.isfinite(p.low) else p.low / p.factor,
                                    None if not math.isfinite(p.high) else p.high / p.factor))
-    if failed[0]:
+    if failed:
         diagnostics.append(Diagnostic(
-            "warning", "W884", f"the model failed to run at {failed[0]} trial point"
-                               f"{'s' if failed[0] != 1 else ''} of the fit; the optimiser stepped back",
+            "warning", "W884", f"the model failed to run at {failed} trial point"
+                               f"{'s' if failed != 1 else ''} of the fit; the optimiser stepped back",
             hint="bounds that keep the parameters where the model runs make the fit faster"))
     if not converged:
         diagnostics.append(Diagnostic(
-            "warning", "W883", f"the fit did not converge after {evaluations[0]} evaluations: {solution.message}",
+            "warning", "W883", f"the fit did not converge after {evaluations} evaluations: {solution.message}",
             hint="the values reached are reported; raise --max-evaluations, or start nearer (--set)"))
 
     signals = []
-    for group in groups:
-        before = evaluator.model_values(group, x0)
-        after = evaluator.model_values(group, x)
+    for group in problem.groups:
+        before = problem.evaluator.model_values(group, x0)
+        after = problem.evaluator.model_values(group, x)
         for k, signal in enumerate(group.signals):
             b = before[k] if before is not None else np.full(group.times.size, math.nan)
             a = after[k] if after is not None else np.full(group.times.size, math.nan)
@@ -862,19 +929,8 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
             signals.append(SignalFit(str(group.dataset.data), signal.spec.output, signal.spec.column, signal.unit,
                                      group.times, shown(signal.measured), shown(b), shown(a), rmse_b, rmse_a,
                                      nrmse(rmse_b), nrmse(rmse_a)))
-    result = FitResult(first.graph.name, str(path), converged, str(solution.message), fitted, correlation, cost0,
-                       cost, signals, diagnostics, evaluations[0], evaluator.runs, m, list(datasets))
-    if output is not None:
-        from bondc.report.fit_report import write_fit_report
-
-        write_fit_report(result, output)
-        result.written.append(str(output))
-    if write is not None:
-        from bondc.analysis.fit_write import write_fitted
-
-        write_fitted(write, path, first.graph, result, [d.experiment for d in datasets], sets)
-        result.written.append(str(write))
-    return result
+    return FitResult(problem.first.graph.name, problem.path, converged, str(solution.message), fitted, correlation,
+                     cost0, cost, signals, diagnostics, evaluations, problem.evaluator.runs, m, list(problem.datasets))
 
 
 def _names(names: list[str]) -> str:
