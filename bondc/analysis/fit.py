@@ -874,9 +874,13 @@ def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed
             hint="fix all but one of them with --set, or add data that tells them apart"))
     for i in undetermined:
         stderr[i] = math.inf
+    # the correlations: singular values floored at the rank tolerance, so that a direction the
+    # data does not determine dominates (a product a*b: a and b correlate at -1, as they trade off)
+    floored = np.maximum(S, RANK_TOLERANCE * (S[0] if S.size and S[0] > 0 else 1.0))
+    spread = (Vt.T / floored ** 2) @ Vt
     with np.errstate(invalid="ignore", divide="ignore"):
-        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        correlation = cov / np.outer(sd, sd)
+        sd = np.sqrt(np.maximum(np.diag(spread), 0.0))
+        correlation = spread / np.outer(sd, sd)
     correlation = np.where(np.isfinite(correlation), correlation, 0.0)
     for i in range(n):
         correlation[i, i] = 1.0
