@@ -9,13 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-_TEMPLATE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{{ fit.model }} — bondc fit</title>
+from bondc.report.render import PAGE_HEAD
+
+_TEMPLATE = PAGE_HEAD + """<title>{{ fit.model }} — bondc fit</title>
 <style>
 {% include "report.css" %}
 .table-wrap { overflow-x: auto; max-width: 100%; }
