@@ -649,6 +649,36 @@ def _cmd_fit_friction(args) -> int:
     return code
 
 
+class _FitGroup(argparse.Action):
+    """``bondc fit``'s --data, --experiment and --compare, kept in command-line order: each --data
+    starts a data set, the --experiment and --compare after it belong to it."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        items = list(getattr(namespace, "fit_items", None) or [])
+        items.append((self.dest, values))
+        namespace.fit_items = items
+        if self.dest == "data" and getattr(namespace, "data", None) is None:
+            namespace.data = values         # (the first: the inputs an output must not replace)
+
+
+def _cmd_fit(args) -> int:
+    from bondc.analysis.fit import parse_groups, run_fit
+
+    datasets = parse_groups(getattr(args, "fit_items", None) or [])
+    result = run_fit(args.file, datasets=datasets, estimates=args.estimate or [], model=args.model,
+                     sets=args.set or (), max_evaluations=args.max_evaluations, output=args.output,
+                     write=args.write, progress=not args.json and not _quiet(),
+                     cache=False if args.no_cache else None)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        _print_diagnostics(result.diagnostics)
+        print(result.to_text())
+        for path in result.written:
+            print(f"wrote {path}")
+    return result.exit_status
+
+
 def _megabytes(size: int) -> str:
     """A size for people: 0 B, 812 kB, 3.4 MB, 1.2 GB (powers of 1000, as BONDC_CACHE_MAX_MB)."""
     for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
@@ -867,6 +897,32 @@ def build_parser() -> argparse.ArgumentParser:
                                               "the same command again resumes, skipping the points already there")
     sweep.add_argument("--json", action="store_true", help="print the result as JSON")
     sweep.set_defaults(run=_cmd_sweep)
+
+    fit_ = commands.add_parser("fit", help="estimate parameters from measured data (least squares), with "
+                                            "standard errors, 95 % intervals and correlations")
+    _add_model_args(fit_)
+    fit_.add_argument("--data", action=_FitGroup, metavar="FILE",
+                      help="measured CSV (header units honoured, as validate); each --data starts a data set, "
+                           "and the --experiment and --compare after it belong to it (repeat for several)")
+    fit_.add_argument("--experiment", action=_FitGroup, metavar="NAME",
+                      help="the experiment the data set before it was measured in (before any --data: every "
+                           "data set's default; default: the first)")
+    fit_.add_argument("--compare", action=_FitGroup, metavar="OUT=COLUMN[:weight=W]",
+                      help="fit output OUT to the measured COLUMN of the data set before it (repeatable)")
+    fit_.add_argument("--estimate", action="append", metavar="NAME[=LOW:HIGH]",
+                      help='a parameter to estimate, with bounds in its declared unit or a unit in [ ] '
+                           '("b=5:30", "Ae=5:50 [mm^2]"; an empty bound is open); its --set value, else the '
+                           "model's, is the start (repeatable)")
+    fit_.add_argument("--max-evaluations", type=int, metavar="N",
+                      help="stop the optimiser after N evaluations (default 200; the Jacobians cost more runs)")
+    fit_.add_argument("-o", "--output", help="write the HTML report: estimates, correlations, measured vs model")
+    fit_.add_argument("--write", metavar="FITTED.bg",
+                      help="write a copy of the model with the fitted values (never over a file bondc fit did "
+                           "not write)")
+    fit_.add_argument("--json", action="store_true",
+                      help="print converged, parameters (value, unit, initial, stderr, ci95), correlation, cost, "
+                           "signals, diagnostics as JSON")
+    fit_.set_defaults(run=_cmd_fit, data=None, fit_items=[])
 
     lsp_ = commands.add_parser("lsp", help="the language server for editors (Language Server Protocol on stdio)")
     lsp_.add_argument("--stdio", action="store_true",

@@ -349,6 +349,17 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
+#: The start of a standalone page's template (the sweep's and the fit's reports): its doctype, the
+#: Content-Security-Policy ``csp`` and the viewport; the template goes on with its title and style.
+PAGE_HEAD = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+"""
+
+
 @functools.lru_cache(maxsize=1)
 def environment() -> Environment:
     """The one Jinja environment of bondc's reports (templates in ``bondc/report/templates``)."""
