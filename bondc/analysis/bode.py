@@ -128,6 +128,15 @@ class Response:
     amplitude: float | None = None  # of the verification's sine, SI
 
     @property
+    def unit(self) -> str:
+        """The unit of Y/U in SI: ``m/N``, ``(m/s)/N``, ``1``."""
+        top, bottom = self.output_unit or "1", self.input_unit or "1"
+        if bottom == "1":
+            return top
+        top = top if "/" not in top else f"({top})"
+        return f"{top}/{bottom}" if all(c not in bottom for c in "*/^") else f"{top}/({bottom})"
+
+    @property
     def magnitude_db(self) -> np.ndarray:
         with np.errstate(divide="ignore", invalid="ignore"):
             return 20.0 * np.log10(np.abs(self.response))
@@ -172,15 +181,14 @@ class Bode:
         lines = [f"frequency response, linearised at the {lin.at} point, t = {lin.time:g} s"]
         for r in self.responses:
             f, mag, ph = r.frequency_hz, r.magnitude_db, r.phase_deg
-            unit = f"{r.output_unit or '1'}/{r.input_unit or '1'}"
-            lines += ["", f"{r.output} / {r.input}  [{unit}, SI]: {f.size} frequencies, {f[0]:.4g} .. {f[-1]:.4g} Hz",
+            lines += ["", f"{r.output} / {r.input}  [{r.unit}, SI]: {f.size} frequencies, {f[0]:.4g} .. {f[-1]:.4g} Hz",
                       f"  at {f[0]:.4g} Hz: {mag[0]:.4g} dB, {ph[0]:.4g} deg; "
                       f"at {f[-1]:.4g} Hz: {mag[-1]:.4g} dB, {ph[-1]:.4g} deg",
                       f"  peak {np.nanmax(mag):.4g} dB at {f[int(np.nanargmax(mag))]:.4g} Hz",
                       "  " + r.margins.to_text()]
             if r.checks:
                 lines.append(f"  verified against the nonlinear model (sine of amplitude {r.amplitude:.4g} "
-                             f"{r.input_unit or ''} SI on {r.input}):".replace("  SI", " SI"))
+                             f"{r.input_unit or 'SI'} on {r.input}):")
                 lines.append(f"    {'f [Hz]':>10} {'linear dB':>10} {'model dB':>10} {'error dB':>9} "
                              f"{'linear deg':>11} {'model deg':>10} {'error deg':>9}")
                 for c in r.checks:
@@ -463,13 +471,21 @@ def switches_at_point(ss, lin) -> list[Diagnostic]:
         except (TypeError, ValueError):
             continue
         if abs(value) <= 1e-9 * scale + 1e-12:
+            from bondc.errors import NO_SPAN
+            from bondc.model import readable, readable_names
+            from bondc.simulate import _span_of
+
+            graph = getattr(ss, "graph", None)
+            spans = [_span_of(graph, s.name) for s in sorted(moving, key=lambda s: s.name)] if graph else []
+            span = next((span for span in spans if span is not None), NO_SPAN)
+            text = readable(readable_names(graph), str(g)) if graph is not None else str(g)
             found.append(Diagnostic(
                 "warning", "W942",
-                f"the operating point sits on a switch of the model: {g} = 0 there, where the law has a kink or a "
+                f"the operating point sits on a switch of the model: {text} = 0 there, where the law has a kink or a "
                 f"jump (a stuck friction, a valve at its opening, a backlash at its edge); the linear model "
                 f"takes the slope of one side, and the response holds only for motion to that side",
-                hint="linearise where the law is smooth (another --time, another initial state, or --at "
-                     "equilibrium), and check with --verify"))
+                span=span, hint="linearise where the law is smooth (another --time, another initial state, or "
+                                "--at equilibrium), and check with --verify"))
     return found
 
 

@@ -42,14 +42,6 @@ def _label(response) -> str:
     return f"{response.output}/{response.input}"
 
 
-def _ratio_unit(response) -> str:
-    top, bottom = response.output_unit or "1", response.input_unit or "1"
-    if bottom == "1":
-        return top
-    top = top if all(c not in top for c in "/") else f"({top})"
-    return f"{top}/{bottom}" if all(c not in bottom for c in "*/^") else f"{top}/({bottom})"
-
-
 def bode_svg(responses, title: str, size=BODE_SIZE) -> Markup:
     """The Bode plot of ``responses`` (one or several pairs, one line each) as an inline SVG."""
     import matplotlib
@@ -68,7 +60,7 @@ def bode_svg(responses, title: str, size=BODE_SIZE) -> Markup:
         top, bottom = figure.subplots(2, 1, sharex=True)
         for number, r in enumerate(responses):
             colour = f"C{number % 10}"
-            label = f"{_label(r)} [{_ratio_unit(r)}]"
+            label = f"{_label(r)} [{r.unit}]"
             top.semilogx(r.frequency_hz, r.magnitude_db, color=colour, label=label)
             bottom.semilogx(r.frequency_hz, r.phase_deg, color=colour, label=label)
             m = r.margins
@@ -103,7 +95,7 @@ def csv_text(bode) -> str:
     header = ["frequency [Hz]"]
     columns = [np.asarray(bode.responses[0].frequency_hz, dtype=float)]
     for r in bode.responses:
-        header += [f"{_label(r)} gain [{_ratio_unit(r)}]", f"{_label(r)} magnitude [dB]", f"{_label(r)} phase [deg]"]
+        header += [f"{_label(r)} gain [{r.unit}]", f"{_label(r)} magnitude [dB]", f"{_label(r)} phase [deg]"]
         columns += [np.abs(r.response), r.magnitude_db, r.phase_deg]
     out = io.StringIO()
     out.write(",".join(_csv_cell(cell) for cell in header) + "\n")
@@ -144,7 +136,7 @@ def section_rows(bode) -> list[dict]:
     """What the report's and the page's Bode section shows per pair: its plot, margins and checks."""
     rows = []
     for r in bode.responses:
-        rows.append({"label": _label(r), "unit": _ratio_unit(r), "svg": bode_svg([r], f"Bode plot of {_label(r)}"),
+        rows.append({"label": _label(r), "unit": r.unit, "svg": bode_svg([r], f"Bode plot of {_label(r)}"),
                      "margins": r.margins, "checks": r.checks, "amplitude": r.amplitude,
                      "input_unit": r.input_unit})
     return rows
