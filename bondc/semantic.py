@@ -76,7 +76,12 @@ SETTINGS: Mapping[str, str] = {
     "outputs": "outputs",
     "first_step": "time",
     "dt": "time",
+    "bode": "transfers",
+    "bode_at": "operating point",
 }
+
+#: ``bode_at``: where the report's frequency responses are linearised (as ``bondc bode --at``).
+OPERATING_POINTS = ("initial", "equilibrium")
 
 # Pass as ``experiment=`` to use the model's first experiment (what a command does without --experiment).
 FIRST = "<first experiment>"
@@ -1904,6 +1909,35 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
                 ok = False
         if not ok:
             return
+    elif kind == "transfers":
+        items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
+        ok = True
+        for entry in items:
+            if not isinstance(entry, ast.Transfer):
+                m.report(_error("E313", "bode lists pairs INPUT -> OUTPUT", entry.span,
+                                hint="write bode = [F -> x, F -> v]: the input excited and the output measured"))
+                ok = False
+                continue
+            for name, category, declare in ((entry.source, "input", "input {0} [UNIT] = ..."),
+                                            (entry.target, "output", "output {0} [UNIT] = ...")):
+                if name.name in m.names(category):
+                    m.used.add(name.name)
+                    continue
+                decl = m.decls.get(name.name)
+                what = f"'{name.name}' is {_a(decl.category)}; " if decl is not None else ""
+                m.report(_error("E301", f"no {category} named '{name.name}'", name.span,
+                                hint=_join_hints(_did_you_mean(name.name, m.names(category)),
+                                                 f"{what}bode = [INPUT -> OUTPUT]: declare it with "
+                                                 f"'{declare.format(name.name)}'")))
+                ok = False
+        if not ok:
+            return
+    elif kind == "operating point":
+        if not isinstance(item.value, ast.Str) or item.value.value not in OPERATING_POINTS or item.unit is not None:
+            m.report(_error("E313", f"{item.name} is \"initial\" or \"equilibrium\"", item.value.span,
+                            hint=f'write {item.name} = "equilibrium" to linearise at the equilibrium found from the '
+                                 "initial state"))
+            return
     else:
         if isinstance(item.value, (ast.Str, ast.ListExpr)):
             m.report(_error("E313", f"{item.name} must be a number", item.value.span))
@@ -1931,6 +1965,10 @@ def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
     if kind == "outputs":
         items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
         return tuple(entry.name for entry in items)
+    if kind == "transfers":
+        return tuple((entry.source.name, entry.target.name) for entry in item.value.items)
+    if kind == "operating point":
+        return item.value.value
     value = _try_evaluate(m, item.value, values)
     if value is None:
         return None

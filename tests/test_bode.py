@@ -294,3 +294,55 @@ def test_frequencies_with_units():
     assert parse_frequency("2 [kHz]", "--to") == pytest.approx(2000)
     assert parse_frequency("600 [rpm]", "--to") == pytest.approx(10)
     assert parse_frequency("5", "--to") == 5
+
+
+# ----------------------------------------------------------------- the experiment setting and the report
+
+def _with_setting(text: str, settings: str) -> str:
+    return text.replace("    t_end = 1 [s]\n", "    t_end = 1 [s]\n" + settings, 1)
+
+
+def test_the_report_shows_the_bode_plots_the_experiment_asks_for(tmp_path):
+    from bondc.report.build import build_report
+
+    model = tmp_path / "spring.bg"
+    model.write_text(_with_setting((FIXTURES / "cubic_spring.bg").read_text(),
+                                   '    bode = [F -> x]\n    bode_at = "equilibrium"\n'))
+    page = build_report(model, output=tmp_path / "spring.html", date="2024-01-01").read_text()
+    assert '<section id="frequency-response">' in page
+    assert "Bode plot of x/F" in page and "Bode plot of v/F" not in page
+    assert "linearised at its equilibrium point" in page
+    plain = tmp_path / "plain.bg"
+    plain.write_text((FIXTURES / "cubic_spring.bg").read_text())
+    assert "frequency-response" not in build_report(plain, output=tmp_path / "plain.html", date="2024-01-01").read_text()
+
+
+def test_the_report_says_why_a_bode_plot_is_missing(tmp_path):
+    from bondc.report.build import build_report
+
+    model = tmp_path / "free.bg"
+    model.write_text("model Free\n  input F [N] = 1\n  MSe push : e = F\n  I mass : f = p/2\n  push -> mass\n"
+                     "  output v [m/s] = mass.f\n  experiment run\n    t_end = 1 [s]\n    bode = [F -> v]\n"
+                     "    bode_at = \"equilibrium\"\n  end\nend\n")
+    page = build_report(model, output=tmp_path / "free.html", date="2024-01-01").read_text()
+    assert '<section id="frequency-response">' in page and "E940" in page
+
+
+@pytest.mark.parametrize("settings, code, words", [
+    ("    bode = [F -> xx]\n", "E301", "no output named 'xx'"),
+    ("    bode = [k1 -> x]\n", "E301", "no input named 'k1'"),
+    ("    bode = 3\n", "E313", "bode lists pairs INPUT -> OUTPUT"),
+    ('    bode_at = "rest"\n', "E313", '"initial" or "equilibrium"'),
+])
+def test_the_bode_setting_is_checked(tmp_path, capsys, settings, code, words):
+    model = tmp_path / "spring.bg"
+    model.write_text(_with_setting((FIXTURES / "cubic_spring.bg").read_text(), settings))
+    status, _, err = run(capsys, "check", str(model))
+    assert status == 1 and f"[{code}]" in err and words in err
+
+
+def test_fmt_keeps_the_bode_setting(tmp_path, capsys):
+    model = tmp_path / "spring.bg"
+    model.write_text(_with_setting((FIXTURES / "cubic_spring.bg").read_text(), "    bode = [F->x,F  ->  v]\n"))
+    status, out, _ = run(capsys, "fmt", str(model))
+    assert status == 0 and "bode  = [F -> x, F -> v]" in out

@@ -671,14 +671,18 @@ def parse_amplitude(text, unit_text: str | None, name: str) -> float:
 
 def bode(ss, *, inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None, at: str = "initial",
          time: float = 0.0, low=None, high=None, points: int = DEFAULT_POINTS, verify_model: bool = False,
-         amplitude=None, progress=None) -> Bode:
+         amplitude=None, progress=None, pairs: Sequence[tuple[str, str]] | None = None) -> Bode:
     """The frequency response of ``ss`` from each of ``inputs`` to each of ``outputs`` (names; None:
     the model's only one), linearised at ``at`` (see :func:`bondc.analysis.linearize.linearize`).
     ``low``/``high``: the range's ends in Hz (numbers) or texts with a unit (``"10 [rad/s]"``);
     ``verify_model``: also :func:`verify`, with a sine of ``amplitude`` (a number in the input's
-    declared unit or a text with a unit; default :func:`default_amplitude`)."""
+    declared unit or a text with a unit; default :func:`default_amplitude`). ``pairs``: instead of every
+    input with every output, these (input, output) pairs only (an experiment's ``bode`` setting)."""
     from bondc.analysis.linearize import linearize
 
+    if pairs:
+        inputs = list(dict.fromkeys(u for u, _ in pairs))
+        outputs = list(dict.fromkeys(y for _, y in pairs))
     input_names = chosen_names(ss, inputs, "input")
     output_names = chosen_names(ss, outputs, "output")
     low = None if low is None else parse_frequency(low, "--from")
@@ -694,7 +698,7 @@ def bode(ss, *, inputs: Sequence[str] | None = None, outputs: Sequence[str] | No
     graph = getattr(ss, "graph", None)
     signals = getattr(graph, "inputs", None) or {}
     declared = getattr(graph, "outputs", None) or {}
-    pairs = [(u, y) for u in input_names for y in output_names]
+    pairs = list(dict.fromkeys(pairs)) if pairs else [(u, y) for u in input_names for y in output_names]
     checks: dict = {}
     amplitudes: dict = {}
     if verify_model:
@@ -705,14 +709,13 @@ def bode(ss, *, inputs: Sequence[str] | None = None, outputs: Sequence[str] | No
         checks, found = verify(ss, lin, pairs, verify_frequencies(frequencies), amplitudes, progress=progress)
         warnings += found
     responses = []
-    for a, u in enumerate(input_names):
-        for b, y in enumerate(output_names):
-            h = full[b, a]
-            responses.append(Response(
-                input=u, output=y, input_unit=_si_unit(getattr(signals.get(u), "unit_text", None)),
-                output_unit=_si_unit(getattr(declared.get(y), "unit_text", None)),
-                frequency_hz=frequencies, response=h, margins=margins(frequencies, h),
-                checks=tuple(checks.get((u, y), ())), amplitude=amplitudes.get(u)))
+    for u, y in pairs:
+        h = full[output_names.index(y), input_names.index(u)]
+        responses.append(Response(
+            input=u, output=y, input_unit=_si_unit(getattr(signals.get(u), "unit_text", None)),
+            output_unit=_si_unit(getattr(declared.get(y), "unit_text", None)),
+            frequency_hz=frequencies, response=h, margins=margins(frequencies, h),
+            checks=tuple(checks.get((u, y), ())), amplitude=amplitudes.get(u)))
     return Bode(lin, tuple(responses), tuple(warnings), tuple(notes))
 
 

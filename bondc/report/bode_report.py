@@ -45,6 +45,7 @@ def _label(response) -> str:
 def bode_svg(responses, title: str, size=BODE_SIZE) -> Markup:
     """The Bode plot of ``responses`` (one or several pairs, one line each) as an inline SVG."""
     import matplotlib
+    from matplotlib import ticker
     from matplotlib.figure import Figure
 
     from bondc.report.render import PLOT_STYLE, figure_svg
@@ -77,6 +78,13 @@ def bode_svg(responses, title: str, size=BODE_SIZE) -> Markup:
                              markersize=4, fillstyle="none", label=f"{_label(r)}: simulated model")
                     bottom.plot([c.frequency_hz for c in done], [c.simulated_deg for c in done], "o",
                                 color=colour, markersize=4, fillstyle="none")
+        if any(r.margins.phase_margin_deg is not None for r in responses):
+            top.axhline(0.0, color="#8c959f", linewidth=0.8)
+        if any(r.margins.gain_margin_db is not None for r in responses):
+            bottom.axhline(-180.0, color="#8c959f", linewidth=0.8)
+        # plain numbers on the log axis (the report's text is never mathtext: text.parse_math is off)
+        bottom.xaxis.set_major_formatter(ticker.FuncFormatter(lambda value, _: f"{value:g}"))
+        bottom.xaxis.set_minor_formatter(ticker.NullFormatter())
         top.set_ylabel("magnitude [dB]")
         bottom.set_ylabel("phase [deg]")
         bottom.set_xlabel("frequency [Hz]")
