@@ -594,7 +594,7 @@ def verify(ss, lin, pairs: Sequence[tuple[str, str]], frequencies_hz, amplitudes
             moving = np.abs(states)[np.abs(states) > 0]
             atol = max(1e-6 * float(moving.min()), 1e-300) if moving.size else 1e-12
             if progress is not None:
-                progress(f"--verify: {input_name} at {f:.4g} Hz, {t_end:.4g} s simulated")
+                progress(f"--verify: simulating {t_end:.4g} s with a sine of {f:.4g} Hz on {input_name}")
             result = simulate(model, None, t_end=t_end, t_eval=t_eval, rtol=1e-9, atol=atol,
                               max_step=period / 40.0, inputs=supplied)
             for output in outputs:
@@ -602,7 +602,7 @@ def verify(ss, lin, pairs: Sequence[tuple[str, str]], frequencies_hz, amplitudes
                 predicted = response[i, j, k]
                 pred_db, pred_deg = 20.0 * math.log10(abs(predicted)), math.degrees(np.angle(predicted))
                 if not result.complete:
-                    message = f"the run stopped at t = {result.t_reached:.4g} s: {result.message}"
+                    message = result.message or "the run stopped early"
                     warnings.append(Diagnostic("warning", "W944", f"--verify: the run at {f:.4g} Hz did not complete "
                                                                   f"({message})",
                                                hint="a smaller --amplitude, or a model that runs at this input"))
