@@ -1900,12 +1900,7 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
                 m.report(_error("E313", "outputs lists output names", entry.span,
                                 hint="write outputs = [name1, name2]"))
                 ok = False
-            elif entry.name not in m.names("output"):
-                decl = m.decls.get(entry.name)
-                what = f"'{entry.name}' is {_a(decl.category)}; " if decl is not None else ""
-                m.report(_error("E301", f"no output named '{entry.name}'", entry.span,
-                                hint=_join_hints(_did_you_mean(entry.name, m.names("output")),
-                                                 f"{what}declare it with 'output {entry.name} = ...'")))
+            elif not _declared_as(m, entry, "output", f"declare it with 'output {entry.name} = ...'"):
                 ok = False
         if not ok:
             return
@@ -1918,18 +1913,12 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
                                 hint="write bode = [F -> x, F -> v]: the input excited and the output measured"))
                 ok = False
                 continue
-            for name, category, declare in ((entry.source, "input", "input {0} [UNIT] = ..."),
-                                            (entry.target, "output", "output {0} [UNIT] = ...")):
-                if name.name in m.names(category):
+            for name, category in ((entry.source, "input"), (entry.target, "output")):
+                if _declared_as(m, name, category, f"bode = [INPUT -> OUTPUT]: declare it with "
+                                                   f"'{category} {name.name} [UNIT] = ...'"):
                     m.used.add(name.name)
-                    continue
-                decl = m.decls.get(name.name)
-                what = f"'{name.name}' is {_a(decl.category)}; " if decl is not None else ""
-                m.report(_error("E301", f"no {category} named '{name.name}'", name.span,
-                                hint=_join_hints(_did_you_mean(name.name, m.names(category)),
-                                                 f"{what}bode = [INPUT -> OUTPUT]: declare it with "
-                                                 f"'{declare.format(name.name)}'")))
-                ok = False
+                else:
+                    ok = False
         if not ok:
             return
     elif kind == "operating point":
@@ -1955,6 +1944,18 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
         if item.unit is not None and resolved is None:
             return
     plan.settings[item.name] = item
+
+
+def _declared_as(m: _Model, entry: ast.Name, category: str, how: str) -> bool:
+    """Whether a setting's name ``entry`` is a declared ``category`` ("output", "input"); else E301
+    with the closest such name, what the name is instead, and ``how`` to declare it."""
+    if entry.name in m.names(category):
+        return True
+    decl = m.decls.get(entry.name)
+    what = f"'{entry.name}' is {_a(decl.category)}; " if decl is not None else ""
+    m.report(_error("E301", f"no {category} named '{entry.name}'", entry.span,
+                    hint=_join_hints(_did_you_mean(entry.name, m.names(category)), what + how)))
+    return False
 
 
 def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
