@@ -346,3 +346,28 @@ def test_fmt_keeps_the_bode_setting(tmp_path, capsys):
     model.write_text(_with_setting((FIXTURES / "cubic_spring.bg").read_text(), "    bode = [F->x,F  ->  v]\n"))
     status, out, _ = run(capsys, "fmt", str(model))
     assert status == 0 and "bode  = [F -> x, F -> v]" in out
+
+
+def test_a_free_mass_lags_by_180_degrees_over_the_fallback_range(tmp_path):
+    """x/F = 1/(m s^2): -40 dB per decade and -180 deg (not +180) at every frequency; the model has no
+    mode with a frequency to choose the range from, so the fallback range is used and said."""
+    from bondc.analysis.bode import FALLBACK_RANGE_HZ
+
+    model = tmp_path / "free.bg"
+    model.write_text("model Free\n  param m = 2 [kg]\n  input F [N] = 0\n  MSe push : e = F\n  I mass : f = p/m\n"
+                     "  push -> mass\n  state x [m] : der(x) = mass.f, x(0) = 0\n  output y [m] = x\nend\n")
+    result = response_of(model, points=50)
+    response = result.responses[0]
+    assert (response.frequency_hz[0], response.frequency_hz[-1]) == pytest.approx(FALLBACK_RANGE_HZ)
+    np.testing.assert_allclose(response.phase_deg, -180.0, atol=1e-9)
+    w = 2 * np.pi * response.frequency_hz
+    np.testing.assert_allclose(response.magnitude_db, 20 * np.log10(1 / (2.0 * w**2)), atol=1e-9)
+    assert any("no mode" in note for note in result.notes)
+
+
+def test_doctests():
+    import doctest
+
+    from bondc.analysis import bode as module
+
+    assert doctest.testmod(module).failed == 0

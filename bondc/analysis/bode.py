@@ -205,12 +205,21 @@ class Bode:
 # ------------------------------------------------------------------ numerics
 
 def phase_deg(response: np.ndarray) -> np.ndarray:
-    """The phase of ``response`` in degrees, continuous along it (``numpy.unwrap``)."""
+    """The phase of ``response`` in degrees, continuous along it (``numpy.unwrap``), starting in
+    (-270, 90]: a lag of 180 degrees at the lowest frequency (two integrators, a negative gain) is
+    -180, not +180.
+
+    >>> phase_deg(np.array([-1.0 + 0j, -1j])).tolist()
+    [-180.0, -90.0]
+    """
     response = np.asarray(response, dtype=complex)
     finite = np.isfinite(response)
     out = np.full(response.shape, np.nan)
     if finite.any():
-        out[finite] = np.degrees(np.unwrap(np.angle(response[finite])))
+        unwrapped = np.degrees(np.unwrap(np.angle(response[finite])))
+        if unwrapped[0] > 90.0 + 1e-9:
+            unwrapped -= 360.0
+        out[finite] = unwrapped
     return out
 
 
