@@ -320,7 +320,7 @@ def parse_frequency(text, option: str) -> float:
             raise _usage("E944", f"{option} '{text}' is not a number with a unit", hint=hint)
         value = sign * float(node.value)
         if parsed.unit is not None:
-            unit, problems = resolve(parsed.unit)
+            unit, _ = resolve(parsed.unit)
             s, rad = unit.dims[2] if unit else None, unit.dims[7] if unit else None
             others = [d for i, d in enumerate(unit.dims) if i not in (2, 7)] if unit else [1]
             if unit is None or s != -1 or rad not in (0, 1) or any(others):
@@ -416,8 +416,7 @@ def chosen_names(ss, names: Sequence[str] | None, what: str) -> list[str]:
             continue
         kind = _kind_of(ss, name)
         if kind is not None:
-            raise _usage("E943", f"{option} '{name}' is {kind}, not an {what}" if what == "input" else
-                         f"{option} '{name}' is {kind}, not an {what}",
+            raise _usage("E943", f"{option} '{name}' is {kind}, not an {what}",
                          hint=(f"the model's {what}s: {', '.join(known)}"
                                + ("; to excite a parameter, make it an input ('input U [UNIT] = value') and use it "
                                   "in the law" if what == "input" and kind == "a parameter" else "")
