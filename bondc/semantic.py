@@ -1892,34 +1892,8 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
                             hint=_join_hints(_did_you_mean(item.value.value, SOLVERS),
                                              "solvers (auto: chosen for stiffness; SUNDIALS CVODE and IDA; bondc's DOPRI5; scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
             return
-    elif kind == "outputs":
-        items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
-        ok = True
-        for entry in items:
-            if not isinstance(entry, ast.Name):
-                m.report(_error("E313", "outputs lists output names", entry.span,
-                                hint="write outputs = [name1, name2]"))
-                ok = False
-            elif not _declared_as(m, entry, "output", f"declare it with 'output {entry.name} = ...'"):
-                ok = False
-        if not ok:
-            return
-    elif kind == "transfers":
-        items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
-        ok = True
-        for entry in items:
-            if not isinstance(entry, ast.Transfer):
-                m.report(_error("E313", "bode lists pairs INPUT -> OUTPUT", entry.span,
-                                hint="write bode = [F -> x, F -> v]: the input excited and the output measured"))
-                ok = False
-                continue
-            for name, category in ((entry.source, "input"), (entry.target, "output")):
-                if _declared_as(m, name, category, f"bode = [INPUT -> OUTPUT]: declare it with "
-                                                   f"'{category} {name.name} [UNIT] = ...'"):
-                    m.used.add(name.name)
-                else:
-                    ok = False
-        if not ok:
+    elif kind in _LISTS:
+        if not _list_setting_ok(m, item, kind):
             return
     elif kind == "operating point":
         if not isinstance(item.value, ast.Str) or item.value.value not in OPERATING_POINTS or item.unit is not None:
@@ -1944,6 +1918,34 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
         if item.unit is not None and resolved is None:
             return
     plan.settings[item.name] = item
+
+
+#: Settings that list names: the node each entry must be, and the E313 message and hint for another.
+_LISTS = {"outputs": (ast.Name, "outputs lists output names", "write outputs = [name1, name2]"),
+          "transfers": (ast.Transfer, "bode lists pairs INPUT -> OUTPUT",
+                        "write bode = [F -> x, F -> v]: the input excited and the output measured")}
+
+
+def _list_setting_ok(m: _Model, item: ast.Setting, kind: str) -> bool:
+    """Check a setting that lists outputs (``outputs = [a, b]``) or input-output pairs (``bode =
+    [F -> x]``): E313 for an entry of another form, E301 for a name that is not an output (input)."""
+    node, message, hint = _LISTS[kind]
+    items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
+    ok = True
+    for entry in items:
+        if not isinstance(entry, node):
+            m.report(_error("E313", message, entry.span, hint=hint))
+            ok = False
+        elif isinstance(entry, ast.Name):
+            ok = _declared_as(m, entry, "output", f"declare it with 'output {entry.name} = ...'") and ok
+        else:
+            for name, category in ((entry.source, "input"), (entry.target, "output")):
+                if _declared_as(m, name, category, f"bode = [INPUT -> OUTPUT]: declare it with "
+                                                   f"'{category} {name.name} [UNIT] = ...'"):
+                    m.used.add(name.name)
+                else:
+                    ok = False
+    return ok
 
 
 def _declared_as(m: _Model, entry: ast.Name, category: str, how: str) -> bool:
