@@ -371,3 +371,13 @@ def test_doctests():
     from bondc.analysis import bode as module
 
     assert doctest.testmod(module).failed == 0
+
+
+def test_the_api_checks_its_arguments():
+    import bondc
+    from bondc.errors import UsageError
+
+    with pytest.raises(UsageError, match="list of names"):
+        bondc.bode(MODELS / "mass_spring_damper.bg", outputs="x")
+    with pytest.raises(UsageError, match="at must be one of"):
+        bondc.bode(MODELS / "mass_spring_damper.bg", outputs=["x"], at="rest")
