@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     import pandas
     from matplotlib.figure import Figure
 
+    from bondc.analysis.bode import Bode
     from bondc.analysis.fit import DataSet, FitResult
     from bondc.analysis.linearize import Linearization
     from bondc.model import BondGraph
@@ -34,7 +35,7 @@ if TYPE_CHECKING:
 #: A model file: a path as a string or a :class:`pathlib.Path`.
 PathLike = Union[str, os.PathLike[str]]
 
-__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "fit", "Model", "CheckResult",
+__all__ = ["load", "check", "equations", "linearize", "bode", "compile", "simulate", "fit", "Model", "CheckResult",
            "Simulation", "PathLike"]
 
 
@@ -250,6 +251,34 @@ def linearize(path: PathLike | None = None, *, text: str | None = None, model: s
         raise _usage(f"at must be one of {', '.join(AT)}, not {at!r}")
     time = _number(time, "time")
     return linearise(_derived(path, text, model, experiment, overrides).state_space, time=time, at=at)
+
+
+def bode(path: PathLike | None = None, *, text: str | None = None, model: str | None = None,
+         experiment: str | None = None, overrides: Mapping[str, Any] | None = None,
+         inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None, at: str = "initial",
+         time: float = 0.0, low: float | str | None = None, high: float | str | None = None, points: int = 400,
+         verify: bool = False, amplitude: float | str | None = None) -> Bode:
+    """The frequency response of ``outputs`` to ``inputs`` (``bondc bode``): a
+    :class:`bondc.analysis.bode.Bode` with one ``Response`` per pair (frequencies in Hz, magnitude
+    in dB, phase in degrees, margins) and, with ``verify``, the nonlinear model against it.
+    ``low``/``high``: the range in Hz, or texts with a unit (``"10 [rad/s]"``).
+
+    >>> result = bode("models/mass_spring_damper.bg", outputs=["x"], points=3, low=0.1, high=10)
+    >>> [round(float(v), 2) for v in result.responses[0].magnitude_db]      # 1/(m s^2 + b s + k)
+    [-58.05, -57.21, -77.07]
+    """
+    from bondc.analysis.bode import bode as frequency_response
+    from bondc.analysis.linearize import AT
+
+    if at not in AT:
+        raise _usage(f"at must be one of {', '.join(AT)}, not {at!r}")
+    for name, names in (("inputs", inputs), ("outputs", outputs)):
+        if names is not None and (isinstance(names, str) or not all(isinstance(n, str) for n in names)):
+            raise _usage(f"{name} must be a list of names, not {names!r}", hint=f'e.g. {name}=["x"]')
+    time = _number(time, "time")
+    return frequency_response(_derived(path, text, model, experiment, overrides).state_space, inputs=inputs,
+                              outputs=outputs, at=at, time=time, low=low, high=high, points=points,
+                              verify_model=verify, amplitude=amplitude)
 
 
 def compile(path: PathLike, output: PathLike | None = None, *, model: str | None = None, experiment: str | None = None,

@@ -410,6 +410,35 @@ def _cmd_linearize(args) -> int:
     return EXIT_OK
 
 
+def _cmd_bode(args) -> int:
+    """``bondc bode``: the frequency response of outputs to inputs at the linearisation's operating
+    point (``bondc.analysis.bode``), its margins, and with --verify the nonlinear model against it."""
+    from bondc.analysis.bode import bode, parse_frequency, parse_points
+    from bondc.report.bode_report import check_bode_output, write_bode
+
+    if args.output:
+        check_bode_output(args.output)          # before any work
+    # the options' values before any work too (E944, E945)
+    low = parse_frequency(args.low, "--from") if args.low is not None else None
+    high = parse_frequency(args.high, "--to") if args.high is not None else None
+    points = parse_points(args.points)
+    derived = _derived(args)
+    progress = None if args.json or _quiet() else _note
+    result = bode(derived.state_space, inputs=args.input, outputs=args.output_name, at=args.at, time=args.time,
+                  low=low, high=high, points=points, verify_model=args.verify, amplitude=args.amplitude,
+                  progress=progress)
+    _print_diagnostics(list(result.warnings), derived.graph.sources)
+    if args.output:
+        write_bode(result, args.output, derived.graph.name, args.file)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(result.to_text(), end="")
+        if args.output:
+            print(f"written to {args.output}")
+    return EXIT_OK
+
+
 def _keep_light(derived, account) -> None:
     """After a full run from the compile cache, write the entry's light form for the next one."""
     from bondc.cache import LightStateSpace, entry_of
@@ -797,6 +826,37 @@ def build_parser() -> argparse.ArgumentParser:
                         help="linearise at the initial state or at the equilibrium found from it")
     linear.add_argument("--json", action="store_true")
     linear.set_defaults(run=_cmd_linearize)
+
+    bode_ = commands.add_parser("bode", help="frequency response (Bode plot) of outputs to inputs at an operating "
+                                             "point; gain and phase margins; --verify against the nonlinear model")
+    _add_model_args(bode_)
+    bode_.add_argument("--experiment", help="apply this experiment's parameter overrides (default: the first)")
+    bode_.add_argument("--input", action="append", metavar="U",
+                       help="the input to excite (repeatable; default: the model's only input)")
+    bode_.add_argument("--output", action="append", dest="output_name", metavar="Y",
+                       help="the output to measure (repeatable: one response per input and output; default: the "
+                            "model's only output)")
+    bode_.add_argument("--at", choices=("initial", "equilibrium"), default="initial",
+                       help="linearise at the initial state or at the equilibrium found from it")
+    bode_.add_argument("--time", type=float, default=0.0, help="hold the inputs at their value at this time, s")
+    bode_.add_argument("--from", dest="low", metavar="F_LOW",
+                       help='lowest frequency, Hz, or with a unit: "10 [rad/s]" (default: a decade below the '
+                            "slowest mode)")
+    bode_.add_argument("--to", dest="high", metavar="F_HIGH",
+                       help="highest frequency, Hz or with a unit (default: a decade above the fastest mode)")
+    bode_.add_argument("--points", default="400", metavar="N", help="frequencies, spaced logarithmically (default 400)")
+    bode_.add_argument("--verify", action="store_true",
+                       help="simulate the nonlinear model with a small sine on the input at 5 frequencies and "
+                            "compare with the linear prediction")
+    bode_.add_argument("--amplitude", metavar="A",
+                       help="the verification sine's amplitude, in the input's unit or with a unit (default: 1 %% "
+                            "of the input's value at the operating point, else 1 SI)")
+    bode_.add_argument("-o", metavar="FILE", dest="output",
+                       help="write the response: .csv (units in the header), .svg (the plot) or .html (a page)")
+    bode_.add_argument("--json", action="store_true",
+                       help="print the response as JSON: {input, output, frequency_hz, magnitude_db, phase_deg, "
+                            "margins}; a list of them for several pairs")
+    bode_.set_defaults(run=_cmd_bode)
 
     compile_ = commands.add_parser("compile", help="generate the model's Python module (imports bondc.runtime; "
                                                    "--standalone: numpy + scipy only)")

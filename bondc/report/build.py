@@ -55,7 +55,7 @@ from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
-    FULL_SIZE, HALF_SIZE, Answer, CandidateRow, Equation, HLine, ParameterRow, Plot, ReportContext, ReportHeader,
+    FULL_SIZE, HALF_SIZE, Answer, BodeSection, CandidateRow, Equation, HLine, ParameterRow, Plot, ReportContext, ReportHeader,
     RuleMargin, Table, ValidationSection,
     causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
 )
@@ -68,6 +68,9 @@ __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run
            "write_report", "run_validate", "report_summary", "report_text", "validate_summary",
            "validate_text", "signal_json",
            "compare_run", "validation_table", "state_equations", "output_groups", "REPORTS_DIR"]
+
+#: Frequencies of each Bode plot in a report (the plot is small; ``bondc bode`` takes 400 by default).
+REPORT_BODE_POINTS = 150
 
 #: Where reports go unless ``output`` says otherwise (relative to the working directory).
 REPORTS_DIR = Path("reports")
@@ -617,6 +620,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
             run, motors, inertia_ratio)
         summary = (motor_summary or _summary(run)) + energy_summary
     return ReportContext(
+        bode=_bode_section(run),
         header=_header(run, date),
         source_html=highlight_bg(run.source_text),
         parameters=_parameter_rows(run),
@@ -642,6 +646,27 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         answer=answer,
         ratio=ratio,
     )
+
+
+def _bode_section(run: PipelineRun) -> BodeSection | None:
+    """The frequency responses the experiment asks for (``bode = [U -> Y]``, linearised where
+    ``bode_at`` says, else at the initial point), or None; a linearisation that fails (no
+    equilibrium) is said in the section instead."""
+    from bondc.analysis.bode import bode
+    from bondc.errors import BondcError
+    from bondc.report.bode_report import section_rows
+
+    experiment = run.experiment
+    pairs = experiment.settings.get("bode") if experiment is not None else None
+    if not pairs:
+        return None
+    at = str(experiment.settings.get("bode_at", "initial"))
+    try:
+        result = bode(run.state_space, pairs=pairs, at=at, points=REPORT_BODE_POINTS)
+    except BondcError as error:
+        return BodeSection(at, 0.0, (), [_warning_text(d) for d in error.diagnostics])
+    return BodeSection(at, result.linearization.time, section_rows(result),
+                       [_warning_text(d) for d in result.warnings], list(result.notes))
 
 
 def _warning_text(diagnostic: Diagnostic) -> str:

@@ -515,6 +515,55 @@ d("E941", "derivative cannot be evaluated",
   "message names the loop.",
   "Linearise at another point (another initial value, or `--at equilibrium`), or make the law smooth at the "
   "operating point.")
+d("E942", "no such input or output",
+  "`bondc bode`: a `--input` or `--output` names nothing the model has (the hint names the closest input or "
+  "output and lists them), or the model has several inputs or outputs and none was chosen, or it has none at "
+  "all (a frequency response needs an `input` to excite and an `output` to measure).",
+  "Give the name as the model declares it (`--input F --output x`), or declare the signal: `input F [N] = ...` "
+  "used in a source's law, `output x [m] = spring.q`.")
+d("E943", "not an input (or not an output)",
+  "`bondc bode`: the name given to `--input` is a parameter, an output, a state or an element, not an `input`; "
+  "or the name given to `--output` is an input, a parameter or a state, not an `output`. The linear model's "
+  "columns are the inputs and its rows the outputs.",
+  "Excite an input and measure an output. To excite a parameter, make it an input (`input F [N] = F0`) used in "
+  "the law; to measure a state, declare `output x [m] = spring.q`.")
+d("E944", "bad frequency or range",
+  "`bondc bode`: `--from` or `--to` is not a number with an optional unit of frequency (`0.5`, `\"10 [rad/s]\"`, "
+  "`\"2 [kHz]\"`, `\"600 [rpm]\"`), is not positive (the frequency axis is logarithmic), or `--from` is not below "
+  "`--to`.",
+  "Give positive frequencies in Hz, or with a unit of frequency in brackets, the lower one with `--from`.")
+d("E945", "bad number of frequencies",
+  "`bondc bode --points N`: N is not a whole number from 2 to 100000.",
+  "Give a whole number; the default is 400 frequencies spaced logarithmically.")
+d("E946", "cannot verify",
+  "`bondc bode --verify` simulates the nonlinear model with a small sine on the input around the operating "
+  "point and compares the steady oscillation of the output with the linear prediction. That needs an operating "
+  "point at rest (the default initial point of a model that moves there is not one), a linear model without a "
+  "growing mode (else nothing settles), and a positive `--amplitude` in a unit of the input.",
+  "Verify at an equilibrium (`--at equilibrium`) that is stable; give `--amplitude` as a positive number in the "
+  "input's unit, or with a unit of its dimension (`--amplitude \"0.1 [N]\"`).")
+d("E947", "unknown output kind",
+  "`bondc bode -o FILE`: the file's extension says what to write, and it is not `.csv` (the table, units in the "
+  "header), `.svg` (the plot) or `.html` (a page with the plots and margins).",
+  "Name the file with one of these extensions.")
+d("W942", "operating point on a switch",
+  "`bondc bode`: a switching function of the model's laws (an `if` comparison, the speed of a `coulomb` "
+  "friction, the argument of `sign` or `abs`, a table breakpoint) that depends on a state or an input is zero "
+  "at the operating point: a friction stuck at zero speed, a valve at its opening pressure, a backlash at its "
+  "edge. The law has a kink or a jump there and the linear model takes the slope of one side only, so the "
+  "response holds for motion to that side (a stuck friction is not a viscous damper).",
+  "Linearise where the law is smooth (another `--time`, another initial state, `--at equilibrium`), and check "
+  "the response with `--verify`.")
+d("W943", "linear prediction does not hold",
+  "`bondc bode --verify`: at a verified frequency the simulated model's amplitude or phase differs from the "
+  "linear prediction by more than 0.5 dB or 5 degrees. The model is not linear over the sine's amplitude there, "
+  "or the operating point sits on a switch (W942).",
+  "Verify with a smaller `--amplitude`; if the difference stays, the linearisation does not describe the "
+  "machine at that frequency.")
+d("W944", "verification run incomplete",
+  "`bondc bode --verify`: the simulation at one frequency stopped before its end (the message says where and "
+  "why), so that frequency has no simulated value.",
+  "Verify with a smaller `--amplitude`, or look at the model's behaviour with `bondc simulate`.")
 
 d("E960", "--vary not understood",
   "`bondc sweep`: a `--vary` is not `NAME=VALUES [unit]` (no `=`, a name that is not a name, no values, an "
@@ -958,6 +1007,53 @@ end
 live("E934", Cli("bondc simulate tiny.bg", {"tiny.bg": _TINY}, lines="[E934]"))
 live("W930", Cli("bondc simulate bounce.bg", {"bounce.bg": LOOSE}, stream="stdout", lines="[W930]",
                  note="Of the energy account `bondc simulate` prints, only its last line is shown here."))
+
+# -- frequency response
+
+_CUBIC = """model CubicSpring
+  param m  = 1   [kg]
+  param k1 = 100 [N/m]
+  param k3 = 1e4 [N/m^3]
+  param b  = 4   [N*s/m]
+  param F0 = 10  [N]
+  input F [N] = F0
+  MSe force  : e = F
+  I   mass   : f = p/m
+  C   spring : e = k1*q + k3*q^3
+  R   damper : e = b*f
+  1   j
+  force -> j
+  j -> mass
+  j -> spring
+  j -> damper
+  output x [m] = spring.q
+  output v [m/s] = mass.f
+end
+"""
+# the same mass, on a linear spring with dry friction, at rest: on the friction's switch
+_STUCK = (_CUBIC.replace("CubicSpring", "StuckFriction").replace("  param k3 = 1e4 [N/m^3]\n", "")
+          .replace("input F [N] = F0", "input F [N] = 0").replace("e = k1*q + k3*q^3", "e = k1*q")
+          .replace("e = b*f", "e = b*f + coulomb(f, F0/2)"))
+_BODE = "bondc bode spring.bg "
+live("E942", Cli(_BODE + "--output xx", {"spring.bg": _CUBIC}))
+live("E943", Cli(_BODE + "--input k1 --output x", {"spring.bg": _CUBIC}))
+live("E944", Cli(_BODE + "--output x --from 100 --to 10", {"spring.bg": _CUBIC}),
+     Cli(_BODE + "--output x --from '3 [m]'", {"spring.bg": _CUBIC}))
+live("E945", Cli(_BODE + "--output x --points 1", {"spring.bg": _CUBIC}))
+live("E946", Cli(_BODE + "--output x --verify", {"spring.bg": _CUBIC}))
+live("E947", Cli(_BODE + "--output x -o bode.png", {"spring.bg": _CUBIC}))
+live("W942", Cli("bondc bode stuck.bg --output x --points 5", {"stuck.bg": _STUCK}, lines="W942"))
+live("W943", Cli(_BODE + "--output x --at equilibrium --verify --amplitude 8", {"spring.bg": _CUBIC},
+                 lines="W943", note="A sine almost as large as the force itself moves the mass far along the "
+                                    "hardening spring."))
+# and on a spring whose force grows as the root of its extension, which has no value in compression
+_ROOT = (_CUBIC.replace("CubicSpring", "RootSpring").replace("  param k3 = 1e4 [N/m^3]\n", "")
+         .replace("param k1 = 100 [N/m]", "param k1 = 100 [N/m^0.5]")
+         .replace("e = k1*q + k3*q^3", "e = k1*sqrt(q), q(0) = 0.01"))
+live("W944", Cli("bondc bode root.bg --output x --at equilibrium --verify --amplitude 100", {"root.bg": _ROOT},
+                 lines="run at 0.7667 Hz", note="A sine of 100 N against 10 N pulls the spring into compression, "
+                                            "where sqrt(q) has no value; the runs at the other frequencies stop "
+                                            "the same way."))
 
 # -- sweeps
 
