@@ -362,3 +362,142 @@ def test_a_request_after_shutdown_is_refused_with_invalid_request():
     finally:
         if c.process.poll() is None:
             c.process.kill()
+
+
+RIG = ('import "std:hydraulics"\n\nfn smooth(x, w) = x/sqrt(x^2 + w^2)\n\nmodel Rig\n  param k = 800 [N/m]\n'
+       '  param m = 2 [kg]\n  Se s : e = 10*smooth(t - 1, 0.1)\n'
+       '  C chamber : state V [m], V(0) = 0, der(V) = f, e = k*V\n  I mass : f = p/m\n  R damper : e = 3*f\n'
+       '  1 j\n  s -> j\n  j -> chamber\n  j -> mass\n  j -> damper\n  output stroke [m] = chamber.V\nend\n')
+
+
+def _labels(client, uri, text, needle, offset):
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": _position(text, needle, offset)})
+    return {item["label"] for item in items["items"]}
+
+
+def test_member_completion_offers_only_the_members_that_exist(client, tmp_path):
+    """`chamber.` offered q (an error: the chamber declares its own state) and missed its state."""
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    assert client.diagnostics(uri) == []
+    assert _labels(client, uri, RIG, "chamber.V", len("chamber.")) == {"e", "f", "V"}
+    assert _labels(client, uri, RIG, "mass : f", 0) >= {"k", "m", "chamber", "smooth"}
+    # the issue's case, on the flagship: its chamber's state is P
+    text = FLAGSHIP.read_text()
+    uri = client.open(FLAGSHIP, text)
+    client.diagnostics(uri)
+    assert _labels(client, uri, text, "chamber.P, Ae", len("chamber.")) == {"e", "f", "P"}
+    assert _labels(client, uri, text, "piston.p1  #", len("piston.")) == {"p1", "p2"}     # a two-port in a bond
+    two_port = RIG.replace("output stroke [m] = chamber.V", "TF lever : r = 2\n  output stroke [m] = lever.p1.f")
+    uri = client.open(tmp_path / "lever.bg", two_port)
+    client.diagnostics(uri)
+    assert _labels(client, uri, two_port, "lever.p1.f", len("lever.")) == {"p1.e", "p1.f", "p2.e", "p2.f"}
+
+
+def test_hover_on_a_function_call_and_on_an_import(client, tmp_path):
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    client.diagnostics(uri)
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(RIG, "smooth(t", 2)})
+    assert "fn smooth(x, w) = x/sqrt(x^2 + w^2)" in hover["contents"]["value"]
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(RIG, "std:hydraulics", 3)})
+    value = hover["contents"]["value"]
+    # what std:hydraulics provides, from its own file: its leading comment, each model with its ports
+    library = (ROOT / "bondc" / "std" / "hydraulics.bg").read_text()
+    import re
+
+    models = re.findall(r"^model (\w+)", library, re.M)
+    assert len(models) > 3 and all(f"**{name}**" in value for name in models)
+    assert "**Orifice** (a, b)" in value and "hydraulic circuits" in value
+
+
+def _apply(text, edits):
+    """``text`` with LSP text edits applied (ranges in the original text; ASCII here)."""
+    lines = text.splitlines(keepends=True)
+    offsets = [0]
+    for line in lines:
+        offsets.append(offsets[-1] + len(line))
+
+    def offset(position):
+        return offsets[position["line"]] + position["character"]
+    for edit in sorted(edits, key=lambda e: offset(e["range"]["start"]), reverse=True):
+        start, end = offset(edit["range"]["start"]), offset(edit["range"]["end"])
+        text = text[:start] + edit["newText"] + text[end:]
+    return text
+
+
+def _rename(client, uri, text, needle, offset, new_name):
+    position = _position(text, needle, offset)
+    prepared = client.request("textDocument/prepareRename", {"textDocument": {"uri": uri}, "position": position})
+    edit = client.request("textDocument/rename", {"textDocument": {"uri": uri}, "position": position,
+                                                  "newName": new_name})
+    return prepared, _apply(text, edit["changes"][uri])
+
+
+def test_rename_parameters_elements_functions_and_components(client, tmp_path):
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    client.diagnostics(uri)
+    prepared, renamed = _rename(client, uri, RIG, "k*V", 0, "stiffness")       # from a use
+    assert prepared["placeholder"] == "k"
+    assert renamed == RIG.replace("param k =", "param stiffness =").replace("k*V", "stiffness*V")
+    _, renamed = _rename(client, uri, RIG, "C chamber", 2, "tank")              # in laws and bonds
+    assert renamed == RIG.replace("chamber", "tank")
+    _, renamed = _rename(client, uri, RIG, "fn smooth", 3, "soft")
+    assert renamed == RIG.replace("smooth", "soft")
+    # a component, its parameter (bound in the instance) and an instance, across the document
+    text = ("model Spring\n  port a\n  param k = 1 [N/m]\n  C c : e = k*q\n  a -> c\n  output x [m] = c.q\nend\n"
+            "model Top\n  Sf s : f = 1\n  Spring sp : k = 3 [N/m]\n  s -> sp.a\n  output y [m] = 2*sp.x\nend\n")
+    uri = client.open(tmp_path / "parts.bg", text)
+    assert client.diagnostics(uri) == []
+    _, renamed = _rename(client, uri, text, "Spring sp", 0, "Coil")
+    assert renamed == text.replace("Spring", "Coil")
+    _, renamed = _rename(client, uri, text, "k*q", 0, "stiffness")
+    assert renamed == text.replace("k = ", "stiffness = ").replace("k*q", "stiffness*q")
+    _, renamed = _rename(client, uri, text, "sp : k", 0, "spring")
+    assert renamed == text.replace("sp :", "spring :").replace("sp.", "spring.")
+    _, renamed = _rename(client, uri, text, "output x", 7, "stretch")
+    assert renamed == text.replace("output x", "output stretch").replace("sp.x", "sp.stretch")
+
+
+def test_rename_refuses_clashes_bad_names_and_built_ins(client, tmp_path):
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    client.diagnostics(uri)
+
+    def error(method, needle, offset, **extra):
+        client.next_id += 1
+        client.send({"jsonrpc": "2.0", "id": client.next_id, "method": method,
+                     "params": {"textDocument": {"uri": uri}, "position": _position(RIG, needle, offset), **extra}})
+        while True:
+            message = client.read()
+            if message.get("id") == client.next_id:
+                return message["error"]
+            client.notifications.append(message)
+    clash = error("textDocument/rename", "param k", 6, newName="m")
+    assert clash["code"] == -32803 and "already parameter 'm'" in clash["message"]
+    assert "not a name" in error("textDocument/rename", "param k", 6, newName="2k")["message"]
+    assert "not a name" in error("textDocument/rename", "param k", 6, newName="model")["message"]
+    assert error("textDocument/prepareRename", "sqrt(", 1)["code"] == -32803          # a built-in
+
+
+def test_quick_fixes_for_did_you_mean(client, tmp_path):
+    broken = RIG.replace("e = k*V", "e = kk*V").replace("= chamber.V", "= chamber.VV").replace("[kg]", "[kgg]")
+    uri = client.open(tmp_path / "fix.bg", broken)
+    problems = client.diagnostics(uri)
+    assert sorted(d["code"] for d in problems) == ["E201", "E301", "E312"]
+    for problem in problems:
+        actions = client.request("textDocument/codeAction", {
+            "textDocument": {"uri": uri}, "range": problem["range"],
+            "context": {"diagnostics": [problem]}})
+        (preferred,) = [a for a in actions if a.get("isPreferred")]
+        assert preferred["kind"] == "quickfix" and preferred["diagnostics"][0]["code"] == problem["code"]
+        edits = preferred["edit"]["changes"][uri]
+        broken_line = broken.splitlines()[problem["range"]["start"]["line"]]
+        (edit,) = edits
+        written = broken_line[edit["range"]["start"]["character"]:edit["range"]["end"]["character"]]
+        assert (written, edit["newText"]) in (("kk", "k"), ("chamber.VV", "chamber.V"), ("kgg", "kg"))
+    # all three applied at once (their ranges do not overlap): the model as it was
+    every = [client.request("textDocument/codeAction", {"textDocument": {"uri": uri}, "range": p["range"],
+                                                        "context": {"diagnostics": [p]}})[0]["edit"]["changes"][uri][0]
+             for p in problems]
+    assert _apply(broken, every) == RIG

@@ -256,6 +256,10 @@ def members(index: Index, parts: list[str], model: str | None, bond: bool) -> li
                 seen.setdefault(s.name, s.category)
         return sorted(seen.items())
     if symbol.category == "element" and symbol.statement.kind in KINDS:
+        if bond and KINDS[symbol.statement.kind].ports == 2:
+            from bondc.model import PORT_NAMES
+
+            return [(port, "port") for port in PORT_NAMES]
         return [(name, "state" if name not in ("e", "f") and "." not in name else
                  "effort" if name.endswith("e") else "flow") for name in element_members(symbol.statement)]
     if symbol.category == "junction":
