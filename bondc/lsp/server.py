@@ -26,7 +26,10 @@ from bondc.lsp.protocol import _NOT_JSON, PARSE_ERROR, _Framed, _Protocol
 
 logger = logging.getLogger(__name__)
 
-DEBOUNCE = 0.15          # seconds after the last change before the buffer is checked
+DEBOUNCE = 0.1           # seconds after the last change before the buffer is checked
+#: How long the analysis thread may hold the GIL while the event loop waits for it [s] (Python's
+#: default, 5 ms, made a hover wait several of those while an analysis ran).
+SWITCH_INTERVAL = 0.001
 REQUEST_FAILED = -32803  # LSP's RequestFailed: a rename that cannot be done
 FRESH_WAIT = 30.0        # seconds rename waits for the analysis of the client's version
 
@@ -271,6 +274,7 @@ async def formatting(ls: BondcServer, params: lsp.DocumentFormattingParams):
 def main() -> int:
     """Serve on stdio until the client sends ``exit`` or closes the stream; what the client sends is
     framed by :class:`_Framed` before pygls reads it."""
+    sys.setswitchinterval(SWITCH_INTERVAL)
     stream = _Framed(sys.stdin.buffer, lambda code, message: server.protocol.send_error(None, code, message))
     server.start_io(stdin=stream)
     return 0
