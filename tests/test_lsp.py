@@ -410,6 +410,13 @@ def test_hover_on_a_function_call_and_on_an_import(client, tmp_path):
     models = re.findall(r"^model (\w+)", library, re.M)
     assert len(models) > 3 and all(f"**{name}**" in value for name in models)
     assert "**Orifice** (a, b)" in value and "hydraulic circuits" in value
+    # a file of the project's own: its models
+    text = COMPONENTS.read_text()
+    uri = client.open(COMPONENTS, text)
+    client.diagnostics(uri)
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(text, '"lib/hydraulics.bg"', 2)})
+    assert "**Orifice** (a, b): turbulent orifice" in hover["contents"]["value"]
 
 
 def _apply(text, edits):

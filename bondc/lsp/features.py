@@ -174,31 +174,29 @@ def _component(model: ast.Model) -> list[str]:
 
 def _import_text(analysis: Analysis, item: ast.Import) -> str:
     """What an import brings: the library's leading comment and each model, its ports and description."""
-    if item.path.startswith("std:"):
-        name = item.path
-    else:
-        name = str(Path(item.path))
-    file = next((f for f in analysis.files[1:] if f.path == item.path or Path(f.path).name == Path(item.path).name
-                 and Path(f.path).parts[-len(Path(item.path).parts):] == Path(item.path).parts), None)
+    import os
+
+    # the name the loader gives the file (semantic.load_files): std:NAME, or the path from the importer's
+    name = item.path if item.path.startswith("std:") else os.path.normpath(
+        os.path.join(os.path.dirname(str(analysis.path)), item.path))
+    file = next((f for f in analysis.files[1:] if f.path == name), None)
     if file is None:
         return f"**import \"{item.path}\"**: not read (see the diagnostics)"
-    lines = [f"**import \"{name}\"**"]
     head = []
-    for comment in file.comments:
+    for comment in file.comments:       # the file's leading comment: what its models share
         if comment.span.line != len(head) + 1:
             break
         head.append(comment.text.lstrip("#").strip())
-    if head:
-        lines.append(" ".join(text for text in head if text))
-    models = file.models
-    lines.append(f"{len(models)} model{'s' if len(models) != 1 else ''}:")
     from bondc.flatten import ports_of
 
+    models = file.models
+    listing = [f"{len(models)} model{'s' if len(models) != 1 else ''}:"]
     for model in models:
         ports = ports_of(model)
-        lines.append(f"- **{model.name}**" + (f" ({', '.join(ports)})" if ports else "")
-                     + (f": {model.description}" if model.description else ""))
-    return "\n".join(lines[:2]) + "\n\n" + "\n".join(lines[2:])
+        listing.append(f"- **{model.name}**" + (f" ({', '.join(ports)})" if ports else "")
+                       + (f": {model.description}" if model.description else ""))
+    parts = [f"**import \"{item.path}\"**", " ".join(text for text in head if text), "\n".join(listing)]
+    return "\n\n".join(part for part in parts if part)
 
 
 def hover(analysis: Analysis, position: lsp.Position) -> lsp.Hover | None:
