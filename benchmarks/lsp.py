@@ -25,16 +25,14 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import queue
 import statistics
-import subprocess
 import sys
 import tempfile
-import threading
 import time
 from pathlib import Path
 
 from benchmarks.chain import chain_source
+from tests.test_lsp_robust import Client as _Client
 
 ROOT = Path(__file__).resolve().parent.parent
 LINES = 5000
@@ -49,91 +47,52 @@ def model_text() -> str:
     return chain_source(n)
 
 
-class Client:
+class Client(_Client):
+    """The test suite's client (a reader thread stamps each message as it arrives), timed."""
+
     def __init__(self, source: Path | None):
         env = dict(os.environ)
         if source is not None:
             env["PYTHONPATH"] = str(source) + os.pathsep + env.get("PYTHONPATH", "")
-        self.process = subprocess.Popen([sys.executable, "-m", "bondc", "lsp"], stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env,
-                                        cwd=str(source or ROOT))
-        self.messages: queue.Queue = queue.Queue()
-        self.kept: list = []
-        self.next_id = 0
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self):
-        stream = self.process.stdout
-        while True:
-            length = None
-            while True:
-                line = stream.readline()
-                if not line:
-                    return
-                if line in (b"\r\n", b"\n"):
-                    break
-                if line.lower().startswith(b"content-length:"):
-                    length = int(line.split(b":")[1])
-            self.messages.put((time.perf_counter(), json.loads(stream.read(length))))
+        super().__init__(cwd=str(source or ROOT), env=env)
 
     def send(self, message) -> float:
-        body = json.dumps(message).encode()
         sent = time.perf_counter()
-        self.process.stdin.write(b"Content-Length: %d\r\n\r\n" % len(body) + body)
-        self.process.stdin.flush()
+        super().send(message)
         return sent
-
-    def wait(self, accept, timeout=120.0):
-        for item in self.kept:
-            if accept(item[1]):
-                self.kept.remove(item)
-                return item
-        deadline = time.perf_counter() + timeout
-        while True:
-            item = self.messages.get(timeout=max(deadline - time.perf_counter(), 0.01))
-            if accept(item[1]):
-                return item
-            self.kept.append(item)
-
-    def request(self, method, params):
-        """(seconds to the answer, the answer)."""
-        self.next_id += 1
-        number = self.next_id
-        sent = self.send({"jsonrpc": "2.0", "id": number, "method": method, "params": params})
-        arrived, message = self.wait(lambda m: m.get("id") == number and "method" not in m)
-        return arrived - sent, message.get("result")
 
     def notify(self, method, params) -> float:
         return self.send({"jsonrpc": "2.0", "method": method, "params": params})
 
-    def diagnostics(self, uri, version=None):
-        """(arrival time, diagnostics) of the next publication for ``uri`` (of ``version``)."""
-        arrived, message = self.wait(lambda m: m.get("method") == "textDocument/publishDiagnostics"
-                                     and m["params"]["uri"] == uri
-                                     and (version is None or m["params"].get("version") == version))
-        return arrived, message["params"]["diagnostics"]
+    def timed(self, method, params):
+        """(seconds to the answer, the answer)."""
+        self.next_id += 1
+        number = self.next_id
+        sent = self.send({"jsonrpc": "2.0", "id": number, "method": method, "params": params})
+        message = self.reply(number)
+        return self.arrived[id(message)] - sent, message.get("result")
+
+    def published(self, uri, version):
+        """(arrival time, diagnostics) of the publication of ``version`` for ``uri``."""
+        message = self.wait_for(lambda m: m.get("method") == "textDocument/publishDiagnostics"
+                                and m["params"]["uri"] == uri and m["params"].get("version") == version,
+                                f"diagnostics of version {version}")
+        return self.arrived[id(message)], message["params"]["diagnostics"]
 
     def publications(self, uri):
-        """Every publication for ``uri`` received so far: (time, version)."""
-        while True:
-            try:
-                self.kept.append(self.messages.get_nowait())
-            except queue.Empty:
-                break
-        found = [(t, m["params"].get("version")) for t, m in self.kept
-                 if m.get("method") == "textDocument/publishDiagnostics" and m["params"]["uri"] == uri]
-        self.kept = [(t, m) for t, m in self.kept if not (m.get("method") == "textDocument/publishDiagnostics"
-                                                           and m["params"]["uri"] == uri)]
-        return found
+        """Every publication for ``uri`` received and not taken yet: (arrival time, version)."""
+        while not self.messages.empty():
+            self.seen.append(self.messages.get_nowait())
+        mine = [m for m in self.seen if m and m.get("method") == "textDocument/publishDiagnostics"
+                and m["params"]["uri"] == uri]
+        self.seen = [m for m in self.seen if not any(m is n for n in mine)]
+        return [(self.arrived[id(m)], m["params"].get("version")) for m in mine]
 
     def close(self):
         try:
-            self.request("shutdown", None)
-            self.notify("exit", None)
-            self.process.wait(timeout=10)
+            self.finish()
         finally:
-            if self.process.poll() is None:
-                self.process.kill()
+            self.kill()
 
 
 def measure(source: Path | None, rounds: int) -> dict:
@@ -149,11 +108,11 @@ def measure(source: Path | None, rounds: int) -> dict:
     client = Client(source)
     figures: dict = {"lines": text.count("\n")}
     try:
-        client.request("initialize", {"processId": None, "rootUri": folder.as_uri(), "capabilities": {}})
+        client.timed("initialize", {"processId": None, "rootUri": folder.as_uri(), "capabilities": {}})
         client.notify("initialized", {})
         sent = client.notify("textDocument/didOpen", {"textDocument": {"uri": uri, "languageId": "bondgraph",
                                                                        "version": 1, "text": text}})
-        arrived, found = client.diagnostics(uri)
+        arrived, found = client.published(uri, 1)
         figures["open s"] = arrived - sent
         version = 1
 
@@ -167,7 +126,7 @@ def measure(source: Path | None, rounds: int) -> dict:
         edits = []
         for number in range(rounds):
             edited, sent = edit(1000 + number + 1)
-            arrived, _ = client.diagnostics(uri, edited)
+            arrived, _ = client.published(uri, edited)
             edits.append(arrived - sent)
         figures["edit s"] = edits
 
@@ -176,7 +135,7 @@ def measure(source: Path | None, rounds: int) -> dict:
         for number in range(10):
             edited, sent_at[edited] = edit(2000 + number)
             time.sleep(0.3)
-        arrived, _ = client.diagnostics(uri, edited)
+        arrived, _ = client.published(uri, edited)
         figures["typing: last edit to its diagnostics s"] = arrived - sent_at[edited]
         published = client.publications(uri)
         stale = 0
@@ -190,19 +149,19 @@ def measure(source: Path | None, rounds: int) -> dict:
         edited, sent = edit(3000)
         until = sent + 1.5
         while time.perf_counter() < until:
-            took, answer = client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": hover_at})
+            took, answer = client.timed("textDocument/hover", {"textDocument": {"uri": uri}, "position": hover_at})
             hovers.append(took)
             time.sleep(0.05)
-        client.diagnostics(uri, edited)
+        client.published(uri, edited)
         figures["hover while analysing s"] = hovers
         figures["hover answered"] = bool(answer)
-        idle = [client.request("textDocument/hover", {"textDocument": {"uri": uri}, "position": hover_at})[0]
+        idle = [client.timed("textDocument/hover", {"textDocument": {"uri": uri}, "position": hover_at})[0]
                 for _ in range(rounds)]
         figures["hover idle s"] = idle
-        figures["outline s"] = [client.request("textDocument/documentSymbol", {"textDocument": {"uri": uri}})[0]
+        figures["outline s"] = [client.timed("textDocument/documentSymbol", {"textDocument": {"uri": uri}})[0]
                                 for _ in range(rounds)]
         dot = {"line": param, "character": 0}
-        figures["completion s"] = [client.request("textDocument/completion",
+        figures["completion s"] = [client.timed("textDocument/completion",
                                                   {"textDocument": {"uri": uri}, "position": dot})[0]
                                    for _ in range(rounds)]
     finally:
