@@ -162,7 +162,7 @@ def test_the_flagship_is_checked_quickly_after_an_edit(client):
     client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
                                               "contentChanges": [{"text": text.replace("31.7", "31.8")}]})
     client.diagnostics(uri)
-    # the debounce (0.15 s) plus the check; a generous bound for a loaded CI machine
+    # the debounce (0.05 s) plus the check; a generous bound for a loaded CI machine
     assert time.monotonic() - started < 3.0
 
 
@@ -538,7 +538,7 @@ def _published(client, uri, until_version):
 def test_a_newer_edit_supersedes_the_analysis_and_stale_diagnostics_are_never_published(client, tmp_path):
     """Each edit names a different undefined name; what is published for a version names that
     version's name, versions only go up, and the last edit's diagnostics come last. Edits sent at
-    once (faster than the debounce) are analysed once, for the last of them."""
+    at once get one publication, for the last of them."""
     path = tmp_path / "big.bg"
     uri = client.open(path, _big(300))
     assert client.diagnostics(uri) == []
@@ -554,7 +554,7 @@ def test_a_newer_edit_supersedes_the_analysis_and_stale_diagnostics_are_never_pu
     (only,) = _published(client, uri, 11)
     (problem,) = only["diagnostics"]
     assert "'zz11'" in problem["message"]
-    # edits 0.2 s apart, past the debounce (0.15 s): each starts an analysis of 3 300 lines (a few
+    # edits 0.2 s apart, past the debounce (0.05 s): each starts an analysis of 3 300 lines (a few
     # tenths of a second at least), which the next edit supersedes. The server of before analysed
     # on its event loop and published each version, stale ones included (12 after 13 was sent).
     for version in range(12, 18):

@@ -26,7 +26,8 @@ from bondc.lsp.protocol import _NOT_JSON, PARSE_ERROR, _Framed, _Protocol
 
 logger = logging.getLogger(__name__)
 
-DEBOUNCE = 0.1           # seconds after the last change before the buffer is checked
+DEBOUNCE = 0.05          # seconds after the last change before the buffer is checked (a newer edit
+#                          supersedes the check in flight, so a short wait costs only wasted work)
 #: How long the analysis thread may hold the GIL while the event loop waits for it [s] (Python's
 #: default, 5 ms, made a hover wait several of those while an analysis ran).
 SWITCH_INTERVAL = 0.001
