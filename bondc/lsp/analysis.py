@@ -249,7 +249,10 @@ class Job:
         def done():
             if not self.future.done():
                 self.future.set_result(result)
-        self.loop.call_soon_threadsafe(done)
+        try:
+            self.loop.call_soon_threadsafe(done)
+        except RuntimeError:        # the loop is closed: the server is exiting
+            pass
 
 
 class Worker:

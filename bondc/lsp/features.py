@@ -6,14 +6,13 @@ definition and references, rename, quick fixes, the outline. Pure functions of t
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 from lsprotocol import types as lsp
 
 from bondc import ast
 from bondc.builtins import BUILTINS
 from bondc.lsp.analysis import Analysis
-from bondc.lsp.index import Symbol, Use, at, members, resolve
+from bondc.lsp.index import Symbol, at, members, resolve
 from bondc.model import KINDS
 
 KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment", "import", "if", "then",
