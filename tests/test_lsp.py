@@ -570,12 +570,12 @@ def test_a_hover_is_answered_from_the_last_analysis_while_the_next_one_runs(clie
     """Analysis ran on the event loop: a hover sent after an edit waited for the edit's check
     (4-6 s on a 5 000-line model). Now it is answered from the analysis before, ahead of the
     edit's diagnostics."""
-    text = _big(300)
+    text = _big(600)
     uri = client.open(tmp_path / "hover.bg", text)
     client.diagnostics(uri)
     client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
-                                              "contentChanges": [{"text": _big(300, "zz")}]})
-    time.sleep(0.3)         # past the debounce: the edit's analysis (of 3 300 lines) has started
+                                              "contentChanges": [{"text": _big(600, "zz")}]})
+    time.sleep(0.3)         # past the debounce: the edit's analysis (of 6 600 lines, a second or so) has started
     hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
                                                   "position": _position(text, "k*q", 0)})
     assert "param k" in hover["contents"]["value"]
