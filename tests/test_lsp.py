@@ -583,3 +583,27 @@ def test_a_hover_is_answered_from_the_last_analysis_while_the_next_one_runs(clie
                 and m["params"]["uri"] == uri]          # the edit's diagnostics had not come yet
     (problem,) = client.diagnostics(uri)
     assert "'zz'" in problem["message"]
+
+
+@pytest.mark.parametrize("name, declared", [("x_piston", "state x_piston"), ("Ar", "param Ar"), ("psi", "fn psi("),
+                                            ("mass", "I  mass"), ("j_chamber", "0  j_chamber"), ("K", "param K")])
+def test_renaming_a_name_of_the_flagship_keeps_it_a_valid_model(client, tmp_path, name, declared):
+    """Every occurrence is renamed (the state's initial-value law x(0) = ... included), nothing in a
+    comment, a string or a unit ([K]), and the result checks as cleanly as the flagship does."""
+    import re
+    import shutil
+
+    text = FLAGSHIP.read_text()
+    copy = tmp_path / FLAGSHIP.name
+    shutil.copytree(FLAGSHIP.parent / "data", tmp_path / "data")
+    uri = client.open(copy, text)
+    assert [d for d in client.diagnostics(uri) if d["severity"] == 1] == []
+    _, renamed = _rename(client, uri, text, declared, declared.index(name), "renamed_name")
+    code = lambda t: re.sub(r'#.*|"[^"\n]*"|\[[^\]\n]*\]', "", t)      # noqa: E731
+    pattern = r"(?<![\w.])%s\b"
+    assert len(re.findall(pattern % name, code(renamed))) == 0
+    assert len(re.findall(pattern % "renamed_name", code(renamed))) == len(re.findall(pattern % name, code(text)))
+    assert re.sub(r"\brenamed_name\b", name, renamed) == text
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": renamed}]})
+    assert [d for d in client.diagnostics(uri) if d["severity"] == 1] == []

@@ -105,6 +105,8 @@ def _index_model(index: Index, model: ast.Model, path: str) -> None:
         elif isinstance(statement, ast.StateDecl):
             add(statement.name, "state", statement.name_span, statement)
             for law in statement.laws:
+                if isinstance(law, ast.LawCall) and law.func != "der":      # x(0) = ...: the state itself
+                    index.uses.append(Use(law.func, law.func_span, name))
                 for expr in (getattr(law, "value", None), getattr(law, "arg", None)):
                     if expr is not None:
                         uses_in(expr)
