@@ -793,9 +793,10 @@ d("E005", "expression nested too deeply",
   "Split the expression: name parts of it with `param` or write them as `fn` definitions.")
 d("E006", "document too large to analyse",
   "`bondc lsp`: an open document has more than 20 000 lines or 1 000 000 characters. The language server "
-  "checks a buffer in its only thread as you type, so it does not analyse one that large (a model of "
-  "20 000 lines takes seconds to check, and one of millions of lines would stop the server answering "
-  "anything else); it shows this one diagnostic at the top of the document instead, and hover, "
+  "checks a buffer as you type on one analysis thread, a newer edit superseding the check in flight, "
+  "so it does not analyse one that large (a model of 20 000 lines takes seconds to check, and one of "
+  "millions of lines would hold that thread for minutes and the memory of its syntax tree); it shows "
+  "this one diagnostic at the top of the document instead, and hover, "
   "definitions, completion and formatting give nothing for it. Every other document is served as "
   "before, and the document is analysed again once an edit brings it under the limits.",
   "Run `bondc check FILE` on the file, or split it into files that import each other.")
