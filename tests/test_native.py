@@ -1056,7 +1056,9 @@ def test_the_drivers_deadbands_and_switch_values_are_the_step_loops_to_the_bit()
     model = namespace["_Model"](namespace["_MODEL"])
     assert namespace["attach_native"](model, None)[0]
     p = namespace["param_array"](model.PARAMETERS, None, model.derive_parameters)
-    run = namespace["_Run"](model, p, 0.0, 4.2, None, "CVODE", 1e-6, 1e-9, np.inf, None, None, 1000, 100)
+    run = namespace["_Run"](namespace["RunSpec"](model=model, parameters=p, t_start=0.0, t_end=4.2, t_eval=None,
+                                                 method="CVODE", rtol=1e-6, atol=1e-9, max_step=np.inf,
+                                                 max_events=1000, max_event_rate=100))
     driver = namespace["_NativeDriver"].create(model, model.native_library, p, False)
     rng = np.random.default_rng(11)
     x0, count = model.x0(p), len(model.SWITCHES)

@@ -13,28 +13,37 @@ The modules, one job each, in the order each imports only earlier ones (``MODULE
 - ``adapter``: the model adapter (:class:`_Model`), parameters, the modes of the unfrozen law,
   Filippov's weights (``filippov_alpha``, ``corner_weights``), :func:`evaluate`.
 - ``results``: :class:`Result`, :class:`LazyRows`, :func:`write_csv`, the result's size limits,
-  the typed failure of a run (:class:`RunFailure`) and the ``_Run`` mixins that build the result
-  (``_ResultBuilder``) and diagnose failures (``_Failures``).
+  the typed failure of a run (:class:`RunFailure`, carried by ``_Stop``), the result builder
+  (``_ResultBuilder``) and the diagnosis of a failure (``_Diagnosis``).
 - ``native``: bondc's C and C++ sources (``bondc/native``), compiler discovery (zig as the
   fallback), the SUNDIALS link, the build cache, :func:`attach_native`.
 - ``solvers``: CVODE, IDA, DOPRI5, scipy's methods (:func:`solver_class`), finite-difference
   Jacobians, and the run's choice of solver (``_SolverChoice``).
 - ``driver``: bondc's C driver of CVODE (:class:`_NativeDriver`) and the segments a run integrates
   with it (``_DriverSegments``).
-- ``events``: switches of time, crossing location, restart modes, when clauses, Zeno
-  (``_EventLocation``).
+- ``events``: the known switching times and the roots of switches of time (``_KnownTimes``),
+  crossing location, restart modes, when clauses, Zeno (``_EventLocation``).
 - ``sliding``: Filippov sliding sets, corners, affine holds, sliding segments (``_Sliding``).
 - ``run``: the run specification (:class:`RunSpec`), :func:`simulate_model` and the step loop
   (:class:`_Run`).
 
-``_Run`` is the step loop; its events, sliding, C-driver segments, solver choice, result building
-and failure diagnosis are *mixins* (``_EventLocation``, ``_Sliding``, ``_DriverSegments``,
-``_SolverChoice``, ``_ResultBuilder``, ``_Failures``), each in the module of its job, not
-collaborator objects: each of them reads and updates most of the run's state (the current modes,
-the recorded blocks, the counts in ``stats``, the solver and its dense output, the event list)
-and calls back into the loop's other parts (a sliding segment locates crossings and records points;
-the driver hands back to the step loop), so a collaborator would need the whole run as its
-argument. The mixins share no names, so their order does not matter.
+Typed values between the parts: :func:`simulate_model` settles a frozen :class:`RunSpec` once and
+gives it to ``_Run``; a run that stops early raises ``_Stop`` with a frozen :class:`RunFailure`
+(``Result.run_failure``; ``Result.failure`` is its dict, as it always was).
+
+``_Run`` is the step loop. Its *collaborators* are objects with an interface of their own, made
+from the model, the parameters and the span, reading nothing else of the run: ``_KnownTimes``
+(the breaks and switch-of-time roots before the run), ``_ResultBuilder`` (what the run recorded
+made into a :class:`Result`), ``_Diagnosis`` (which quantity became non-finite, which state
+diverged) and ``_NativeDriver`` (the C driver). Four parts are *mixins* of ``_Run`` instead, each
+in the module of its job: ``_EventLocation`` (crossings, restart modes, when clauses, Zeno),
+``_Sliding``, ``_DriverSegments`` and ``_SolverChoice``. Each of them reads and updates most of
+the run's state (the current solver and its dense output, the modes and the switches watched, the
+recorded blocks, the events, the counts in ``stats``, the sliding and chattering bookkeeping) and
+calls the others back (a sliding segment locates crossings, records points and hands over to the
+C driver; the driver hands back to the step loop, which restarts through the event part), so as
+collaborators each would need the whole run as its argument. The mixins share no names, so their
+order does not matter.
 
 A standalone generated module (``bondc compile --standalone``, and what ``bondc simulate`` runs
 in-process) carries the text of these modules in ``MODULES`` order, each with its imports of the
@@ -64,8 +73,8 @@ from bondc.runtime.adapter import (  # noqa: F401
     filippov_alpha, mode_values, modes_at, param_array, pattern_arrays
 )
 from bondc.runtime.results import (  # noqa: F401
-    DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Failures, _ResultBuilder,
-    _Stalled, _Stop, _evaluate_columns, _unique_rows, max_points, write_csv
+    DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
+    _ResultBuilder, _Stalled, _Stop, _evaluate_columns, _unique_rows, max_points, write_csv
 )
 from bondc.runtime.native import (  # noqa: F401
     Compiler, UNIT_MARK, _COMPILERS, _COMPILER_PROBES, _ERK_FLAGS, _ERK_LOADED, _NATIVE_AT_FUNCTIONS,
@@ -86,8 +95,8 @@ from bondc.runtime.driver import (  # noqa: F401
     _DriverSegments, _DriverStep, _NativeDriver, _Piece
 )
 from bondc.runtime.events import (  # noqa: F401
-    _EVENT_ROUNDS, _EventLocation, _HIDDEN_LEVELS, _HIDDEN_SPLIT, _HIDDEN_VALUES, _ZENO_FIRINGS, _ZENO_INTERVAL,
-    _ZENO_RATIO, _hidden_changes, _zero_touches, bracketed_roots
+    _EVENT_ROUNDS, _EventLocation, _HIDDEN_LEVELS, _HIDDEN_SPLIT, _HIDDEN_VALUES, _KnownTimes, _ZENO_FIRINGS,
+    _ZENO_INTERVAL, _ZENO_RATIO, _hidden_changes, _zero_touches, bracketed_roots
 )
 from bondc.runtime.sliding import (  # noqa: F401
     SLIDING_CHECKS, _MAX_HELD, _MAX_SLIDING, _Sliding

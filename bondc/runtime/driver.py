@@ -443,7 +443,7 @@ class _DriverSegments:
                     if self.progress is not None:
                         self.progress(t_prev)
                 if code == "diverged":
-                    raise _Stop(self.diverged(t_prev, y_prev))
+                    raise _Stop(self.diagnosis.diverged(t_prev, y_prev))
                 if code == 0:
                     if self.check_stiffness(t_prev, y_prev, modes):
                         return t_prev, y_prev, None     # the rest is the stiff solver's

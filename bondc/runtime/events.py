@@ -136,15 +136,24 @@ _ZENO_INTERVAL = 1e-4    # ... the last shorter than this fraction of the run, a
 _ZENO_RATIO = 0.98       # ... each at most this times the one before (a frequency sweep's shrink slower)
 
 
-class _EventLocation:
-    """Events: known times and the roots of switches of time, crossing location on the solver's
-    dense output, the modes at a restart, when clauses, Zeno and event-rate limits. A mixin of
-    :class:`_Run` (it reads and sets the run's modes, events and counts)."""
+class _KnownTimes:
+    """The switching times a run knows before it starts: the model's known breaks (``_time_breaks``:
+    steps, table corners in t, csv samples) and the roots of its switches of time alone, found by
+    sampling (:meth:`time_switch_roots`). A collaborator of :class:`_Run`, made from the model, the
+    parameters, the span and the run's ``max_step``; after :meth:`breaks`, ``max_step`` is the
+    step limit a dense measured signal sets and ``located`` the switches whose changes are all
+    known (the run no longer watches them as events)."""
 
-    # -- the run
+    def __init__(self, model, p, t_start, t_end, max_step):
+        self.model, self.p = model, p
+        self.t_start, self.t_end = float(t_start), float(t_end)
+        self.switch_count = len(model.SWITCHES)
+        self.max_step = max_step
+        self.located = set()
 
     def breaks(self):
-        """Known switching times inside (t_start, t_end) with their labels, merged when equal."""
+        """Known switching times inside (t_start, t_end) with their labels, merged when equal. Sets
+        ``max_step`` (capped by a dense measured signal's spacing) and ``located``."""
         listed = [(float(tb), label, kind) for tb, label, kind in self.model.time_breaks(self.p)]
         inside = lambda items: [(tb, label) for tb, label in items
                                 if np.isfinite(tb) and self.t_start < tb < self.t_end]
@@ -154,8 +163,8 @@ class _EventLocation:
             # a dense measured signal: no segment per sample, but no step longer than its typical spacing
             times = np.unique([tb for tb, _ in csv])
             spacing = float(np.median(np.diff(times))) if times.size > 1 else np.inf
-            if spacing > 0 and spacing < self.options["max_step"]:
-                self.options["max_step"] = spacing
+            if spacing > 0 and spacing < self.max_step:
+                self.max_step = spacing
             csv = []
         found = sorted(inside(other) + csv + self.time_switch_roots())
         merged = []
@@ -275,9 +284,7 @@ class _EventLocation:
                 lo, hi, g_lo - levels, g_hi - levels, 4 * _EPS, 4 * _EPS)]
             roots += [(root, label) for root in found[k]]
             located.add(k)
-        if located:
-            self.event_switches = np.array([k for k in self.event_switches if k not in located], dtype=int)
-            self.stats["switches_found_ahead"] = len(located)
+        self.located = located
         return roots
 
     def _inner_time_modes(self) -> dict:
@@ -318,6 +325,25 @@ class _EventLocation:
                     modes = new
             pieces.append(modes)
         return pieces
+
+
+class _EventLocation:
+    """Events: crossing location on the solver's dense output, the modes at a restart, when
+    clauses, Zeno and event-rate limits (the known times are :class:`_KnownTimes`'). A mixin of
+    :class:`_Run`: it reads and sets the run's modes, its solver's dense output, its events and
+    counts, and calls the sliding and driver parts back."""
+
+    def breaks(self):
+        """The run's known switching times (see :class:`_KnownTimes`); the switches of time whose
+        roots were all found are no longer watched as events, and a dense measured signal caps
+        the step."""
+        known = _KnownTimes(self.model, self.p, self.t_start, self.t_end, self.options["max_step"])
+        breaks = known.breaks()
+        self.options["max_step"] = known.max_step
+        if known.located:
+            self.event_switches = np.array([k for k in self.event_switches if k not in known.located], dtype=int)
+            self.stats["switches_found_ahead"] = len(known.located)
+        return breaks
 
     def restart_modes(self, t, y, guess):
         """Modes just after (t, y), and the switches that chatter there.
@@ -410,7 +436,7 @@ class _EventLocation:
                 self.stats["when_fired"] = self.stats.get("when_fired", 0) + 1
                 self.check_zeno(k, t)
             if not np.all(np.isfinite(new)):
-                raise _Stop(self.diagnose(t, new, modes, f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
+                raise _Stop(self.diagnosis.nonfinite(t, new, modes, f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
             self.jumps.append((float(t), np.array(y, dtype=float), new.copy()))
             y = new
             modes, chattering = self.restart_modes(t, y, modes)

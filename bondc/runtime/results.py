@@ -10,7 +10,6 @@ from collections.abc import Mapping as _Mapping
 
 import numpy as np
 
-from bondc.runtime.kernels import _EPS
 from bondc.runtime.adapter import _model_memo, mode_values
 
 
@@ -294,8 +293,15 @@ def _unique_rows(rows):
 
 
 class _ResultBuilder:
-    """The run's recorded blocks made into a :class:`Result`: points' modes, outputs, lazily
-    evaluated variables and sliding blends. A mixin of :class:`_Run` (it reads every recorded block)."""
+    """What a run recorded made into a :class:`Result`: points' modes, outputs, lazily evaluated
+    variables and sliding blends. A collaborator of :class:`_Run`: made from the model, the
+    parameters and the start time; :meth:`build` takes the recorded blocks (times, states and
+    the mode or sliding combination of each), the mode table, the events, the when clauses'
+    jumps and the counts, and reads nothing else of the run."""
+
+    def __init__(self, model, p, t_start):
+        self.model, self.p, self.t_start = model, p, float(t_start)
+        self.switch_count = len(model.SWITCHES)
 
     def switch_columns(self, t, x, modes):
         """Switching functions at many points with one mode vector: shape (switches, points)."""
@@ -348,15 +354,6 @@ class _ResultBuilder:
             out[:, columns] = total
         return blend
 
-    def _consistent_blocks(self) -> None:
-        """Drop what an interruption (Ctrl-C lands between any two statements) left half recorded:
-        a block whose times, states or mode were not all appended, or whose times and states
-        differ in length."""
-        count = min(len(self.blocks_t), len(self.blocks_x), len(self.blocks_mode))
-        del self.blocks_t[count:], self.blocks_x[count:], self.blocks_mode[count:]
-        while self.blocks_t and np.shape(self.blocks_x[-1])[-1] != np.size(self.blocks_t[-1]):
-            self.blocks_t.pop(), self.blocks_x.pop(), self.blocks_mode.pop()
-
     def variable_rows(self) -> dict:
         """Each variable's row of the result's matrix of variables, made once per model (a
         1000-section chain has 6 000 variables); the results share it and never change it."""
@@ -365,29 +362,29 @@ class _ResultBuilder:
             memo.update(zip(self.model.VARIABLE_NAMES, self.model.VARIABLE_ROWS))
         return memo
 
-    def result(self, complete, failure):
-        self._consistent_blocks()
+    def build(self, complete, failure, blocks_t, blocks_x, blocks_mode, mode_table, events, jumps, stats):
+        """The :class:`Result`; ``stats`` (the run's counts) gets the number of points."""
         model = self.model
         n = len(model.STATE_NAMES)
         n_out, n_var = len(model.OUTPUT_NAMES), len(model.VARIABLE_NAMES)
-        modes_by_id = {index: np.array(key) for key, index in self.mode_table.items()}
-        if self.blocks_t:
-            t = np.concatenate(self.blocks_t)
+        modes_by_id = {index: np.array(key) for key, index in mode_table.items()}
+        if blocks_t:
+            t = np.concatenate(blocks_t)
             # point by point in memory (the driver's batches are stored so, as (points, states) copies
             # seen transposed): the batches are copied whole, not state by state (2 ms of a 10 s run
             # of the 1000-section chain), and a point's states are together, as a CSV row takes them
             x = np.empty((n, t.size), order="F")
-            np.concatenate(self.blocks_x, axis=1, out=x)
+            np.concatenate(blocks_x, axis=1, out=x)
         else:
             t, x = np.zeros(0), np.zeros((n, 0))
         # restarts that made no progress (a switch re-decided at the same instant) repeat a point:
         # keep its first record, so the time of the result strictly increases. Dropped before the
         # outputs and variables are evaluated (not a copy of every variable at every point after)
         keep = np.concatenate([[True], np.diff(t) > 0]) if t.size else np.ones(0, dtype=bool)
-        kept_blocks = list(zip(self.blocks_t, self.blocks_mode))
+        kept_blocks = list(zip(blocks_t, blocks_mode))
         if not keep.all():
             t, x, start, kept_blocks = t[keep], x[:, keep], 0, []
-            for times, mode in zip(self.blocks_t, self.blocks_mode):
+            for times, mode in zip(blocks_t, blocks_mode):
                 kept = keep[start:start + times.size]
                 start += times.size
                 if kept.all():
@@ -467,34 +464,37 @@ class _ResultBuilder:
         t.flags.writeable = x.flags.writeable = False
         reached = float(t[-1]) if t.size else self.t_start
         if complete:
-            message = f"completed: {t.size} points to t={reached:.6g}, {len(self.events)} events"
+            message = f"completed: {t.size} points to t={reached:.6g}, {len(events)} events"
         else:
             message = failure.message
-        self.stats["points"] = int(t.size)
+        stats["points"] = int(t.size)
         return Result(
             t=t,
             states=dict(zip(model.STATE_NAMES, x)),
             outputs=dict(zip(model.OUTPUT_NAMES, outputs)),
             variables=LazyRows(self.variable_rows(), _Deferred((n_rows, t.size), variable_tasks)),
-            events=list(self.events),
+            events=list(events),
             complete=complete,
             message=message,
             failure=failure,
-            stats=dict(self.stats),
+            stats=dict(stats),
             parameters={name: float(v) for name, v in zip(model.parameter_names, self.p)},
             jumps=[(time, dict(zip(model.STATE_NAMES, before)), dict(zip(model.STATE_NAMES, after)))
-                   for time, before, after in self.jumps],
+                   for time, before, after in jumps],
             sliding=sliding,
         )
 
 
-class _Failures:
-    """The typed failures of a run: which variable first became non-finite and its law, a
-    solver that could not go on, a diverged state. A mixin of :class:`_Run`."""
+class _Diagnosis:
+    """What went wrong at a point, as a :class:`RunFailure`: which quantity first became
+    non-finite (a state, a variable in causal order with its law, a derivative) and why, or
+    which state diverged. A collaborator of :class:`_Run`, made from the model and the
+    parameters; it reads nothing else of the run."""
 
-    # -- failures
+    def __init__(self, model, p):
+        self.model, self.p = model, p
 
-    def diagnose(self, t, x, modes, context):
+    def nonfinite(self, t, x, modes, context):
         """Name the first non-finite quantity at (t, x): a state, a variable in causal order, a derivative."""
         model = self.model
         variable, law, value = None, None, None
@@ -549,49 +549,3 @@ class _Failures:
                           cause="the model is unstable (a negative damping or resistance, a positive feedback) "
                                 "or a law grows without bound",
                           hint="check the signs and values of the parameters that damp this state")
-
-    def solver_failure(self, t, message):
-        if self.bad is not None and self.bad[0] >= t - 1e-6 * max(self.span, 1e-300):
-            failure = self.diagnose(*self.bad, context=f"the solver could not go past t={t:.6g}: ")
-            return failure.replace(time=float(t), solver_message=message)
-        method = self.method.__name__
-        hint = ("try a stiff solver (solver = \"CVODE\" in the experiment)" if not self.implicit
-                else "check the laws near that time for a singularity or a switch bondc cannot see "
-                     "(a discontinuity hidden in a smooth-looking function), or loosen rtol/atol")
-        return RunFailure(message=f"the solver ({method}) failed at t={t:.6g}: {message}", time=float(t),
-                          variable=None, law=None,
-                          cause="the step size became too small: the model is stiffer than the method can "
-                                "handle, a variable grows without bound, or the right-hand side is discontinuous",
-                          hint=hint, kind="solver", solver_message=message)
-
-    def stop_nonfinite(self, solver, derivative, modes_of, mode):
-        """The last step produced a nan or inf: bisect its dense output for the first non-finite point,
-        record the trajectory up to just before it and stop with a diagnosis there."""
-        dense = solver.dense_output()
-        lo, hi = solver.t_old, solver.t
-
-        def finite(tt):
-            yy = dense(tt)
-            return bool(np.all(np.isfinite(yy)) and np.all(np.isfinite(derivative(tt, yy))))
-
-        for _ in range(80):
-            if hi - lo <= 4 * _EPS * max(abs(hi), 1.0):
-                break
-            middle = 0.5 * (lo + hi)
-            if finite(middle):
-                lo = middle
-            else:
-                hi = middle
-        if lo > solver.t_old:
-            y_lo = dense(lo)
-            self.record(solver.t_old, lo, y_lo, dense,
-                        mode if mode is not None else self.mode_id(modes_of(lo, y_lo)))
-        y_hi = dense(hi)
-        failure = self.diagnose(hi, y_hi, modes_of(hi, y_hi), "")
-        if failure.variable in self.model.STATE_NAMES and self.bad is not None:
-            # the solver's own state went bad: name the law that produced the nan it saw
-            cause = self.diagnose(*self.bad, context="")
-            failure = cause.replace(message=f"the solver's state became non-finite at t={hi:.6g} after the "
-                                            f"right-hand side was evaluated at a trial point where {cause.message}",
-                                    time=float(hi))
-        raise _Stop(failure)

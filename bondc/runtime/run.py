@@ -129,7 +129,7 @@ from bondc.runtime.signals import _with_inputs, external_inputs
 from bondc.runtime.loops import _BLOCK_SOLUTIONS
 from bondc.runtime.adapter import _Model, _model_memo, modes_at, param_array
 from bondc.runtime.results import (
-    DIVERGED, MAX_VALUES, RunFailure, _CountedBlocks, _Failures, _ResultBuilder, _Stalled, _Stop, max_points
+    DIVERGED, MAX_VALUES, RunFailure, _CountedBlocks, _Diagnosis, _ResultBuilder, _Stalled, _Stop, max_points
 )
 from bondc.runtime.native import attach_native, compiler_label
 from bondc.runtime.solvers import (
@@ -167,8 +167,7 @@ _STALL_FRACTION = 1e-7  # restarts that advance time by less than this fraction 
 _STALL_RESTARTS = 5000  # ... this many times in a row mean the run is stalled
 
 
-class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice, _ResultBuilder,
-           _Failures):
+class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice):
     """One simulation run of a model: segments between events, recorded points."""
 
     def __init__(self, spec: RunSpec):
@@ -177,6 +176,7 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice, _ResultBuil
         method, rtol, atol, max_step, first_step = spec.method, spec.rtol, spec.atol, spec.max_step, spec.first_step
         self.model = model
         self.p = p
+        self.diagnosis = _Diagnosis(model, p)
         self.t_start, self.t_end = float(t_start), float(t_end)
         self.span = self.t_end - self.t_start
         self.t_eval = None if t_eval is None else np.asarray(t_eval, dtype=float)
@@ -239,6 +239,70 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice, _ResultBuil
         self._pieces = None            # whether pieces can be integrated ahead: None (not decided yet)
         self.pieces_skip, self.pieces_backoff = 0, 1    # segments not to try it for, after calls that
                                                         # ended inside their first piece (see queued_piece)
+
+    def _consistent_blocks(self) -> None:
+        """Drop what an interruption (Ctrl-C lands between any two statements) left half recorded:
+        a block whose times, states or mode were not all appended, or whose times and states
+        differ in length."""
+        count = min(len(self.blocks_t), len(self.blocks_x), len(self.blocks_mode))
+        del self.blocks_t[count:], self.blocks_x[count:], self.blocks_mode[count:]
+        while self.blocks_t and np.shape(self.blocks_x[-1])[-1] != np.size(self.blocks_t[-1]):
+            self.blocks_t.pop(), self.blocks_x.pop(), self.blocks_mode.pop()
+
+    # -- failures
+
+    def solver_failure(self, t, message):
+        if self.bad is not None and self.bad[0] >= t - 1e-6 * max(self.span, 1e-300):
+            failure = self.diagnosis.nonfinite(*self.bad, context=f"the solver could not go past t={t:.6g}: ")
+            return failure.replace(time=float(t), solver_message=message)
+        method = self.method.__name__
+        hint = ("try a stiff solver (solver = \"CVODE\" in the experiment)" if not self.implicit
+                else "check the laws near that time for a singularity or a switch bondc cannot see "
+                     "(a discontinuity hidden in a smooth-looking function), or loosen rtol/atol")
+        return RunFailure(message=f"the solver ({method}) failed at t={t:.6g}: {message}", time=float(t),
+                          variable=None, law=None,
+                          cause="the step size became too small: the model is stiffer than the method can "
+                                "handle, a variable grows without bound, or the right-hand side is discontinuous",
+                          hint=hint, kind="solver", solver_message=message)
+
+    def stop_nonfinite(self, solver, derivative, modes_of, mode):
+        """The last step produced a nan or inf: bisect its dense output for the first non-finite point,
+        record the trajectory up to just before it and stop with a diagnosis there."""
+        dense = solver.dense_output()
+        lo, hi = solver.t_old, solver.t
+
+        def finite(tt):
+            yy = dense(tt)
+            return bool(np.all(np.isfinite(yy)) and np.all(np.isfinite(derivative(tt, yy))))
+
+        for _ in range(80):
+            if hi - lo <= 4 * _EPS * max(abs(hi), 1.0):
+                break
+            middle = 0.5 * (lo + hi)
+            if finite(middle):
+                lo = middle
+            else:
+                hi = middle
+        if lo > solver.t_old:
+            y_lo = dense(lo)
+            self.record(solver.t_old, lo, y_lo, dense,
+                        mode if mode is not None else self.mode_id(modes_of(lo, y_lo)))
+        y_hi = dense(hi)
+        failure = self.diagnosis.nonfinite(hi, y_hi, modes_of(hi, y_hi), "")
+        if failure.variable in self.model.STATE_NAMES and self.bad is not None:
+            # the solver's own state went bad: name the law that produced the nan it saw
+            cause = self.diagnosis.nonfinite(*self.bad, context="")
+            failure = cause.replace(message=f"the solver's state became non-finite at t={hi:.6g} after the "
+                                            f"right-hand side was evaluated at a trial point where {cause.message}",
+                                    time=float(hi))
+        raise _Stop(failure)
+
+    def result(self, complete, failure):
+        """The run's :class:`Result` (built by :class:`_ResultBuilder` from what it recorded)."""
+        self._consistent_blocks()
+        return _ResultBuilder(self.model, self.p, self.t_start).build(
+            complete, failure, self.blocks_t, self.blocks_x, self.blocks_mode, self.mode_table, self.events,
+            self.jumps, self.stats)
 
     # -- evaluation helpers
 
@@ -323,10 +387,10 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice, _ResultBuil
         stall_time, stall_count, stall_span = t, 0, _STALL_FRACTION * max(self.t_end - self.t_start, 1e-300)
         try:
             if not np.all(np.isfinite(y)):
-                raise _Stop(self.diagnose(t, y, modes, "the initial state is not finite: "))
+                raise _Stop(self.diagnosis.nonfinite(t, y, modes, "the initial state is not finite: "))
             with np.errstate(all="ignore"):
                 if not np.all(np.isfinite(self.rhs(t, y, modes))):
-                    raise _Stop(self.diagnose(t, y, modes, "at the start, "))
+                    raise _Stop(self.diagnosis.nonfinite(t, y, modes, "at the start, "))
             with np.errstate(all="ignore"):
                 while t < self.t_end:
                     while break_index < len(breaks) and breaks[break_index][0] <= t:
@@ -507,7 +571,7 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice, _ResultBuil
             if not np.max(np.abs(y_new), initial=0.0) < DIVERGED:
                 self.collect(solver)
                 self.record(solver.t_old, t_new, y_new, None, mode)
-                raise _Stop(self.diverged(t_new, y_new))
+                raise _Stop(self.diagnosis.diverged(t_new, y_new))
             self._dense = None
             if index.size:
                 values_new = self.switches_at(t_new, y_new, modes, index)
