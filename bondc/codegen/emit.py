@@ -153,27 +153,17 @@ def native_files_source() -> str:
     return "\n".join(lines + ["}"])
 
 
-@functools.lru_cache(maxsize=4)
-def _defined_names(source: str) -> frozenset[str]:
-    """The functions, classes and variables ``source`` defines at its top level (not its imports)."""
+@functools.lru_cache(maxsize=8)
+def _top_level_names(source: str, imports: bool = True) -> frozenset[str]:
+    """The names ``source`` binds at its top level: its functions, classes and assigned names, and
+    (``imports``) what it imports."""
     names = set()
     for node in _python_ast.parse(source).body:
         if isinstance(node, (_python_ast.FunctionDef, _python_ast.ClassDef)):
             names.add(node.name)
         elif isinstance(node, _python_ast.Assign):
             names.update(t.id for t in node.targets if isinstance(t, _python_ast.Name))
-    return frozenset(names)
-
-
-@functools.lru_cache(maxsize=4)
-def _top_level_names(source: str) -> frozenset[str]:
-    names = set()
-    for node in _python_ast.parse(source).body:
-        if isinstance(node, (_python_ast.FunctionDef, _python_ast.ClassDef)):
-            names.add(node.name)
-        elif isinstance(node, _python_ast.Assign):
-            names.update(t.id for t in node.targets if isinstance(t, _python_ast.Name))
-        elif isinstance(node, (_python_ast.Import, _python_ast.ImportFrom)):
+        elif imports and isinstance(node, (_python_ast.Import, _python_ast.ImportFrom)):
             names.update((a.asname or a.name).split(".")[0] for a in node.names)
     return frozenset(names)
 
@@ -996,7 +986,7 @@ class _Emitter:
 
     @staticmethod
     def runtime_import() -> str:
-        names = sorted(name for name in _defined_names(runtime_source())
+        names = sorted(name for name in _top_level_names(runtime_source(), imports=False)
                        if not name.startswith("__") and name not in _RUNTIME_MODULES)
         lines = ["import math", "import os", "import sys", "", "import numpy as np", "",
                  "from bondc.runtime import ("]

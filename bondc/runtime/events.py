@@ -444,7 +444,7 @@ class _EventLocation:
         labels = "; ".join(model.WHEN_LABELS[k] for k in range(len(after)) if after[k] and not before[k])
         raise _Stop(RunFailure(message=f"when clauses kept firing at t={t:.6g}: after {_EVENT_ROUNDS} rounds at "
                                        f"the same instant, {labels} became true again",
-                               time=float(t), variable=None, law=None, kind="events",
+                               time=float(t), kind="events",
                                cause="the statements of a when clause make another (or its own) condition true "
                                      "again",
                                hint="make the conditions exclusive (a hysteresis band), or the statements move "
@@ -475,7 +475,7 @@ class _EventLocation:
         raise _Stop(RunFailure(message=f"the events of '{label}' accumulate at t={limit:.6g} (Zeno behaviour): "
                                        f"{len(times)} firings, each interval about {ratio:.3g} times the one "
                                        f"before, the last {gaps[-1]:.3g} s",
-                               time=float(t), variable=None, law=None, kind="events", when=label,
+                               time=float(t), kind="events", when=label,
                                cause="infinitely many events before a finite time, as a bouncing ball coming to "
                                      "rest; the model does not say what happens after that time",
                                hint="give the model a law for what follows: e.g. a discrete variable that a when "

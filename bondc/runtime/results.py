@@ -230,7 +230,7 @@ class _CountedBlocks(list):
             raise _Stop(RunFailure(message=f"the result reached {run.points} points at t={t:.6g}, more than the "
                                            f"{run.max_points} a run of this model records (at most "
                                            f"{MAX_VALUES:.0e} numbers, about 1 GB with its analyses)",
-                                   time=t, variable=None, law=None, kind="points",
+                                   time=t, kind="points",
                                    cause="every point keeps every state, output and bond variable",
                                    hint="report on a coarser grid (--dt or dt in the experiment) or simulate a "
                                         "shorter time"))
@@ -545,7 +545,7 @@ class _Diagnosis:
         k = int(np.argmax(np.abs(y)))
         name = self.model.STATE_NAMES[k]
         return RunFailure(message=f"the state '{name}' grew beyond {DIVERGED:g} (to {float(y[k]):.3g}) at t={t:.6g}",
-                          time=float(t), variable=name, law=None, kind="diverged",
+                          time=float(t), variable=name, kind="diverged",
                           cause="the model is unstable (a negative damping or resistance, a positive feedback) "
                                 "or a law grows without bound",
                           hint="check the signs and values of the parameters that damp this state")

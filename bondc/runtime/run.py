@@ -440,7 +440,7 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice):
                             raise _Stop(RunFailure(
                                 message=f"the simulation stalled at t={t:.6g}: {_STALL_RESTARTS} restarts "
                                         f"advanced time by less than {stall_span:.3g} s",
-                                time=float(t), variable=None, law=None, kind="events",
+                                time=float(t), kind="events",
                                 cause="several switches (sign, abs, if) keep changing mode together, e.g. "
                                       "friction laws that make the motion stick",
                                 hint="smooth the laws near their switching surfaces (a small linear band "
@@ -489,7 +489,7 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice):
                     if self.stats["mode_changes"] > self.max_events:
                         raise _Stop(RunFailure(
                             message=f"more than {self.max_events} events by t={t:.6g}",
-                            time=float(t), variable=None, law=None, kind="events",
+                            time=float(t), kind="events",
                             cause="a switch keeps changing mode (chattering) faster than the chattering guard "
                                   "can absorb",
                             hint="smooth the law near its switching surface (a small linear band around zero "

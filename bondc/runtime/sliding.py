@@ -64,7 +64,7 @@ class _Sliding:
         named = "; ".join(self.model.SWITCHES[k] for k in near[:4]) + ("; ..." if len(near) > 4 else "")
         return RunFailure(message=f"the simulation stalled at t={t:.6g}: {len(near)} switches are on their "
                                   f"surfaces at once ({named}), and {why}",
-                          time=float(t), kind="events", law=None, variable=self.model.SWITCH_OWNERS[near[0]],
+                          time=float(t), kind="events", variable=self.model.SWITCH_OWNERS[near[0]],
                           cause=f"holding {len(near)} switches at once (dry frictions that stick together) "
                                 f"combines 2^{len(near)} laws; beyond {_MAX_SLIDING}, bondc holds them only where "
                                 "each one's law enters the motion linearly (a friction force added to sums of "
