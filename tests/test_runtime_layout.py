@@ -123,5 +123,5 @@ def test_the_carried_runtime_runs_where_annotations_are_strings_and_no_module_ho
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == str({"message": "m", "time": 2.0, "kind": "events", "variable": None, "law": None,
-                                      "cause": None, "hint": None, "when": "when h < 0"})
+    assert out.stdout.strip() == str({"message": "m", "time": 2.0, "variable": None, "law": None, "cause": None,
+                                      "hint": None, "kind": "events", "when": "when h < 0"})

@@ -193,14 +193,14 @@ class RunFailure:
                        "solver_message": str | None, "terminated": bool | None}
     variable = law = cause = hint = when = solver_message = terminated = None
 
-    #: fields a failure's dict has only where they are set
-    _OPTIONAL = ("when", "solver_message", "terminated")
+    #: the keys of a failure's dict, in the order a non-finite value's had; the last three only where set
+    _KEYS = ("message", "time", "variable", "law", "cause", "hint", "kind", "when", "solver_message", "terminated")
 
     def as_dict(self) -> dict:
         """The failure as the dict ``Result.failure`` has always been (message, time, variable, law,
-        kind, cause, hint; and when, solver_message, terminated where set)."""
-        return {field.name: getattr(self, field.name) for field in dataclasses.fields(self)
-                if field.name not in self._OPTIONAL or getattr(self, field.name) is not None}
+        cause, hint, kind; and when, solver_message, terminated where set)."""
+        return {key: getattr(self, key) for key in self._KEYS
+                if key in self._KEYS[:7] or getattr(self, key) is not None}
 
     def __getitem__(self, name):
         """``failure["message"]``: read as the dict it replaces (KeyError for an optional field not set)."""
