@@ -433,6 +433,16 @@ def _inertia_ratio(args) -> float | None:
         raise UsageError(error.diagnostics) from None
 
 
+_RATIO_HELP = ('with --motors: the parameter that sets the transmission ratio and values to try, as sweep --vary '
+               '("lead=2,5,10,20 [mm]", "n_gear=5:40:8"); shows the smallest qualifying motor at each value and '
+               'the model\'s own')
+
+
+def _jobs() -> int:
+    """Processes for the points of a --ratio study: one per core."""
+    return max(1, os.cpu_count() or 1)
+
+
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import dense_steps, energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
@@ -443,6 +453,9 @@ def _cmd_simulate(args) -> int:
         check_result_path(args.output)
         check_output(args.output)       # before any work
     inertia_ratio = _inertia_ratio(args)
+    from bondc.analysis.ratio import check_ratio
+
+    check_ratio(args.ratio, args.motors)
     if args.motors:
         from bondc.analysis.motors import load_catalogue
 
@@ -495,6 +508,14 @@ def _cmd_simulate(args) -> int:
             _print_diagnostics(problem.diagnostics, graph.sources)
             summary.setdefault("diagnostics", []).extend(d.to_json() for d in problem.diagnostics)
             failed = any(d.is_error for d in problem.diagnostics)
+    study = None
+    if args.ratio and result.complete:
+        from bondc.analysis.ratio import ratio_study
+
+        study = ratio_study(args.file, args.ratio, motors=args.motors, model=args.model,
+                            experiment=args.experiment, sets=args.set or (), t_end=args.t_end,
+                            inertia_ratio=inertia_ratio, jobs=_jobs(), progress=not args.json and not _quiet())
+        summary["ratio"] = study.to_json()
     if args.json:
         _print_json(summary)
     else:
@@ -517,6 +538,9 @@ def _cmd_simulate(args) -> int:
         if motors_text:
             print()
             print(motors_text)
+        if study is not None:
+            print()
+            print(study.to_text())
     if error is not None:
         _print_diagnostics(error.diagnostics, graph.sources)
         return result.exit_status or EXIT_ERRORS
@@ -559,7 +583,8 @@ def _cmd_report(args) -> int:
     summary = report_summary(Path(args.file), model=args.model, experiment=args.experiment,
                              sets=_parse_sets(args.set), data=args.data, compare=args.compare or (),
                              motors=args.motors, output=args.output, t_end=args.t_end,
-                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio)
+                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio,
+                             ratio=args.ratio, jobs=_jobs())
     if args.json:
         _print_json(summary)
     elif not _quiet() or summary["exit_status"]:
@@ -622,6 +647,36 @@ def _cmd_fit_friction(args) -> int:
     stream = sys.stdout if code == EXIT_OK or args.json else sys.stderr
     print(text, file=stream)
     return code
+
+
+class _FitGroup(argparse.Action):
+    """``bondc fit``'s --data, --experiment and --compare, kept in command-line order: each --data
+    starts a data set, the --experiment and --compare after it belong to it."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        items = list(getattr(namespace, "fit_items", None) or [])
+        items.append((self.dest, values))
+        namespace.fit_items = items
+        if self.dest == "data" and getattr(namespace, "data", None) is None:
+            namespace.data = values         # (the first: the inputs an output must not replace)
+
+
+def _cmd_fit(args) -> int:
+    from bondc.analysis.fit import parse_groups, run_fit
+
+    datasets = parse_groups(getattr(args, "fit_items", None) or [])
+    result = run_fit(args.file, datasets=datasets, estimates=args.estimate or [], model=args.model,
+                     sets=args.set or (), max_evaluations=args.max_evaluations, output=args.output,
+                     write=args.write, progress=not args.json and not _quiet(),
+                     cache=False if args.no_cache else None)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        _print_diagnostics(result.diagnostics)
+        print(result.to_text())
+        for path in result.written:
+            print(f"wrote {path}")
+    return result.exit_status
 
 
 def _megabytes(size: int) -> str:
@@ -767,6 +822,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--motors", metavar="CATALOGUE.csv",
                      help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")
     sim.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
+    sim.add_argument("--ratio", metavar="NAME=VALUES", help=_RATIO_HELP)
     sim.set_defaults(run=_cmd_simulate)
 
     report = commands.add_parser("report", help="one self-contained HTML report: model, bond graph, equations, "
@@ -781,6 +837,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="compare output OUT with the measured COLUMN (repeatable)")
     report.add_argument("--motors", metavar="CATALOGUE.csv", help="judge the motors of this catalogue against the cycle")
     report.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
+    report.add_argument("--ratio", metavar="NAME=VALUES", help=_RATIO_HELP)
     report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
                                                    "reports/<file>-<experiment>.html for a non-first experiment)")
     report.add_argument("--json", action="store_true",
@@ -840,6 +897,32 @@ def build_parser() -> argparse.ArgumentParser:
                                               "the same command again resumes, skipping the points already there")
     sweep.add_argument("--json", action="store_true", help="print the result as JSON")
     sweep.set_defaults(run=_cmd_sweep)
+
+    fit_ = commands.add_parser("fit", help="estimate parameters from measured data (least squares), with "
+                                            "standard errors, 95 % intervals and correlations")
+    _add_model_args(fit_)
+    fit_.add_argument("--data", action=_FitGroup, metavar="FILE",
+                      help="measured CSV (header units honoured, as validate); each --data starts a data set, "
+                           "and the --experiment and --compare after it belong to it (repeat for several)")
+    fit_.add_argument("--experiment", action=_FitGroup, metavar="NAME",
+                      help="the experiment the data set before it was measured in (before any --data: every "
+                           "data set's default; default: the first)")
+    fit_.add_argument("--compare", action=_FitGroup, metavar="OUT=COLUMN[:weight=W]",
+                      help="fit output OUT to the measured COLUMN of the data set before it (repeatable)")
+    fit_.add_argument("--estimate", action="append", metavar="NAME[=LOW:HIGH]",
+                      help='a parameter to estimate, with bounds in its declared unit or a unit in [ ] '
+                           '("b=5:30", "Ae=5:50 [mm^2]"; an empty bound is open); its --set value, else the '
+                           "model's, is the start (repeatable)")
+    fit_.add_argument("--max-evaluations", type=int, metavar="N",
+                      help="stop the optimiser after N evaluations (default 200; the Jacobians cost more runs)")
+    fit_.add_argument("-o", "--output", help="write the HTML report: estimates, correlations, measured vs model")
+    fit_.add_argument("--write", metavar="FITTED.bg",
+                      help="write a copy of the model with the fitted values (never over a file bondc fit did "
+                           "not write)")
+    fit_.add_argument("--json", action="store_true",
+                      help="print converged, parameters (value, unit, initial, stderr, ci95), correlation, cost, "
+                           "signals, diagnostics as JSON")
+    fit_.set_defaults(run=_cmd_fit, data=None, fit_items=[])
 
     lsp_ = commands.add_parser("lsp", help="the language server for editors (Language Server Protocol on stdio)")
     lsp_.add_argument("--stdio", action="store_true",

@@ -519,22 +519,6 @@ def test_model_code_golden(update_golden):
     assert model_part == golden.read_text(encoding="utf-8")
 
 
-def test_doctests():
-    import doctest
-    import importlib
-
-    # importlib: bondc.codegen.emit as an attribute is the function the package re-exports
-    from bondc.runtime import MODULES
-
-    runtime = [f"bondc.runtime.{module}" for module in MODULES
-               if ">>>" in (ROOT / "bondc" / "runtime" / f"{module}.py").read_text(encoding="utf-8")]
-    assert len(runtime) >= 4
-    for name in ("bondc.codegen.emit", "bondc.codegen.freeze", "bondc.codegen.printer", *runtime,
-                 "bondc.simulate", "bondc.equations"):
-        result = doctest.testmod(importlib.import_module(name))
-        assert result.attempted and not result.failed, name
-
-
 HOSTILE_NAMES = [
     'q""";import os;os.system("touch PWNED");"""x.bg',
     "line\nimport os; os.system('touch PWNED')\n#.bg",

@@ -165,7 +165,7 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
                  sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                  motors: str | Path | None = None, output: str | Path | None = None,
                  t_end: float | None = None, date: str | None = None, progress: bool = False,
-                 inertia_ratio: float | None = None) -> Path:
+                 inertia_ratio: float | None = None, ratio: str | None = None, jobs: int = 1) -> Path:
     """``bondc report``: run the pipeline and write one self-contained HTML report; returns its path.
 
     ``data`` (a measured CSV) with ``compare`` (``OUT=COLUMN[:nrmse=0.05]``
@@ -175,7 +175,10 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     ``torque`` and ``omega`` always gets the motor requirements). ``output``
     defaults to :func:`default_output`; missing directories are made.
     ``inertia_ratio`` is the load/rotor inertia-ratio limit of every motor
-    (``--inertia-ratio``; default: the catalogue's, else 10).
+    (``--inertia-ratio``; default: the catalogue's, else 10). ``ratio``
+    (``--ratio lead=2,5,10 [mm]``, with ``motors``) adds how the smallest
+    qualifying motor changes with the transmission ratio
+    (:mod:`bondc.analysis.ratio`), its values run on ``jobs`` processes.
     ``t_end`` [s] overrides the experiment's end time, ``date`` the date in
     the header (ISO, default today).
 
@@ -183,16 +186,24 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     is simulated; a model error raises its stage's error. Either way nothing
     is written and an earlier report stays as it was.
     """
-    target, _, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
+    target, _, _, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
                           motors=motors, output=output, t_end=t_end, date=date, progress=progress,
-                          inertia_ratio=inertia_ratio)
+                          inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     return target
 
 
 def _build(path, *, model, experiment, sets, data, compare, motors, output, t_end, date,
-           progress, inertia_ratio=None) -> tuple[Path, PipelineRun, list[SignalResult]]:
+           progress, inertia_ratio=None, ratio=None,
+           jobs=1) -> tuple[Path, PipelineRun, list[SignalResult], Any]:
+    from bondc.analysis.ratio import check_ratio, ratio_study
+
+    check_ratio(ratio, motors)
     specs, measured = _measured(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
+    study = None
+    if ratio is not None and run.result is not None:
+        study = ratio_study(path, ratio, motors=motors, model=model, experiment=experiment, sets=sets,
+                            t_end=t_end, inertia_ratio=inertia_ratio, jobs=jobs, progress=progress)
     target = Path(output) if output is not None else default_output(path, run)
     results: list[SignalResult] = []
     try:
@@ -201,11 +212,11 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
             results = compare_run(run, measured, specs)
             validation = validation_section(run, results, data)
         write_report(report_context(run, validation=validation, motors=motors, date=date,
-                                    inertia_ratio=inertia_ratio), target)
+                                    inertia_ratio=inertia_ratio, ratio=study), target)
     except KeyboardInterrupt as interrupt:
         _keep_simulation(run, target, interrupt)
         raise
-    return target, run, results
+    return target, run, results, study
 
 
 def _keep_simulation(run: PipelineRun, target: Path, interrupt: KeyboardInterrupt) -> None:
@@ -231,7 +242,8 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
                sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
                date: str | None = None, progress: bool = False,
-               errors: TextIO | None = None, inertia_ratio: float | None = None) -> tuple[Path, int]:
+               errors: TextIO | None = None, inertia_ratio: float | None = None,
+               ratio: str | None = None, jobs: int = 1) -> tuple[Path, int]:
     """``bondc report`` for the command line: :func:`build_report`, then tell the user; returns (path, exit code).
 
     Prints the run's warnings (and an incomplete simulation's diagnostic)
@@ -243,7 +255,7 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
     errors = errors if errors is not None else sys.stderr
     summary = report_summary(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
                              motors=motors, output=output, t_end=t_end, date=date, progress=progress,
-                             errors=errors, inertia_ratio=inertia_ratio)
+                             errors=errors, inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     print(report_text(summary), file=errors)
     return Path(summary["written"][0]), summary["exit_status"]
 
@@ -252,7 +264,8 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
                    sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                    motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
                    date: str | None = None, progress: bool = False,
-                   errors: TextIO | None = None, inertia_ratio: float | None = None) -> dict:
+                   errors: TextIO | None = None, inertia_ratio: float | None = None,
+                   ratio: str | None = None, jobs: int = 1) -> dict:
     """:func:`run_report` without its last line: builds and writes the report, prints the run's
     warnings to ``errors``, and returns what ``bondc report --json`` prints: ``complete`` (the
     simulation ran to its end), ``written`` (the report's path), ``signals`` (with ``--data``: each
@@ -261,9 +274,9 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
     errors = errors if errors is not None else sys.stderr
     if output is not None:
         check_output(output, "the report", make_folder=True)
-    target, run, results = _build(path, model=model, experiment=experiment, sets=sets, data=data,
+    target, run, results, study = _build(path, model=model, experiment=experiment, sets=sets, data=data,
                                   compare=compare, motors=motors, output=output, t_end=t_end, date=date,
-                                  progress=progress, inertia_ratio=inertia_ratio)
+                                  progress=progress, inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     diagnostics = _print_diagnostics(run, errors)
     failing = [result.name for result in results if not result.passed]
     interrupted = getattr(run.result, "exit_status", None) if run.result is not None else None
@@ -272,13 +285,16 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
             "written": [str(target)],
             "signals": [signal_json(result, _signal_unit(run.graph, result.output)[0]) for result in results],
             "failing": failing, "diagnostics": [d.to_json() for d in diagnostics],
+            **({"ratio": study.to_json()} if study is not None else {}),
             "exit_status": interrupted or (0 if run.complete and not failing else 1)}
 
 
 def report_text(summary: Mapping) -> str:
     """``bondc report``'s line: ``wrote PATH``, and whether the run or a comparison failed."""
     failing = summary["failing"]
-    return (f"wrote {summary['written'][0]}" + ("" if summary["complete"] else " (incomplete simulation)")
+    ratio = summary.get("ratio")
+    return ((ratio["sentence"] + "\n" if ratio else "")
+            + f"wrote {summary['written'][0]}" + ("" if summary["complete"] else " (incomplete simulation)")
             + (f"; validation failed: {', '.join(failing)}" if failing else ""))
 
 
@@ -576,7 +592,7 @@ def _diagram(graph, causal):
 
 def report_context(run: PipelineRun, *, validation: ValidationSection | None = None,
                    motors: str | Path | None = None, date: str | None = None,
-                   inertia_ratio: float | None = None) -> ReportContext:
+                   inertia_ratio: float | None = None, ratio=None) -> ReportContext:
     """Everything the report of ``run`` shows (see the module docstring)."""
     graph, result = run.graph, run.result
     equations, laws, state_table = state_equations(run.state_space)
@@ -624,6 +640,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         summary=summary,
         verdict=verdict,
         answer=answer,
+        ratio=ratio,
     )
 
 

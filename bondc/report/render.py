@@ -278,6 +278,7 @@ class ReportContext:
     laws: Sequence[Equation] = ()               # "where": the laws the state equations name
     result_tables: Sequence[Table] = ()         # e.g. statistics of the outputs
     power_plots: Sequence[Plot] = ()            # power of the elements against time
+    ratio: Any = None                           # --ratio: a bondc.analysis.ratio.RatioStudy, after the answer
 
     def __post_init__(self) -> None:
         # Trusted HTML must come from bondc's own producers, which return Markup; a
@@ -346,6 +347,17 @@ def format_unit(text: str | None) -> Markup:
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+#: The start of a standalone page's template (the sweep's and the fit's reports): its doctype, the
+#: Content-Security-Policy ``csp`` and the viewport; the template goes on with its title and style.
+PAGE_HEAD = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+"""
 
 
 @functools.lru_cache(maxsize=1)
