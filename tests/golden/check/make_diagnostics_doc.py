@@ -241,7 +241,7 @@ d("W704", "initial value ignored",
   "Remove the initial value, or give it to the element that is in integral causality (for two geared "
   "inertias, the motor's momentum sets the load's).")
 
-# -- simulation (bondc/simulate.py, bondc/runtime.py)
+# -- simulation (bondc/simulate.py, bondc/runtime/)
 
 d("E801", "no end time",
   "`bondc simulate` (and `report`, `validate`, `sweep`) needs an end time: `--t-end`, or `t_end` in the "
@@ -1198,7 +1198,7 @@ STAGES = (  # (title, modules), in the order of the page
     ("Element laws and states", "`bondc/semantic.py`"),
     ("Causality", "`bondc/causality.py`, `bondc/equations.py`"),
     ("Equations", "`bondc/equations.py`, `bondc/symbolic.py`"),
-    ("Simulation", "`bondc/simulate.py`, `bondc/runtime.py`"),
+    ("Simulation", "`bondc/simulate.py`, `bondc/runtime/`"),
     ("Analyses and data files", "`bondc/analysis/`"),
     ("Validation against measured data", "`bondc/report/validate.py`"),
     ("Calibration", "`bondc/analysis/fit.py`, `bondc/analysis/fit_write.py`"),
