@@ -196,7 +196,7 @@ def test_module_imports_only_numpy_scipy_sundials_and_the_standard_library():
                           for a in node.names}
     standard = {"math", "os", "stat", "sys", "time", "argparse", "warnings", "csv", "importlib", "hashlib", "glob",
                 "shutil", "subprocess", "tempfile", "atexit", "ast", "functools", "collections", "shlex", "json",
-                "dataclasses"}
+                "dataclasses", "weakref"}
     optional = {"sksundae", "cffi", "platformdirs", "boost_headers"}
     assert imported <= {"numpy", "scipy"} | standard | optional
     # SUNDIALS, cffi (native code), platformdirs (where native code is cached) and the Boost headers

@@ -278,37 +278,46 @@ static int driver_last_step(bondc_driver *d, double *h)
     return CVodeGetLastStep(d->cvode, h);
 }
 
+/* The Jacobian's entries (the pattern's order) at (t, y) into d->values, as the segment integrates:
+   the frozen modes' law, a sliding mode's corners weighted as their right-hand sides, or the unfrozen
+   law's modes found again: 0, -1 (d->bad = 2) where a weight or an entry is not finite */
+static int driver_jac_values(bondc_driver *d, double t, const double *y)
+{
+    if (!isfinite(t)) { d->bad = 2; return -1; }
+    if (d->slide >= 0) {        /* the corners' Jacobians, weighted as their right-hand sides */
+        double w = clip01(slide_alpha(d, t, y));
+        if (w != w) { d->bad = 2; return -1; }
+        for (int k = 0; k < d->entries; k++) d->values[k] = 0.0;
+        if (1 - w != 0) {
+            bondc_jac(t, y, d->p, d->mm, d->extra);
+            for (int k = 0; k < d->entries; k++) d->values[k] += (1 - w) * d->extra[k];
+        }
+        if (w != 0) {
+            bondc_jac(t, y, d->p, d->mp, d->extra);
+            for (int k = 0; k < d->entries; k++) d->values[k] += w * d->extra[k];
+        }
+    } else if (d->held > 1) {
+        if (many_alphas(d, t, y) != 0) { d->bad = 2; return -1; }
+        for (int k = 0; k < d->entries; k++) d->values[k] = 0.0;
+        for (int c = 0; c < d->corners; c++) {
+            if (d->weights[c] == 0) continue;
+            bondc_jac(t, y, d->p, d->cm + (long)c * d->switches, d->extra);
+            for (int k = 0; k < d->entries; k++) d->values[k] += d->weights[c] * d->extra[k];
+        }
+    } else {
+        if (d->unfrozen) driver_modes_at(d, t, y, d->m, d->floors, d->m);
+        bondc_jac(t, y, d->p, d->m, d->values);
+    }
+    if (!driver_finite(d->values, d->entries)) { d->bad = 2; return -1; }
+    return 0;
+}
+
 static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, void *data,
                       N_Vector t1, N_Vector t2, N_Vector t3)
 {
     bondc_driver *d = (bondc_driver *)data;
     (void)fy; (void)t1; (void)t2; (void)t3;
-    if (!isfinite(t)) { d->bad = 2; return -1; }
-    if (d->slide >= 0) {        /* the corners' Jacobians, weighted as their right-hand sides */
-        double w = clip01(slide_alpha(d, t, N_VGetArrayPointer(y)));
-        if (w != w) { d->bad = 2; return -1; }
-        for (int k = 0; k < d->entries; k++) d->values[k] = 0.0;
-        if (1 - w != 0) {
-            bondc_jac(t, N_VGetArrayPointer(y), d->p, d->mm, d->extra);
-            for (int k = 0; k < d->entries; k++) d->values[k] += (1 - w) * d->extra[k];
-        }
-        if (w != 0) {
-            bondc_jac(t, N_VGetArrayPointer(y), d->p, d->mp, d->extra);
-            for (int k = 0; k < d->entries; k++) d->values[k] += w * d->extra[k];
-        }
-    } else if (d->held > 1) {
-        if (many_alphas(d, t, N_VGetArrayPointer(y)) != 0) { d->bad = 2; return -1; }
-        for (int k = 0; k < d->entries; k++) d->values[k] = 0.0;
-        for (int c = 0; c < d->corners; c++) {
-            if (d->weights[c] == 0) continue;
-            bondc_jac(t, N_VGetArrayPointer(y), d->p, d->cm + (long)c * d->switches, d->extra);
-            for (int k = 0; k < d->entries; k++) d->values[k] += d->weights[c] * d->extra[k];
-        }
-    } else {
-        if (d->unfrozen) driver_modes_at(d, t, N_VGetArrayPointer(y), d->m, d->floors, d->m);
-        bondc_jac(t, N_VGetArrayPointer(y), d->p, d->m, d->values);
-    }
-    if (!driver_finite(d->values, d->entries)) { d->bad = 2; return -1; }
+    if (driver_jac_values(d, t, N_VGetArrayPointer(y)) != 0) return -1;
     SUNMatZero(jac);
     for (int k = 0; k < d->entries; k++) {
         if (d->banded)
@@ -316,6 +325,22 @@ static int driver_jac(sunrealtype t, N_Vector y, N_Vector fy, SUNMatrix jac, voi
         else
             SUNDenseMatrix_Column(jac, d->cols[k])[d->rows[k]] = d->values[k];
     }
+    return 0;
+}
+
+/* Whether the segment integrates a sliding mode (whose weights change with the state: the corners'
+   Jacobians weighted leave that out, and an implicit solver's Newton iteration can fail on them) */
+int bondc_driver_sliding(bondc_driver *d)
+{
+    return d->slide >= 0 || d->held > 1;
+}
+
+/* The Jacobian's entries (the pattern's order) at (t, y) into out, as the segment integrates: for
+   a stepper that is not CVODE (scipy's implicit solvers, bondc.runtime.steppers): 0, or -1 */
+int bondc_driver_jac_entries(bondc_driver *d, double t, const double *y, double *out)
+{
+    if (driver_jac_values(d, t, y) != 0) return -1;
+    for (int k = 0; k < d->entries; k++) out[k] = d->values[k];
     return 0;
 }
 

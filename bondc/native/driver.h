@@ -10,6 +10,8 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
                          const double *t_eval, int n_eval, int *eval_next, int eval_capacity, double *et,
                          double *ey, int *eval_count);
 int bondc_driver_dky(bondc_driver *d, double t, int k, double *out);
+int bondc_driver_jac_entries(bondc_driver *d, double t, const double *y, double *out);
+int bondc_driver_sliding(bondc_driver *d);
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out);
 double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,

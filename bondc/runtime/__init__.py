@@ -19,6 +19,9 @@ The modules, one job each, in the order each imports only earlier ones (``MODULE
   fallback), the SUNDIALS link, the build cache, :func:`attach_native`.
 - ``solvers``: CVODE, IDA, DOPRI5, scipy's methods (:func:`solver_class`), finite-difference
   Jacobians, and the run's choice of solver (``_SolverChoice``).
+- ``steppers``: scipy's solvers (``Radau``, ``BDF``, ``LSODA``, ``RK45``, ...) as steppers of the C
+  driver (the table of ``bondc/native/erk_api.h`` filled with callbacks), so that a run with any of
+  them takes its crossings, sliding modes and restarts from the driver's C functions.
 - ``driver``: bondc's C driver of CVODE (:class:`_NativeDriver`) and the segments a run integrates
   with it (``_DriverSegments``).
 - ``events``: the known switching times and the roots of switches of time (``_KnownTimes``),
@@ -91,6 +94,10 @@ from bondc.runtime.solvers import (  # noqa: F401
     _UNFROZEN_STEPS, _all_finite, _creeping, _may_dip, difference_jacobian, solver_class, stiff_solver,
     sundials_available
 )
+from bondc.runtime.steppers import (  # noqa: F401
+    _DENSE_UP_TO, _RatesFailed, _STEPPER_DRIVERS, _STEPPER_TABLES, _StepperRun, _StepperTable, _TAKE_JACOBIAN,
+    _driver_jacobian, register_stepper_driver, stepper_table
+)
 from bondc.runtime.driver import (  # noqa: F401
     _DriverSegments, _DriverStep, _NativeDriver, _Piece
 )
@@ -107,4 +114,4 @@ from bondc.runtime.run import (  # noqa: F401
 
 
 #: The modules in the order a standalone module carries them (each imports only earlier ones).
-MODULES = ('kernels', 'signals', 'loops', 'adapter', 'results', 'native', 'solvers', 'driver', 'events', 'sliding', 'run')
+MODULES = ('kernels', 'signals', 'loops', 'adapter', 'results', 'native', 'solvers', 'steppers', 'driver', 'events', 'sliding', 'run')

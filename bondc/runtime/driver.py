@@ -11,7 +11,8 @@ from bondc.runtime.kernels import _EPS
 from bondc.runtime.adapter import pattern_arrays
 from bondc.runtime.results import DIVERGED, _Stop
 from bondc.runtime.native import compiler_label, load_erk
-from bondc.runtime.solvers import CvodeSolver, DOPRI5, _CREEP, _CREEP_STEPS, _UNFROZEN_STEPS
+from bondc.runtime.solvers import CvodeSolver, DOPRI5, IDA, _CREEP, _CREEP_STEPS, _UNFROZEN_STEPS
+from bondc.runtime.steppers import register_stepper_driver, stepper_table
 
 
 class _NativeDriver:
@@ -30,6 +31,7 @@ class _NativeDriver:
         self.ts = np.empty(self.capacity)
         self.ys = np.empty((self.capacity, n))
         self.count = ffi.new("int *")
+        self.entries = 0                # the Jacobian's entries (JACOBIAN_PATTERN)
         self.modes = np.zeros(0)
         self.linear_solver = keep["solver"]
 
@@ -65,7 +67,20 @@ class _NativeDriver:
         handle = ffi.gc(handle, lib.bondc_driver_free)
         if explicit and lib.bondc_driver_explicit(handle, ffi.cast("void *", explicit)) != 0:
             return None
-        return cls(ffi, lib, handle, n, keep)
+        driver = cls(ffi, lib, handle, n, keep)
+        driver.entries = len(pattern)
+        if explicit:
+            register_stepper_driver(int(ffi.cast("uintptr_t", handle)), driver)
+        return driver
+
+    def jacobian_entries(self, t, y):
+        """The Jacobian's entries (JACOBIAN_PATTERN's order) at (t, y) as the segment integrates
+        (frozen modes, or the sliding combination's weighted corners); None where not finite."""
+        out = np.empty(max(self.entries, 1))
+        y = np.ascontiguousarray(y, dtype=float)
+        flag = self.lib.bondc_driver_jac_entries(self.handle, float(t), self.ffi.from_buffer("double[]", y),
+                                                 self.ffi.from_buffer("double[]", out))
+        return out[:self.entries] if flag == 0 else None
 
     def start(self, t, y, modes, t_stop, rtol, atol, max_step, first_step) -> bool:
         self.modes = np.array(modes, dtype=float)
@@ -304,8 +319,9 @@ class _DriverSegments:
     def driver_for(self, index, signs):
         """The native driver for a segment watching ``index`` in modes ``signs``, or None.
 
-        It serves CVODE and DOPRI5 runs of models whose C code carries the driver (DOPRI5 where
-        bondc's explicit stepper is built, :func:`load_erk`), when every watched switch is a sign
+        It serves CVODE, DOPRI5 and scipy's solvers for models whose C code carries the driver
+        (DOPRI5 where bondc's explicit stepper is built, :func:`load_erk`; scipy's solvers through
+        :func:`stepper_table`), when every watched switch is a sign
         switch (floor switches keep the step-by-step loop); a run reported at ``t_eval`` takes its
         report points from the driver's interpolant of each step (:meth:`record_reported`). It also
         serves sliding modes (:meth:`driver_sliding`)."""
@@ -328,6 +344,10 @@ class _DriverSegments:
                     driver.capacity = min(driver.capacity, self.STIFFNESS_CHECK)
             elif issubclass(self.method, CvodeSolver):
                 driver = _NativeDriver.create(self.model, library, self.p, self.method.variant == "Adams")
+            elif self.method is not IDA:
+                # one of scipy's solvers, stepping the driver's right-hand side through callbacks
+                driver = _NativeDriver.create(self.model, library, self.p, False,
+                                              explicit=stepper_table(self.method))
             else:
                 return None
             if driver is None:
