@@ -22,7 +22,7 @@ from pathlib import Path
 import sympy
 
 from bondc import __version__
-from bondc.errors import Diagnostic, UsageError
+from bondc.errors import BondcError, Diagnostic
 from bondc.source import NO_SPAN
 
 #: The C functions of an exported model (each ``void f(double t, const double *x, const double *p,
@@ -114,7 +114,6 @@ def si_unit(text: str | None, display_factor: float = 1.0) -> Unit | None:
     """The :class:`Unit` of a unit as the model writes it (``kPa``, ``kg*m/s``), or None."""
     if not text:
         return None
-    from bondc.errors import BondcError
     from bondc.parse import parse_set_value
     from bondc.units import resolve
 
@@ -132,8 +131,10 @@ def si_unit(text: str | None, display_factor: float = 1.0) -> Unit | None:
     return Unit(si, dims, display)
 
 
-class ExportError(UsageError):
+class ExportError(BondcError):
     """A model bondc cannot export as asked (E840-E859)."""
+
+    stage = "export"
 
 
 def export_error(code: str, message: str, span=NO_SPAN, hint: str | None = None) -> ExportError:

@@ -433,6 +433,9 @@ def build_fmu(derived, output, *, fmi: int = 2, kind: str = "cs") -> BuiltFmu:
     from bondc.io import atomic_write
 
     graph, ss, experiment = derived.graph, derived.state_space, derived.experiment
+    if fmi == 3 and kind == "me":
+        raise export_error("E845", "bondc makes FMI 3.0 FMUs for Co-Simulation only",
+                           hint="use --fmi 2 --kind me for Model Exchange, or --fmi 3 --kind cs")
     model = c_model(ss, experiment, header_name="bondc_model.h")
     check_exportable(model, graph, kind)
     link = _sundials()
