@@ -107,7 +107,7 @@ def sliding_switches(plan) -> list:
 
 def check_exportable(model: CModel, graph, kind: str) -> None:
     """The errors that stop an FMU before any build: a switch that may slide (E841), when
-    clauses without C code (E842)."""
+    clauses without C code (E840)."""
     plan = model.plan
     sliding = sliding_switches(plan)
     if sliding:
@@ -130,7 +130,7 @@ def check_exportable(model: CModel, graph, kind: str) -> None:
         for when in getattr(graph, "whens", ()):
             span = when.span
             break
-        raise export_error("E842", "cannot export as an FMU: a when clause of the model has no C form",
+        raise export_error("E840", "cannot export as an FMU: a when clause of the model has no C form",
                            span, hint="write the when clause's condition and statements with arithmetic and "
                                       "the built-in functions")
 
