@@ -23,6 +23,7 @@ import sympy
 
 from bondc import __version__
 from bondc.errors import BondcError, Diagnostic
+from bondc.codegen.cprinter import c_double
 from bondc.source import NO_SPAN
 
 #: The C functions of an exported model (each ``void f(double t, const double *x, const double *p,
@@ -100,16 +101,6 @@ def c_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
-def c_double(value: float) -> str:
-    value = float(value)
-    if value != value:
-        return "NAN"
-    if value in (float("inf"), float("-inf")):
-        return "INFINITY" if value > 0 else "(-INFINITY)"
-    text = repr(value)
-    return text if any(c in text for c in ".en") else text + ".0"
-
-
 def si_unit(text: str | None, display_factor: float = 1.0) -> Unit | None:
     """The :class:`Unit` of a unit as the model writes it (``kPa``, ``kg*m/s``), or None."""
     if not text:
@@ -118,9 +109,12 @@ def si_unit(text: str | None, display_factor: float = 1.0) -> Unit | None:
     from bondc.units import resolve
 
     try:
-        resolved, problems = resolve(parse_set_value(f"x=1 [{text}]").unit)
+        unit = parse_set_value(f"x=1 [{text}]").unit
     except BondcError:
         return None
+    if unit is None:
+        return None
+    resolved, problems = resolve(unit)
     if resolved is None or problems:
         return None
     dims = tuple(int(d) for d in resolved.dims) if all(d.denominator == 1 for d in resolved.dims) else None
@@ -209,7 +203,6 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
     header_name = header_name or f"{model_name}.h"
     plan, emitter, native, external = _emitters(ss, source_name)
     pattern = sorted(plan.jacobian_entries, key=lambda key: (key[1], key[0]))
-    n = len(plan.states)
     try:
         functions = [
             native.c_function("bondc_rhs", plan.statements, plan.derivatives),
@@ -300,7 +293,6 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
              f'#include "{header_name}"\n' + prelude.rstrip("\n"), tables]
     parts += functions + when_parts + ["\n".join(x0_lines + ["}"]), "\n".join(derive_lines + ["}"])]
     model.c_text = "\n\n".join(part.rstrip("\n") for part in parts) + "\n"
-    del n
     return model
 
 
@@ -314,7 +306,7 @@ def _quantities(name, quantities):
     rows = []
     for q in quantities:
         unit = q.unit.si if q.unit is not None else ""
-        rows.append(f"    {{{c_string(q.name)}, {c_string(unit)}, {c_string(q.description)}, {c_double(q.value)}}},")
+        rows.append(f"    {{{c_string(q.name)}, {c_string(unit)}, {c_string(q.description)}, {c_double(float(q.value))}}},")
     if not rows:
         rows = ['    {"", "", "", 0.0},']
     return "\n".join([f"const bondc_quantity {name}[{max(len(quantities), 1)}] = {{"] + rows + ["};"])
@@ -340,7 +332,7 @@ def _tables(model: CModel) -> str:
         _array("int", "bondc_when_target_start", [str(v) for v in starts]),
         _array("int", "bondc_when_targets", [str(v) for v in targets]),
         "const double bondc_experiment[4] = {" + ", ".join(
-            c_double(experiment.get(key, default)) for key, default in
+            c_double(float(experiment.get(key, default))) for key, default in
             (("t_end", 1.0), ("rtol", 1e-6), ("atol", 1e-8), ("max_step", 0.0))) + "};",
     ]
     return "\n".join(lines)

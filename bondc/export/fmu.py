@@ -31,7 +31,7 @@ import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from xml.sax.saxutils import escape, quoteattr
+from xml.sax.saxutils import quoteattr
 
 from bondc import __version__
 from bondc.errors import Diagnostic, Related
@@ -167,7 +167,7 @@ def _units(model: CModel) -> list:
     return [(name, dims, sorted(displays.items())) for name, (dims, displays) in sorted(units.items())]
 
 
-def _unit_definitions(model: CModel, fmi: int) -> list:
+def _unit_definitions(model: CModel) -> list:
     lines = ["  <UnitDefinitions>"]
     for name, dims, displays in _units(model):
         lines.append(f"    <Unit name={_attr(name)}>")
@@ -179,6 +179,14 @@ def _unit_definitions(model: CModel, fmi: int) -> list:
         lines.append("    </Unit>")
     lines.append("  </UnitDefinitions>")
     return lines if len(lines) > 2 else []
+
+
+def _default_experiment(model: CModel) -> str:
+    """The experiment's t_end and rtol as the FMU's default experiment."""
+    default = ['startTime="0.0"', f'stopTime="{_number(model.experiment.get("t_end", 1.0))}"']
+    if "rtol" in model.experiment:
+        default.append(f'tolerance="{_number(model.experiment["rtol"])}"')
+    return f"  <DefaultExperiment {' '.join(default)}/>"
 
 
 def _variables(model: CModel):
@@ -213,7 +221,6 @@ def model_description(model: CModel, guid: str, fmi: int, kind: str) -> str:
     if fmi == 3:
         return _model_description3(model, guid, kind)
     rows = _variables(model)
-    experiment = model.experiment
     description = f"{model.name}, exported by bondc {__version__} from {model.source_file}"
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<fmiModelDescription fmiVersion="2.0" modelName={_attr(model.name)} guid={_attr(guid)}',
@@ -224,11 +231,8 @@ def model_description(model: CModel, guid: str, fmi: int, kind: str) -> str:
     else:
         lines.append(f"  <CoSimulation modelIdentifier={_attr(model.name)} "
                      'canHandleVariableCommunicationStepSize="true" canNotUseMemoryManagementFunctions="true"/>')
-    lines += _unit_definitions(model, 2)
-    default = ['startTime="0.0"', f'stopTime="{_number(experiment.get("t_end", 1.0))}"']
-    if "rtol" in experiment:
-        default.append(f'tolerance="{_number(experiment["rtol"])}"')
-    lines.append(f"  <DefaultExperiment {' '.join(default)}/>")
+    lines += _unit_definitions(model)
+    lines.append(_default_experiment(model))
     lines.append("  <ModelVariables>")
     index = {}
     for vr, kind_, q, i in rows:
@@ -281,7 +285,6 @@ def model_description(model: CModel, guid: str, fmi: int, kind: str) -> str:
 
 def _model_description3(model: CModel, guid: str, kind: str) -> str:
     rows = _variables(model)
-    experiment = model.experiment
     description = f"{model.name}, exported by bondc {__version__} from {model.source_file}"
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              f'<fmiModelDescription fmiVersion="3.0" modelName={_attr(model.name)} instantiationToken={_attr(guid)}',
@@ -292,11 +295,8 @@ def _model_description3(model: CModel, guid: str, kind: str) -> str:
     else:
         lines.append(f"  <CoSimulation modelIdentifier={_attr(model.name)} "
                      'canHandleVariableCommunicationStepSize="true" hasEventMode="false"/>')
-    lines += _unit_definitions(model, 3)
-    default = ['startTime="0.0"', f'stopTime="{_number(experiment.get("t_end", 1.0))}"']
-    if "rtol" in experiment:
-        default.append(f'tolerance="{_number(experiment["rtol"])}"')
-    lines.append(f"  <DefaultExperiment {' '.join(default)}/>")
+    lines += _unit_definitions(model)
+    lines.append(_default_experiment(model))
     lines.append("  <ModelVariables>")
     lines.append('    <Float64 name="time" valueReference="0" causality="independent" variability="continuous" '
                  'description="the time"/>')
@@ -454,7 +454,10 @@ def build_fmu(derived, output, *, fmi: int = 2, kind: str = "cs") -> BuiltFmu:
         entries += [(name, text.encode("utf-8"), False) for name, text in _licence_texts()]
     data = _zip(entries)
     output = Path(output)
-    atomic_write(output, lambda stream: stream.write(data))
+    def write(stream) -> None:
+        stream.write(data)
+
+    atomic_write(output, write)
     return BuiltFmu(output, model, guid, fmi, kind, len(data))
 
 
@@ -462,4 +465,4 @@ def default_output(path, model_name: str) -> Path:
     return Path(path).with_name(f"{re.sub(r'[^A-Za-z0-9_]', '_', model_name)}.fmu")
 
 
-__all__ = ["build_fmu", "model_description", "sliding_switches", "check_exportable", "guid_of", "escape"]
+__all__ = ["build_fmu", "model_description", "sliding_switches", "check_exportable", "guid_of"]
