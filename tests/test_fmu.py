@@ -40,6 +40,8 @@ BUILDS = {
     "rlc_me": (MODELS / "series_rlc.bg", ["--kind", "me"]),
     "msd_fmi3": (MODELS / "mass_spring_damper.bg", ["--fmi", "3"]),
     "motor_fmi3": (MODELS / "dc_motor_gear.bg", ["--fmi", "3"]),
+    "msd_me_fmi3": (MODELS / "mass_spring_damper.bg", ["--fmi", "3", "--kind", "me"]),
+    "ball_me_fmi3": (ENGINE / "bouncing_ball.bg", ["--fmi", "3", "--kind", "me"]),
     "ball": (ENGINE / "bouncing_ball.bg", []),
     "ball_me": (ENGINE / "bouncing_ball.bg", ["--kind", "me"]),
     "thermostat": (ENGINE / "thermostat.bg", []),
@@ -117,7 +119,9 @@ def test_a_parameter_change_changes_the_answer(fmus):
 
 
 @pytest.mark.parametrize("name, model", [("msd_me", "mass_spring_damper.bg"), ("rlc_me", "series_rlc.bg"),
-                                         ("ball_me", ENGINE / "bouncing_ball.bg")])
+                                         ("ball_me", ENGINE / "bouncing_ball.bg"),
+                                         ("msd_me_fmi3", "mass_spring_damper.bg"),
+                                         ("ball_me_fmi3", ENGINE / "bouncing_ball.bg")])
 def test_model_exchange_matches_bondc_simulate(fmus, name, model):
     """FMPy integrates the Model Exchange FMU (its CVODE, the switches as event indicators, the
     bouncing ball's impacts as when clauses that change the state at an event)."""

@@ -327,10 +327,17 @@ def _model_description3(model: CModel, guid: str, kind: str) -> str:
             attributes = 'causality="output" variability="continuous" initial="calculated"'
         lines.append(f'    <Float64 name={_attr(name)} valueReference="{vr}" description={_attr(desc)} '
                      f"{attributes}{unit}/>")
+    if kind == "me":        # the event indicators: the located switches' switching functions
+        for j, k in enumerate(k for k, located in enumerate(model.located) if located):
+            lines.append(f'    <Float64 name="switch[{j + 1}]" valueReference="{len(rows) + 1 + j}" '
+                         f"description={_attr('switching function of ' + model.switch_labels[k])} "
+                         'causality="local" variability="continuous" initial="calculated"/>')
     lines.append("  </ModelVariables>")
     lines.append("  <ModelStructure>")
     for i in range(len(model.outputs)):
         lines.append(f'    <Output valueReference="{vrs[("output", i)]}"/>')
+    indicators = [k for k, located in enumerate(model.located) if located] if kind == "me" else []
+    first_indicator = len(rows) + 1
     for i in range(len(model.states)):
         lines.append(f'    <ContinuousStateDerivative valueReference="{vrs[("derivative", i)]}"/>')
     initial = sorted([vrs[("output", i)] for i in range(len(model.outputs))]
@@ -339,6 +346,8 @@ def _model_description3(model: CModel, guid: str, kind: str) -> str:
                      + [vrs[("parameter", i)] for i, q in enumerate(model.parameters) if q.derived])
     for vr in initial:
         lines.append(f'    <InitialUnknown valueReference="{vr}"/>')
+    for j in range(len(indicators)):
+        lines.append(f'    <EventIndicator valueReference="{first_indicator + j}"/>')
     lines += ["  </ModelStructure>", "</fmiModelDescription>", ""]
     return "\n".join(lines)
 
@@ -433,9 +442,6 @@ def build_fmu(derived, output, *, fmi: int = 2, kind: str = "cs") -> BuiltFmu:
     from bondc.io import atomic_write
 
     graph, ss, experiment = derived.graph, derived.state_space, derived.experiment
-    if fmi == 3 and kind == "me":
-        raise export_error("E845", "bondc makes FMI 3.0 FMUs for Co-Simulation only",
-                           hint="use --fmi 2 --kind me for Model Exchange, or --fmi 3 --kind cs")
     model = c_model(ss, experiment, header_name="bondc_model.h")
     check_exportable(model, graph, kind)
     link = _sundials()

@@ -1,8 +1,9 @@
-/* bondc's FMI 3.0 Co-Simulation wrapper around its engine (engine.c).
+/* bondc's FMI 3.0 wrapper (Co-Simulation and Model Exchange) around its engine (engine.c).
 
    Value references (modelDescription.xml, written by bondc.export.fmu, lists the same): 0 is the
    time; vr - 1 is laid out as in fmi2.c: the parameters, the external inputs, the states, their
-   derivatives, the outputs. Every variable is a Float64. Model Exchange is FMI 2.0's (fmi2.c). */
+   derivatives, the outputs, then (Model Exchange) the event indicators. Every variable is a
+   Float64. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,8 +22,8 @@ typedef struct {
     bondc_fmu *engine;
     fmi3InstanceEnvironment environment;
     fmi3LogMessageCallback log;
-    int logging, initialized;
-    double *buffer;     /* the derivatives, then the outputs */
+    int logging, initialized, model_exchange, states_set;
+    double *buffer;     /* the derivatives, the outputs, the event indicators */
 } instance;
 
 static fmi3Status failed(instance *c)
@@ -45,15 +46,46 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance i, fmi3Boolean loggingOn, size_t n, 
     return fmi3OK;
 }
 
+static instance *new_instance(fmi3InstanceEnvironment environment, fmi3LogMessageCallback log, int logging)
+{
+    instance *c = (instance *)calloc(1, sizeof(instance));
+    if (!c) return NULL;
+    c->buffer = (double *)calloc(BONDC_N_STATES + BONDC_N_OUTPUTS + BONDC_N_SWITCHES + 1, sizeof(double));
+    c->engine = bondc_fmu_new();
+    if (!c->buffer || !c->engine) {
+        free(c->buffer); bondc_fmu_free(c->engine); free(c);
+        return NULL;
+    }
+    c->environment = environment;
+    c->log = log;
+    c->logging = logging;
+    return c;
+}
+
+static int token_is_ours(fmi3String token, fmi3InstanceEnvironment environment, fmi3LogMessageCallback log)
+{
+    if (token && strcmp(token, BONDC_FMU_GUID) == 0) return 1;
+    if (log) log(environment, fmi3Error, "logStatusError", "the instantiation token is not this FMU's");
+    return 0;
+}
+
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage)
 {
-    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
+    (void)instanceName; (void)resourcePath; (void)visible;
+#ifdef BONDC_FMU_ME
+    if (!token_is_ours(instantiationToken, instanceEnvironment, logMessage)) return NULL;
+    instance *c = new_instance(instanceEnvironment, logMessage, loggingOn);
+    if (c) c->model_exchange = 1;
+    return c;
+#else
+    (void)instantiationToken; (void)loggingOn;
     if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                               "this FMU is for Co-Simulation only (bondc's Model Exchange FMUs are FMI 2.0)");
+                               "this FMU was built for Co-Simulation only (bondc fmu --kind)");
     return NULL;
+#endif
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -67,28 +99,20 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
 {
     (void)instanceName; (void)resourcePath; (void)visible; (void)earlyReturnAllowed;
     (void)requiredIntermediateVariables; (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
-    if (!instantiationToken || strcmp(instantiationToken, BONDC_FMU_GUID) != 0) {
-        if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
-                                   "the instantiation token is not this FMU's");
-        return NULL;
-    }
+#ifdef BONDC_FMU_ME
+    (void)instantiationToken; (void)loggingOn; (void)eventModeUsed;
+    if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
+                               "this FMU was built for Model Exchange only (bondc fmu --kind)");
+    return NULL;
+#else
+    if (!token_is_ours(instantiationToken, instanceEnvironment, logMessage)) return NULL;
     if (eventModeUsed) {
         if (logMessage) logMessage(instanceEnvironment, fmi3Error, "logStatusError",
                                    "this FMU has no event mode (hasEventMode is false)");
         return NULL;
     }
-    instance *c = (instance *)calloc(1, sizeof(instance));
-    if (!c) return NULL;
-    c->buffer = (double *)calloc(BONDC_N_STATES + BONDC_N_OUTPUTS + 1, sizeof(double));
-    c->engine = bondc_fmu_new();
-    if (!c->buffer || !c->engine) {
-        free(c->buffer); bondc_fmu_free(c->engine); free(c);
-        return NULL;
-    }
-    c->environment = instanceEnvironment;
-    c->log = logMessage;
-    c->logging = loggingOn;
-    return c;
+    return new_instance(instanceEnvironment, logMessage, loggingOn);
+#endif
 }
 
 fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
@@ -127,13 +151,13 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance i)
 {
     instance *c = (instance *)i;
     int changed;
-    bondc_fmu_parameters_changed(c->engine, 1);
+    bondc_fmu_parameters_changed(c->engine, !c->states_set);
     if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
     c->initialized = 1;
     return fmi3OK;
 }
 
-fmi3Status fmi3EnterEventMode(fmi3Instance i) { (void)i; return fmi3Error; }
+fmi3Status fmi3EnterEventMode(fmi3Instance i) { return ((instance *)i)->model_exchange ? fmi3OK : fmi3Error; }
 fmi3Status fmi3Terminate(fmi3Instance i) { (void)i; return fmi3OK; }
 
 fmi3Status fmi3Reset(fmi3Instance i)
@@ -141,6 +165,7 @@ fmi3Status fmi3Reset(fmi3Instance i)
     instance *c = (instance *)i;
     bondc_fmu_reset(c->engine);
     c->initialized = 0;
+    c->states_set = 0;
     return fmi3OK;
 }
 
@@ -149,23 +174,28 @@ fmi3Status fmi3GetFloat64(fmi3Instance i, const fmi3ValueReference vr[], size_t 
 {
     instance *c = (instance *)i;
     bondc_fmu *e = c->engine;
-    int derivatives = 0, outputs = 0;
+    int derivatives = 0, outputs = 0, indicators = 0, changed;
     if (nValues != nvr) return fmi3Error;
     for (size_t k = 0; k < nvr; k++) {
-        if (vr[k] > VR_END) return fmi3Error;
+        if (vr[k] > VR_END + (c->model_exchange ? bondc_fmu_indicator_count() : 0)) return fmi3Error;
         derivatives |= vr[k] > VR_DERIVATIVES && vr[k] <= VR_OUTPUTS;
-        outputs |= vr[k] > VR_OUTPUTS;
+        outputs |= vr[k] > VR_OUTPUTS && vr[k] <= VR_END;
+        indicators |= vr[k] > VR_END;
     }
-    /* the modes the last step ended with: a crossing at its end is the next step's (the left limit) */
+    /* Model Exchange: the modes of the event the importer found. Co-Simulation: the modes the last
+       step ended with (a crossing at its end is the next step's: the outputs are its left limit) */
+    if (c->model_exchange && (derivatives || outputs || indicators) && bondc_fmu_event(e, &changed) != 0)
+        return failed(c);
     if (derivatives) bondc_fmu_derivatives(e, c->buffer);
     if (outputs) bondc_fmu_outputs(e, c->buffer + BONDC_N_STATES);
+    if (indicators) bondc_fmu_indicators(e, c->buffer + BONDC_N_STATES + BONDC_N_OUTPUTS);
     for (size_t k = 0; k < nvr; k++) {
         if (vr[k] == 0) { values[k] = e->t; continue; }
         fmi3ValueReference r = vr[k] - 1;
         if (r < VR_STATES) values[k] = e->p[r];
         else if (r < VR_DERIVATIVES) values[k] = e->x[r - VR_STATES];
         else if (r < VR_OUTPUTS) values[k] = c->buffer[r - VR_DERIVATIVES];
-        else values[k] = c->buffer[BONDC_N_STATES + r - VR_OUTPUTS];
+        else values[k] = c->buffer[BONDC_N_STATES + r - VR_OUTPUTS];     /* an output, an indicator */
     }
     return fmi3OK;
 }
@@ -209,7 +239,7 @@ fmi3Status fmi3DoStep(fmi3Instance i, fmi3Float64 currentCommunicationPoint, fmi
 fmi3Status fmi3EnterStepMode(fmi3Instance i) { (void)i; return fmi3OK; }
 
 /* ---- what this FMU does not have: no variables of other types, no clocks, no FMU state, no
-   partial derivatives, no Model Exchange, no Scheduled Execution */
+   partial derivatives, no Scheduled Execution */
 
 #define NO_VALUES(name, type) \
     fmi3Status name(fmi3Instance i, const fmi3ValueReference vr[], size_t nvr, type values[], size_t n) \
@@ -292,26 +322,101 @@ fmi3Status fmi3SetShiftDecimal(fmi3Instance i, const fmi3ValueReference vr[], si
 fmi3Status fmi3SetShiftFraction(fmi3Instance i, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 c[],
                                 const fmi3UInt64 r[])
 { (void)i; (void)vr; (void)n; (void)c; (void)r; return fmi3Error; }
-fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance i) { (void)i; return fmi3Error; }
-fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *a, fmi3Boolean *b, fmi3Boolean *c, fmi3Boolean *d,
-                                    fmi3Boolean *e, fmi3Float64 *f)
-{ (void)i; (void)a; (void)b; (void)c; (void)d; (void)e; (void)f; return fmi3Error; }
-fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance i) { (void)i; return fmi3Error; }
-fmi3Status fmi3CompletedIntegratorStep(fmi3Instance i, fmi3Boolean n, fmi3Boolean *a, fmi3Boolean *b)
-{ (void)i; (void)n; (void)a; (void)b; return fmi3Error; }
-fmi3Status fmi3SetTime(fmi3Instance i, fmi3Float64 t) { (void)i; (void)t; return fmi3Error; }
+fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance i) { (void)i; return fmi3OK; }
+
+/* ---- Model Exchange */
+
+fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *discreteStatesNeedUpdate,
+                                    fmi3Boolean *terminateSimulation, fmi3Boolean *nominalsOfContinuousStatesChanged,
+                                    fmi3Boolean *valuesOfContinuousStatesChanged, fmi3Boolean *nextEventTimeDefined,
+                                    fmi3Float64 *nextEventTime)
+{
+    instance *c = (instance *)i;
+    int changed = 0;
+    c->engine->selected = 0;        /* the modes after the event the importer found */
+    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
+    *discreteStatesNeedUpdate = fmi3False;
+    *terminateSimulation = fmi3False;
+    *nominalsOfContinuousStatesChanged = fmi3False;
+    *valuesOfContinuousStatesChanged = changed ? fmi3True : fmi3False;
+    *nextEventTimeDefined = fmi3False;
+    *nextEventTime = 0.0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance i) { (void)i; return fmi3OK; }
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance i, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean *enterEventMode, fmi3Boolean *terminateSimulation)
+{
+    (void)i; (void)noSetFMUStatePriorToCurrentPoint;
+    *enterEventMode = fmi3False;
+    *terminateSimulation = fmi3False;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetTime(fmi3Instance i, fmi3Float64 time)
+{
+    ((instance *)i)->engine->t = time;
+    return fmi3OK;
+}
+
 fmi3Status fmi3SetContinuousStates(fmi3Instance i, const fmi3Float64 x[], size_t n)
-{ (void)i; (void)x; (void)n; return fmi3Error; }
-fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance i, fmi3Float64 d[], size_t n)
-{ (void)i; (void)d; (void)n; return fmi3Error; }
-fmi3Status fmi3GetEventIndicators(fmi3Instance i, fmi3Float64 z[], size_t n)
-{ (void)i; (void)z; (void)n; return fmi3Error; }
+{
+    instance *c = (instance *)i;
+    if (n != BONDC_N_STATES) return fmi3Error;
+    memcpy(c->engine->x, x, sizeof(double) * n);
+    c->states_set = 1;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance i, fmi3Float64 derivatives[], size_t n)
+{
+    instance *c = (instance *)i;
+    int changed;
+    if (n != BONDC_N_STATES) return fmi3Error;
+    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
+    bondc_fmu_derivatives(c->engine, derivatives);
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance i, fmi3Float64 indicators[], size_t n)
+{
+    instance *c = (instance *)i;
+    int changed;
+    if ((int)n != bondc_fmu_indicator_count()) return fmi3Error;
+    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
+    bondc_fmu_indicators(c->engine, indicators);
+    return fmi3OK;
+}
+
 fmi3Status fmi3GetContinuousStates(fmi3Instance i, fmi3Float64 x[], size_t n)
-{ (void)i; (void)x; (void)n; return fmi3Error; }
-fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance i, fmi3Float64 x[], size_t n)
-{ (void)i; (void)x; (void)n; return fmi3Error; }
-fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance i, size_t *n) { (void)i; *n = 0; return fmi3OK; }
-fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance i, size_t *n) { (void)i; *n = 0; return fmi3OK; }
+{
+    instance *c = (instance *)i;
+    if (n != BONDC_N_STATES) return fmi3Error;
+    memcpy(x, c->engine->x, sizeof(double) * n);
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance i, fmi3Float64 nominals[], size_t n)
+{
+    (void)i;
+    for (size_t k = 0; k < n; k++) nominals[k] = 1.0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance i, size_t *n)
+{
+    *n = ((instance *)i)->model_exchange ? (size_t)bondc_fmu_indicator_count() : 0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance i, size_t *n)
+{
+    *n = ((instance *)i)->model_exchange ? BONDC_N_STATES : 0;
+    return fmi3OK;
+}
+
 fmi3Status fmi3GetOutputDerivatives(fmi3Instance i, const fmi3ValueReference vr[], size_t nvr, const fmi3Int32 o[],
                                     fmi3Float64 v[], size_t n)
 { (void)i; (void)vr; (void)nvr; (void)o; (void)v; (void)n; return fmi3Error; }

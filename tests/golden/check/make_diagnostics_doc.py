@@ -351,9 +351,6 @@ d("E844", "the FMU's C code did not compile",
   "bug of bondc's export, not of the model; the message gives the compiler's first complaint. It cannot be "
   "triggered from a model.",
   "Report it with the model file; meanwhile simulate with `bondc simulate`.")
-d("E845", "no FMI 3.0 Model Exchange",
-  "bondc writes FMI 3.0 FMUs for Co-Simulation only; Model Exchange is FMI 2.0's (`--fmi 2 --kind me`).",
-  "Use `--fmi 2 --kind me`, or `--fmi 3 --kind cs`.")
 d("E815", "the run diverged",
   "A state grew beyond 1e30 in SI units, a magnitude no physical quantity of a machine reaches: the model is "
   "unstable (a negative damping or resistance, a positive feedback) or a law grows without bound. The run "
@@ -1000,7 +997,6 @@ end
 """
 live("E840", Cli("bondc compile rc.bg --target c -o rc_c", {"rc.bg": _RC_CSV, "drive.csv": "t [s],u [V]\n0,0\n1,5\n"}))
 live("E841", Cli("bondc fmu slide.bg", {"slide.bg": _SLIDE}))
-live("E845", Cli("bondc fmu spin.bg --fmi 3 --kind me", {"spin.bg": SPIN}))
 live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
 live("E003", Cli("bondc compile spin.bg -o spin.bg", {"spin.bg": SPIN}))
 live("E007", Cli("bondc check spin.bg --set b=", {"spin.bg": SPIN}))
