@@ -241,3 +241,31 @@ def test_a_coulomb_friction_is_refused_at_its_law(tmp_path, capsys):
     assert main(["fmu", str(model), "--json"]) == 1
     err = capsys.readouterr().err
     assert "error[E841]" in err and "slide.bg:6:" in err
+
+
+def test_a_tunable_parameter_changed_during_the_run_takes_effect_from_there(fmus):
+    """k set from 800 to 1600 N/m at t = 1 s, between two communication steps: the run goes on from
+    its state with the stiffer spring and settles at F0/k = 10/1600 m (it was at 10/800 before)."""
+    changed = []
+
+    def stiffen(time, recorder):
+        if time >= 1.0 and not changed:
+            recorder.fmu.setReal([1], [1600.0])     # value reference 1: k (modelDescription.xml)
+            changed.append(time)
+        return True
+
+    result = simulate_fmu(str(fmus["msd"]), stop_time=4.0, step_finished=stiffen)
+    t, x = result["time"], result["x"]
+    assert changed
+    assert x[np.searchsorted(t, 0.99)] == pytest.approx(10 / 800, rel=0.02)
+    assert x[-1] == pytest.approx(10 / 1600, rel=0.002)
+    # from its state at the change, m x'' + b x' + k x = F0 with the new k (scipy, an independent solver)
+    from scipy.integrate import solve_ivp
+
+    i = int(np.searchsorted(t, changed[0]))
+    m, b, k, f0 = 2.0, 12.0, 1600.0, 10.0
+    after = solve_ivp(lambda _, y: [y[1], (f0 - b * y[1] - k * y[0]) / m], (t[i], t[-1]), [x[i], result["v"][i]],
+                      t_eval=t[i:], rtol=1e-10, atol=1e-13)
+    deviation = np.max(np.abs(after.y[0] - x[i:])) / np.ptp(x)
+    print(f"k changed at t = {changed[0]:g}: max deviation / range = {deviation:.2e}")
+    assert deviation < 1e-3
