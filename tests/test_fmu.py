@@ -269,3 +269,35 @@ def test_a_tunable_parameter_changed_during_the_run_takes_effect_from_there(fmus
     deviation = np.max(np.abs(after.y[0] - x[i:])) / np.ptp(x)
     print(f"k changed at t = {changed[0]:g}: max deviation / range = {deviation:.2e}")
     assert deviation < 1e-3
+
+
+DIVIDER = """model Divider "a voltage step on two resistors: no state, an algebraic loop solved in C"
+  param R1 = 1000 [Ohm]
+  param R2 = 3000 [Ohm]
+  input u [V] = step(t, 0.5)*10
+  Se supply : e = u
+  R  r1 : e = R1*f
+  R  r2 : e = R2*f
+  1  j
+  supply -> j
+  j -> r1
+  j -> r2
+  output i [A] = r1.f
+  experiment run
+    t_end = 1 [s]
+  end
+end
+"""
+
+
+@pytest.mark.parametrize("kind", ["cs", "me"])
+def test_a_model_without_states_exports(tmp_path, kind):
+    model = tmp_path / "divider.bg"
+    model.write_text(DIVIDER)
+    fmu = tmp_path / "divider.fmu"
+    assert main(["fmu", str(model), "-o", str(fmu), "-q", "--kind", kind]) == 0
+    assert validate_fmu(str(fmu)) == []
+    result = simulate_fmu(str(fmu))
+    t, i = result["time"], result["i"]
+    # Ohm's law: 10 V over 4 kOhm from t = 0.5 s on
+    assert np.allclose(i[t < 0.499], 0.0) and np.allclose(i[t > 0.501], 10 / 4000, rtol=1e-12)

@@ -62,7 +62,8 @@ bondc_fmu *bondc_fmu_new(void)
         return NULL;
     }
     /* the driver: CVODE with a dense or banded solver as the runtime chooses it for a small model */
-    c->d = bondc_driver_new(BONDC_N_STATES, BONDC_N_SWITCHES, BONDC_N_JACOBIAN, bondc_jacobian_rows,
+    /* (a model without states: a driver of one state that stays 0, for the mode selection only) */
+    c->d = bondc_driver_new(NX, BONDC_N_SWITCHES, BONDC_N_JACOBIAN, bondc_jacobian_rows,
                             bondc_jacobian_cols, 0, 0, 0, 0, c->p);
     if (!c->d) {
         bondc_fmu_free(c);
@@ -317,6 +318,12 @@ int bondc_fmu_advance(bondc_fmu *c, double t_end)
 {
     long stalled = 0;
     double t_last = c->t;
+    if (BONDC_N_STATES == 0) {      /* nothing to integrate: the modes at t_end */
+        int changed;
+        c->t = t_end;
+        c->selected = 0;
+        return bondc_fmu_event(c, &changed);
+    }
     while (c->t < t_end) {
         int changed;
         if (bondc_fmu_event(c, &changed) != 0) return -1;
