@@ -572,7 +572,8 @@ def _cmd_fmu(args) -> int:
     output = Path(args.output) if args.output else default_output(args.file, derived.graph.name)
     check_output(output, "the FMU")
     built = build_fmu(derived, output, fmi=int(args.fmi), kind=args.kind)
-    summary = {"complete": True, "file": args.file, "model": derived.graph.name, "experiment": args.experiment,
+    summary = {"complete": True, "file": args.file, "model": derived.graph.name,
+               "experiment": getattr(derived.experiment, "name", None),
                "fmi": built.fmi, "kind": built.kind, "guid": built.guid, "platforms": ["linux64"],
                "states": len(built.model.states), "parameters": len(built.model.parameters),
                "inputs": len(built.model.inputs), "outputs": len(built.model.outputs),

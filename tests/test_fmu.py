@@ -301,3 +301,14 @@ def test_a_model_without_states_exports(tmp_path, kind):
     t, i = result["time"], result["i"]
     # Ohm's law: 10 V over 4 kOhm from t = 0.5 s on
     assert np.allclose(i[t < 0.499], 0.0) and np.allclose(i[t > 0.501], 10 / 4000, rtol=1e-12)
+
+
+def test_fmu_json_says_what_it_wrote(tmp_path, capsys):
+    import json
+
+    output = tmp_path / "msd.fmu"
+    assert main(["fmu", str(MODELS / "mass_spring_damper.bg"), "--kind", "me", "-o", str(output), "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["complete"] and summary["written"] == [str(output)] and output.exists()
+    assert (summary["fmi"], summary["kind"], summary["platforms"]) == (2, "me", ["linux64"])
+    assert (summary["states"], summary["parameters"], summary["outputs"], summary["event_indicators"]) == (2, 5, 3, 1)
