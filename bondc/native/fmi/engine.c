@@ -95,6 +95,7 @@ void bondc_fmu_reset(bondc_fmu *c)
     c->t = 0.0;
     c->failed = 0;
     c->events = 0;
+    c->states_set = 0;
     c->message[0] = 0;
     bondc_x0(c->p, c->x);
     c->selected = 0;
@@ -404,4 +405,45 @@ void bondc_fmu_indicators(bondc_fmu *c, double *out)
     if (!c->watched) return;
     bondc_switches(c->t, c->x, c->p, c->m, c->g);
     for (int j = 0; j < c->watched; j++) out[j] = c->g[c->watch[j]];
+}
+
+/* ---- Model Exchange */
+
+int bondc_fmu_event_update(bondc_fmu *c, int *changed)
+{
+    c->selected = 0;
+    return bondc_fmu_event(c, changed);
+}
+
+int bondc_fmu_set_states(bondc_fmu *c, const double *x, size_t n)
+{
+    if (n != BONDC_N_STATES) return -2;
+    if (n) memcpy(c->x, x, sizeof(double) * n);
+    c->states_set = 1;
+    return 0;
+}
+
+int bondc_fmu_get_states(bondc_fmu *c, double *x, size_t n)
+{
+    if (n != BONDC_N_STATES) return -2;
+    if (n) memcpy(x, c->x, sizeof(double) * n);
+    return 0;
+}
+
+int bondc_fmu_get_derivatives(bondc_fmu *c, double *out, size_t n)
+{
+    int changed;
+    if (n != BONDC_N_STATES) return -2;
+    if (bondc_fmu_event(c, &changed) != 0) return -1;
+    bondc_fmu_derivatives(c, out);
+    return 0;
+}
+
+int bondc_fmu_get_indicators(bondc_fmu *c, double *out, size_t n)
+{
+    int changed;
+    if ((int)n != bondc_fmu_indicator_count()) return -2;
+    if (bondc_fmu_event(c, &changed) != 0) return -1;
+    bondc_fmu_indicators(c, out);
+    return 0;
 }

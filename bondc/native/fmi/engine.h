@@ -4,6 +4,8 @@
 #ifndef BONDC_FMU_ENGINE_H
 #define BONDC_FMU_ENGINE_H
 
+#include <stddef.h>
+
 typedef struct bondc_fmu bondc_fmu;
 
 struct bondc_fmu {
@@ -13,6 +15,7 @@ struct bondc_fmu {
     double *x;              /* the state */
     double *m;              /* the modes, valid at (t, x) where `selected` */
     int selected;           /* 0: the modes are selected again before anything is evaluated */
+    int states_set;         /* the importer set the state (Model Exchange): not x0(p) at initialisation */
     int failed;
     long events;            /* mode changes and when clauses fired so far */
     char message[600];      /* why the last call failed */
@@ -43,5 +46,14 @@ void bondc_fmu_outputs(bondc_fmu *c, double *out);
 /* the event indicators: the located switches' switching functions with the current modes */
 int bondc_fmu_indicator_count(void);
 void bondc_fmu_indicators(bondc_fmu *c, double *out);
+
+/* Model Exchange, what the importer asks (the same in FMI 2.0 and 3.0): 0, -1 where the engine
+   failed (message says why), -2 where the call gives the wrong number of values */
+/* the modes after an event the importer found, and the when clauses; *changed: x changed */
+int bondc_fmu_event_update(bondc_fmu *c, int *changed);
+int bondc_fmu_set_states(bondc_fmu *c, const double *x, size_t n);
+int bondc_fmu_get_states(bondc_fmu *c, double *x, size_t n);
+int bondc_fmu_get_derivatives(bondc_fmu *c, double *out, size_t n);
+int bondc_fmu_get_indicators(bondc_fmu *c, double *out, size_t n);
 
 #endif

@@ -26,7 +26,7 @@ typedef struct {
     bondc_fmu *engine;
     fmi2CallbackFunctions callbacks;
     char *name;
-    int model_exchange, logging, initialized, states_set;
+    int model_exchange, logging, initialized;
     double *buffer;     /* the derivatives, then the outputs */
 } instance;
 
@@ -46,6 +46,12 @@ static fmi2Status failed(instance *c)
 {
     say(c, fmi2Error, "logStatusError", "%s", c->engine->message);
     return fmi2Error;
+}
+
+/* the status of an engine call: 0 OK, -1 failed (said), else the wrong number of values */
+static fmi2Status status(instance *c, int code)
+{
+    return code == 0 ? fmi2OK : (code == -1 ? failed(c) : fmi2Error);
 }
 
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
@@ -131,7 +137,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component component)
 {
     instance *c = (instance *)component;
     int changed;
-    bondc_fmu_parameters_changed(c->engine, !c->states_set);
+    bondc_fmu_parameters_changed(c->engine, !c->engine->states_set);
     if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
     c->initialized = 1;
     return fmi2OK;
@@ -144,7 +150,6 @@ fmi2Status fmi2Reset(fmi2Component component)
     instance *c = (instance *)component;
     bondc_fmu_reset(c->engine);
     c->initialized = 0;
-    c->states_set = 0;
     return fmi2OK;
 }
 
@@ -195,7 +200,7 @@ fmi2Status fmi2SetReal(fmi2Component component, const fmi2ValueReference vr[], s
         }
     }
     /* a tunable parameter changed during the run: the run goes on from its state with the new value */
-    if (parameters) bondc_fmu_parameters_changed(e, !c->initialized && !c->states_set);
+    if (parameters) bondc_fmu_parameters_changed(e, !c->initialized && !e->states_set);
     return fmi2OK;
 }
 
@@ -234,8 +239,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component component, fmi2EventInfo *info)
 {
     instance *c = (instance *)component;
     int changed = 0;
-    c->engine->selected = 0;        /* the modes after the event the importer found */
-    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
+    if (bondc_fmu_event_update(c->engine, &changed) != 0) return failed(c);
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
@@ -264,39 +268,22 @@ fmi2Status fmi2SetTime(fmi2Component component, fmi2Real time)
 
 fmi2Status fmi2SetContinuousStates(fmi2Component component, const fmi2Real x[], size_t nx)
 {
-    instance *c = (instance *)component;
-    if (nx != BONDC_N_STATES) return fmi2Error;
-    memcpy(c->engine->x, x, sizeof(double) * nx);
-    c->states_set = 1;
-    return fmi2OK;
+    return status((instance *)component, bondc_fmu_set_states(((instance *)component)->engine, x, nx));
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component component, fmi2Real derivatives[], size_t nx)
 {
-    instance *c = (instance *)component;
-    int changed;
-    if (nx != BONDC_N_STATES) return fmi2Error;
-    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
-    bondc_fmu_derivatives(c->engine, derivatives);
-    return fmi2OK;
+    return status((instance *)component, bondc_fmu_get_derivatives(((instance *)component)->engine, derivatives, nx));
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component component, fmi2Real indicators[], size_t ni)
 {
-    instance *c = (instance *)component;
-    int changed;
-    if ((int)ni != bondc_fmu_indicator_count()) return fmi2Error;
-    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
-    bondc_fmu_indicators(c->engine, indicators);
-    return fmi2OK;
+    return status((instance *)component, bondc_fmu_get_indicators(((instance *)component)->engine, indicators, ni));
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component component, fmi2Real x[], size_t nx)
 {
-    instance *c = (instance *)component;
-    if (nx != BONDC_N_STATES) return fmi2Error;
-    memcpy(x, c->engine->x, sizeof(double) * nx);
-    return fmi2OK;
+    return status((instance *)component, bondc_fmu_get_states(((instance *)component)->engine, x, nx));
 }
 
 fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component component, fmi2Real nominals[], size_t nx)

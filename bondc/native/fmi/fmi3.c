@@ -22,7 +22,7 @@ typedef struct {
     bondc_fmu *engine;
     fmi3InstanceEnvironment environment;
     fmi3LogMessageCallback log;
-    int logging, initialized, model_exchange, states_set;
+    int logging, initialized, model_exchange;
     double *buffer;     /* the derivatives, the outputs, the event indicators */
 } instance;
 
@@ -30,6 +30,12 @@ static fmi3Status failed(instance *c)
 {
     if (c->log) c->log(c->environment, fmi3Error, "logStatusError", c->engine->message);
     return fmi3Error;
+}
+
+/* the status of an engine call: 0 OK, -1 failed (said), else the wrong number of values */
+static fmi3Status status(instance *c, int code)
+{
+    return code == 0 ? fmi3OK : (code == -1 ? failed(c) : fmi3Error);
 }
 
 static void complain(instance *c, const char *text)
@@ -151,7 +157,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance i)
 {
     instance *c = (instance *)i;
     int changed;
-    bondc_fmu_parameters_changed(c->engine, !c->states_set);
+    bondc_fmu_parameters_changed(c->engine, !c->engine->states_set);
     if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
     c->initialized = 1;
     return fmi3OK;
@@ -165,7 +171,6 @@ fmi3Status fmi3Reset(fmi3Instance i)
     instance *c = (instance *)i;
     bondc_fmu_reset(c->engine);
     c->initialized = 0;
-    c->states_set = 0;
     return fmi3OK;
 }
 
@@ -333,8 +338,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance i, fmi3Boolean *discreteStatesN
 {
     instance *c = (instance *)i;
     int changed = 0;
-    c->engine->selected = 0;        /* the modes after the event the importer found */
-    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
+    if (bondc_fmu_event_update(c->engine, &changed) != 0) return failed(c);
     *discreteStatesNeedUpdate = fmi3False;
     *terminateSimulation = fmi3False;
     *nominalsOfContinuousStatesChanged = fmi3False;
@@ -363,39 +367,22 @@ fmi3Status fmi3SetTime(fmi3Instance i, fmi3Float64 time)
 
 fmi3Status fmi3SetContinuousStates(fmi3Instance i, const fmi3Float64 x[], size_t n)
 {
-    instance *c = (instance *)i;
-    if (n != BONDC_N_STATES) return fmi3Error;
-    memcpy(c->engine->x, x, sizeof(double) * n);
-    c->states_set = 1;
-    return fmi3OK;
+    return status((instance *)i, bondc_fmu_set_states(((instance *)i)->engine, x, n));
 }
 
 fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance i, fmi3Float64 derivatives[], size_t n)
 {
-    instance *c = (instance *)i;
-    int changed;
-    if (n != BONDC_N_STATES) return fmi3Error;
-    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
-    bondc_fmu_derivatives(c->engine, derivatives);
-    return fmi3OK;
+    return status((instance *)i, bondc_fmu_get_derivatives(((instance *)i)->engine, derivatives, n));
 }
 
 fmi3Status fmi3GetEventIndicators(fmi3Instance i, fmi3Float64 indicators[], size_t n)
 {
-    instance *c = (instance *)i;
-    int changed;
-    if ((int)n != bondc_fmu_indicator_count()) return fmi3Error;
-    if (bondc_fmu_event(c->engine, &changed) != 0) return failed(c);
-    bondc_fmu_indicators(c->engine, indicators);
-    return fmi3OK;
+    return status((instance *)i, bondc_fmu_get_indicators(((instance *)i)->engine, indicators, n));
 }
 
 fmi3Status fmi3GetContinuousStates(fmi3Instance i, fmi3Float64 x[], size_t n)
 {
-    instance *c = (instance *)i;
-    if (n != BONDC_N_STATES) return fmi3Error;
-    memcpy(x, c->engine->x, sizeof(double) * n);
-    return fmi3OK;
+    return status((instance *)i, bondc_fmu_get_states(((instance *)i)->engine, x, n));
 }
 
 fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance i, fmi3Float64 nominals[], size_t n)
