@@ -180,7 +180,13 @@ def test_the_fmu_is_self_contained(fmus):
     assert 'name="F_ext"' in description and 'causality="input"' in description and 'start="25.0"' in description
     assert 'name="k"' in description and 'causality="parameter" variability="tunable"' in description
     assert 'name="spring.q"' in description and 'name="der(spring.q)"' in description
-    assert 'causality="output"' in description and '<DisplayUnit name="N/m"' in description
+    assert 'causality="output"' in description and '<Unit name="N/m">' in description
+    # values in SI; a unit the model shows otherwise is the display unit (display = factor * SI)
+    with zipfile.ZipFile(fmus["motor"]) as archive:
+        motor = archive.read("modelDescription.xml").decode()
+    assert '<DisplayUnit name="ms" factor="1000.0"/>' in motor and 'name="t_on"' in motor
+    assert re.search(r'name="speed_rpm".*\n\s*<Real unit="rad/s" displayUnit="rpm"/>', motor)
+    assert '<DefaultExperiment startTime="0.0" stopTime="0.3" tolerance="1e-08"/>' in motor
 
 
 CHILD = r"""

@@ -34,9 +34,10 @@ FUNCTIONS = ("bondc_rhs", "bondc_jac", "bondc_switches", "bondc_outputs", "bondc
 
 @dataclass(frozen=True)
 class Unit:
-    """A quantity's unit: its SI unit as text (``kg*m/s^2``), the exponents of that unit over m,
-    kg, s, A, K, mol, cd, rad (None where not whole numbers or unknown), and the unit the model
-    shows it in with its factor (display = SI / factor), or None."""
+    """A quantity's unit: its SI unit as text (as the model writes it where that is SI, ``N/m``;
+    else its dimensions, ``kg/(m*s^2)`` for ``kPa``), the exponents of that unit over m, kg, s, A,
+    K, mol, cd, rad (None where not whole numbers or unknown), and the unit the model shows it in
+    with its factor (display = SI / factor), or None."""
 
     si: str
     dims: tuple | None
@@ -118,11 +119,9 @@ def si_unit(text: str | None, display_factor: float = 1.0) -> Unit | None:
     if resolved is None or problems:
         return None
     dims = tuple(int(d) for d in resolved.dims) if all(d.denominator == 1 for d in resolved.dims) else None
-    si = resolved.dimension_text()
-    display = None
-    if not resolved.is_coherent or text.replace(" ", "") != si:
-        display = (text, float(resolved.factor))
-    return Unit(si, dims, display)
+    if resolved.is_coherent:        # an SI unit already (N/m, W, kg*m/s): under its own name
+        return Unit(text.replace(" ", ""), dims)
+    return Unit(resolved.dimension_text(), dims, (text, float(resolved.factor)))
 
 
 class ExportError(BondcError):
