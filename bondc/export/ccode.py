@@ -71,7 +71,6 @@ class CModel:
     floors: list                    # 1 where m = floor(g)
     located: list                   # 1 where the switch's mode can change (an event or a known time)
     switch_owners: list             # the variable whose law has each switch
-    slides: list = field(default_factory=list)     # 1 where a switch may hold the state on its surface
     whens: list = field(default_factory=list)      # [(label, [state index])]
     when_native: bool = True
     experiment: dict = field(default_factory=dict)  # t_end, rtol, atol, max_step
@@ -193,7 +192,6 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
     print (a measured csv signal)."""
     from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter
     from bondc.codegen.printer import UnsupportedExpression
-    from bondc.symbolic import External
 
     graph = getattr(ss, "graph", None)
     model_name = c_identifier(getattr(graph, "name", None) or "model")
