@@ -193,7 +193,11 @@ fmi2Status fmi2SetReal(fmi2Component component, const fmi2ValueReference vr[], s
             if (e->p[r] != value[i]) parameters = 1;
             e->p[r] = value[i];
         } else if (r < VR_STATES) {
-            e->p[r] = value[i];     /* an input: a crossing it causes is found by the next step */
+            /* an input changed between two steps (Co-Simulation): the modes are selected again at
+               the next step's start, as bondc simulate restarts at each sample of an input; in
+               Model Exchange its switches are event indicators the importer watches */
+            if (e->p[r] != value[i] && !c->model_exchange) e->selected = 0;
+            e->p[r] = value[i];
         } else {
             say(c, fmi2Error, "logStatusError", "variable %u cannot be set", (unsigned)r);
             return fmi2Error;

@@ -218,6 +218,8 @@ fmi3Status fmi3SetFloat64(fmi3Instance i, const fmi3ValueReference vr[], size_t 
         if (r < VR_INPUTS) {
             if (bondc_parameter_derived[r]) { complain(c, "a parameter computed from others cannot be set"); return fmi3Error; }
             if (e->p[r] != values[k]) parameters = 1;
+        } else if (e->p[r] != values[k] && !c->model_exchange) {
+            e->selected = 0;        /* an input changed between steps: the modes again (as fmi2.c) */
         }
         e->p[r] = values[k];
     }
