@@ -6,8 +6,8 @@ The compiler is a pipeline of typed stages, each one function in one module::
          --derive--> StateSpace --emit--> Python module --simulate--> SimResult --render--> HTML
 
 The Python API (``docs/api.md``) is exported from here: :func:`load`, :func:`check`,
-:func:`equations`, :func:`linearize`, :func:`compile`, :func:`simulate` and their results
-:class:`Model`, :class:`CheckResult`, :class:`Simulation` (all defined in :mod:`bondc.api`).
+:func:`equations`, :func:`linearize`, :func:`bode`, :func:`compile`, :func:`simulate`, :func:`fit` and their
+results :class:`Model`, :class:`CheckResult`, :class:`Simulation` (all defined in :mod:`bondc.api`).
 """
 
 from __future__ import annotations
@@ -18,16 +18,17 @@ from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation",
-           "__version__"]
+__all__ = ["load", "check", "equations", "linearize", "bode", "compile", "simulate", "fit", "Model", "CheckResult",
+           "Simulation", "__version__"]
 
 #: The API's names, imported from :mod:`bondc.api` on first use so that ``import bondc`` stays light.
-_API = ("load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation")
+_API = ("load", "check", "equations", "linearize", "bode", "compile", "simulate", "fit", "Model", "CheckResult",
+        "Simulation")
 
 if TYPE_CHECKING:       # what type checkers see: the functions and classes themselves
-    from bondc.api import (CheckResult as CheckResult, Model as Model, Simulation as Simulation, check as check,
-                           compile as compile, equations as equations, linearize as linearize, load as load,
-                           simulate as simulate)
+    from bondc.api import (CheckResult as CheckResult, Model as Model, Simulation as Simulation, bode as bode,
+                           check as check, compile as compile, equations as equations, fit as fit,
+                           linearize as linearize, load as load, simulate as simulate)
 else:
     def __getattr__(name):
         if name in _API:

@@ -26,6 +26,8 @@ if TYPE_CHECKING:
     import pandas
     from matplotlib.figure import Figure
 
+    from bondc.analysis.bode import Bode
+    from bondc.analysis.fit import DataSet, FitResult
     from bondc.analysis.linearize import Linearization
     from bondc.model import BondGraph
     from bondc.simulate import SimResult
@@ -33,8 +35,8 @@ if TYPE_CHECKING:
 #: A model file: a path as a string or a :class:`pathlib.Path`.
 PathLike = Union[str, os.PathLike[str]]
 
-__all__ = ["load", "check", "equations", "linearize", "compile", "simulate", "Model", "CheckResult", "Simulation",
-           "PathLike"]
+__all__ = ["load", "check", "equations", "linearize", "bode", "compile", "simulate", "fit", "Model", "CheckResult",
+           "Simulation", "PathLike"]
 
 
 def _usage(message: str, hint: str | None = None) -> UsageError:
@@ -251,6 +253,34 @@ def linearize(path: PathLike | None = None, *, text: str | None = None, model: s
     return linearise(_derived(path, text, model, experiment, overrides).state_space, time=time, at=at)
 
 
+def bode(path: PathLike | None = None, *, text: str | None = None, model: str | None = None,
+         experiment: str | None = None, overrides: Mapping[str, Any] | None = None,
+         inputs: Sequence[str] | None = None, outputs: Sequence[str] | None = None, at: str = "initial",
+         time: float = 0.0, low: float | str | None = None, high: float | str | None = None, points: int = 400,
+         verify: bool = False, amplitude: float | str | None = None) -> Bode:
+    """The frequency response of ``outputs`` to ``inputs`` (``bondc bode``): a
+    :class:`bondc.analysis.bode.Bode` with one ``Response`` per pair (frequencies in Hz, magnitude
+    in dB, phase in degrees, margins) and, with ``verify``, the nonlinear model against it.
+    ``low``/``high``: the range in Hz, or texts with a unit (``"10 [rad/s]"``).
+
+    >>> result = bode("models/mass_spring_damper.bg", outputs=["x"], points=3, low=0.1, high=10)
+    >>> [round(float(v), 2) for v in result.responses[0].magnitude_db]      # 1/(m s^2 + b s + k)
+    [-58.05, -57.21, -77.07]
+    """
+    from bondc.analysis.bode import bode as frequency_response
+    from bondc.analysis.linearize import AT
+
+    if at not in AT:
+        raise _usage(f"at must be one of {', '.join(AT)}, not {at!r}")
+    for name, names in (("inputs", inputs), ("outputs", outputs)):
+        if names is not None and (isinstance(names, str) or not all(isinstance(n, str) for n in names)):
+            raise _usage(f"{name} must be a list of names, not {names!r}", hint=f'e.g. {name}=["x"]')
+    time = _number(time, "time")
+    return frequency_response(_derived(path, text, model, experiment, overrides).state_space, inputs=inputs,
+                              outputs=outputs, at=at, time=time, low=low, high=high, points=points,
+                              verify_model=verify, amplitude=amplitude)
+
+
 def compile(path: PathLike, output: PathLike | None = None, *, model: str | None = None, experiment: str | None = None,
             overrides: Mapping[str, Any] | None = None, standalone: bool = False) -> Path:
     """Write the model's Python module (``bondc compile``); returns its path. ``standalone``: the
@@ -404,3 +434,40 @@ def simulate(path: PathLike | None = None, *, text: str | None = None, model: st
     if error is not None:
         raise error
     return Simulation(result, tuple(derived.notes) + tuple(result.warnings))
+
+
+def fit(path: PathLike, *, data: PathLike | Sequence[DataSet], estimate: Sequence[str],
+        compare: Sequence[str] | None = None, model: str | None = None, experiment: str | None = None,
+        overrides: Mapping[str, Any] | None = None, max_evaluations: int | None = None,
+        output: PathLike | None = None, write: PathLike | None = None) -> FitResult:
+    """Estimate parameters from measured data (``bondc fit``); returns a
+    :class:`bondc.analysis.fit.FitResult` (``converged``, ``parameters`` with ``value``,
+    ``stderr``, ``ci95`` in each parameter's declared unit, ``correlation``, ``signals``,
+    ``diagnostics``; ``to_json()`` is ``--json``).
+
+    ``data``: one measured CSV with its ``compare`` list (``"OUT=COLUMN[:weight=W]"``) and
+    ``experiment``, or several :class:`bondc.analysis.fit.DataSet` (each its own CSV, comparisons and
+    experiment; one parameter set fits them all). ``estimate``: ``"NAME"`` or ``"NAME=LOW:HIGH"``
+    (bounds in the declared unit, or a unit in brackets). ``overrides`` fix other parameters and
+    give an estimated one its start value. ``output``: the HTML report; ``write``: a copy of the
+    model with the fitted values. A fit that does not converge is returned with ``converged``
+    False; a bad request raises (E880-E892).
+    """
+    from bondc.analysis.fit import DataSet, run_fit
+
+    if isinstance(data, (str, os.PathLike)):
+        if not compare:
+            raise _usage("compare must list at least one 'OUT=COLUMN' when data is one file",
+                         hint='e.g. compare=["x=x_meas"]')
+        if isinstance(compare, str):
+            compare = [compare]
+        datasets = [DataSet(str(data), tuple(compare), experiment)]
+    else:
+        if compare is not None:
+            raise _usage("give compare inside each DataSet when data is a list of them")
+        datasets = [d if d.experiment is not None or experiment is None else DataSet(d.data, d.compare, experiment)
+                    for d in data]
+    if isinstance(estimate, str):
+        estimate = [estimate]
+    return run_fit(Path(path), datasets=datasets, estimates=list(estimate), model=model, sets=_sets(overrides),
+                   max_evaluations=max_evaluations, output=output, write=write)

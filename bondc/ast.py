@@ -94,6 +94,16 @@ class If:
     span: Span = _span()
 
 
+@dataclass(frozen=True)
+class Transfer:
+    """``U -> Y`` in the experiment setting ``bode = [U -> Y, ...]``: from input U to output Y (only
+    there: the grammar allows it nowhere else)."""
+
+    source: Name
+    target: Name
+    span: Span = _span()
+
+
 Expr = Union[Num, Str, Name, Ref, Call, ListExpr, Unary, Binary, If]
 
 
@@ -389,6 +399,9 @@ def walk(expr: Expr):
     elif isinstance(expr, ListExpr):
         for item in expr.items:
             yield from walk(item)
+    elif isinstance(expr, Transfer):
+        yield expr.source
+        yield expr.target
     elif isinstance(expr, Unary):
         yield from walk(expr.operand)
     elif isinstance(expr, Binary):

@@ -410,6 +410,35 @@ def _cmd_linearize(args) -> int:
     return EXIT_OK
 
 
+def _cmd_bode(args) -> int:
+    """``bondc bode``: the frequency response of outputs to inputs at the linearisation's operating
+    point (``bondc.analysis.bode``), its margins, and with --verify the nonlinear model against it."""
+    from bondc.analysis.bode import bode, parse_frequency, parse_points
+    from bondc.report.bode_report import check_bode_output, write_bode
+
+    if args.output:
+        check_bode_output(args.output)          # before any work
+    # the options' values before any work too (E944, E945)
+    low = parse_frequency(args.low, "--from") if args.low is not None else None
+    high = parse_frequency(args.high, "--to") if args.high is not None else None
+    points = parse_points(args.points)
+    derived = _derived(args)
+    progress = None if args.json or _quiet() else _note
+    result = bode(derived.state_space, inputs=args.input, outputs=args.output_name, at=args.at, time=args.time,
+                  low=low, high=high, points=points, verify_model=args.verify, amplitude=args.amplitude,
+                  progress=progress)
+    _print_diagnostics(list(result.warnings), derived.graph.sources)
+    if args.output:
+        write_bode(result, args.output, derived.graph.name, args.file)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        print(result.to_text(), end="")
+        if args.output:
+            print(f"written to {args.output}")
+    return EXIT_OK
+
+
 def _keep_light(derived, account) -> None:
     """After a full run from the compile cache, write the entry's light form for the next one."""
     from bondc.cache import LightStateSpace, entry_of
@@ -433,6 +462,16 @@ def _inertia_ratio(args) -> float | None:
         raise UsageError(error.diagnostics) from None
 
 
+_RATIO_HELP = ('with --motors: the parameter that sets the transmission ratio and values to try, as sweep --vary '
+               '("lead=2,5,10,20 [mm]", "n_gear=5:40:8"); shows the smallest qualifying motor at each value and '
+               'the model\'s own')
+
+
+def _jobs() -> int:
+    """Processes for the points of a --ratio study: one per core."""
+    return max(1, os.cpu_count() or 1)
+
+
 def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import dense_steps, energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
@@ -443,6 +482,9 @@ def _cmd_simulate(args) -> int:
         check_result_path(args.output)
         check_output(args.output)       # before any work
     inertia_ratio = _inertia_ratio(args)
+    from bondc.analysis.ratio import check_ratio
+
+    check_ratio(args.ratio, args.motors)
     if args.motors:
         from bondc.analysis.motors import load_catalogue
 
@@ -495,6 +537,14 @@ def _cmd_simulate(args) -> int:
             _print_diagnostics(problem.diagnostics, graph.sources)
             summary.setdefault("diagnostics", []).extend(d.to_json() for d in problem.diagnostics)
             failed = any(d.is_error for d in problem.diagnostics)
+    study = None
+    if args.ratio and result.complete:
+        from bondc.analysis.ratio import ratio_study
+
+        study = ratio_study(args.file, args.ratio, motors=args.motors, model=args.model,
+                            experiment=args.experiment, sets=args.set or (), t_end=args.t_end,
+                            inertia_ratio=inertia_ratio, jobs=_jobs(), progress=not args.json and not _quiet())
+        summary["ratio"] = study.to_json()
     if args.json:
         _print_json(summary)
     else:
@@ -517,6 +567,9 @@ def _cmd_simulate(args) -> int:
         if motors_text:
             print()
             print(motors_text)
+        if study is not None:
+            print()
+            print(study.to_text())
     if error is not None:
         _print_diagnostics(error.diagnostics, graph.sources)
         return result.exit_status or EXIT_ERRORS
@@ -609,7 +662,8 @@ def _cmd_report(args) -> int:
     summary = report_summary(Path(args.file), model=args.model, experiment=args.experiment,
                              sets=_parse_sets(args.set), data=args.data, compare=args.compare or (),
                              motors=args.motors, output=args.output, t_end=args.t_end,
-                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio)
+                             progress=not args.json and not _quiet(), inertia_ratio=inertia_ratio,
+                             ratio=args.ratio, jobs=_jobs())
     if args.json:
         _print_json(summary)
     elif not _quiet() or summary["exit_status"]:
@@ -672,6 +726,36 @@ def _cmd_fit_friction(args) -> int:
     stream = sys.stdout if code == EXIT_OK or args.json else sys.stderr
     print(text, file=stream)
     return code
+
+
+class _FitGroup(argparse.Action):
+    """``bondc fit``'s --data, --experiment and --compare, kept in command-line order: each --data
+    starts a data set, the --experiment and --compare after it belong to it."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        items = list(getattr(namespace, "fit_items", None) or [])
+        items.append((self.dest, values))
+        namespace.fit_items = items
+        if self.dest == "data" and getattr(namespace, "data", None) is None:
+            namespace.data = values         # (the first: the inputs an output must not replace)
+
+
+def _cmd_fit(args) -> int:
+    from bondc.analysis.fit import parse_groups, run_fit
+
+    datasets = parse_groups(getattr(args, "fit_items", None) or [])
+    result = run_fit(args.file, datasets=datasets, estimates=args.estimate or [], model=args.model,
+                     sets=args.set or (), max_evaluations=args.max_evaluations, output=args.output,
+                     write=args.write, progress=not args.json and not _quiet(),
+                     cache=False if args.no_cache else None)
+    if args.json:
+        _print_json(result.to_json())
+    else:
+        _print_diagnostics(result.diagnostics)
+        print(result.to_text())
+        for path in result.written:
+            print(f"wrote {path}")
+    return result.exit_status
 
 
 def _megabytes(size: int) -> str:
@@ -793,6 +877,37 @@ def build_parser() -> argparse.ArgumentParser:
     linear.add_argument("--json", action="store_true")
     linear.set_defaults(run=_cmd_linearize)
 
+    bode_ = commands.add_parser("bode", help="frequency response (Bode plot) of outputs to inputs at an operating "
+                                             "point; gain and phase margins; --verify against the nonlinear model")
+    _add_model_args(bode_)
+    bode_.add_argument("--experiment", help="apply this experiment's parameter overrides (default: the first)")
+    bode_.add_argument("--input", action="append", metavar="U",
+                       help="the input to excite (repeatable; default: the model's only input)")
+    bode_.add_argument("--output", action="append", dest="output_name", metavar="Y",
+                       help="the output to measure (repeatable: one response per input and output; default: the "
+                            "model's only output)")
+    bode_.add_argument("--at", choices=("initial", "equilibrium"), default="initial",
+                       help="linearise at the initial state or at the equilibrium found from it")
+    bode_.add_argument("--time", type=float, default=0.0, help="hold the inputs at their value at this time, s")
+    bode_.add_argument("--from", dest="low", metavar="F_LOW",
+                       help='lowest frequency, Hz, or with a unit: "10 [rad/s]" (default: a decade below the '
+                            "slowest mode)")
+    bode_.add_argument("--to", dest="high", metavar="F_HIGH",
+                       help="highest frequency, Hz or with a unit (default: a decade above the fastest mode)")
+    bode_.add_argument("--points", default="400", metavar="N", help="frequencies, spaced logarithmically (default 400)")
+    bode_.add_argument("--verify", action="store_true",
+                       help="simulate the nonlinear model with a small sine on the input at 5 frequencies and "
+                            "compare with the linear prediction")
+    bode_.add_argument("--amplitude", metavar="A",
+                       help="the verification sine's amplitude, in the input's unit or with a unit (default: 1 %% "
+                            "of the input's value at the operating point, else 1 SI)")
+    bode_.add_argument("-o", metavar="FILE", dest="output",
+                       help="write the response: .csv (units in the header), .svg (the plot) or .html (a page)")
+    bode_.add_argument("--json", action="store_true",
+                       help="print the response as JSON: {input, output, frequency_hz, magnitude_db, phase_deg, "
+                            "margins}; a list of them for several pairs")
+    bode_.set_defaults(run=_cmd_bode)
+
     compile_ = commands.add_parser("compile", help="generate the model's Python module (imports bondc.runtime; "
                                                    "--standalone: numpy + scipy only)")
     _add_model_args(compile_)
@@ -833,6 +948,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--motors", metavar="CATALOGUE.csv",
                      help="size the motor from outputs 'torque' and 'omega' and list the qualifying motors")
     sim.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
+    sim.add_argument("--ratio", metavar="NAME=VALUES", help=_RATIO_HELP)
     sim.set_defaults(run=_cmd_simulate)
 
     report = commands.add_parser("report", help="one self-contained HTML report: model, bond graph, equations, "
@@ -847,6 +963,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="compare output OUT with the measured COLUMN (repeatable)")
     report.add_argument("--motors", metavar="CATALOGUE.csv", help="judge the motors of this catalogue against the cycle")
     report.add_argument("--inertia-ratio", metavar="LIMIT", help="load/rotor inertia-ratio limit of every motor (default: the catalogue's max_inertia_ratio, else 10)")
+    report.add_argument("--ratio", metavar="NAME=VALUES", help=_RATIO_HELP)
     report.add_argument("-o", "--output", help="the HTML file (default: reports/<model file>.html, "
                                                    "reports/<file>-<experiment>.html for a non-first experiment)")
     report.add_argument("--json", action="store_true",
@@ -906,6 +1023,32 @@ def build_parser() -> argparse.ArgumentParser:
                                               "the same command again resumes, skipping the points already there")
     sweep.add_argument("--json", action="store_true", help="print the result as JSON")
     sweep.set_defaults(run=_cmd_sweep)
+
+    fit_ = commands.add_parser("fit", help="estimate parameters from measured data (least squares), with "
+                                            "standard errors, 95 % intervals and correlations")
+    _add_model_args(fit_)
+    fit_.add_argument("--data", action=_FitGroup, metavar="FILE",
+                      help="measured CSV (header units honoured, as validate); each --data starts a data set, "
+                           "and the --experiment and --compare after it belong to it (repeat for several)")
+    fit_.add_argument("--experiment", action=_FitGroup, metavar="NAME",
+                      help="the experiment the data set before it was measured in (before any --data: every "
+                           "data set's default; default: the first)")
+    fit_.add_argument("--compare", action=_FitGroup, metavar="OUT=COLUMN[:weight=W]",
+                      help="fit output OUT to the measured COLUMN of the data set before it (repeatable)")
+    fit_.add_argument("--estimate", action="append", metavar="NAME[=LOW:HIGH]",
+                      help='a parameter to estimate, with bounds in its declared unit or a unit in [ ] '
+                           '("b=5:30", "Ae=5:50 [mm^2]"; an empty bound is open); its --set value, else the '
+                           "model's, is the start (repeatable)")
+    fit_.add_argument("--max-evaluations", type=int, metavar="N",
+                      help="stop the optimiser after N evaluations (default 200; the Jacobians cost more runs)")
+    fit_.add_argument("-o", "--output", help="write the HTML report: estimates, correlations, measured vs model")
+    fit_.add_argument("--write", metavar="FITTED.bg",
+                      help="write a copy of the model with the fitted values (never over a file bondc fit did "
+                           "not write)")
+    fit_.add_argument("--json", action="store_true",
+                      help="print converged, parameters (value, unit, initial, stderr, ci95), correlation, cost, "
+                           "signals, diagnostics as JSON")
+    fit_.set_defaults(run=_cmd_fit, data=None, fit_items=[])
 
     lsp_ = commands.add_parser("lsp", help="the language server for editors (Language Server Protocol on stdio)")
     lsp_.add_argument("--stdio", action="store_true",

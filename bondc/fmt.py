@@ -114,6 +114,9 @@ class ExprPrinter:
     def _print_ListExpr(self, expr: ast.ListExpr):
         return f"[{self.join(expr.items)}]", _ATOM
 
+    def _print_Transfer(self, expr: ast.Transfer):
+        return f"{expr.source.name} -> {expr.target.name}", _ATOM
+
     def _print_Unary(self, expr: ast.Unary):
         if expr.op == "not":
             return "not " + self.print(expr.operand, _NOT), _NOT

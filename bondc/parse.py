@@ -470,6 +470,19 @@ class _ToAst(Transformer):
         return ast.Setting(str(name), value, unit, self._meta(meta), self._tok(name))
 
     @v_args(meta=True)
+    def setting_transfers(self, meta, children):
+        name, *transfers = children
+        span = self._meta(meta)
+        items = ast.ListExpr(tuple(transfers), transfers[0].span.to(transfers[-1].span))
+        return ast.Setting(str(name), items, None, span, self._tok(name))
+
+    @v_args(meta=True)
+    def transfer(self, meta, children):
+        source, target = children
+        return ast.Transfer(ast.Name(str(source), self._tok(source)), ast.Name(str(target), self._tok(target)),
+                            self._meta(meta))
+
+    @v_args(meta=True)
     def experiment(self, meta, children):
         name, description, *body = children
         return ast.Experiment(str(name), _opt_str(description), tuple(body), self._meta(meta), self._tok(name))

@@ -76,7 +76,12 @@ SETTINGS: Mapping[str, str] = {
     "outputs": "outputs",
     "first_step": "time",
     "dt": "time",
+    "bode": "transfers",
+    "bode_at": "operating point",
 }
+
+#: ``bode_at``: where the report's frequency responses are linearised (as ``bondc bode --at``).
+OPERATING_POINTS = ("initial", "equilibrium")
 
 # Pass as ``experiment=`` to use the model's first experiment (what a command does without --experiment).
 FIRST = "<first experiment>"
@@ -1887,22 +1892,14 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
                             hint=_join_hints(_did_you_mean(item.value.value, SOLVERS),
                                              "solvers (auto: chosen for stiffness; SUNDIALS CVODE and IDA; bondc's DOPRI5; scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
             return
-    elif kind == "outputs":
-        items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
-        ok = True
-        for entry in items:
-            if not isinstance(entry, ast.Name):
-                m.report(_error("E313", "outputs lists output names", entry.span,
-                                hint="write outputs = [name1, name2]"))
-                ok = False
-            elif entry.name not in m.names("output"):
-                decl = m.decls.get(entry.name)
-                what = f"'{entry.name}' is {_a(decl.category)}; " if decl is not None else ""
-                m.report(_error("E301", f"no output named '{entry.name}'", entry.span,
-                                hint=_join_hints(_did_you_mean(entry.name, m.names("output")),
-                                                 f"{what}declare it with 'output {entry.name} = ...'")))
-                ok = False
-        if not ok:
+    elif kind in _LISTS:
+        if not _list_setting_ok(m, item, kind):
+            return
+    elif kind == "operating point":
+        if not isinstance(item.value, ast.Str) or item.value.value not in OPERATING_POINTS or item.unit is not None:
+            m.report(_error("E313", f"{item.name} is \"initial\" or \"equilibrium\"", item.value.span,
+                            hint=f'write {item.name} = "equilibrium" to linearise at the equilibrium found from the '
+                                 "initial state"))
             return
     else:
         if isinstance(item.value, (ast.Str, ast.ListExpr)):
@@ -1923,6 +1920,46 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
     plan.settings[item.name] = item
 
 
+#: Settings that list names: the node each entry must be, and the E313 message and hint for another.
+_LISTS = {"outputs": (ast.Name, "outputs lists output names", "write outputs = [name1, name2]"),
+          "transfers": (ast.Transfer, "bode lists pairs INPUT -> OUTPUT",
+                        "write bode = [F -> x, F -> v]: the input excited and the output measured")}
+
+
+def _list_setting_ok(m: _Model, item: ast.Setting, kind: str) -> bool:
+    """Check a setting that lists outputs (``outputs = [a, b]``) or input-output pairs (``bode =
+    [F -> x]``): E313 for an entry of another form, E301 for a name that is not an output (input)."""
+    node, message, hint = _LISTS[kind]
+    items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
+    ok = True
+    for entry in items:
+        if not isinstance(entry, node):
+            m.report(_error("E313", message, entry.span, hint=hint))
+            ok = False
+        elif isinstance(entry, ast.Name):
+            ok = _declared_as(m, entry, "output", f"declare it with 'output {entry.name} = ...'") and ok
+        else:
+            for name, category in ((entry.source, "input"), (entry.target, "output")):
+                if _declared_as(m, name, category, f"bode = [INPUT -> OUTPUT]: declare it with "
+                                                   f"'{category} {name.name} [UNIT] = ...'"):
+                    m.used.add(name.name)
+                else:
+                    ok = False
+    return ok
+
+
+def _declared_as(m: _Model, entry: ast.Name, category: str, how: str) -> bool:
+    """Whether a setting's name ``entry`` is a declared ``category`` ("output", "input"); else E301
+    with the closest such name, what the name is instead, and ``how`` to declare it."""
+    if entry.name in m.names(category):
+        return True
+    decl = m.decls.get(entry.name)
+    what = f"'{entry.name}' is {_a(decl.category)}; " if decl is not None else ""
+    m.report(_error("E301", f"no {category} named '{entry.name}'", entry.span,
+                    hint=_join_hints(_did_you_mean(entry.name, m.names(category)), what + how)))
+    return False
+
+
 def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
     """A checked setting's value: SI float, solver string or output names."""
     kind = SETTINGS[item.name]
@@ -1931,6 +1968,10 @@ def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
     if kind == "outputs":
         items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
         return tuple(entry.name for entry in items)
+    if kind == "transfers":
+        return tuple((entry.source.name, entry.target.name) for entry in item.value.items)
+    if kind == "operating point":
+        return item.value.value
     value = _try_evaluate(m, item.value, values)
     if value is None:
         return None

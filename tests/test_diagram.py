@@ -268,12 +268,3 @@ def test_empty_graph_still_has_a_size():
     graph = BondGraph("E", None, "e.bg", {}, {}, {}, {}, {}, {}, (), (), {})
     root = parse_svg(bond_graph_svg(graph))
     assert float(root.get("width")) > 0 and float(root.get("height")) > 0
-
-
-def test_docstring_examples():
-    import doctest
-
-    from bondc.report import diagram
-
-    result = doctest.testmod(diagram)
-    assert result.attempted > 0 and result.failed == 0

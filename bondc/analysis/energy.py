@@ -102,31 +102,12 @@ _INTEGRATION = np.array([[(s ** (m + 1) - (-1.0) ** (m + 1)) / (m + 1) for m in 
 _FINE_GRID = np.linspace(-1.0, 1.0, 65)
 _FINE_FROM_NODES = np.vander(_FINE_GRID, 5, increasing=True) @ _FROM_NODES
 
-# QUADPACK's 21-point Gauss-Kronrod rule (dqk21, the first rule of quad's qagse) on [-1, 1]: the
-# Kronrod nodes and weights from the outermost node inwards to 0, and the weights of the 10-point
-# Gauss rule on the odd-numbered of them (tested: exact for polynomials to degree 31 and 19)
-_KRONROD_HALF = np.array([
-    0.995657163025808080735527280689003, 0.973906528517171720077964012084452,
-    0.930157491355708226001207180059508, 0.865063366688984510732096688423493,
-    0.780817726586416897063717578345042, 0.679409568299024406234327365114874,
-    0.562757134668604683339000099272694, 0.433395394129247190799265943165784,
-    0.294392862701460198131126603103866, 0.148874338981631210884826001129720, 0.0])
-_KRONROD_HALF_WEIGHTS = np.array([
-    0.011694638867371874278064396062192, 0.032558162307964727478818972459390,
-    0.054755896574351996031381300244580, 0.075039674810919952767043140916190,
-    0.093125454583697605535065465083366, 0.109387158802297641899210590325805,
-    0.123491976262065851077208643474261, 0.134709217311473325928054001771707,
-    0.142775938577060080797094273138717, 0.147739104901338491374841515972068,
-    0.149445554002916905664936468389821])
-_GAUSS_HALF_WEIGHTS = np.array([
-    0.066671344308688137593568809893332, 0.149451349150580593145776339657697,
-    0.219086362515982043995534934228163, 0.269266719309996355091226921569469,
-    0.295524224714752870173892994651338])
-KRONROD_NODES = np.concatenate([-_KRONROD_HALF[:-1], _KRONROD_HALF[::-1]])
-KRONROD_WEIGHTS = np.concatenate([_KRONROD_HALF_WEIGHTS[:-1], _KRONROD_HALF_WEIGHTS[::-1]])
-GAUSS_WEIGHTS = np.zeros(21)            # on the same 21 nodes, 0 at the Kronrod-only ones
-GAUSS_WEIGHTS[1:10:2] = _GAUSS_HALF_WEIGHTS
-GAUSS_WEIGHTS[11:20:2] = _GAUSS_HALF_WEIGHTS[::-1]
+# The quadrature of a numeric energy function over many pieces at once: Gauss-Legendre rules of 10
+# and 21 points on [-1, 1] (numpy's leggauss; exact for polynomials to degree 19 and 41), the
+# second the piece's integral, their difference its error estimate.
+GAUSS_NODES, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(10)
+FINE_NODES, FINE_WEIGHTS = np.polynomial.legendre.leggauss(21)
+_PIECE_NODES = np.concatenate([GAUSS_NODES, FINE_NODES])
 
 #: A residual above this fraction of the throughput gets warning W930.
 RESIDUAL_TOLERANCE = 1e-6
@@ -588,51 +569,6 @@ def _hermite(tau, h, xa, xb, fa, fb):
             + (-2 * tau3 + 3 * tau2) * xb + (tau3 - tau2) * h * fb)
 
 
-def _not_a_knot_spline(x, y, at):
-    """The cubic spline through ``(x[i], y[i])`` with not-a-knot ends, at the times ``at``:
-    ``scipy.interpolate.CubicSpline(x, y, axis=0)(at)`` for four or more points (y: (n, k);
-    result: ``at.shape + (k,)``), without importing scipy.interpolate (0.4 s, most of a cached
-    ``bondc simulate``). The slopes solve scipy's tridiagonal system with its two end rows:
-    rows 0 .. n-2 are eliminated in order (their pivots are positive and at least the
-    adjacent steps: dx1, dx0 + dx1, then 2 dx[i-1] + dx[i]), the last two unknowns from their
-    2 x 2 system with pivoting."""
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    n = x.size
-    dx = np.diff(x)
-    slope = np.diff(y, axis=0) / dx[:, None]
-    lower, diagonal, upper = np.empty(n), np.empty(n), np.empty(n)
-    b = np.empty_like(y)
-    lower[1:-1], diagonal[1:-1], upper[1:-1] = dx[1:], 2.0 * (dx[:-1] + dx[1:]), dx[:-1]
-    b[1:-1] = 3.0 * (dx[1:, None] * slope[:-1] + dx[:-1, None] * slope[1:])
-    span = x[2] - x[0]
-    diagonal[0], upper[0] = dx[1], span
-    b[0] = ((dx[0] + 2.0 * span) * dx[1] * slope[0] + dx[0] ** 2 * slope[1]) / span
-    span = x[-1] - x[-3]
-    lower[-1], diagonal[-1] = span, dx[-2]
-    b[-1] = (dx[-1] ** 2 * slope[-2] + (2.0 * span + dx[-1]) * dx[-2] * slope[-1]) / span
-    # forward elimination of rows 1 .. n-2 (Thomas); the pivots are plain floats
-    pivots = diagonal.tolist()
-    uppers, lowers = upper.tolist(), lower.tolist()
-    for i in range(1, n - 1):
-        factor = lowers[i] / pivots[i - 1]
-        pivots[i] -= factor * uppers[i - 1]
-        b[i] -= factor * b[i - 1]
-    s = np.empty_like(y)
-    system = np.array([[pivots[n - 2], uppers[n - 2]], [lowers[n - 1], pivots[n - 1]]])
-    s[n - 2:] = np.linalg.solve(system, b[n - 2:])
-    for i in range(n - 3, -1, -1):
-        s[i] = (b[i] - uppers[i] * s[i + 1]) / pivots[i]
-    # the cubic of each interval, in powers of (t - x[i]) as scipy's PPoly
-    t = (s[:-1] + s[1:] - 2.0 * slope) / dx[:, None]
-    c0, c1 = t / dx[:, None], (slope - s[:-1]) / dx[:, None] - t
-    at = np.asarray(at, dtype=float)
-    interval = np.clip(np.searchsorted(x, at.ravel(), side="right") - 1, 0, n - 2)
-    z = (at.ravel() - x[interval])[:, None]
-    values = ((c0[interval] * z + c1[interval]) * z + s[:-1][interval]) * z + y[:-1][interval]
-    return values.reshape(at.shape + (y.shape[1],))
-
-
 def _inside(values, increasing, start, end, closed=False):
     """Indices of ``values`` in (start, end) (``closed``: [start, end]), by bisection where the
     values increase (a run with thousands of sliding spans: not a pass over all of them per span)."""
@@ -958,7 +894,9 @@ class _Trajectory:
                 splined = np.all(np.isfinite(recorded[:, points]), axis=1) if points.size >= 4 else \
                     np.zeros(len(names), dtype=bool)
                 if np.any(splined):
-                    spline = _not_a_knot_spline(recorded_t[points], recorded[splined][:, points].T, times[rows])
+                    from scipy.interpolate import CubicSpline
+
+                    spline = CubicSpline(recorded_t[points], recorded[splined][:, points].T, axis=0)(times[rows])
                     values[np.flatnonzero(splined)[:, None], rows[None, :], :] = np.moveaxis(spline, -1, 0)
                 for i in np.flatnonzero(~splined):
                     values[i, rows, :] = np.interp(times[rows], recorded_t[points], recorded[i, points]) \
@@ -1029,7 +967,7 @@ class _StoredEnergy:
     def change(self, start: float, end: float, breaks=()) -> tuple[float, float, float]:
         """(H at start, H at end, change); a numeric H is the law integrated from a zero state,
         in pieces between the ``breaks`` (state values where the law may switch: quadrature that
-        straddles a switch can miss it, as 21 Kronrod nodes over [0, 0.050015] all miss a hard
+        straddles a switch can miss it, as 31 Gauss nodes over [0, 0.050015] all miss a hard
         stop's law, zero below 0.05)."""
         if self.kind == "analytic":
             h0, h1 = float(self.function(start)), float(self.function(end))
@@ -1048,27 +986,27 @@ class _StoredEnergy:
         return total if b > a else -total
 
     def _pieces(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
-        """The law's integral over each piece [starts[i], ends[i]]: QUADPACK's first rule (21
-        Gauss-Kronrod nodes) on every piece in one evaluation of the law, where the 10-point Gauss
-        rule on the same nodes agrees with it to the tolerance of :meth:`_piece` (a run with
-        thousands of events has as many pieces); :meth:`_piece`, quad's adaptive rule, for the
-        others (a kink inside, a steep law) and for a law that has no form for arrays."""
+        """The law's integral over each piece [starts[i], ends[i]]: the 21-point Gauss rule on every
+        piece in one evaluation of the law (at the 10-point rule's nodes too), where the 10-point
+        rule agrees with it to the tolerance of :meth:`_piece` (a run with thousands of events has
+        as many pieces); :meth:`_piece`, quad's adaptive rule, for the others (a kink inside, a
+        steep law) and for a law that has no form for arrays."""
         results = np.full(starts.size, np.nan)
         if self.law_of_arrays is not None and starts.size > 1:
             half, middle = 0.5 * (ends - starts), 0.5 * (ends + starts)
             with np.errstate(all="ignore"):
                 try:
-                    values = np.broadcast_to(np.asarray(self.law_of_arrays(middle[:, None] + half[:, None] * KRONROD_NODES),
-                                                        dtype=float), (starts.size, KRONROD_NODES.size))
+                    values = np.broadcast_to(np.asarray(self.law_of_arrays(middle[:, None] + half[:, None] * _PIECE_NODES),
+                                                        dtype=float), (starts.size, _PIECE_NODES.size))
                 except (ValueError, TypeError, IndexError):
                     values = None
                 if values is not None:
-                    kronrod = half * (values @ KRONROD_WEIGHTS)
-                    gauss = half * (values @ GAUSS_WEIGHTS)
+                    coarse = half * (values[:, :GAUSS_NODES.size] @ GAUSS_WEIGHTS)
+                    fine = half * (values[:, GAUSS_NODES.size:] @ FINE_WEIGHTS)
                     size = np.max(np.abs(values), axis=1) * np.abs(ends - starts)
                     good = (np.all(np.isfinite(values), axis=1)
-                            & (np.abs(kronrod - gauss) <= np.maximum(1e-15 * size, 1e-12 * np.abs(kronrod))))
-                    results[good] = kronrod[good]
+                            & (np.abs(fine - coarse) <= np.maximum(1e-15 * size, 1e-12 * np.abs(fine))))
+                    results[good] = fine[good]
         for i in np.flatnonzero(np.isnan(results)):
             results[i] = self._piece(float(starts[i]), float(ends[i]))
         return results

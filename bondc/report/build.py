@@ -55,7 +55,7 @@ from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
-    FULL_SIZE, HALF_SIZE, Answer, CandidateRow, Equation, HLine, ParameterRow, Plot, ReportContext, ReportHeader,
+    FULL_SIZE, HALF_SIZE, Answer, BodeSection, CandidateRow, Equation, HLine, ParameterRow, Plot, ReportContext, ReportHeader,
     RuleMargin, Table, ValidationSection,
     causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
 )
@@ -68,6 +68,9 @@ __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run
            "write_report", "run_validate", "report_summary", "report_text", "validate_summary",
            "validate_text", "signal_json",
            "compare_run", "validation_table", "state_equations", "output_groups", "REPORTS_DIR"]
+
+#: Frequencies of each Bode plot in a report (the plot is small; ``bondc bode`` takes 400 by default).
+REPORT_BODE_POINTS = 150
 
 #: Where reports go unless ``output`` says otherwise (relative to the working directory).
 REPORTS_DIR = Path("reports")
@@ -165,7 +168,7 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
                  sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                  motors: str | Path | None = None, output: str | Path | None = None,
                  t_end: float | None = None, date: str | None = None, progress: bool = False,
-                 inertia_ratio: float | None = None) -> Path:
+                 inertia_ratio: float | None = None, ratio: str | None = None, jobs: int = 1) -> Path:
     """``bondc report``: run the pipeline and write one self-contained HTML report; returns its path.
 
     ``data`` (a measured CSV) with ``compare`` (``OUT=COLUMN[:nrmse=0.05]``
@@ -175,7 +178,10 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     ``torque`` and ``omega`` always gets the motor requirements). ``output``
     defaults to :func:`default_output`; missing directories are made.
     ``inertia_ratio`` is the load/rotor inertia-ratio limit of every motor
-    (``--inertia-ratio``; default: the catalogue's, else 10).
+    (``--inertia-ratio``; default: the catalogue's, else 10). ``ratio``
+    (``--ratio lead=2,5,10 [mm]``, with ``motors``) adds how the smallest
+    qualifying motor changes with the transmission ratio
+    (:mod:`bondc.analysis.ratio`), its values run on ``jobs`` processes.
     ``t_end`` [s] overrides the experiment's end time, ``date`` the date in
     the header (ISO, default today).
 
@@ -183,16 +189,24 @@ def build_report(path: str | Path, *, model: str | None = None, experiment: str 
     is simulated; a model error raises its stage's error. Either way nothing
     is written and an earlier report stays as it was.
     """
-    target, _, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
+    target, _, _, _ = _build(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
                           motors=motors, output=output, t_end=t_end, date=date, progress=progress,
-                          inertia_ratio=inertia_ratio)
+                          inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     return target
 
 
 def _build(path, *, model, experiment, sets, data, compare, motors, output, t_end, date,
-           progress, inertia_ratio=None) -> tuple[Path, PipelineRun, list[SignalResult]]:
+           progress, inertia_ratio=None, ratio=None,
+           jobs=1) -> tuple[Path, PipelineRun, list[SignalResult], Any]:
+    from bondc.analysis.ratio import check_ratio, ratio_study
+
+    check_ratio(ratio, motors)
     specs, measured = _measured(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
+    study = None
+    if ratio is not None and run.result is not None:
+        study = ratio_study(path, ratio, motors=motors, model=model, experiment=experiment, sets=sets,
+                            t_end=t_end, inertia_ratio=inertia_ratio, jobs=jobs, progress=progress)
     target = Path(output) if output is not None else default_output(path, run)
     results: list[SignalResult] = []
     try:
@@ -201,11 +215,11 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
             results = compare_run(run, measured, specs)
             validation = validation_section(run, results, data)
         write_report(report_context(run, validation=validation, motors=motors, date=date,
-                                    inertia_ratio=inertia_ratio), target)
+                                    inertia_ratio=inertia_ratio, ratio=study), target)
     except KeyboardInterrupt as interrupt:
         _keep_simulation(run, target, interrupt)
         raise
-    return target, run, results
+    return target, run, results, study
 
 
 def _keep_simulation(run: PipelineRun, target: Path, interrupt: KeyboardInterrupt) -> None:
@@ -231,7 +245,8 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
                sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
                date: str | None = None, progress: bool = False,
-               errors: TextIO | None = None, inertia_ratio: float | None = None) -> tuple[Path, int]:
+               errors: TextIO | None = None, inertia_ratio: float | None = None,
+               ratio: str | None = None, jobs: int = 1) -> tuple[Path, int]:
     """``bondc report`` for the command line: :func:`build_report`, then tell the user; returns (path, exit code).
 
     Prints the run's warnings (and an incomplete simulation's diagnostic)
@@ -243,7 +258,7 @@ def run_report(path: str | Path, *, model: str | None = None, experiment: str | 
     errors = errors if errors is not None else sys.stderr
     summary = report_summary(path, model=model, experiment=experiment, sets=sets, data=data, compare=compare,
                              motors=motors, output=output, t_end=t_end, date=date, progress=progress,
-                             errors=errors, inertia_ratio=inertia_ratio)
+                             errors=errors, inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     print(report_text(summary), file=errors)
     return Path(summary["written"][0]), summary["exit_status"]
 
@@ -252,7 +267,8 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
                    sets: Sequence = (), data: str | Path | None = None, compare: Sequence[str | CompareSpec] = (),
                    motors: str | Path | None = None, output: str | Path | None = None, t_end: float | None = None,
                    date: str | None = None, progress: bool = False,
-                   errors: TextIO | None = None, inertia_ratio: float | None = None) -> dict:
+                   errors: TextIO | None = None, inertia_ratio: float | None = None,
+                   ratio: str | None = None, jobs: int = 1) -> dict:
     """:func:`run_report` without its last line: builds and writes the report, prints the run's
     warnings to ``errors``, and returns what ``bondc report --json`` prints: ``complete`` (the
     simulation ran to its end), ``written`` (the report's path), ``signals`` (with ``--data``: each
@@ -261,9 +277,9 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
     errors = errors if errors is not None else sys.stderr
     if output is not None:
         check_output(output, "the report", make_folder=True)
-    target, run, results = _build(path, model=model, experiment=experiment, sets=sets, data=data,
+    target, run, results, study = _build(path, model=model, experiment=experiment, sets=sets, data=data,
                                   compare=compare, motors=motors, output=output, t_end=t_end, date=date,
-                                  progress=progress, inertia_ratio=inertia_ratio)
+                                  progress=progress, inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     diagnostics = _print_diagnostics(run, errors)
     failing = [result.name for result in results if not result.passed]
     interrupted = getattr(run.result, "exit_status", None) if run.result is not None else None
@@ -272,13 +288,16 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
             "written": [str(target)],
             "signals": [signal_json(result, _signal_unit(run.graph, result.output)[0]) for result in results],
             "failing": failing, "diagnostics": [d.to_json() for d in diagnostics],
+            **({"ratio": study.to_json()} if study is not None else {}),
             "exit_status": interrupted or (0 if run.complete and not failing else 1)}
 
 
 def report_text(summary: Mapping) -> str:
     """``bondc report``'s line: ``wrote PATH``, and whether the run or a comparison failed."""
     failing = summary["failing"]
-    return (f"wrote {summary['written'][0]}" + ("" if summary["complete"] else " (incomplete simulation)")
+    ratio = summary.get("ratio")
+    return ((ratio["sentence"] + "\n" if ratio else "")
+            + f"wrote {summary['written'][0]}" + ("" if summary["complete"] else " (incomplete simulation)")
             + (f"; validation failed: {', '.join(failing)}" if failing else ""))
 
 
@@ -576,7 +595,7 @@ def _diagram(graph, causal):
 
 def report_context(run: PipelineRun, *, validation: ValidationSection | None = None,
                    motors: str | Path | None = None, date: str | None = None,
-                   inertia_ratio: float | None = None) -> ReportContext:
+                   inertia_ratio: float | None = None, ratio=None) -> ReportContext:
     """Everything the report of ``run`` shows (see the module docstring)."""
     graph, result = run.graph, run.result
     equations, laws, state_table = state_equations(run.state_space)
@@ -601,6 +620,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
             run, motors, inertia_ratio)
         summary = (motor_summary or _summary(run)) + energy_summary
     return ReportContext(
+        bode=_bode_section(run),
         header=_header(run, date),
         source_html=highlight_bg(run.source_text),
         parameters=_parameter_rows(run),
@@ -624,7 +644,29 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         summary=summary,
         verdict=verdict,
         answer=answer,
+        ratio=ratio,
     )
+
+
+def _bode_section(run: PipelineRun) -> BodeSection | None:
+    """The frequency responses the experiment asks for (``bode = [U -> Y]``, linearised where
+    ``bode_at`` says, else at the initial point), or None; a linearisation that fails (no
+    equilibrium) is said in the section instead."""
+    from bondc.analysis.bode import bode
+    from bondc.errors import BondcError
+    from bondc.report.bode_report import section_rows
+
+    experiment = run.experiment
+    pairs = experiment.settings.get("bode") if experiment is not None else None
+    if not pairs:
+        return None
+    at = str(experiment.settings.get("bode_at", "initial"))
+    try:
+        result = bode(run.state_space, pairs=pairs, at=at, points=REPORT_BODE_POINTS)
+    except BondcError as error:
+        return BodeSection(at, 0.0, (), [_warning_text(d) for d in error.diagnostics])
+    return BodeSection(at, result.linearization.time, section_rows(result),
+                       [_warning_text(d) for d in result.warnings], list(result.notes))
 
 
 def _warning_text(diagnostic: Diagnostic) -> str:

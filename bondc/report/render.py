@@ -170,6 +170,17 @@ class Equation:
     label: str = ""                 # e.g. "mass.p" or "(3)"
 
 
+class BodeSection(NamedTuple):
+    """The frequency responses an experiment asks for (``bode = [U -> Y]``): where they were linearised,
+    and per pair (``bondc.report.bode_report.section_rows``) its plot, margins and verification."""
+
+    at: str
+    time: float
+    rows: Sequence[Mapping[str, Any]] = ()
+    warnings: Sequence[str] = ()
+    notes: Sequence[str] = ()
+
+
 class Plot(NamedTuple):
     title: str
     svg: Markup                     # from plot_svg
@@ -278,6 +289,8 @@ class ReportContext:
     laws: Sequence[Equation] = ()               # "where": the laws the state equations name
     result_tables: Sequence[Table] = ()         # e.g. statistics of the outputs
     power_plots: Sequence[Plot] = ()            # power of the elements against time
+    ratio: Any = None                           # --ratio: a bondc.analysis.ratio.RatioStudy, after the answer
+    bode: BodeSection | None = None             # the experiment's bode = [U -> Y]: frequency responses
 
     def __post_init__(self) -> None:
         # Trusted HTML must come from bondc's own producers, which return Markup; a
@@ -348,6 +361,17 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
+#: The start of a standalone page's template (the sweep's and the fit's reports): its doctype, the
+#: Content-Security-Policy ``csp`` and the viewport; the template goes on with its title and style.
+PAGE_HEAD = """<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+"""
+
+
 @functools.lru_cache(maxsize=1)
 def environment() -> Environment:
     """The one Jinja environment of bondc's reports (templates in ``bondc/report/templates``)."""
@@ -382,6 +406,8 @@ def _sections(context: ReportContext) -> list[tuple[str, str]]:
         sections.append(("results", "Simulation results"))
     if context.power_tables or context.power_plots:
         sections.append(("power", "Power and energy"))
+    if context.bode is not None:
+        sections.append(("frequency-response", "Frequency response"))
     if context.motor_requirements is not None:
         sections.append(("motor-requirements", "Motor requirements"))
     if context.motor_candidates is not None:

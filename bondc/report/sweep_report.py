@@ -36,7 +36,8 @@ import numpy as np
 from markupsafe import Markup
 
 from bondc.errors import DataError, Diagnostic
-from bondc.report.render import PLOT_STYLE, content_security_policy, draw_motor_envelopes, environment, figure_svg
+from bondc.report.render import (PAGE_HEAD, PLOT_STYLE, content_security_policy, draw_motor_envelopes, environment,
+                                  figure_svg)
 
 STATISTICS = ("min", "max", "mean", "rms", "final", "cycle_peak", "cycle_rms", "cycle_energy",
               "cycle_energy_positive", "cycle_energy_negative")
@@ -336,13 +337,7 @@ def motor_plot(study: Study, catalogue) -> Markup | None:
         return figure_svg(figure, title, key)
 
 
-_TEMPLATE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{{ study.name }} — bondc design study</title>
+_TEMPLATE = PAGE_HEAD + """<title>{{ study.name }} — bondc design study</title>
 <style>
 {% include "report.css" %}
 .table-wrap { overflow-x: auto; max-width: 100%; }

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import os
 import re
 import shlex
@@ -541,6 +542,55 @@ d("E941", "derivative cannot be evaluated",
   "message names the loop.",
   "Linearise at another point (another initial value, or `--at equilibrium`), or make the law smooth at the "
   "operating point.")
+d("E942", "no such input or output",
+  "`bondc bode`: a `--input` or `--output` names nothing the model has (the hint names the closest input or "
+  "output and lists them), or the model has several inputs or outputs and none was chosen, or it has none at "
+  "all (a frequency response needs an `input` to excite and an `output` to measure).",
+  "Give the name as the model declares it (`--input F --output x`), or declare the signal: `input F [N] = ...` "
+  "used in a source's law, `output x [m] = spring.q`.")
+d("E943", "not an input (or not an output)",
+  "`bondc bode`: the name given to `--input` is a parameter, an output, a state or an element, not an `input`; "
+  "or the name given to `--output` is an input, a parameter or a state, not an `output`. The linear model's "
+  "columns are the inputs and its rows the outputs.",
+  "Excite an input and measure an output. To excite a parameter, make it an input (`input F [N] = F0`) used in "
+  "the law; to measure a state, declare `output x [m] = spring.q`.")
+d("E944", "bad frequency or range",
+  "`bondc bode`: `--from` or `--to` is not a number with an optional unit of frequency (`0.5`, `\"10 [rad/s]\"`, "
+  "`\"2 [kHz]\"`, `\"600 [rpm]\"`), is not positive (the frequency axis is logarithmic), or `--from` is not below "
+  "`--to`.",
+  "Give positive frequencies in Hz, or with a unit of frequency in brackets, the lower one with `--from`.")
+d("E945", "bad number of frequencies",
+  "`bondc bode --points N`: N is not a whole number from 2 to 100000.",
+  "Give a whole number; the default is 400 frequencies spaced logarithmically.")
+d("E946", "cannot verify",
+  "`bondc bode --verify` simulates the nonlinear model with a small sine on the input around the operating "
+  "point and compares the steady oscillation of the output with the linear prediction. That needs an operating "
+  "point at rest (the default initial point of a model that moves there is not one), a linear model without a "
+  "growing mode (else nothing settles), and a positive `--amplitude` in a unit of the input.",
+  "Verify at an equilibrium (`--at equilibrium`) that is stable; give `--amplitude` as a positive number in the "
+  "input's unit, or with a unit of its dimension (`--amplitude \"0.1 [N]\"`).")
+d("E947", "unknown output kind",
+  "`bondc bode -o FILE`: the file's extension says what to write, and it is not `.csv` (the table, units in the "
+  "header), `.svg` (the plot) or `.html` (a page with the plots and margins).",
+  "Name the file with one of these extensions.")
+d("W942", "operating point on a switch",
+  "`bondc bode`: a switching function of the model's laws (an `if` comparison, the speed of a `coulomb` "
+  "friction, the argument of `sign` or `abs`, a table breakpoint) that depends on a state or an input is zero "
+  "at the operating point: a friction stuck at zero speed, a valve at its opening pressure, a backlash at its "
+  "edge. The law has a kink or a jump there and the linear model takes the slope of one side only, so the "
+  "response holds for motion to that side (a stuck friction is not a viscous damper).",
+  "Linearise where the law is smooth (another `--time`, another initial state, `--at equilibrium`), and check "
+  "the response with `--verify`.")
+d("W943", "linear prediction does not hold",
+  "`bondc bode --verify`: at a verified frequency the simulated model's amplitude or phase differs from the "
+  "linear prediction by more than 0.5 dB or 5 degrees. The model is not linear over the sine's amplitude there, "
+  "or the operating point sits on a switch (W942).",
+  "Verify with a smaller `--amplitude`; if the difference stays, the linearisation does not describe the "
+  "machine at that frequency.")
+d("W944", "verification run incomplete",
+  "`bondc bode --verify`: the simulation at one frequency stopped before its end (the message says where and "
+  "why), so that frequency has no simulated value.",
+  "Verify with a smaller `--amplitude`, or look at the model's behaviour with `bondc simulate`.")
 
 d("E960", "--vary not understood",
   "`bondc sweep`: a `--vary` is not `NAME=VALUES [unit]` (no `=`, a name that is not a name, no values, an "
@@ -601,11 +651,99 @@ d("E972", "not a sweep table",
   "`bondc report --sweep FILE`: FILE cannot be read, or is not the csv `bondc sweep -o` wrote (its header "
   "starts with `index` and has a `status` column).",
   "Give the table the sweep wrote.")
+d("E973", "ratio study without a catalogue",
+  "`--ratio NAME=VALUES` (of `simulate` and `report`) shows how the smallest qualifying motor changes with the "
+  "transmission ratio, so it needs the motor catalogue to choose from; the command stops before any run.",
+  "Add `--motors CATALOGUE.csv`, or vary the parameter with `bondc sweep --vary NAME=VALUES` to see its metrics "
+  "without a motor choice.")
 d("E971", "sweep executor",
   "`--executor dask` (or `--scheduler`) needs `dask.distributed`, which is not installed; or the scheduler "
   "given with `--scheduler` cannot be reached; or the executor is neither `local` nor `dask`.",
   "`pip install \"dask[distributed]\"`; start a scheduler with `dask scheduler` and workers with "
   "`dask worker ADDRESS`, and pass the address the scheduler prints.")
+
+# -- calibration (bondc/analysis/fit.py, bondc/analysis/fit_write.py)
+
+d("E880", "fit comparison not understood",
+  "A `bondc fit --compare` is not `OUT=COLUMN[:weight=W]`: no `=`, a name that is not a signal name, "
+  "something after `:` other than `weight=W`, or a weight that is not a positive number. (A fit takes no "
+  "tolerances; `bondc validate` does.)",
+  "Write e.g. `--compare torque=tau_meas` or `--compare P=P_meas:weight=2`.")
+d("E881", "estimate not understood",
+  "An `--estimate` is not `NAME` or `NAME=LOW:HIGH [unit]`: bounds that are not two numbers separated by "
+  "`:`, a bound that is not a finite number, an empty unit, a unit without bounds, or a unit that measures "
+  "another quantity than the parameter.",
+  "Write `--estimate b`, `--estimate b=5:30` (bounds in the parameter's declared unit; an empty bound is "
+  "open: `b=0:`) or `--estimate \"Ae=5:50 [mm^2]\"`.")
+d("E882", "estimated parameter unknown",
+  "An `--estimate` names no parameter of the model (the hint suggests the closest and lists them). A "
+  "component's parameters are named with dots (`valve.Ae`).",
+  "Use a parameter's name as `bondc check --json` or the report lists it.")
+d("E883", "parameter cannot be estimated",
+  "A fit gives the compiled model new parameter values at each evaluation, without deriving it again. "
+  "This parameter cannot be given that way: its value sets an experiment setting (`t_end = T`, "
+  "`max_step = h`, `cycle`), which is fixed before a run starts, or changes what the model's equations "
+  "are derived from.",
+  "Estimate a parameter that only enters the equations; fix this one with `--set`. To fit a setting, "
+  "run `bondc sweep` over it.")
+d("E884", "estimate bounds reversed",
+  "An `--estimate NAME=LOW:HIGH` has LOW at or above HIGH.",
+  "Give LOW < HIGH.")
+d("E885", "start value outside the bounds",
+  "The value the fit starts from (the model's, after the experiment and `--set`) is outside the "
+  "`--estimate` bounds.",
+  "Widen the bounds, or give a start inside them with `--set NAME=VALUE`.")
+d("E886", "fit column missing",
+  "A `--compare OUT=COLUMN` names a column the data set's CSV does not have (the hint lists them).",
+  "Use a column name of the data file's header.")
+d("E887", "fit signal missing",
+  "A `--compare OUT=COLUMN` names a signal the model's run does not record (the hint lists the outputs).",
+  "Use an output, a state (`mass.p`) or a bond variable (`b3.e`); or add an output to the model.")
+d("E888", "parameter estimated twice",
+  "Two `--estimate` name the same parameter.",
+  "Give it once, with its bounds.")
+d("E889", "fit data sets",
+  "The data sets of `bondc fit` are not complete: a `--compare` before any `--data` (each `--data` starts a "
+  "data set; the `--experiment` and `--compare` after it belong to it), a data set without `--compare`, two "
+  "`--experiment` in one data set, no `--data` or no `--estimate`, data and run that share fewer than two "
+  "samples, fewer samples than parameters, or `--max-evaluations` below 1.",
+  "Write `--data up.csv --experiment up --compare x=x_meas --data down.csv --experiment down --compare "
+  "x=x_meas`, each data set with its comparisons after it.")
+d("E890", "fitted model cannot be written",
+  "`bondc fit --write FILE`: the file is the model or a data file, is not a `.bg` file, exists and was not "
+  "written by `bondc fit` (its first line says so), is in another folder than a model that reads files by "
+  "relative paths (`import`, `csv()`), or an estimated parameter belongs to a component, so that the copy "
+  "of the model file cannot hold its value.",
+  "Give a new `.bg` path beside the model; for a component's parameter, give the fitted value with `--set`.")
+d("E891", "model fails at the start values",
+  "The run of a data set's experiment stops early (or gives values that are not finite) at the values the "
+  "fit starts from, so there is nothing to improve on.",
+  "Start from values with which `bondc simulate` runs the model, with `--set`.")
+d("E892", "bound the model rejects",
+  "The model does not accept an estimated parameter at one of its bounds (a divisor that becomes 0, a "
+  "value its checks refuse): the fit would try it.",
+  "Give bounds inside the values the model accepts (e.g. a mass above 0).")
+d("W880", "estimates cannot be told apart",
+  "Two estimates correlate beyond 0.99: the data determines a combination of them (a product, a sum), "
+  "not each one; their intervals are wide and the values arbitrary along that combination.",
+  "Fix one of them with `--set`, or add data (another signal, another experiment) that separates them.")
+d("W881", "Jacobian singular",
+  "A direction of the parameters changes no residual (the Jacobian's singular value is below 1e-6 of the "
+  "largest): the parameters named cannot be determined from this data; their standard errors and "
+  "intervals are infinite.",
+  "Fix all but one of them with `--set`, or add data that tells them apart.")
+d("W882", "estimate on its bound",
+  "The fit ended with a parameter on its bound: the best value may lie beyond it, and its interval "
+  "(computed as if it were free) is not meaningful.",
+  "Widen the bounds if the values beyond are physical; otherwise check the model and the data.")
+d("W883", "fit not converged",
+  "The optimiser stopped at its evaluation limit before its tolerances were met; `bondc fit` reports the "
+  "values it reached and exits with status 1.",
+  "Raise `--max-evaluations`, or start nearer the solution with `--set`.")
+d("W884", "runs failed during the fit",
+  "At some trial values the model's run stopped early; the optimiser treated them as a poor fit and "
+  "stepped back.",
+  "Bounds that keep the parameters where the model runs make the fit faster and surer.")
 
 # -- validation against measured data (bondc/report/validate.py)
 
@@ -819,6 +957,7 @@ live("E925", Api("from bondc.analysis.motors import requirements\n"
                  "requirements([0.0, 0.5, 1.0], [0.2, 0.3, 0.4], [100.0, 150.0, 200.0], cycle=(0.5, 2.0))"))
 live("E928", Cli("bondc simulate spin.bg --motors motors.csv --inertia-ratio -5",
                  {"spin.bg": SPIN, "motors.csv": CATALOGUE}))
+live("E973", Cli("bondc simulate spin.bg --ratio n=2,5", {"spin.bg": SPIN}))
 live("E927", Cli("bondc simulate spin.bg --motors motors.csv", {"spin.bg": SPIN_NO_TORQUE, "motors.csv": CATALOGUE}))
 
 _IMPORTS = ("from bondc import semantic\n"
@@ -896,6 +1035,53 @@ live("E934", Cli("bondc simulate tiny.bg", {"tiny.bg": _TINY}, lines="[E934]"))
 live("W930", Cli("bondc simulate bounce.bg", {"bounce.bg": LOOSE}, stream="stdout", lines="[W930]",
                  note="Of the energy account `bondc simulate` prints, only its last line is shown here."))
 
+# -- frequency response
+
+_CUBIC = """model CubicSpring
+  param m  = 1   [kg]
+  param k1 = 100 [N/m]
+  param k3 = 1e4 [N/m^3]
+  param b  = 4   [N*s/m]
+  param F0 = 10  [N]
+  input F [N] = F0
+  MSe force  : e = F
+  I   mass   : f = p/m
+  C   spring : e = k1*q + k3*q^3
+  R   damper : e = b*f
+  1   j
+  force -> j
+  j -> mass
+  j -> spring
+  j -> damper
+  output x [m] = spring.q
+  output v [m/s] = mass.f
+end
+"""
+# the same mass, on a linear spring with dry friction, at rest: on the friction's switch
+_STUCK = (_CUBIC.replace("CubicSpring", "StuckFriction").replace("  param k3 = 1e4 [N/m^3]\n", "")
+          .replace("input F [N] = F0", "input F [N] = 0").replace("e = k1*q + k3*q^3", "e = k1*q")
+          .replace("e = b*f", "e = b*f + coulomb(f, F0/2)"))
+_BODE = "bondc bode spring.bg "
+live("E942", Cli(_BODE + "--output xx", {"spring.bg": _CUBIC}))
+live("E943", Cli(_BODE + "--input k1 --output x", {"spring.bg": _CUBIC}))
+live("E944", Cli(_BODE + "--output x --from 100 --to 10", {"spring.bg": _CUBIC}),
+     Cli(_BODE + "--output x --from '3 [m]'", {"spring.bg": _CUBIC}))
+live("E945", Cli(_BODE + "--output x --points 1", {"spring.bg": _CUBIC}))
+live("E946", Cli(_BODE + "--output x --verify", {"spring.bg": _CUBIC}))
+live("E947", Cli(_BODE + "--output x -o bode.png", {"spring.bg": _CUBIC}))
+live("W942", Cli("bondc bode stuck.bg --output x --points 5", {"stuck.bg": _STUCK}, lines="W942"))
+live("W943", Cli(_BODE + "--output x --at equilibrium --verify --amplitude 8", {"spring.bg": _CUBIC},
+                 lines="W943", note="A sine almost as large as the force itself moves the mass far along the "
+                                    "hardening spring."))
+# and on a spring whose force grows as the root of its extension, which has no value in compression
+_ROOT = (_CUBIC.replace("CubicSpring", "RootSpring").replace("  param k3 = 1e4 [N/m^3]\n", "")
+         .replace("param k1 = 100 [N/m]", "param k1 = 100 [N/m^0.5]")
+         .replace("e = k1*q + k3*q^3", "e = k1*sqrt(q), q(0) = 0.01"))
+live("W944", Cli("bondc bode root.bg --output x --at equilibrium --verify --amplitude 100", {"root.bg": _ROOT},
+                 lines="run at 0.7667 Hz", note="A sine of 100 N against 10 N pulls the spring into compression, "
+                                            "where sqrt(q) has no value; the runs at the other frequencies stop "
+                                            "the same way."))
+
 # -- sweeps
 
 _SWEEP = "bondc sweep spin.bg "
@@ -913,6 +1099,64 @@ live("E970", Cli(_SWEEP + "--vary J=1e-4,4e-4 --metric omega.final -o study.csv"
                   "study.csv": "index,J [kg*m^2],omega.final [rad/s],status,message,wall_time [s]\n"
                                "0,0.0001,499.99,ok,,0.02\n1,0.0002,496.63,ok,,0.02\n"},
                  note="`study.csv` is the table of an earlier `--vary J=1e-4,2e-4`."))
+
+# -- calibration
+
+_FIT_TIMES = [i / 10 for i in range(11)]
+FIT_DATA = "t,omega_meas\n" + "".join(f"{t:g},{2000 * (1 - math.exp(-t / 0.4)):.5g}\n" for t in _FIT_TIMES)
+_FIT = "bondc fit spin.bg --data measured.csv "
+SPIN_STEP = SPIN.replace("  experiment run\n", "  param h = 1 [ms]\n  experiment run\n    max_step = h\n")
+PRODUCT = """model RC
+  param a = 100 [Ohm]
+  param b = 10 [1]
+  Se source : e = 10
+  R  r      : e = a*b*f
+  C  cap    : e = q/1e-3
+  1  loop
+  source -> loop
+  loop -> r
+  loop -> cap
+  output v [V] = cap.e
+  experiment charge
+    t_end = 5 [s]
+  end
+end
+"""
+RC_DATA = "t,v\n" + "".join(f"{t / 2:g},{10 * (1 - math.exp(-t / 2 / 1.5)):.6g}\n" for t in range(11))
+_SQRT = ("model Sqrt\n  param c = 2 [s]\n  Se s : e = sqrt(c - t)\n  I m : f = p\n  s -> m\n"
+         "  output y = m.p\n  experiment run\n    t_end = 1 [s]\n  end\nend\n")
+_SQRT_DATA = "t,y\n" + "".join(f"{t / 10:g},{(2 / 3) * (0.6 ** 1.5 - (0.6 - t / 10) ** 1.5):.6g}\n"
+                                for t in range(6)) + "0.6,0.31\n"
+live("E880", Cli(_FIT + "--compare omega --estimate b", {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E881", Cli(_FIT + "--compare omega=omega_meas --estimate b=1e-4", {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E882", Cli(_FIT + "--compare omega=omega_meas --estimate j", {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E883", Cli(_FIT + "--compare omega=omega_meas --estimate h=0.5:5", {"spin.bg": SPIN_STEP,
+                                                                          "measured.csv": FIT_DATA}))
+live("E884", Cli(_FIT + "--compare omega=omega_meas --estimate b=1e-3:1e-4",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E885", Cli(_FIT + "--compare omega=omega_meas --estimate b=2e-3:1e-2",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E886", Cli(_FIT + "--compare omega=omega_mes --estimate b", {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E887", Cli(_FIT + "--compare speed=omega_meas --estimate b", {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E888", Cli(_FIT + "--compare omega=omega_meas --estimate b --estimate b=1e-4:1e-2",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E889", Cli("bondc fit spin.bg --compare omega=omega_meas --data measured.csv --estimate b",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E890", Cli(_FIT + "--compare omega=omega_meas --estimate b --write spin.bg",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("E891", Cli("bondc fit sqrt.bg --data y.csv --compare y=y --estimate c=0.1:3",
+                 {"sqrt.bg": _SQRT.replace("param c = 2", "param c = 0.5"), "y.csv": _SQRT_DATA}))
+live("E892", Cli(_FIT + "--compare omega=omega_meas --estimate J=0:1e-3", {"spin.bg": SPIN, "measured.csv": FIT_DATA}))
+live("W880", Cli("bondc fit rc.bg --data v.csv --compare v=v --estimate a=1:1000 --estimate b=0.1:100",
+                 {"rc.bg": PRODUCT, "v.csv": RC_DATA}, lines="W88"))
+live("W881", Cli("bondc fit rc.bg --data v.csv --compare v=v --estimate a=1:1000 --estimate b=0.1:100",
+                 {"rc.bg": PRODUCT, "v.csv": RC_DATA}, lines="W88"))
+live("W882", Cli(_FIT + "--compare omega=omega_meas --estimate b=2.6e-4:1e-2 --estimate J",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}, lines="W882"))
+live("W883", Cli(_FIT + "--compare omega=omega_meas --estimate b --estimate J --max-evaluations 1",
+                 {"spin.bg": SPIN, "measured.csv": FIT_DATA}, lines="W883"))
+live("W884", Cli("bondc fit sqrt.bg --data y.csv --compare y=y --estimate c=0.1:3",
+                 {"sqrt.bg": _SQRT, "y.csv": _SQRT_DATA}, lines="W884"))
 
 # -- validation
 
@@ -1015,6 +1259,7 @@ STAGES = (  # (title, modules), in the order of the page
     ("Analyses and data files", "`bondc/analysis/`"),
     ("Validation against measured data", "`bondc/report/validate.py`"),
     ("Export: C code and FMUs", "`bondc/export/`"),
+    ("Calibration", "`bondc/analysis/fit.py`, `bondc/analysis/fit_write.py`"),
     ("Command line and files", "`bondc/cli.py`, `bondc/io.py`, `bondc/errors.py`"),
 )
 
@@ -1030,6 +1275,8 @@ def stage_of(code: str) -> str:
         return "Validation against measured data"
     if 840 <= number < 860:
         return "Export: C code and FMUs"
+    if 880 <= number < 900:
+        return "Calibration"
     by_hundred = {1: "Syntax", 2: "Units", 3: "Names, expressions, files and experiments", 4: "Graph structure",
                   5: "Element laws and states", 6: "Causality", 7: "Equations", 8: "Simulation",
                   9: "Analyses and data files"}
