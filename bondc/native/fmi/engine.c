@@ -1,10 +1,10 @@
 /* bondc's engine inside an FMU: one instance's state, integrated by bondc's CVODE driver (driver.c).
 
    The driver integrates with the model's frozen laws (the modes m held) and watches the switching
-   functions of the located switches (bondc_driver_advance); at a possible crossing this file finds
-   the earliest crossing in the last step on the driver's interpolant (bondc_driver_switch), as the
-   Python runtime's _Run.crossing does, then selects the modes after it (bondc_driver_restart:
-   the modes there and a probe ahead along their law, as _Run.restart_modes) and fires the when
+   functions of the located switches (bondc_driver_advance); at a possible crossing the driver finds
+   the earliest crossing in the last step on its interpolant (bondc_driver_crossing, as the Python
+   runtime's _Run.crossing does) and selects the modes after it (bondc_driver_select: the modes
+   there and a probe ahead along their law, as _Run.restart_modes); this file fires the when
    clauses whose condition became true (as bondc_driver_pieces does). A restart whose modes cycle
    (switches that chatter: a sliding mode) is an error: bondc fmu refuses, before building, a model
    whose switches may slide (see bondc.export.fmu). */
@@ -22,7 +22,6 @@
 #define NP (BONDC_N_P > 0 ? BONDC_N_P : 1)
 #define CAPACITY 256          /* steps of one batch of the driver */
 #define MAX_STEPS 100000L     /* CVODE's steps between two restarts */
-#define MAX_ROUNDS 8          /* mode selections a probe ahead (as _Run.restart_modes) */
 #define EVENT_ROUNDS 10       /* rounds of when clauses at one instant (as the runtime's _EVENT_ROUNDS) */
 #define STALL_EVENTS 100000   /* events in one call without time advancing: the run is stalled */
 
@@ -45,18 +44,15 @@ bondc_fmu *bondc_fmu_new(void)
     c->band = (double *)zeros(NS, sizeof(double));
     c->g_old = (double *)zeros(NS, sizeof(double));
     c->g = (double *)zeros(NS, sizeof(double));
-    c->ahead = (double *)zeros(NS, sizeof(double));
     c->old = (double *)zeros(NS, sizeof(double));
-    c->seen = (double *)zeros((size_t)NS * (MAX_ROUNDS + 2), sizeof(double));
     c->f = (double *)zeros(NX, sizeof(double));
-    c->shifted = (double *)zeros(NX, sizeof(double));
     c->conditions = (double *)zeros(BONDC_N_WHENS, sizeof(double));
     c->after = (double *)zeros(BONDC_N_WHENS, sizeof(double));
     c->values = (double *)zeros(BONDC_N_WHEN_TARGETS, sizeof(double));
     c->ts = (double *)zeros(CAPACITY, sizeof(double));
     c->ys = (double *)zeros((size_t)CAPACITY * NX, sizeof(double));
-    if (!c->p || !c->x || !c->m || !c->watch || !c->signs || !c->band || !c->g_old || !c->g || !c->ahead
-        || !c->old || !c->seen || !c->f || !c->shifted || !c->conditions || !c->after || !c->values || !c->ts
+    if (!c->p || !c->x || !c->m || !c->watch || !c->signs || !c->band || !c->g_old || !c->g
+        || !c->old || !c->f || !c->conditions || !c->after || !c->values || !c->ts
         || !c->ys) {
         bondc_fmu_free(c);
         return NULL;
@@ -81,7 +77,7 @@ void bondc_fmu_free(bondc_fmu *c)
     if (!c) return;
     if (c->d) bondc_driver_free(c->d);
     free(c->p); free(c->x); free(c->m); free(c->watch); free(c->signs); free(c->band); free(c->g_old);
-    free(c->g); free(c->ahead); free(c->old); free(c->seen); free(c->f); free(c->shifted); free(c->conditions);
+    free(c->g); free(c->old); free(c->f); free(c->conditions);
     free(c->after); free(c->values); free(c->ts); free(c->ys);
     free(c);
 }
@@ -143,33 +139,12 @@ static int same_modes(const double *a, const double *b)
     return 1;
 }
 
-/* The modes just after (t, x), from the guess c->old, into c->m: those of bondc_driver_restart
-   where the modes a probe ahead agree; else the modes ahead, probed again, until they agree (as
-   _Run.restart_modes). 0, 1 where they cycle (switches that chatter: a sliding mode), -1 where the
-   law is not finite. */
+/* The modes just after (t, x), from the guess c->old, into c->m (the driver's bondc_driver_select:
+   bondc_driver_restart, then the modes a probe ahead until they agree, as _Run.restart_modes): 0,
+   1 where they cycle (switches that chatter: a sliding mode), -1 where memory ran out. */
 static int select_modes(bondc_fmu *c, double t, const double *x)
 {
-    const int *floors = bondc_switch_floor;
-    if (BONDC_N_SWITCHES == 0) return 0;
-    int code = bondc_driver_restart(c->d, t, x, c->old, floors, c->probe, 0, c->m);
-    if (code == 1) return 0;
-    if (code < 0) return -1;
-    int rounds = 1;
-    memcpy(c->seen, c->m, sizeof(double) * BONDC_N_SWITCHES);
-    for (int round = 0; round < MAX_ROUNDS; round++) {
-        bondc_rhs(t, x, c->p, c->m, c->f);
-        if (!finite_all(c->f, BONDC_N_STATES)) return 0;
-        for (int i = 0; i < BONDC_N_STATES; i++) c->shifted[i] = x[i] + c->probe * c->f[i];
-        /* the modes a probe ahead along this law: the first output of a restart there */
-        bondc_driver_restart(c->d, t + c->probe, c->shifted, c->m, floors, c->probe, 0, c->ahead);
-        if (same_modes(c->ahead, c->m)) return 0;
-        for (int r = 0; r < rounds; r++)
-            if (same_modes(c->ahead, c->seen + (long)r * BONDC_N_SWITCHES)) return 1;
-        memcpy(c->seen + (long)rounds * BONDC_N_SWITCHES, c->ahead, sizeof(double) * BONDC_N_SWITCHES);
-        rounds++;
-        memcpy(c->m, c->ahead, sizeof(double) * BONDC_N_SWITCHES);
-    }
-    return 1;
+    return bondc_driver_select(c->d, t, x, c->old, bondc_switch_floor, c->probe, c->m);
 }
 
 static int chattering(bondc_fmu *c, double t)
@@ -192,7 +167,7 @@ int bondc_fmu_event(bondc_fmu *c, int *changed)
     if (!finite_all(c->x, BONDC_N_STATES)) return fail(c, "the state is not finite", c->t);
     memcpy(c->old, c->m, sizeof(double) * NS);
     int code = select_modes(c, c->t, c->x);
-    if (code < 0) return fail(c, "a switching function is not finite", c->t);
+    if (code < 0) return fail(c, "out of memory", c->t);
     if (code > 0) return chattering(c, c->t);
     if (!same_modes(c->old, c->m)) c->events++;
     /* the when clauses whose condition became true here: their statements from the values just
@@ -214,85 +189,11 @@ int bondc_fmu_event(bondc_fmu *c, int *changed)
         c->events++;
         memcpy(c->old, c->m, sizeof(double) * NS);
         code = select_modes(c, c->t, c->x);
-        if (code < 0) return fail(c, "a switching function is not finite", c->t);
+        if (code < 0) return fail(c, "out of memory", c->t);
         if (code > 0) return chattering(c, c->t);
     }
     c->selected = 1;
     return 0;
-}
-
-/* The root of f in [a, b] with f(a) > 0 >= f(b): the end b of a bracket narrowed by the Illinois
-   method (regula falsi that halves the weight of an end kept twice) to 4 eps, as brentq's xtol. */
-typedef struct { bondc_fmu *c; double t_old, t_new; const double *y_new; int k, kind; double sign, band, level; } crossing;
-
-static double crossing_value(const crossing *s, double t)
-{
-    double g = bondc_driver_switch(s->c->d, t, s->t_old, s->t_new, s->y_new, s->c->m, s->k);
-    if (s->kind == 1) return fmin(g - s->level, s->level + 1.0 - g);    /* a floor switch: inside [m, m + 1) */
-    if (s->kind == 2) return s->level - fabs(g);                       /* mode 0: leaving the surface */
-    return s->sign * g + s->band;
-}
-
-static double locate(const crossing *s)
-{
-    double a = s->t_old, b = s->t_new, fa = crossing_value(s, a), fb = crossing_value(s, b);
-    if (!(fa > 0) || !(fb <= 0)) return b;     /* no sign change on the interpolant: the step's end */
-    int kept = 0;
-    for (int i = 0; i < 200 && b - a > 4 * EPS * fmax(fabs(a), fabs(b)) + 1e-300; i++) {
-        double t = b - fb * (b - a) / (fb - fa);
-        if (!(t > a && t < b)) t = 0.5 * (a + b);
-        double ft = crossing_value(s, t);
-        if (ft != ft) { t = 0.5 * (a + b); ft = crossing_value(s, t); }
-        if (ft <= 0) {
-            b = t; fb = ft;
-            if (kept == -1) fa *= 0.5;
-            kept = -1;
-        } else {
-            a = t; fa = ft;
-            if (kept == 1) fb *= 0.5;
-            kept = 1;
-        }
-        if (ft == 0) break;
-    }
-    return b;
-}
-
-/* The earliest crossing in the step (t_old, t_new] of the watched switches (as _Run.crossing), or
-   -1: its time into *t_event. */
-static int earliest(bondc_fmu *c, double t_old, double t_new, const double *y_new, double *t_event)
-{
-    int found = -1;
-    double best = t_new;
-    bondc_switches(t_new, y_new, c->p, c->m, c->g);
-    for (int j = 0; j < c->watched; j++) {
-        int k = c->watch[j];
-        double s = c->signs[j], band = c->band[j], old = c->g_old[j], now = c->g[k], root;
-        crossing q = {c, t_old, t_new, y_new, k, 0, s, band, 0.0};
-        if (bondc_switch_floor[k]) {
-            double before = fmin(old - s, s + 1.0 - old) + band, after = fmin(now - s, s + 1.0 - now) + band;
-            if (!(after < 0)) continue;
-            if (before <= 0) { root = t_old; }
-            else { q.kind = 1; q.level = s; root = locate(&q); }
-        } else if (s != 0) {
-            double before = s * old + band, after = s * now + band;
-            if (!(after < 0 || (after == 0 && before > 0))) continue;
-            if (before <= 0) root = t_old;
-            else if (after == 0) root = t_new;
-            else {
-                /* the deadband decides whether it crossed; where the zero itself is in this step, the zero */
-                q.band = s * old > 0 ? 0.0 : band;
-                root = locate(&q);
-            }
-        } else {
-            if (!(isfinite(now) && fabs(now) > band && now != 0)) continue;
-            q.kind = 2;
-            q.level = band > 0 ? band : 1e-6 * fabs(now);
-            root = locate(&q);
-        }
-        if (found < 0 || root < best) { best = root; found = k; }
-    }
-    *t_event = best;
-    return found;
 }
 
 /* Start a segment at (t, x) with the modes m: the watched switches' signs, values and deadbands
@@ -358,7 +259,10 @@ int bondc_fmu_advance(bondc_fmu *c, double t_end)
             /* code 1: a possible crossing in the last step (t_old, t_new] */
             double t_old = kept > 0 ? c->t : t_before, t_new = c->ts[count - 1], t_event;
             const double *y_new = c->ys + (long)(count - 1) * BONDC_N_STATES;
-            int k = earliest(c, t_old, t_new, y_new, &t_event);
+            /* the earliest crossing in it, on CVODE's interpolant (the driver's bondc_driver_crossing,
+               as _Run.crossing finds it) */
+            int k = bondc_driver_crossing(c->d, c->watched, c->watch, c->signs, c->band, c->g_old,
+                                          bondc_switch_floor, c->m, t_old, t_new, y_new, c->g, &t_event);
             if (k < 0) {        /* no crossing: the step stands */
                 c->t = t_new;
                 memcpy(c->x, y_new, sizeof(double) * BONDC_N_STATES);

@@ -23,7 +23,7 @@ struct bondc_fmu {
     struct bondc_driver *d;
     int watched;
     int *watch;
-    double *signs, *band, *g_old, *g, *f, *shifted, *ahead, *seen, *old, *conditions, *after, *values;
+    double *signs, *band, *g_old, *g, *f, *old, *conditions, *after, *values;
     double *ts, *ys;
 };
 
