@@ -3,8 +3,8 @@
 An FMU is a zip of ``modelDescription.xml`` (the variables, their units, the default experiment)
 and a shared library per platform. bondc's holds, in ``binaries/linux64/<Model>.so``, the model's
 C code (:mod:`bondc.export.ccode`), bondc's CVODE driver (``bondc/native/driver.c``), the engine of
-an FMU instance (``bondc/native/fmi/engine.c``: crossing location and mode selection on the
-driver's functions) and the FMI wrapper (``bondc/native/fmi/fmi2.c`` or ``fmi3.c``), linked with
+an FMU instance (``bondc/native/fmi/engine.c``: its state, its steps and events, on the driver's
+functions) and the FMI wrapper (``bondc/native/fmi/fmi2.c`` or ``fmi3.c``), linked with
 scikit-sundae's SUNDIALS libraries, which the FMU carries beside it (found through the rpath
 ``$ORIGIN``): it runs where neither bondc, Python nor a C compiler is installed.
 
