@@ -19,7 +19,7 @@ m.bg:1:17: error[E201]: unknown unit 'kgg'
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Mapping
 
@@ -39,6 +39,25 @@ class Related:
     label: str
 
 
+class Hint(str):
+    """A hint's text with the names its "did you mean" offers (:attr:`Diagnostic.suggestions`):
+    a string everywhere a hint is, that keeps them through :meth:`join`."""
+
+    suggestions: tuple[str, ...]
+
+    def __new__(cls, text: str, suggestions: tuple[str, ...] = ()) -> "Hint":
+        made = super().__new__(cls, text)
+        made.suggestions = tuple(suggestions)
+        return made
+
+    @classmethod
+    def join(cls, parts, separator: str = "; ") -> "Hint":
+        """The parts joined, with the suggestions of the first part that offers any."""
+        parts = list(parts)
+        offered = next((p.suggestions for p in parts if getattr(p, "suggestions", ())), ())
+        return cls(separator.join(parts), offered)
+
+
 @dataclass(frozen=True)
 class Diagnostic:
     severity: str
@@ -47,6 +66,9 @@ class Diagnostic:
     span: Span = NO_SPAN
     hint: str | None = None
     related: tuple[Related, ...] = ()
+    #: The names the hint's "did you mean" offers for what the span names, as data (the language
+    #: server's quick fix replaces the span's text, or its closest dotted part, with one of them).
+    suggestions: tuple[str, ...] = field(default=(), compare=False)
 
     @property
     def is_error(self) -> bool:

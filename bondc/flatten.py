@@ -55,7 +55,7 @@ from pathlib import PurePosixPath
 from typing import Iterable, Mapping, Sequence
 
 from bondc import ast
-from bondc.errors import Diagnostic, Related
+from bondc.errors import Diagnostic, Hint, Related
 from bondc.model import JUNCTION_KINDS, KINDS
 from bondc.source import Span
 
@@ -74,16 +74,17 @@ class _TooLarge(Exception):
 
 
 def _error(code: str, message: str, span: Span, hint: str | None = None, related=()) -> Diagnostic:
-    return Diagnostic("error", code, message, span, hint, tuple(related))
+    return Diagnostic("error", code, message, span, hint, tuple(related),
+                      suggestions=getattr(hint, "suggestions", ()))
 
 
 def _did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     close = difflib.get_close_matches(name, list(candidates), n=1)
-    return f"did you mean '{close[0]}'?" if close else None
+    return Hint(f"did you mean '{close[0]}'?", (close[0],)) if close else None
 
 
 def _hints(*hints: str | None) -> str | None:
-    return "; ".join(h for h in hints if h) or None
+    return Hint.join(h for h in hints if h) or None
 
 
 def library_name(file: ast.File) -> str:
@@ -221,7 +222,8 @@ class _Flattener:
                 if library in known:
                     models = sorted({m.name for f in self.files if library_name(f) == library for m in f.models})
                     close = difflib.get_close_matches(name, models, n=1)
-                    hint = _hints(f"did you mean '{library}.{close[0]}'?" if close else None,
+                    hint = _hints(Hint(f"did you mean '{library}.{close[0]}'?", (f"{library}.{close[0]}",))
+                                  if close else None,
                                   f"'{library}' has: {', '.join(models[:12])}"
                                   + (", ..." if len(models) > 12 else ""))
                     self.report(_error("E330", f"no model '{name}' in the imported library '{library}'", span,

@@ -47,7 +47,7 @@ from typing import Iterable, Mapping, Sequence
 
 from bondc import ast, builtins, units
 from bondc.io import read_source
-from bondc.errors import Diagnostic, ModelError, Related, sort_key
+from bondc.errors import Diagnostic, Hint, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, ExpansionBudget, evaluate
 from bondc.model import (
     JUNCTION_KINDS, KINDS, PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
@@ -105,22 +105,24 @@ def _did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     candidates = sorted(set(candidates))
     same_case = [c for c in candidates if c.lower() == name.lower() and c != name]
     found = same_case or difflib.get_close_matches(name, candidates, n=1, cutoff=0.6)
-    return f"did you mean '{found[0]}'?" if found else None
+    return Hint(f"did you mean '{found[0]}'?", (found[0],)) if found else None
 
 
 def _join_hints(*hints: str | None) -> str | None:
     parts = [h for h in hints if h]
-    return "; ".join(parts) if parts else None
+    return Hint.join(parts) if parts else None
 
 
 def _error(code: str, message: str, span: Span, hint: str | None = None,
            related: Sequence[Related] = ()) -> Diagnostic:
-    return Diagnostic("error", code, message, span, hint=hint, related=tuple(related))
+    return Diagnostic("error", code, message, span, hint=hint, related=tuple(related),
+                      suggestions=getattr(hint, "suggestions", ()))
 
 
 def _warning(code: str, message: str, span: Span, hint: str | None = None,
              related: Sequence[Related] = ()) -> Diagnostic:
-    return Diagnostic("warning", code, message, span, hint=hint, related=tuple(related))
+    return Diagnostic("warning", code, message, span, hint=hint, related=tuple(related),
+                      suggestions=getattr(hint, "suggestions", ()))
 
 
 def _file_span(name: str) -> Span:

@@ -198,23 +198,23 @@ def compile_model(ss) -> dict:
 
 
 def _module_codes(source: str, filename: str) -> tuple:
-    """The code of a generated module, as the code objects to execute in turn. The verbatim copy
-    of ``bondc/runtime.py`` that a module carries (300 kB: 0.1 s of compiling, 30 times its model's
-    part for a small model) is compiled once per process, under the runtime's own file name, so
+    """The code of a generated module, as the code objects to execute in turn. The copy of the
+    runtime's modules that a module carries (300 kB: 0.1 s of compiling, 30 times its model's
+    part for a small model) is compiled once per process, each module under its own file name, so
     that a traceback shows its lines; the text before it and the model after it are compiled
     with their lines numbered as in the whole text. The runtime runs first: the text before it
-    (comments and the module's docstring) then sets ``__doc__``, which the runtime's docstring,
-    compiled alone, would set too. A text without the copy is compiled whole."""
-    from bondc.codegen.emit import RUNTIME_PATH, runtime_source
+    (comments and the module's docstring) then sets ``__doc__``, which the runtime modules'
+    docstrings, compiled alone, would set too. A text without the copy is compiled whole."""
+    from bondc.codegen.emit import runtime_parts, runtime_source
 
     runtime = runtime_source().rstrip("\n")
     at = source.find(runtime)
     if at < 0:
         return (compile(source, filename, "exec"),)
     if _RUNTIME_CODE.get("text") != runtime:
-        _RUNTIME_CODE.update(text=runtime, code=compile(runtime, str(RUNTIME_PATH), "exec"))
+        _RUNTIME_CODE.update(text=runtime, codes=tuple(compile(text, path, "exec") for path, text in runtime_parts()))
     head, model = source[:at], source[at + len(runtime):]
-    return (_RUNTIME_CODE["code"], compile(head, filename, "exec"),
+    return (*_RUNTIME_CODE["codes"], compile(head, filename, "exec"),
             compile("\n" * (head.count("\n") + runtime.count("\n")) + model, filename, "exec"))
 
 

@@ -343,14 +343,14 @@ _OFFSET_SCALES = {"degc": "°C", "°c": "°C", "celsius": "°C", "degf": "°F", 
                   "c°": "°C", "f°": "°F"}
 
 
-def _hint(name: str) -> str:
+def _hint(name: str, found: list[str] | None = None) -> str:
     scale = _OFFSET_SCALES.get(name.lower())
     if scale is not None:
         example = "20 °C is 293.15 [K]" if scale == "°C" else "68 °F is 293.15 [K]"
         return (f"{scale} is a temperature scale with an offset, which no unit factor converts: give "
                 f"temperatures in K ({example})")
     parts = []
-    found = _suggestions(name)
+    found = _suggestions(name) if found is None else found
     if found:
         quoted = [f"'{s}'" for s in found]
         choice = quoted[0] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
@@ -383,9 +383,11 @@ def resolve(unit: ast.Unit) -> tuple[SIUnit | None, list[Diagnostic]]:
     for factor in unit.factors:
         entry = _TABLE.get(factor.name)
         if entry is None:
+            found = _suggestions(factor.name)
             diagnostics.append(Diagnostic(
                 "error", "E201", f"unknown unit '{factor.name}'", factor.span,
-                hint=_hint(factor.name)))
+                hint=_hint(factor.name, found),
+                suggestions=() if factor.name.lower() in _OFFSET_SCALES else tuple(found)))
             continue
         exponent = Fraction(factor.exponent)
         if exponent.denominator == 1:

@@ -195,7 +195,8 @@ def test_module_imports_only_numpy_scipy_sundials_and_the_standard_library():
             top_level |= {(node.module if isinstance(node, ast.ImportFrom) else a.name).split(".")[0]
                           for a in node.names}
     standard = {"math", "os", "stat", "sys", "time", "argparse", "warnings", "csv", "importlib", "hashlib", "glob",
-                "shutil", "subprocess", "tempfile", "atexit", "ast", "functools", "collections", "shlex", "json"}
+                "shutil", "subprocess", "tempfile", "atexit", "ast", "functools", "collections", "shlex", "json",
+                "dataclasses"}
     optional = {"sksundae", "cffi", "platformdirs", "boost_headers"}
     assert imported <= {"numpy", "scipy"} | standard | optional
     # SUNDIALS, cffi (native code), platformdirs (where native code is cached) and the Boost headers
@@ -443,10 +444,25 @@ def test_generated_module_finds_its_csv_data_relative_to_itself(tmp_path):
 
 
 def test_generated_module_copy_of_the_runtime_is_verbatim():
+    """A standalone module carries every module of bondc/runtime, in order, verbatim but for its
+    imports of the other runtime modules, which are commented out line for line."""
+    from bondc.runtime import MODULES
+
     _, ss, experiment = derive("msd")
     source = emit(ss, experiment)
-    runtime_text = (ROOT / "bondc" / "runtime.py").read_text(encoding="utf-8")
-    assert runtime_text.rstrip("\n") in source
+    at, commented = 0, 0
+    for name in MODULES:
+        text = (ROOT / "bondc" / "runtime" / f"{name}.py").read_text(encoding="utf-8")
+        imports = {line for node in ast.parse(text).body if isinstance(node, ast.ImportFrom)
+                   and node.module.startswith("bondc.runtime") for line in range(node.lineno, node.end_lineno + 1)}
+        commented += len(imports)
+        lines = ["# " + line if number in imports else line
+                 for number, line in enumerate(text.splitlines(), start=1)]
+        found = source.find("\n".join(lines), at)
+        assert found > at, name
+        at = found + len("\n".join(lines))
+    assert commented > len(MODULES)
+    assert "\nfrom bondc.runtime" not in source and "\nimport bondc" not in source
 
 
 def test_a_module_compiled_with_its_runtime_once_per_process_is_the_whole_text_compiled():
@@ -460,32 +476,36 @@ def test_a_module_compiled_with_its_runtime_once_per_process_is_the_whole_text_c
     _, ss, experiment = derive("friction")
     source = emit(ss, experiment)
     whole = load_module(source)
+    from bondc.runtime import MODULES
+
     codes = _module_codes(source, "<generated>")
-    assert len(codes) == 3 and _module_codes(source, "<other>")[0] is codes[0]      # compiled once
+    # compiled once: one code per runtime module, then the text before it and the model
+    assert len(codes) == len(MODULES) + 2 and _module_codes(source, "<other>")[:-2] == codes[:-2]
     parts = {"__name__": "generated", "__file__": str(SIM / "generated.py")}
     for code in codes:
         exec(code, parts)
     functions = {name: value for name, value in whole.items() if isinstance(value, types.FunctionType)}
     assert functions and set(functions) == {name for name, value in parts.items()
                                             if isinstance(value, types.FunctionType)}
-    runtime_file = str(ROOT / "bondc" / "runtime.py")
-    runtime_lines = (ROOT / "bondc" / "runtime.py").read_text(encoding="utf-8").splitlines()
+    runtime_files = {str(ROOT / "bondc" / "runtime" / f"{module}.py") for module in MODULES}
     source_lines = source.splitlines()
     for name, function in functions.items():
         mine = parts[name].__code__
-        if mine.co_filename == runtime_file:        # the runtime's: its own file's line
+        if mine.co_filename in runtime_files:       # the runtime's: its own file's line
+            runtime_lines = Path(mine.co_filename).read_text(encoding="utf-8").splitlines()
             assert runtime_lines[mine.co_firstlineno - 1] in source_lines[function.__code__.co_firstlineno - 1:][:1]
         else:                                       # the model's: the line of the whole text
             assert (mine.co_filename, mine.co_firstlineno) == ("<generated>", function.__code__.co_firstlineno)
     assert parts["_rhs"].__code__.co_filename == "<generated>"
-    assert parts["simulate_model"].__code__.co_filename == runtime_file
+    assert parts["simulate_model"].__code__.co_filename == str(ROOT / "bondc" / "runtime" / "run.py")
+    assert parts["load_csv"].__code__.co_filename == str(ROOT / "bondc" / "runtime" / "signals.py")
     assert parts["__doc__"] == whole["__doc__"]
     a = whole["simulate_model"](whole["_MODEL"], t_end=0.5, native=False)
     b = parts["simulate_model"](parts["_MODEL"], t_end=0.5, native=False)
     assert np.array_equal(a.t, b.t) and all(np.array_equal(a.states[k], b.states[k]) for k in a.states)
     # a text without the runtime's copy (another version's) is compiled whole
     assert len(_module_codes(source.replace("def simulate_model(", "def simulate_model_(", 1), "<x>")) == 1
-    assert simulate_module._RUNTIME_CODE["code"] is codes[0]
+    assert simulate_module._RUNTIME_CODE["codes"] == codes[:len(MODULES)]
 
 
 def test_model_code_golden(update_golden):

@@ -1215,7 +1215,7 @@ def test_the_zeno_detector_stops_geometric_firings_and_not_a_sweep(monkeypatch):
     run_ = detector()
     for time in sweep:
         _Run.check_zeno(run_, 0, float(time))
-    monkeypatch.setattr(runtime, "_ZENO_RATIO", 1.0)   # without the ratio bound it would be taken for Zeno
+    monkeypatch.setattr(runtime.events, "_ZENO_RATIO", 1.0)   # without the ratio bound it would be taken for Zeno
     run_ = detector()
     with pytest.raises(_Stop):
         for time in sweep:

@@ -299,7 +299,7 @@ def test_without_a_cxx_compiler_auto_takes_cvode_and_says_why(tmp_path, monkeypa
     _simulate(namespace, experiment, t_end=0.01, method="CVODE")
     monkeypatch.setenv("CXX", str(tmp_path / "no-such-compiler"))
     monkeypatch.setenv("PATH", str(tmp_path / "no-programs"))
-    monkeypatch.setattr(runtime, "_zig", lambda: None)
+    monkeypatch.setattr(runtime.native, "_zig", lambda: None)
     monkeypatch.setitem(namespace, "_zig", lambda: None)      # the module's own copy of the runtime
     table, why = runtime.load_erk()
     assert table is None and "no C++ compiler works here" in why and "was not found" in why

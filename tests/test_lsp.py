@@ -162,7 +162,7 @@ def test_the_flagship_is_checked_quickly_after_an_edit(client):
     client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
                                               "contentChanges": [{"text": text.replace("31.7", "31.8")}]})
     client.diagnostics(uri)
-    # the debounce (0.15 s) plus the check; a generous bound for a loaded CI machine
+    # the debounce (0.05 s) plus the check; a generous bound for a loaded CI machine
     assert time.monotonic() - started < 3.0
 
 
@@ -208,7 +208,13 @@ def test_components_definitions_across_files_and_dotted_completion(client):
     items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
                                                        "position": {"line": line, "character": 27}})
     labels = {item["label"] for item in items["items"]}
-    assert {"a", "b", "loss", "Q", "A"} <= labels
+    # in an expression, what valve.X may name (flatten.py): values, elements, junctions; a port has no
+    # variables there (valve.a is E312)
+    assert labels == {"Cd", "A", "rho", "loss", "j", "Q"}
+    line = text[:text.index("supply -> valve.a")].count("\n")
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": {"line": line, "character": 18}})
+    assert {item["label"] for item in items["items"]} == {"a", "b"}         # in a bond: its ports
 
 
 def test_outline_completion_and_formatting(client, tmp_path):
@@ -356,3 +362,248 @@ def test_a_request_after_shutdown_is_refused_with_invalid_request():
     finally:
         if c.process.poll() is None:
             c.process.kill()
+
+
+RIG = ('import "std:hydraulics"\n\nfn smooth(x, w) = x/sqrt(x^2 + w^2)\n\nmodel Rig\n  param k = 800 [N/m]\n'
+       '  param m = 2 [kg]\n  Se s : e = 10*smooth(t - 1, 0.1)\n'
+       '  C chamber : state V [m], V(0) = 0, der(V) = f, e = k*V\n  I mass : f = p/m\n  R damper : e = 3*f\n'
+       '  1 j\n  s -> j\n  j -> chamber\n  j -> mass\n  j -> damper\n  output stroke [m] = chamber.V\nend\n')
+
+
+def _labels(client, uri, text, needle, offset):
+    items = client.request("textDocument/completion", {"textDocument": {"uri": uri},
+                                                       "position": _position(text, needle, offset)})
+    return {item["label"] for item in items["items"]}
+
+
+def test_member_completion_offers_only_the_members_that_exist(client, tmp_path):
+    """`chamber.` offered q (an error: the chamber declares its own state) and missed its state."""
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    assert client.diagnostics(uri) == []
+    assert _labels(client, uri, RIG, "chamber.V", len("chamber.")) == {"e", "f", "V"}
+    assert _labels(client, uri, RIG, "mass : f", 0) >= {"k", "m", "chamber", "smooth"}
+    # the issue's case, on the flagship: its chamber's state is P
+    text = FLAGSHIP.read_text()
+    uri = client.open(FLAGSHIP, text)
+    client.diagnostics(uri)
+    assert _labels(client, uri, text, "chamber.P, Ae", len("chamber.")) == {"e", "f", "P"}
+    assert _labels(client, uri, text, "piston.p1  #", len("piston.")) == {"p1", "p2"}     # a two-port in a bond
+    two_port = RIG.replace("output stroke [m] = chamber.V", "TF lever : r = 2\n  output stroke [m] = lever.p1.f")
+    uri = client.open(tmp_path / "lever.bg", two_port)
+    client.diagnostics(uri)
+    assert _labels(client, uri, two_port, "lever.p1.f", len("lever.")) == {"p1.e", "p1.f", "p2.e", "p2.f"}
+
+
+def test_hover_on_a_function_call_and_on_an_import(client, tmp_path):
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    client.diagnostics(uri)
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(RIG, "smooth(t", 2)})
+    assert "fn smooth(x, w) = x/sqrt(x^2 + w^2)" in hover["contents"]["value"]
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(RIG, "std:hydraulics", 3)})
+    value = hover["contents"]["value"]
+    # what std:hydraulics provides, from its own file: its leading comment, each model with its ports
+    library = (ROOT / "bondc" / "std" / "hydraulics.bg").read_text()
+    import re
+
+    models = re.findall(r"^model (\w+)", library, re.M)
+    assert len(models) > 3 and all(f"**{name}**" in value for name in models)
+    assert "**Orifice** (a, b)" in value and "hydraulic circuits" in value
+    # a file of the project's own: its models
+    text = COMPONENTS.read_text()
+    uri = client.open(COMPONENTS, text)
+    client.diagnostics(uri)
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(text, '"lib/hydraulics.bg"', 2)})
+    assert "**Orifice** (a, b): turbulent orifice" in hover["contents"]["value"]
+
+
+def _apply(text, edits):
+    """``text`` with LSP text edits applied (ranges in the original text; ASCII here)."""
+    lines = text.splitlines(keepends=True)
+    offsets = [0]
+    for line in lines:
+        offsets.append(offsets[-1] + len(line))
+
+    def offset(position):
+        return offsets[position["line"]] + position["character"]
+    for edit in sorted(edits, key=lambda e: offset(e["range"]["start"]), reverse=True):
+        start, end = offset(edit["range"]["start"]), offset(edit["range"]["end"])
+        text = text[:start] + edit["newText"] + text[end:]
+    return text
+
+
+def _rename(client, uri, text, needle, offset, new_name):
+    position = _position(text, needle, offset)
+    prepared = client.request("textDocument/prepareRename", {"textDocument": {"uri": uri}, "position": position})
+    edit = client.request("textDocument/rename", {"textDocument": {"uri": uri}, "position": position,
+                                                  "newName": new_name})
+    return prepared, _apply(text, edit["changes"][uri])
+
+
+def test_rename_parameters_elements_functions_and_components(client, tmp_path):
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    client.diagnostics(uri)
+    prepared, renamed = _rename(client, uri, RIG, "k*V", 0, "stiffness")       # from a use
+    assert prepared["placeholder"] == "k"
+    assert renamed == RIG.replace("param k =", "param stiffness =").replace("k*V", "stiffness*V")
+    _, renamed = _rename(client, uri, RIG, "C chamber", 2, "tank")              # in laws and bonds
+    assert renamed == RIG.replace("chamber", "tank")
+    _, renamed = _rename(client, uri, RIG, "fn smooth", 3, "soft")
+    assert renamed == RIG.replace("smooth", "soft")
+    # a component, its parameter (bound in the instance) and an instance, across the document
+    text = ("model Spring\n  port a\n  param k = 1 [N/m]\n  C c : e = k*q\n  a -> c\n  output x [m] = c.q\nend\n"
+            "model Top\n  Sf s : f = 1\n  Spring sp : k = 3 [N/m]\n  s -> sp.a\n  output y [m] = 2*sp.x\nend\n")
+    uri = client.open(tmp_path / "parts.bg", text)
+    assert client.diagnostics(uri) == []
+    _, renamed = _rename(client, uri, text, "Spring sp", 0, "Coil")
+    assert renamed == text.replace("Spring", "Coil")
+    _, renamed = _rename(client, uri, text, "k*q", 0, "stiffness")
+    assert renamed == text.replace("k = ", "stiffness = ").replace("k*q", "stiffness*q")
+    _, renamed = _rename(client, uri, text, "sp : k", 0, "spring")
+    assert renamed == text.replace("sp :", "spring :").replace("sp.", "spring.")
+    _, renamed = _rename(client, uri, text, "output x", 7, "stretch")
+    assert renamed == text.replace("output x", "output stretch").replace("sp.x", "sp.stretch")
+
+
+def test_rename_refuses_clashes_bad_names_and_built_ins(client, tmp_path):
+    uri = client.open(tmp_path / "rig.bg", RIG)
+    client.diagnostics(uri)
+
+    def error(method, needle, offset, **extra):
+        client.next_id += 1
+        client.send({"jsonrpc": "2.0", "id": client.next_id, "method": method,
+                     "params": {"textDocument": {"uri": uri}, "position": _position(RIG, needle, offset), **extra}})
+        while True:
+            message = client.read()
+            if message.get("id") == client.next_id:
+                return message["error"]
+            client.notifications.append(message)
+    clash = error("textDocument/rename", "param k", 6, newName="m")
+    assert clash["code"] == -32803 and "already parameter 'm'" in clash["message"]
+    assert "not a name" in error("textDocument/rename", "param k", 6, newName="2k")["message"]
+    assert "not a name" in error("textDocument/rename", "param k", 6, newName="model")["message"]
+    assert error("textDocument/prepareRename", "sqrt(", 1)["code"] == -32803          # a built-in
+
+
+def test_quick_fixes_for_did_you_mean(client, tmp_path):
+    broken = RIG.replace("e = k*V", "e = kk*V").replace("= chamber.V", "= chamber.VV").replace("[kg]", "[kgg]")
+    uri = client.open(tmp_path / "fix.bg", broken)
+    problems = client.diagnostics(uri)
+    assert sorted(d["code"] for d in problems) == ["E201", "E301", "E312"]
+    for problem in problems:
+        actions = client.request("textDocument/codeAction", {
+            "textDocument": {"uri": uri}, "range": problem["range"],
+            "context": {"diagnostics": [problem]}})
+        (preferred,) = [a for a in actions if a.get("isPreferred")]
+        assert preferred["kind"] == "quickfix" and preferred["diagnostics"][0]["code"] == problem["code"]
+        edits = preferred["edit"]["changes"][uri]
+        broken_line = broken.splitlines()[problem["range"]["start"]["line"]]
+        (edit,) = edits
+        written = broken_line[edit["range"]["start"]["character"]:edit["range"]["end"]["character"]]
+        assert (written, edit["newText"]) in (("kk", "k"), ("chamber.VV", "chamber.V"), ("kgg", "kg"))
+    # all three applied at once (their ranges do not overlap): the model as it was
+    every = [client.request("textDocument/codeAction", {"textDocument": {"uri": uri}, "range": p["range"],
+                                                        "context": {"diagnostics": [p]}})[0]["edit"]["changes"][uri][0]
+             for p in problems]
+    assert _apply(broken, every) == RIG
+
+
+def _big(sections, broken=None):
+    """The N-section chain of the benchmarks (11 lines a section); ``broken``: a name that is not
+    defined, used in the first spring's law (E301 names it)."""
+    from benchmarks.chain import chain_source
+
+    text = chain_source(sections)
+    return text if broken is None else text.replace("C k1 : e = k*q", f"C k1 : e = k*q + 0*{broken}")
+
+
+def _published(client, uri, until_version):
+    """Every diagnostics publication for ``uri`` up to and including the one of ``until_version``."""
+    found = []
+    while not found or found[-1]["version"] != until_version:
+        for message in list(client.notifications):
+            if message["method"] == "textDocument/publishDiagnostics" and message["params"]["uri"] == uri:
+                client.notifications.remove(message)
+                found.append(message["params"])
+                break
+        else:
+            message = client.read()
+            if "method" in message and "id" not in message:
+                client.notifications.append(message)
+    return found
+
+
+def test_a_newer_edit_supersedes_the_analysis_and_stale_diagnostics_are_never_published(client, tmp_path):
+    """Each edit names a different undefined name; what is published for a version names that
+    version's name, versions only go up, and the last edit's diagnostics come last. Edits sent at
+    at once get one publication, for the last of them."""
+    path = tmp_path / "big.bg"
+    uri = client.open(path, _big(300))
+    assert client.diagnostics(uri) == []
+
+    def edit(version):
+        body = json.dumps({"jsonrpc": "2.0", "method": "textDocument/didChange", "params": {
+            "textDocument": {"uri": uri, "version": version},
+            "contentChanges": [{"text": _big(300, f"zz{version}")}]}}).encode()
+        return f"Content-Length: {len(body)}\r\n\r\n".encode() + body
+
+    client.process.stdin.write(b"".join(edit(version) for version in range(2, 12)))    # one write
+    client.process.stdin.flush()
+    (only,) = _published(client, uri, 11)
+    (problem,) = only["diagnostics"]
+    assert "'zz11'" in problem["message"]
+    # edits 0.2 s apart, past the debounce (0.05 s): each starts an analysis of 3 300 lines (a few
+    # tenths of a second at least), which the next edit supersedes. The server of before analysed
+    # on its event loop and published each version, stale ones included (12 after 13 was sent).
+    for version in range(12, 18):
+        client.process.stdin.write(edit(version))
+        client.process.stdin.flush()
+        time.sleep(0.2)
+    (last,) = _published(client, uri, 17)
+    (problem,) = last["diagnostics"]
+    assert "'zz17'" in problem["message"]
+
+
+def test_a_hover_is_answered_from_the_last_analysis_while_the_next_one_runs(client, tmp_path):
+    """Analysis ran on the event loop: a hover sent after an edit waited for the edit's check
+    (4-6 s on a 5 000-line model). Now it is answered from the analysis before, ahead of the
+    edit's diagnostics."""
+    text = _big(600)
+    uri = client.open(tmp_path / "hover.bg", text)
+    client.diagnostics(uri)
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": _big(600, "zz")}]})
+    time.sleep(0.3)         # past the debounce: the edit's analysis (of 6 600 lines, a second or so) has started
+    hover = client.request("textDocument/hover", {"textDocument": {"uri": uri},
+                                                  "position": _position(text, "k*q", 0)})
+    assert "param k" in hover["contents"]["value"]
+    assert not [m for m in client.notifications if m["method"] == "textDocument/publishDiagnostics"
+                and m["params"]["uri"] == uri]          # the edit's diagnostics had not come yet
+    (problem,) = client.diagnostics(uri)
+    assert "'zz'" in problem["message"]
+
+
+@pytest.mark.parametrize("name, declared", [("x_piston", "state x_piston"), ("Ar", "param Ar"), ("psi", "fn psi("),
+                                            ("mass", "I  mass"), ("j_chamber", "0  j_chamber"), ("K", "param K")])
+def test_renaming_a_name_of_the_flagship_keeps_it_a_valid_model(client, tmp_path, name, declared):
+    """Every occurrence is renamed (the state's initial-value law x(0) = ... included), nothing in a
+    comment, a string or a unit ([K]), and the result checks as cleanly as the flagship does."""
+    import re
+    import shutil
+
+    text = FLAGSHIP.read_text()
+    copy = tmp_path / FLAGSHIP.name
+    shutil.copytree(FLAGSHIP.parent / "data", tmp_path / "data")
+    uri = client.open(copy, text)
+    assert [d for d in client.diagnostics(uri) if d["severity"] == 1] == []
+    _, renamed = _rename(client, uri, text, declared, declared.index(name), "renamed_name")
+    code = lambda t: re.sub(r'#.*|"[^"\n]*"|\[[^\]\n]*\]', "", t)      # noqa: E731
+    pattern = r"(?<![\w.])%s\b"
+    assert len(re.findall(pattern % name, code(renamed))) == 0
+    assert len(re.findall(pattern % "renamed_name", code(renamed))) == len(re.findall(pattern % name, code(text)))
+    assert re.sub(r"\brenamed_name\b", name, renamed) == text
+    client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 2},
+                                              "contentChanges": [{"text": renamed}]})
+    assert [d for d in client.diagnostics(uri) if d["severity"] == 1] == []

@@ -36,10 +36,11 @@ MODEL = "model M\n  param k = 800 [N/m]\n  Sf s : f = 1\n  C c : e = k*q\n  s ->
 class Client:
     """An LSP client over a server process's stdio; what the server sends is read by a thread."""
 
-    def __init__(self):
+    def __init__(self, cwd=ROOT, env=None):
         self.process = subprocess.Popen([sys.executable, "-m", "bondc", "lsp"], stdin=subprocess.PIPE,
-                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+                                        stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=cwd, env=env)
         self.messages: queue.Queue = queue.Queue()
+        self.arrived: dict = {}         # id() of a message read -> when it was read (benchmarks/lsp.py)
         self.seen: list = []
         self.next_id = 0
         self.stderr = b""
@@ -60,7 +61,9 @@ class Client:
                 name, _, value = line.partition(b":")
                 if name.strip().lower() == b"content-length":
                     length = int(value)
-            self.messages.put(json.loads(stream.read(length)))
+            message = json.loads(stream.read(length))
+            self.arrived[id(message)] = time.perf_counter()
+            self.messages.put(message)
 
     def _drain_stderr(self):
         self.stderr = self.process.stderr.read()

@@ -371,13 +371,13 @@ def test_an_unusable_cc_gives_way_to_the_system_compiler_and_the_choice_is_recor
     machine's record of the compiler's probe spares the next process a second probe."""
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
     monkeypatch.setenv("CC", str(tmp_path / "no-such-compiler"))
-    monkeypatch.setattr(runtime, "_COMPILERS", {})
+    monkeypatch.setattr(runtime.native, "_COMPILERS", {})
     compiler, why = runtime.find_compiler("c")
     assert compiler is not None and why == ""
     assert not compiler.command[0].startswith(str(tmp_path)) and "was not found" in compiler.label
     assert len(list((tmp_path / "native").glob("compiler_*.json"))) == 1
     probes = []
-    monkeypatch.setattr(runtime, "_COMPILERS", {})      # a new process
+    monkeypatch.setattr(runtime.native, "_COMPILERS", {})      # a new process
     monkeypatch.setattr(subprocess, "run", lambda *a, **k: probes.append(a))
     assert runtime.find_compiler("c") == (compiler, "") and not probes
 
@@ -1056,7 +1056,9 @@ def test_the_drivers_deadbands_and_switch_values_are_the_step_loops_to_the_bit()
     model = namespace["_Model"](namespace["_MODEL"])
     assert namespace["attach_native"](model, None)[0]
     p = namespace["param_array"](model.PARAMETERS, None, model.derive_parameters)
-    run = namespace["_Run"](model, p, 0.0, 4.2, None, "CVODE", 1e-6, 1e-9, np.inf, None, None, 1000, 100)
+    run = namespace["_Run"](namespace["RunSpec"](model=model, parameters=p, t_start=0.0, t_end=4.2, t_eval=None,
+                                                 method="CVODE", rtol=1e-6, atol=1e-9, max_step=np.inf,
+                                                 max_events=1000, max_event_rate=100))
     driver = namespace["_NativeDriver"].create(model, model.native_library, p, False)
     rng = np.random.default_rng(11)
     x0, count = model.x0(p), len(model.SWITCHES)
@@ -1097,7 +1099,7 @@ def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute
     assert len(runtime._native_units(source)) == 1
     runtime._NATIVE_LIBRARIES.clear()
     whole_ffi, whole = runtime.load_native(source)
-    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", 0)
     units = runtime._native_units(source + "\n" + runtime.UNIT_MARK + "int bondc_unit_probe;\n")
     # its six functions (right-hand side, Jacobian, switches, when conditions, when statements and
     # whether those are in C) and the probe
@@ -1131,7 +1133,7 @@ def test_a_build_started_ahead_is_the_one_load_native_finishes_and_an_unused_one
     load_native waits for that build instead of starting another, and gives the same library as a
     build from scratch; a build nobody loads is stopped and its folder removed (at exit)."""
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", 0)
     derived = derive_file(ROOT / "models" / "electro_pneumatic_hybrid.bg", cache=False)
     namespace = compile_model(derived.state_space)
     source = runtime.native_text(namespace["__bondc_source__"])
@@ -1144,7 +1146,7 @@ def test_a_build_started_ahead_is_the_one_load_native_finishes_and_an_unused_one
     assert len(runtime._NATIVE_PENDING) == 1
     (pending,) = runtime._NATIVE_PENDING.values()
     started = []
-    monkeypatch.setattr(runtime, "_NativeBuild", lambda *a, **k: started.append(a))   # no second build
+    monkeypatch.setattr(runtime.native, "_NativeBuild", lambda *a, **k: started.append(a))   # no second build
     ffi, lib = runtime.load_native(source)
     assert ffi is not None and not started and not runtime._NATIVE_PENDING
     assert not os.path.exists(pending.work) and len(list((tmp_path / "native").glob("*.so"))) == 1
@@ -1157,7 +1159,7 @@ def test_a_build_started_ahead_is_the_one_load_native_finishes_and_an_unused_one
     np.testing.assert_allclose(out, namespace["_rhs"](0.3, x, p, m), rtol=1e-12, atol=1e-12)
     monkeypatch.undo()
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path / "other"))
-    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", 0)
     runtime._NATIVE_LIBRARIES.clear()
     runtime.start_native(source)
     (unused,) = runtime._NATIVE_PENDING.values()
@@ -1180,7 +1182,7 @@ def test_a_forked_process_never_finishes_or_removes_its_parents_build(tmp_path, 
     import multiprocessing
 
     monkeypatch.setenv("BONDC_CACHE_DIR", str(tmp_path))
-    monkeypatch.setattr(runtime, "_NATIVE_SPLIT_FROM", 0)
+    monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", 0)
     derived = derive_file(ROOT / "models" / "mass_spring_damper.bg", cache=False)
     source = "".join(compile_model(derived.state_space)["NATIVE_SOURCE"])
     runtime._discard_pending()
@@ -1257,9 +1259,9 @@ def test_a_loaded_models_library_is_found_again_by_its_text_without_building(tmp
     first = runtime.load_native(source)
     assert first[0] is not None
     real = runtime._build_native
-    monkeypatch.setattr(runtime, "_build_native", lambda *args: pytest.fail("built or hashed again"))
+    monkeypatch.setattr(runtime.native, "_build_native", lambda *args: pytest.fail("built or hashed again"))
     assert runtime.load_native(source)[1] is first[1]
-    monkeypatch.setattr(runtime, "_build_native", real)
+    monkeypatch.setattr(runtime.native, "_build_native", real)
     runtime._NATIVE_LIBRARIES.clear()
     again = runtime.load_native(source)
     assert again[1] is not first[1]

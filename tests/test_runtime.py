@@ -290,7 +290,7 @@ def test_brentq_is_scipys_brentq_to_the_bit_with_or_without_scipy_optimize(funct
     expected = scipy_brentq(function, a, b, xtol=4 * eps, rtol=4 * eps)
     assert runtime._scipy_kernel("optimize", "_zeros", runtime._zeros_probe) is not None
     assert runtime.brentq(function, a, b, 4 * eps, 4 * eps) == expected
-    monkeypatch.setattr(runtime, "_scipy_kernel", lambda *args: None)
+    monkeypatch.setattr(runtime.kernels, "_scipy_kernel", lambda *args: None)
     assert runtime.brentq(function, a, b, 4 * eps, 4 * eps) == expected
 
 
@@ -348,7 +348,7 @@ def test_quad_is_scipys_quad_without_importing_scipy_integrate(law, a, b, exact,
     assert runtime._scipy_kernel("integrate", "_quadpack", runtime._quadpack_probe) is not None
     assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == expected
     assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == pytest.approx(exact, rel=1e-10, abs=1e-14)
-    monkeypatch.setattr(runtime, "_scipy_kernel", lambda *args: None)
+    monkeypatch.setattr(runtime.kernels, "_scipy_kernel", lambda *args: None)
     assert runtime.quad(law, a, b, epsabs=1e-15, epsrel=1e-12, limit=500) == expected
 
 

@@ -581,3 +581,21 @@ def test_build_takes_a_parsed_file():
     assert graph.experiments["step"].t_end == 2.0
     with pytest.raises(ModelError):
         semantic.build(parse_text(MSD.replace("b*f", "bb*f"), "msd.bg"), {})
+
+
+def test_a_did_you_mean_carries_its_names_as_data(tmp_path):
+    """The quick fix of the language server reads the names a hint offers from the diagnostic
+    (Diagnostic.suggestions), not from the hint's text: an undefined name, an unknown unit, a
+    variable an element lacks, a member an instance lacks."""
+    path = tmp_path / "m.bg"
+    path.write_text("model Part\n  port a\n  param A = 1 [m^2]\n  C c : e = q/A\n  a -> c\n  output Q [m] = c.q\nend\n"
+                    "model M\n  param k = 800 [N/m]\n  param m = 2 [kgg]\n  Sf s : f = 1\n  C c : e = kk*q\n"
+                    "  Part p\n  s -> p.a\n  output x [m] = c.qq\n  output y [m] = p.QQ\nend\n")
+    with pytest.raises(ModelError) as caught:
+        semantic.load(path, model="M")
+    found = {d.code + ":" + d.message.split("'")[1]: d.suggestions for d in caught.value.diagnostics}
+    assert found["E201:kgg"][0] == "kg"
+    assert found["E301:kk"] == ("k",)
+    assert found["E312:c"] == ("c.q",)                  # C 'c' has no variable 'qq'
+    assert found["E312:p"] == ("Q",)                    # instance 'p' of 'Part' has no 'QQ'
+    assert all(d.hint and f"'{d.suggestions[0]}'" in d.hint for d in caught.value.diagnostics if d.suggestions)

@@ -66,7 +66,8 @@ from bondc.model import readable, readable_names
 from bondc.runtime import LOOP_START_OFFSETS, UNIT_MARK, native_file
 from bondc.symbolic import as_sympy, partial_derivative
 
-RUNTIME_PATH = Path(__file__).resolve().parent.parent / "runtime.py"
+#: The runtime package, whose modules a standalone module carries (see :func:`runtime_source`).
+RUNTIME_DIR = Path(__file__).resolve().parent.parent / "runtime"
 ARGUMENTS = ("t", "x", "p", "m")
 #: Module-level names of the generated model code (besides the runtime's).
 MODULE_NAMES = (
@@ -83,20 +84,55 @@ _INDENT = "    "
 _LAW_LIMIT = 200
 
 
-#: Modules the runtime imports under its own names (the generated module imports them itself).
-_RUNTIME_MODULES = frozenset({"atexit", "math", "os", "sys", "np", "_csv", "importlib", "_integrate", "_optimize",
-                              "_time_module"})
+#: Names the runtime defines that a generated module importing it needs not (it imports its own modules).
+_RUNTIME_MODULES = frozenset({"_integrate", "_optimize"})
+
+
+def _runtime_files() -> tuple:
+    """(path, stat) of each module of bondc/runtime in ``MODULES`` order."""
+    from bondc.runtime import MODULES
+
+    files = []
+    for name in MODULES:
+        path = RUNTIME_DIR / f"{name}.py"
+        info = path.stat()
+        files.append((str(path), (info.st_mtime_ns, info.st_size)))
+    return tuple(files)
+
+
+@functools.lru_cache(maxsize=4)
+def _runtime_parts(files: tuple) -> tuple:
+    parts = []
+    for path, _ in files:
+        text = Path(path).read_text(encoding="utf-8")
+        lines = text.splitlines(keepends=True)
+        for node in _python_ast.parse(text).body:
+            if isinstance(node, _python_ast.ImportFrom) and (node.module or "").startswith("bondc.runtime"):
+                for i in range(node.lineno - 1, node.end_lineno):
+                    lines[i] = "# " + lines[i]
+        parts.append((path, "".join(lines)))
+    return tuple(parts)
+
+
+def runtime_parts() -> tuple:
+    """``(path, text)`` of each module of the runtime package, in ``bondc.runtime.MODULES`` order (each
+    imports only earlier ones), as a standalone module carries it: the module's text with its imports
+    of the other runtime modules commented out, line for line (the lines stay those of the file)."""
+    return _runtime_parts(_runtime_files())
 
 
 def runtime_source() -> str:
-    """The text of ``bondc/runtime.py``, which every generated module carries verbatim."""
-    return RUNTIME_PATH.read_text(encoding="utf-8")
+    """The runtime every standalone generated module carries: the text of each module of
+    ``bondc/runtime`` (:func:`runtime_parts`), in order, each after a comment naming its file. One
+    namespace, as one file was: no two modules define the same name (tests/test_runtime_layout.py)."""
+    return "\n\n\n".join(f"# ---- bondc/runtime/{Path(path).name}\n{text.rstrip()}\n"
+                          for path, text in runtime_parts())
 
 
 # -- bondc's native sources in a standalone module
 
 #: bondc's C and C++ sources (the CVODE driver, the explicit stepper, their headers): package data
-NATIVE_PATH = RUNTIME_PATH.parent / "native"
+NATIVE_PATH = RUNTIME_DIR.parent / "native"
 NATIVE_SUFFIXES = (".c", ".h", ".cpp")
 
 
@@ -117,15 +153,17 @@ def native_files_source() -> str:
     return "\n".join(lines + ["}"])
 
 
-@functools.lru_cache(maxsize=4)
-def _top_level_names(source: str) -> frozenset[str]:
+@functools.lru_cache(maxsize=8)
+def _top_level_names(source: str, imports: bool = True) -> frozenset[str]:
+    """The names ``source`` binds at its top level: its functions, classes and assigned names, and
+    (``imports``) what it imports."""
     names = set()
     for node in _python_ast.parse(source).body:
         if isinstance(node, (_python_ast.FunctionDef, _python_ast.ClassDef)):
             names.add(node.name)
         elif isinstance(node, _python_ast.Assign):
             names.update(t.id for t in node.targets if isinstance(t, _python_ast.Name))
-        elif isinstance(node, (_python_ast.Import, _python_ast.ImportFrom)):
+        elif imports and isinstance(node, (_python_ast.Import, _python_ast.ImportFrom)):
             names.update((a.asname or a.name).split(".")[0] for a in node.names)
     return frozenset(names)
 
@@ -948,7 +986,7 @@ class _Emitter:
 
     @staticmethod
     def runtime_import() -> str:
-        names = sorted(name for name in _top_level_names(runtime_source())
+        names = sorted(name for name in _top_level_names(runtime_source(), imports=False)
                        if not name.startswith("__") and name not in _RUNTIME_MODULES)
         lines = ["import math", "import os", "import sys", "", "import numpy as np", "",
                  "from bondc.runtime import ("]
@@ -958,8 +996,9 @@ class _Emitter:
     @staticmethod
     def runtime_banner() -> str:
         rule = "# " + "=" * 76
-        return (f"{rule}\n# bondc runtime: a verbatim copy of bondc/runtime.py, so that this module runs\n"
-                f"# without bondc. Model-specific code follows the runtime.\n{rule}")
+        return (f"{rule}\n# bondc runtime: verbatim copies of the modules of bondc/runtime (their imports of\n"
+                f"# each other commented out), so that this module runs without bondc. Model-specific\n"
+                f"# code follows the runtime.\n{rule}")
 
     @staticmethod
     def model_banner() -> str:

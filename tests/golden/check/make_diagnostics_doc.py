@@ -241,7 +241,7 @@ d("W704", "initial value ignored",
   "Remove the initial value, or give it to the element that is in integral causality (for two geared "
   "inertias, the motor's momentum sets the load's).")
 
-# -- simulation (bondc/simulate.py, bondc/runtime.py)
+# -- simulation (bondc/simulate.py, bondc/runtime/)
 
 d("E801", "no end time",
   "`bondc simulate` (and `report`, `validate`, `sweep`) needs an end time: `--t-end`, or `t_end` in the "
@@ -820,9 +820,10 @@ d("E005", "expression nested too deeply",
   "Split the expression: name parts of it with `param` or write them as `fn` definitions.")
 d("E006", "document too large to analyse",
   "`bondc lsp`: an open document has more than 20 000 lines or 1 000 000 characters. The language server "
-  "checks a buffer in its only thread as you type, so it does not analyse one that large (a model of "
-  "20 000 lines takes seconds to check, and one of millions of lines would stop the server answering "
-  "anything else); it shows this one diagnostic at the top of the document instead, and hover, "
+  "checks a buffer as you type on one analysis thread, a newer edit superseding the check in flight, "
+  "so it does not analyse one that large (a model of 20 000 lines takes seconds to check, and one of "
+  "millions of lines would hold that thread for minutes and the memory of its syntax tree); it shows "
+  "this one diagnostic at the top of the document instead, and hover, "
   "definitions, completion and formatting give nothing for it. Every other document is served as "
   "before, and the document is analysed again once an edit brings it under the limits.",
   "Run `bondc check FILE` on the file, or split it into files that import each other.")
@@ -1255,7 +1256,7 @@ STAGES = (  # (title, modules), in the order of the page
     ("Element laws and states", "`bondc/semantic.py`"),
     ("Causality", "`bondc/causality.py`, `bondc/equations.py`"),
     ("Equations", "`bondc/equations.py`, `bondc/symbolic.py`"),
-    ("Simulation", "`bondc/simulate.py`, `bondc/runtime.py`"),
+    ("Simulation", "`bondc/simulate.py`, `bondc/runtime/`"),
     ("Analyses and data files", "`bondc/analysis/`"),
     ("Validation against measured data", "`bondc/report/validate.py`"),
     ("Export: C code and FMUs", "`bondc/export/`"),

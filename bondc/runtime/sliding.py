@@ -1,0 +1,576 @@
+"""Filippov sliding (:class:`_Sliding`, a mixin of ``_Run``): the switches that can be held on
+their surfaces, the corners and weights of the combination, affine holds, sliding segments and
+their ends, holding at a stall."""
+
+import math
+
+import numpy as np
+
+from bondc.runtime.kernels import _EPS, brentq
+from bondc.runtime.adapter import corner_weights, filippov_alpha
+from bondc.runtime.results import RunFailure, _Stop
+from bondc.runtime.solvers import CvodeSolver, IDA, _may_dip, difference_jacobian
+
+
+_MAX_SLIDING = 8         # switches sliding at once in the multilinear combination (2**8 corners) ...
+_MAX_HELD = 4096         # ... and in the affine one (k + 1 corners), when the laws combine linearly
+SLIDING_CHECKS = 1000    # a sliding mode's exits are tested at least this often over the run's span
+
+
+class _Sliding:
+    """Filippov sliding: the candidates on their surfaces, the corners and weights, affine holds,
+    sliding segments and their ends, holding at a stall. A mixin of :class:`_Run`."""
+
+    def hold_at_stall(self, stalled, t_stop):
+        """After the unfrozen law stalled at (t, y): slide on every switch close to its surface
+        there, or stop the run with the stall's diagnosis when they cannot be held."""
+        t, y = stalled.t, stalled.y
+        modes = self.modes_at(t, y)
+        index = np.array([k for k in self.event_switches if not self.model.floor_switches[k]], dtype=int)
+        near = []
+        if index.size:
+            values = np.abs(self.switches_at(t, y, modes, index))
+            bands = np.maximum(100 * self.deadbands(t, y, modes, index), 1e-12)
+            relevant = self.relevant(t, y, modes)
+            near = [int(k) for k, value, band in zip(index, values, bands) if value <= band and relevant[k]]
+        # a law continuous across its surface holds nothing there (its two sides' laws agree): it
+        # may only be held where the motion keeps to the surface anyway (a valve at rest between
+        # equal pressures), not where it crosses (a pressure drop changing sign)
+        steep = [k for k in near if self.continuous_across(t, y, modes, k) and not self.keeps_to(t, y, modes, k)]
+        near = [k for k in near if k not in steep]
+        if steep and not near:
+            # a law continuous across its surface but too steep there for the solver (a square
+            # root at 0): it is crossed, never held, and cannot be integrated as written
+            named = "; ".join(self.model.SWITCHES[k] for k in steep)
+            raise _Stop(stalled.failure.replace(
+                message=f"the simulation stalled at t={t:.6g}: the law of {named} is continuous there but "
+                        f"infinitely steep (a square root at 0), and the solver makes no headway through it",
+                variable=self.model.SWITCH_OWNERS[steep[0]],
+                cause="a law like sign(dp)*sqrt(abs(dp)) has an infinite slope at dp = 0: near it the time "
+                      "constant of what it feeds goes to zero",
+                hint="give the law a laminar band around 0, as real orifices have: if abs(dp) < dp_l then "
+                     "K*dp/sqrt(dp_l) else K*sign(dp)*sqrt(abs(dp)) (std:hydraulics's LaminarTurbulentOrifice)"))
+        if near and len(near) <= _MAX_HELD:
+            held, modes, alpha = self.consistent_sliding_set(t, y, modes, near)
+            if held:
+                t_new, y_new = self.sliding_segment(t, y, modes, held, alpha, t_stop)
+                return t_new, y_new, held
+        if len(near) > _MAX_HELD:
+            raise _Stop(self.too_many_held(t, near, f"more than {_MAX_HELD}"))
+        raise _Stop(stalled.failure)
+
+    def too_many_held(self, t, near, why):
+        """The failure of a run whose switches on their surfaces at (t, y) cannot be held together."""
+        named = "; ".join(self.model.SWITCHES[k] for k in near[:4]) + ("; ..." if len(near) > 4 else "")
+        return RunFailure(message=f"the simulation stalled at t={t:.6g}: {len(near)} switches are on their "
+                                  f"surfaces at once ({named}), and {why}",
+                          time=float(t), kind="events", variable=self.model.SWITCH_OWNERS[near[0]],
+                          cause=f"holding {len(near)} switches at once (dry frictions that stick together) "
+                                f"combines 2^{len(near)} laws; beyond {_MAX_SLIDING}, bondc holds them only where "
+                                "each one's law enters the motion linearly (a friction force added to sums of "
+                                f"forces), at most {_MAX_HELD} at a time",
+                          hint="give some of these laws a narrow linear band around zero velocity (for a "
+                               "friction, e = if abs(f) < v_band then F_s*f/v_band else coulomb(f, F_c, F_s)), "
+                               "or join parts that always move together into one mass")
+
+    def onto_surfaces(self, t, y, modes, held, alpha):
+        """The state at the end of a sliding segment, back on the surfaces of the switches it held,
+        where they are still held there (the segment ended at another switch's event or a known
+        time, not at a break-away).
+
+        In the Filippov motion they stay at g = 0; the integration lets them drift (a stuck mass's
+        momentum by 1e-10 over 0.7 s, a hundred times its tolerance). Where that drift is more than
+        the switch's deadband, the restart would no longer see the switch on its surface, and a
+        friction held by its static limit would slide off at the next unrelated event. The
+        smallest correction, each state weighted by its tolerance, that makes every held g zero
+        (one Newton step; g is linear in the states for a velocity); only for a drift (at most 1e6
+        deadbands) and where every weight of the sliding combination is still inside (0, 1)."""
+        index = np.array([k for k in held if not self.model.floor_switches[k]], dtype=int)
+        if index.size == 0 or len(index) != len(held):
+            return y
+        g = self.switches_at(t, y, modes, index)
+        band = self.deadbands(t, y, modes, index)
+        if not np.all(np.isfinite(g)) or np.all(np.abs(g) <= band) or np.any(np.abs(g) > 1e6 * band):
+            return y
+        corners, sides = self.sliding_corners(modes, held)
+        _, rates = self.sliding_rates(t, y, corners, held)
+        weights_now = self.solve_alpha(rates, sides, alpha)
+        if not np.all(np.isfinite(weights_now)) or np.any(np.minimum(weights_now, 1.0 - weights_now) <= 1e-6):
+            return y            # at a break-away: the switch leaves its surface here
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        jacobian = self.switch_differences(t, y, modes, index) / scale
+        weights = scale ** 2
+        try:
+            multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, -g)
+        except np.linalg.LinAlgError:
+            return y
+        corrected = y + weights * (jacobian.T @ multipliers)
+        return corrected if np.all(np.isfinite(corrected)) else y
+
+    def sliding_candidates(self, t, y, modes, chattering):
+        """Switches that may slide at (t, y): those that chatter, and those on their surface that
+        either slid until now or are ``coulomb`` frictions (whose static limit can hold them even
+        where each side's sliding law alone would move away)."""
+        floors = self.model.floor_switches
+        candidates = {k for k in chattering if not floors[k]}       # an integer mode cannot slide
+        vertices = self.model.SWITCH_VERTICES
+        keep = [k for k in self.event_switches
+                if k not in candidates and (vertices[k] != 1.0 or k in self.sliding_now)]
+        if keep:
+            relevant = self.relevant(t, y, modes)
+            index = np.array([k for k in keep if relevant[k]], dtype=int)
+            if index.size:
+                # on the surface: |g| within its deadband (the integration noise of the state)
+                on_surface = np.abs(self.switches_at(t, y, modes, index)) <= self.deadbands(t, y, modes, index)
+                candidates.update(int(k) for k in index[on_surface])
+        return sorted(k for k in candidates if not self.continuous_across(t, y, modes, k))
+
+    def keeps_to(self, t, y, modes, k) -> bool:
+        """Whether the motion keeps to switch ``k``'s surface near (t, y): on the surface (where a
+        continuous law's two sides agree), g moves by less than its deadband over a thousandth of
+        the run."""
+        near = self.near_surface(t, y, modes, k)
+        if near is None:
+            return False
+        on, band, plus, minus, _ = near
+        with np.errstate(all="ignore"):
+            at = on(0.0)
+            rate = float(self.switch_rate(t, at, self.rhs(t, at, plus), plus, k))
+        return bool(np.isfinite(rate) and abs(rate) * 1e-3 * self.span <= band)
+
+    def continuous_across(self, t, y, modes, k) -> bool:
+        """Whether the law is continuous across switch ``k``'s surface near (t, y), as a turbulent
+        orifice's sign(dp)*sqrt(abs(dp)) is at dp = 0: such a switch is crossed, never held, whatever
+        its frozen laws extended past the surface say (each side's law there gives the flow of the
+        other direction, and from a state a little off the surface the two seemed to push towards
+        it: a false sliding mode held the pressure drop away from 0 at a flow near none).
+
+        The jump between the two sides' right-hand sides (each state by its error tolerance), on
+        the side g > 0 at the distance of the switch's deadband (the integration noise of g) and at
+        100 times it: a discontinuity (a friction's) keeps its size as the surface nears, a
+        continuous law's jump vanishes there (as the square root of the distance for the orifice,
+        linearly for a kink). A switch whose modes give one right-hand side is left as it was."""
+        near = self.near_surface(t, y, modes, k)
+        if near is None:
+            return False
+        on, band, plus, minus, scale = near
+        with np.errstate(all="ignore"):
+            def jump(level):
+                at = on(level)
+                return float(np.max(np.abs(self.rhs(t, at, plus) - self.rhs(t, at, minus)) / scale))
+
+            near_jump, far_jump = jump(band), jump(100.0 * band)
+        return bool(np.isfinite(near_jump) and np.isfinite(far_jump) and far_jump > 0
+                    and near_jump <= 0.3 * far_jump)
+
+    def near_surface(self, t, y, modes, k):
+        """For a sign switch ``k`` whose g moves with the state: (the state moved along g's gradient
+        to where g has a given value, g's deadband there, the modes with k on its plus side, on its
+        minus side, each state's error tolerance), or None."""
+        vertex = self.vertex_override.get(k, self.model.SWITCH_VERTICES[k])
+        if vertex != 1.0 or self.model.floor_switches[k]:
+            return None
+        index = np.array([k])
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
+        with np.errstate(all="ignore"):
+            gradient = self.switch_differences(t, y, modes, index)[0] / scale
+            norm = float(gradient @ gradient)
+            g0 = float(self.switches_at(t, y, modes, index)[0])
+            band = float(self.deadbands(t, y, modes, index)[0])
+        if not (np.isfinite(norm) and norm > 0 and np.isfinite(g0) and np.isfinite(band) and band > 0):
+            return None
+        plus, minus = np.array(modes, dtype=float), np.array(modes, dtype=float)
+        plus[k], minus[k] = 1.0, -1.0
+        return (lambda level: y + (level - g0) * gradient / norm), band, plus, minus, scale
+
+    def switch_rate(self, t, y, slope, modes, k):
+        """d g_k / dt along ``slope`` with the modes frozen (central difference over the probe step);
+        ``k`` an index or an array of them."""
+        h = self.probe
+        ahead = self.model.switches(t + h, y + h * slope, self.p, modes)[k]
+        behind = self.model.switches(t - h, y - h * slope, self.p, modes)[k]
+        return (ahead - behind) / (2 * h)
+
+    def sliding_corners(self, modes, sliding, affine=None):
+        """The mode vectors at the corners of the sliding set and their sides (+1/-1 per switch).
+
+        Each sliding switch takes its vertex value on each side: 1 for a sign or an if, 2 for a
+        ``coulomb`` friction (its frozen law gives the static limit there). Either all 2**k corners
+        (the multilinear combination) or the k + 1 corners of the affine one: every switch on its
+        minus side, then each one alone on its plus side. ``affine`` None: the affine one where
+        :meth:`affine_holds` found that the laws combine so (the first corner, all minus, is the
+        same in both).
+        """
+        vertices = self.model.SWITCH_VERTICES
+        vertices = [self.vertex_override.get(k, vertices[k]) for k in range(len(vertices))]
+        count = len(sliding)
+        base = np.array(modes, dtype=float)
+        for k in sliding:
+            base[k] = -vertices[k]
+        if affine is None:
+            affine = (base.tobytes(), tuple(sliding)) in self.affine_sets
+        if affine:
+            sides = np.vstack([-np.ones((1, count)), 2.0 * np.eye(count) - 1.0])
+        else:
+            sides = np.array([[1.0 if (c >> i) & 1 else -1.0 for i in range(count)] for c in range(2 ** count)])
+        corners = np.repeat(np.asarray(modes, dtype=float)[None, :], len(sides), axis=0)
+        for i, k in enumerate(sliding):
+            corners[:, k] = sides[:, i] * vertices[k]
+        return corners, sides
+
+    def held_corners(self, t, y, modes, sliding):
+        """The corners of the sliding set at (t, y) (:meth:`sliding_corners`), the right-hand side
+        and the sliding switches' rates at each: the affine combination for three switches or more
+        where the laws combine linearly (k + 1 corners instead of 2**k), else the multilinear one,
+        which holds at most ``_MAX_SLIDING`` switches."""
+        if len(sliding) > 2:
+            corners, sides = self.sliding_corners(modes, sliding, affine=True)
+            values, rates = self.sliding_rates(t, y, corners, sliding)
+            if self.affine_holds(t, y, corners, sides, values, sliding):
+                return corners, sides, values, rates
+            if len(sliding) > _MAX_SLIDING:
+                raise _Stop(self.too_many_held(t, sliding, "their laws do not combine linearly"))
+        corners, sides = self.sliding_corners(modes, sliding, affine=False)
+        values, rates = self.sliding_rates(t, y, corners, sliding)
+        return corners, sides, values, rates
+
+    corner_weights = staticmethod(corner_weights)
+
+    def affine_holds(self, t, y, corners, sides, values, sliding):
+        """Whether the right-hand side at (t, y) is affine in the sliding switches' weights, as the
+        affine combination of :meth:`sliding_corners` takes it: the corners with every pair of
+        switches (at most 512 pairs, spread over all) and with every switch on its plus side give
+        what the k + 1 corners predict, to rounding. A friction force that only enters sums of
+        forces is affine; one that feeds a nonlinear law (a normal force, a product) is not. Once
+        a set of switches and the others' modes passed, only the all-plus corner is tested again.
+        Records the set in ``affine_sets`` (for :meth:`sliding_corners`) when it holds."""
+        count = sides.shape[1]
+        checked = self.affine_checked
+        base, delta = values[0], values[1:] - values[0]
+        key = (corners[0].tobytes(), tuple(sliding))
+        tests = [list(range(count))]
+        self.affine_sets.discard(key)
+        if key not in checked:
+            pairs = [(i, j) for i in range(count) for j in range(i + 1, count)]
+            if len(pairs) > 512:
+                pairs = pairs[:: -(-len(pairs) // 512)]
+            tests = [list(pair) for pair in pairs] + tests
+        scale = np.max(np.abs(values), axis=0) + np.max(np.abs(delta), axis=0) * count
+        for plus in tests:
+            corner = corners[0].copy()
+            corner[[sliding[i] for i in plus]] = corners[[i + 1 for i in plus], [sliding[i] for i in plus]]
+            predicted = base + delta[plus].sum(axis=0)
+            actual = self.rhs(t, y, corner)
+            if not np.all(np.abs(actual - predicted) <= 1e-9 * scale + 1e-300):
+                checked.discard(key)
+                return False
+        checked.add(key)
+        self.affine_sets.add(key)
+        return True
+
+    def sliding_rates(self, t, y, corners, sliding):
+        """Right-hand side at each corner and the rate of each sliding switch's g along it."""
+        values = np.array([self.rhs(t, y, corner) for corner in corners])
+        index = np.asarray(sliding, dtype=int)
+        rates = np.array([self.switch_rate(t, y, values[c], corners[c], index) for c in range(len(corners))])
+        return values, rates
+
+    solve_alpha = staticmethod(filippov_alpha)
+
+    def sliding_set(self, t, y, modes, candidates):
+        """Which of ``candidates`` slide at (t, y) (complementarity by active set) and the modes of
+        the others: a switch whose weight leaves [0, 1] cannot be held and takes that side.
+
+        Returns (sliding switches, modes, alpha).
+        """
+        modes = np.array(modes, dtype=float)
+        sliding = list(candidates)
+        tolerance = 1e-9
+        self.vertex_override = {}
+        while sliding:
+            corners, sides, values, rates = self.held_corners(t, y, modes, sliding)
+            if len(sliding) > 1:
+                # a switch whose sides give the same right-hand side (a free clutch: both its limits
+                # 0) holds nothing; among others it would only bend their weights' least squares
+                affine = sides.shape[0] != 2 ** sides.shape[1]
+                free = [i for i in range(len(sliding))
+                        if (np.array_equal(values[1 + i], values[0]) if affine else
+                            all(np.array_equal(values[c], values[c | (1 << i)])
+                                for c in range(len(values)) if not (c >> i) & 1))]
+                if free:
+                    k = sliding[free[0]]
+                    g = self.model.switches(t, y, self.p, modes)[k]
+                    modes[k] = 1.0 if g >= 0 else -1.0
+                    del sliding[free[0]]
+                    continue
+            alpha = self.solve_alpha(rates, sides)
+            if not np.all(np.isfinite(alpha)):
+                return [], modes, None
+            if np.any(np.minimum(alpha, 1.0 - alpha) < 1e-6):
+                # at the edge (a holding force at its limit, as at the instant a sliding segment ended):
+                # decide by where the weights go just after t
+                h = self.probe
+                slope = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ values
+                _, rates_ahead = self.sliding_rates(t + h, y + h * slope, corners, sliding)
+                ahead = self.solve_alpha(rates_ahead, sides, alpha)
+                if np.all(np.isfinite(ahead)):
+                    alpha = np.where(np.minimum(alpha, 1.0 - alpha) < 1e-6, ahead, alpha)
+            residual = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ rates
+            scale = np.max(np.abs(rates), axis=0)
+            # a rate that would move g by less than its deadband over a millionth of the run is nil
+            # (a surface whose own rate is a state held at zero by the others: second-order sliding)
+            nil = self.deadbands(t, y, modes, np.asarray(sliding, dtype=int)) / (1e-6 * self.span)
+            unheld = np.flatnonzero(np.abs(residual) > np.maximum(1e-8 * scale, np.maximum(nil, 1e-300)))
+            if unheld.size:
+                # no weight stops it (its own law does not act on it: a free clutch): it moves on
+                worst = int(unheld[np.argmax(np.abs(residual[unheld]) / scale[unheld])])
+                if self.relax_static_limit(sliding[worst]):
+                    continue
+                modes[sliding[worst]] = 1.0 if residual[worst] > 0 else -1.0
+                del sliding[worst]
+                continue
+            violation = np.maximum(alpha - 1.0, -alpha)
+            worst = int(np.argmax(violation))
+            if violation[worst] <= tolerance:
+                return sliding, modes, np.clip(alpha, 0.0, 1.0)
+            # the force needed to hold it exceeds its limit: it leaves towards that side
+            if self.relax_static_limit(sliding[worst]):
+                continue
+            modes[sliding[worst]] = 1.0 if alpha[worst] > 1.0 else -1.0
+            del sliding[worst]
+        return [], modes, None
+
+    def relax_static_limit(self, k):
+        """A ``coulomb`` friction that its static limit cannot hold may still be held between its
+        sliding forces (a static limit below the sliding force: each side's sliding law pushes
+        back across v = 0, which is a Filippov sliding mode): try those as the corners."""
+        if self.model.SWITCH_VERTICES[k] != 1.0 and self.vertex_override.get(k) is None:
+            self.vertex_override[k] = 1.0
+            return True
+        return False
+
+    def consistent_sliding_set(self, t, y, modes, candidates):
+        """:meth:`sliding_set`, with the modes of the other switches chosen just after (t, y) along the
+        sliding motion itself (not along either side's law): a switch that flips there takes its new
+        mode; one that flips back and forth joins the sliding set. A candidate that is not held
+        keeps the side :meth:`sliding_set` found for it (it leaves its surface on that side, even
+        from a state a rounding error on the other)."""
+        candidates, flipped = list(candidates), set()
+        for _ in range(2 * _MAX_SLIDING):
+            held, modes, alpha = self.sliding_set(t, y, modes, candidates)
+            if not held:
+                return held, modes, alpha
+            corners, sides = self.sliding_corners(modes, held)
+            values, _ = self.sliding_rates(t, y, corners, held)
+            slope = self.corner_weights(alpha, sides) @ values
+            ahead = self.modes_at(t + self.probe, y + self.probe * slope, modes)
+            relevant = self.relevant(t, y, modes)
+            changed = [j for j in self.event_switches
+                       if j not in candidates and relevant[j] and ahead[j] != modes[j]]
+            if not changed:
+                return held, modes, alpha
+            for j in changed:
+                if j in flipped and len(candidates) < _MAX_HELD:
+                    candidates.append(j)
+                else:
+                    modes[j] = ahead[j]
+                    flipped.add(j)
+        return held, modes, alpha
+
+    def sliding_segment(self, t, y, modes, sliding, alpha0, t_stop):
+        """Integrate a sliding mode on the switches ``sliding`` (Filippov, any number at once).
+
+        The right-hand side is the multilinear combination of the corners of the sliding set
+        whose weights keep every sliding ``g`` constant (for friction: the holding forces), until
+        a weight reaches 0 or 1 (a holding force reaches its limit: break-away), another switch
+        crosses, or ``t_stop``. Returns (t, y).
+        """
+        self.stats["segments"] += 1
+        self.stats["sliding_segments"] = self.stats.get("sliding_segments", 0) + 1
+        corners, sides = self.sliding_corners(modes, sliding)
+        corner_ids = [self.mode_id(corner) for corner in corners]
+        labels = "; ".join(self.model.SWITCHES[k] for k in sliding)
+        ended = f"sliding on {labels} ends"
+        again = [i for i in range(len(self.events) - 1, -1, -1)
+                 if self.events[i] == (float(t), ended)]
+        if again:               # the same switches held again at once (another switch's event between):
+            del self.events[again[0]]       # one sliding span goes on, not an end and a start
+        else:
+            self.note_event(t, f"sliding on {labels}")
+        others = np.array([j for j in self.event_switches if j not in sliding and modes[j] != 0], dtype=int)
+        # a switch that starts a little on the far side of its surface (a sliding mode drifts by the
+        # solver's tolerance, and a friction may leave from there): it exits from where it starts
+        drift = np.zeros(others.size)
+        if others.size:
+            start = modes[others] * self.model.switches(t, y, self.p, modes)[others]
+            drift = np.where(self.model.floor_switches[others], 0.0, np.maximum(0.0, -start))
+        memory = {"alpha": np.array(alpha0, dtype=float)}
+        sundials = self.method is IDA or issubclass(self.method, CvodeSolver)
+        # scipy's implicit solvers declare their Newton iteration diverging where one correction is
+        # not smaller than the one before, even at the level of rounding: the combination must be a
+        # function of (t, y) alone. Solved from the last weights, the weights of two held frictions
+        # came out an ulp apart from call to call, a held mass's rate flipped between +-2e-16, and
+        # BDF stopped at t = 0.2 ms. The weights are solved from those at the mode's start there;
+        # SUNDIALS, whose convergence test is absolute, keeps solving from the last ones (as C does)
+        start = None if sundials else np.array(alpha0, dtype=float)
+
+        def combination(tt, yy):
+            values, rates = self.sliding_rates(tt, yy, corners, sliding)
+            alpha = self.solve_alpha(rates, sides, memory["alpha"] if start is None else start)
+            if np.all(np.isfinite(alpha)):
+                memory["alpha"] = alpha
+            return values, alpha
+
+        def fun(tt, yy):
+            values, alpha = combination(tt, yy)
+            return self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ values
+
+        def jac(tt, yy):
+            _, alpha = combination(tt, yy)
+            weights = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides)
+            return sum(w * self.jac(tt, yy, corner) for w, corner in zip(weights, corners) if w != 0)
+
+        def differences(tt, yy):
+            # scipy's implicit solvers: the combination's own Jacobian, the weights' dependence on the
+            # state included. The corners' weighted Jacobians leave it out, and Radau's Newton iteration
+            # then fails step after step (a held mass pulled through a spring: 5 201 steps in 20 s
+            # where 412 do). The SUNDIALS solvers cope with the weighted ones.
+            with np.errstate(all="ignore"):
+                return difference_jacobian(fun, tt, yy, np.asarray(fun(tt, yy), dtype=float))
+
+        def exits(tt, yy):      # every entry stays positive while sliding lasts
+            _, alpha = combination(tt, yy)
+            values = list(alpha) + list(1.0 - alpha)
+            if others.size:
+                values += list(modes[others] * self.model.switches(tt, yy, self.p, modes)[others] + drift)
+            return np.array(values, dtype=float)
+
+        def weights_at(times, states):
+            return np.array([self.corner_weights(np.clip(combination(ti, states[:, i])[1], 0.0, 1.0), sides)
+                             for i, ti in enumerate(times)]).T
+
+        if (len(self.blocks_t) == 1 and self.blocks_t[0].size == 1 and self.blocks_t[0][0] == t
+                and t == self.t_start):
+            # the initial point: its outputs are those of the sliding combination too
+            self.blocks_mode[0] = ("slide", tuple(corner_ids), weights_at(self.blocks_t[0], self.blocks_x[0]))
+        driver = None
+        if not any(self.model.floor_switches[k] for k in sliding):
+            driver = self.driver_for(others, ())
+        if driver is not None:
+            outcome = self.driver_sliding(driver, t, y, modes, sliding, corners, sides, corner_ids, others,
+                                          drift, memory, weights_at, labels, t_stop)
+            if outcome[0] != "handover":
+                return outcome
+            _, t, y = outcome       # a law not finite at a trial point: the step loop goes on and explains
+        solver = self.new_solver(fun, jac if sundials else differences, t, y, t_stop)
+        old = np.maximum(exits(t, y), 0.0)      # at the edge of the sliding region: leaving counts from here
+        while True:
+            message = solver.step()
+            self.stats["steps"] += 1
+            if solver.status == "failed":
+                self.collect(solver)
+                raise _Stop(self.solver_failure(solver.t, message))
+            t_new, y_new = solver.t, solver.y
+            if not (np.all(np.isfinite(y_new)) and np.all(np.isfinite(fun(t_new, y_new)))):
+                self.collect(solver)
+                self.stop_nonfinite(solver, fun, lambda tt, yy: corners[-1], corner_ids[-1])
+            new = exits(t_new, y_new)
+            dense = solver.dense_output()
+            hit = self.sliding_end_within(old, new, lambda tt: exits(tt, dense(tt)), solver.t_old, t_new)
+            end = t_new if hit is None else hit
+            y_end = y_new if hit is None else dense(hit)
+            self.record_sliding(solver.t_old, end, y_end, dense, corner_ids, weights_at)
+            if self.progress is not None:
+                self.progress(end)
+            if hit is not None or solver.status == "finished":
+                self.collect(solver)
+                if hit is not None:
+                    self.note_event(end, f"sliding on {labels} ends")
+                return end, np.array(y_end)
+            old = new
+
+    def sliding_end_within(self, old, new, exits_at, t_old, t_new):
+        """:meth:`sliding_end` of a step, its exits also tested inside it every
+        :meth:`sliding_check`: a mode whose states stand still (a mass held at rest or at a speed)
+        gives the solver nothing to limit its steps by, while the force that holds it follows an input
+        that may pass the holding limit and come back within one step. Between two tests, an exit
+        that dips below 0 and comes back is looked for too (:meth:`sliding_dip`): a step whose
+        states move is as long as their motion allows, which may be longer than the push is past
+        the limit."""
+        longest = self.sliding_check()
+        count = int(min(math.ceil((t_new - t_old) / longest), 1e6)) if longest > 0 else 1
+        times = np.linspace(t_old, t_new, max(count, 1) + 1)
+        before = old
+        for a, b in zip(times[:-1], times[1:]):
+            after = new if b == t_new else np.asarray(exits_at(b), dtype=float)
+            hit = self.sliding_end(before, after, exits_at, a, b)
+            if hit is None:
+                hit = self.sliding_dip(before, after, exits_at, a, b)
+            if hit is not None:
+                return hit
+            before = after
+        return None
+
+    def sliding_dip(self, left, right, exits_at, a, b, budget=None):
+        """The end of a sliding mode inside (a, b) where its exits are positive at both ends, or None:
+        an exit that dips below 0 and comes back between them (a push passing a static limit for less
+        than the spacing of the tests). Each exit's parabola through a, the middle and b is looked at
+        (:func:`_may_dip`): where it comes within its own curvature of 0 inside, the halves are
+        searched in turn, at most 60 evaluations in all."""
+        budget = [60] if budget is None else budget
+        middle_t = 0.5 * (a + b)
+        if budget[0] <= 0 or not a < middle_t < b:
+            return None
+        budget[0] -= 1
+        middle = np.asarray(exits_at(middle_t), dtype=float)
+        hit = self.sliding_end(left, middle, exits_at, a, middle_t)
+        if hit is not None:
+            return hit
+        hit = self.sliding_end(middle, right, exits_at, middle_t, b)
+        if hit is not None:
+            return hit
+        if not _may_dip(left, middle, right):
+            return None
+        hit = self.sliding_dip(left, middle, exits_at, a, middle_t, budget)
+        if hit is not None:
+            return hit
+        return self.sliding_dip(middle, right, exits_at, middle_t, b, budget)
+
+    def sliding_check(self) -> float:
+        """The longest stretch of a sliding mode whose exits are tested only at its ends: the run's
+        span over SLIDING_CHECKS, or its max_step where that is shorter."""
+        return min(self.span / SLIDING_CHECKS, float(self.options.get("max_step", np.inf)))
+
+    @staticmethod
+    def sliding_end(old, new, exits_at, t_old, t_new):
+        """The earliest end of a sliding mode in the step (t_old, t_new], or None: where an exit (an
+        entry of ``exits_at(tt)``, positive while the mode lasts) went from > 0 to <= 0 or from >= 0
+        to < 0 (``old``, ``new``: the exits at the step's ends), located by brentq."""
+        hit = None
+        for j in range(new.size):
+            if not (old[j] > 0 >= new[j] or old[j] >= 0 > new[j]):
+                continue
+            if old[j] <= 0:
+                root = t_old
+            else:
+                try:
+                    root = brentq(lambda tt, j=j: exits_at(tt)[j], t_old, t_new, 4 * _EPS, 4 * _EPS)
+                except ValueError:
+                    root = t_new
+            hit = root if hit is None else min(hit, root)
+        return hit
+
+    def record_sliding(self, t_old, t_new, y_new, dense, corner_ids, weights_at):
+        if self.t_eval is None:
+            times = np.array([t_new])
+            states = np.asarray(y_new, dtype=float).reshape(-1, 1)
+        else:
+            stop = np.searchsorted(self.t_eval, t_new, side="right")
+            times = self.t_eval[self.eval_index:stop]
+            self.eval_index = stop
+            if times.size == 0:
+                return
+            states = np.column_stack([y_new if ti == t_new else dense(ti) for ti in times])
+        self.blocks_t.append(times)
+        self.blocks_x.append(states)
+        self.blocks_mode.append(("slide", tuple(corner_ids), weights_at(times, states)))
