@@ -579,6 +579,8 @@ def _cmd_simulate(args) -> int:
 def _cmd_compile(args) -> int:
     from bondc.codegen import compile_file, default_output
 
+    if args.target == "c":
+        return _compile_c(args)
     output = Path(args.output) if args.output else default_output(args.file)
     compile_file(Path(args.file), output, model=args.model, experiment=args.experiment,
                  sets=_parse_sets(args.set), standalone=args.standalone)
@@ -587,6 +589,54 @@ def _cmd_compile(args) -> int:
                      "standalone": args.standalone, "written": [str(output)]})
     elif not _quiet():
         print(f"wrote {output}")
+    return EXIT_OK
+
+
+def _compile_c(args) -> int:
+    """``bondc compile FILE --target c -o DIR``: the model's C code and header (bondc.export.ccode)."""
+    from bondc.export.ccode import c_model, write_c
+    from bondc.io import check_output
+
+    derived = _derived(args)
+    model = c_model(derived.state_space, derived.experiment)
+    folder = Path(args.output) if args.output else Path(args.file).with_name(f"{model.name}_c")
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(Diagnostic("error", "E001", f"--target c writes a folder: {folder} is a file",
+                                    hint="give -o a folder (made if missing)"))
+    check_output(folder / f"{model.name}.c", "the C code", make_folder=True)
+    written = write_c(model, folder)
+    if args.json:
+        _print_json({"complete": True, "file": args.file, "model": args.model, "experiment": args.experiment,
+                     "target": "c", "written": [str(path) for path in written]})
+    elif not _quiet():
+        for path in written:
+            print(f"wrote {path}")
+    return EXIT_OK
+
+
+def _cmd_fmu(args) -> int:
+    """``bondc fmu FILE``: a Functional Mock-up Unit (bondc.export.fmu)."""
+    from bondc.export.fmu import build_fmu, default_output
+    from bondc.io import check_output
+
+    if args.output:
+        check_output(args.output, "the FMU")
+    derived = _derived(args)
+    output = Path(args.output) if args.output else default_output(args.file, derived.graph.name)
+    check_output(output, "the FMU")
+    built = build_fmu(derived, output, fmi=int(args.fmi), kind=args.kind)
+    summary = {"complete": True, "file": args.file, "model": derived.graph.name,
+               "experiment": getattr(derived.experiment, "name", None),
+               "fmi": built.fmi, "kind": built.kind, "guid": built.guid, "platforms": ["linux64"],
+               "states": len(built.model.states), "parameters": len(built.model.parameters),
+               "inputs": len(built.model.inputs), "outputs": len(built.model.outputs),
+               "event_indicators": sum(built.model.located), "written": [str(output)]}
+    if args.json:
+        _print_json(summary)
+    elif not _quiet():
+        kind = "Co-Simulation" if built.kind == "cs" else "Model Exchange"
+        print(f"wrote {output} (FMI {built.fmi}.0 {kind}, linux64: {summary['states']} states, "
+              f"{summary['parameters']} parameters, {summary['inputs']} inputs, {summary['outputs']} outputs)")
     return EXIT_OK
 
 
@@ -865,8 +915,24 @@ def build_parser() -> argparse.ArgumentParser:
     compile_.add_argument("-o", "--output", help="the module to write (default: MODEL_gen.py beside the model)")
     compile_.add_argument("--standalone", action="store_true",
                           help="copy bondc's runtime into the module, so that it runs where bondc is not installed")
+    compile_.add_argument("--target", choices=("python", "c"), default="python",
+                          help="python: the simulation module (default); c: the model's C code and header "
+                               "(-o names their folder, default MODEL_c beside the model)")
     compile_.add_argument("--json", action="store_true", help="print what was written as JSON")
     compile_.set_defaults(run=_cmd_compile)
+
+    fmu = commands.add_parser("fmu", help="export a Functional Mock-up Unit (FMI 2.0 or 3.0, Co-Simulation or "
+                                          "Model Exchange, linux64) with bondc's CVODE engine inside")
+    _add_model_args(fmu)
+    fmu.add_argument("--experiment", help="whose t_end, rtol and atol become the FMU's default experiment "
+                                          "(default: the first)")
+    fmu.add_argument("--fmi", choices=("2", "3"), default="2", help="the FMI version (default: 2)")
+    fmu.add_argument("--kind", choices=("cs", "me"), default="cs",
+                     help="cs: Co-Simulation, bondc's engine integrates (default); me: Model Exchange, the "
+                          "importer integrates")
+    fmu.add_argument("-o", "--output", help="the FMU to write (default: MODEL.fmu beside the model)")
+    fmu.add_argument("--json", action="store_true", help="print what was written as JSON")
+    fmu.set_defaults(run=_cmd_fmu)
 
     sim = commands.add_parser("simulate", help="simulate an experiment; statistics, energy per cycle, CSV/NPZ")
     _add_model_args(sim)

@@ -107,6 +107,16 @@ def c_name(python_name: str, index: int) -> str:
     return f"w{index}"
 
 
+def c_double(value: float) -> str:
+    """A C double literal of ``value``, exactly (``repr``: 17 significant digits), or NAN/INFINITY."""
+    if value != value:
+        return "NAN"
+    if value in (float("inf"), float("-inf")):
+        return "INFINITY" if value > 0 else "(-INFINITY)"
+    text = repr(value)
+    return text if any(c in text for c in ".en") else text + ".0"
+
+
 class NativePrinter(BondcPrinting, C99CodePrinter):
     """C99 printer with bondc's names, exact doubles and numpy-compatible helpers."""
 
@@ -122,13 +132,7 @@ class NativePrinter(BondcPrinting, C99CodePrinter):
     # -- names and numbers
 
     def _print_Float(self, expr):
-        value = float(expr)
-        if value != value:
-            return "NAN"
-        if value in (float("inf"), float("-inf")):
-            return "INFINITY" if value > 0 else "(-INFINITY)"
-        text = repr(value)
-        return text if any(c in text for c in ".en") else text + ".0"
+        return c_double(float(expr))
 
     def _print_Integer(self, expr):
         return f"{int(expr)}.0" if abs(int(expr)) < 2 ** 53 else repr(float(expr))

@@ -995,3 +995,136 @@ void bondc_driver_free(bondc_driver *d)
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
     free(d->newton); free(d->residual); free(d->delta); free(d->kept); free(d);
 }
+
+/* ---- the crossing after a possible one, and the modes after it: what an FMU's engine
+   (bondc/native/fmi/engine.c) does with bondc_driver_advance's code 1, in C for any caller */
+
+static int same_values(const double *a, const double *b, int count)
+{
+    for (int i = 0; i < count; i++)
+        if (a[i] != b[i]) return 0;
+    return 1;
+}
+
+/* The modes just after (t, y) from `guess` into out, as _Run.restart_modes makes them: those of
+   bondc_driver_restart where the modes a probe ahead agree; else the modes ahead, probed again along
+   their law, until they agree (0), or until they repeat (1: switches that chatter, a sliding mode
+   this function does not resolve; out holds the last modes). -1 when out of memory. */
+int bondc_driver_select(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                        double probe, double *out)
+{
+    enum { ROUNDS = 8 };
+    int switches = d->switches, n = d->n;
+    if (switches == 0) return 0;
+    if (bondc_driver_restart(d, t, y, guess, floors, probe, 0, out) == 1) return 0;
+    double *seen = (double *)calloc((size_t)(ROUNDS + 2) * switches, sizeof(double));
+    double *ahead = (double *)calloc((size_t)switches, sizeof(double));
+    double *shifted = (double *)calloc((size_t)n + 1, sizeof(double));
+    int code = 1, rounds = 1;
+    if (!seen || !ahead || !shifted) code = -1;
+    else memcpy(seen, out, sizeof(double) * switches);
+    for (int round = 0; code == 1 && round < ROUNDS; round++) {
+        bondc_rhs(t, y, d->p, out, d->fp);
+        if (!driver_finite(d->fp, n)) { code = 0; break; }     /* as restart_modes: that law stands */
+        for (int i = 0; i < n; i++) shifted[i] = y[i] + probe * d->fp[i];
+        driver_modes_at(d, t + probe, shifted, out, floors, ahead);
+        if (same_values(ahead, out, switches)) { code = 0; break; }
+        for (int r = 0; r < rounds; r++)
+            if (same_values(ahead, seen + (long)r * switches, switches)) code = 2;
+        memcpy(out, ahead, sizeof(double) * switches);
+        if (code == 2) { code = 1; break; }
+        memcpy(seen + (long)rounds * switches, ahead, sizeof(double) * switches);
+        rounds++;
+    }
+    free(seen); free(ahead); free(shifted);
+    return code;
+}
+
+/* One watched switch's test of a step, as a function of time: m*g + band (kind 0), the distance
+   inside [level, level + 1) of a floor switch (1), or level - |g| for a switch in mode 0 (2) */
+typedef struct {
+    bondc_driver *d;
+    double t_old, t_new;
+    const double *y_new, *m;
+    int k, kind;
+    double sign, band, level;
+} crossing_test;
+
+static double crossing_value(const crossing_test *q, double t)
+{
+    double g = bondc_driver_switch(q->d, t, q->t_old, q->t_new, q->y_new, q->m, q->k);
+    if (q->kind == 1) return fmin(g - q->level, q->level + 1.0 - g);
+    if (q->kind == 2) return q->level - fabs(g);
+    return q->sign * g + q->band;
+}
+
+/* Where the test goes from > 0 (at t_old) to <= 0 (at t_new) on the step's interpolant: the end of
+   a bracket narrowed by the Illinois method to 4 eps (brentq's xtol in _Run.crossing) on the side
+   past the zero; t_new where the test does not change sign there. */
+static double crossing_locate(const crossing_test *q)
+{
+    const double eps = 2.220446049250313e-16;
+    double a = q->t_old, b = q->t_new, fa = crossing_value(q, a), fb = crossing_value(q, b);
+    if (!(fa > 0) || !(fb <= 0)) return b;
+    int kept = 0;
+    for (int i = 0; i < 200 && b - a > 4 * eps * fmax(fabs(a), fabs(b)) + 1e-300; i++) {
+        double t = b - fb * (b - a) / (fb - fa);
+        if (!(t > a && t < b)) t = 0.5 * (a + b);
+        double ft = crossing_value(q, t);
+        if (ft != ft) { t = 0.5 * (a + b); ft = crossing_value(q, t); }
+        if (ft <= 0) {
+            b = t; fb = ft;
+            if (kept == -1) fa *= 0.5;
+            kept = -1;
+        } else {
+            a = t; fa = ft;
+            if (kept == 1) fb *= 0.5;
+            kept = 1;
+        }
+        if (ft == 0) break;
+    }
+    return b;
+}
+
+/* The earliest crossing in the last step (t_old, t_new] of the `watched` switches `watch` (modes m,
+   their signs, bands and values before the step g_old, as bondc_driver_advance watched them), as
+   _Run.crossing finds it: its switch, or -1 where none crossed (a step advance flagged for a dip
+   without a change of sign); its time into *t_event; the switching functions at the step's end
+   (y_new) into g_new. */
+int bondc_driver_crossing(bondc_driver *d, int watched, const int *watch, const double *signs, const double *band,
+                          const double *g_old, const int *floors, const double *m, double t_old, double t_new,
+                          const double *y_new, double *g_new, double *t_event)
+{
+    int found = -1;
+    double best = t_new;
+    bondc_switches(t_new, y_new, d->p, m, g_new);
+    for (int j = 0; j < watched; j++) {
+        int k = watch[j];
+        double s = signs[j], b = band[j], old = g_old[j], now = g_new[k], root;
+        crossing_test q = {d, t_old, t_new, y_new, m, k, 0, s, b, 0.0};
+        if (floors[k]) {
+            double before = fmin(old - s, s + 1.0 - old) + b, after = fmin(now - s, s + 1.0 - now) + b;
+            if (!(after < 0)) continue;
+            if (before <= 0) root = t_old;
+            else { q.kind = 1; q.level = s; root = crossing_locate(&q); }
+        } else if (s != 0) {
+            double before = s * old + b, after = s * now + b;
+            if (!(after < 0 || (after == 0 && before > 0))) continue;
+            if (before <= 0) root = t_old;
+            else if (after == 0) root = t_new;
+            else {
+                /* the deadband decides whether it crossed; where the zero itself is in this step, the zero */
+                q.band = s * old > 0 ? 0.0 : b;
+                root = crossing_locate(&q);
+            }
+        } else {
+            if (!(isfinite(now) && fabs(now) > b && now != 0)) continue;
+            q.kind = 2;
+            q.level = b > 0 ? b : 1e-6 * fabs(now);
+            root = crossing_locate(&q);
+        }
+        if (found < 0 || root < best) { best = root; found = k; }
+    }
+    *t_event = best;
+    return found;
+}

@@ -40,3 +40,8 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
 void bondc_driver_free(bondc_driver *d);
 int bondc_driver_explicit(bondc_driver *d, const void *api);
 int bondc_when_native(void);
+int bondc_driver_select(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
+                        double probe, double *out);
+int bondc_driver_crossing(bondc_driver *d, int watched, const int *watch, const double *signs, const double *band,
+                          const double *g_old, const int *floors, const double *m, double t_old, double t_new,
+                          const double *y_new, double *g_new, double *t_event);

@@ -325,6 +325,33 @@ d("E814", "too many points",
   "computed up to there, marked incomplete. A `dt` that would give more points than that is refused before the "
   "run (E803).",
   "Report on a coarser grid (`--dt`, or `dt` in the experiment), or simulate a shorter time.")
+d("E840", "no C form",
+  "`bondc compile --target c` and `bondc fmu` print the model's laws as C. A law (or an output, an initial value, "
+  "a when clause) that C cannot express has none: a measured `csv(...)` signal, read by bondc's Python runtime from "
+  "its file, is the common case. The diagnostic points at the law that reads it.",
+  "Give the signal as an external input (`input u [V] external`, LANGUAGE.md section 15): the FMU's importer, or "
+  "the program that embeds the C code, supplies it.")
+d("E841", "a switch that may slide cannot be exported",
+  "An FMU integrates the model's frozen laws between events and selects the modes at each event with bondc's "
+  "CVODE driver; it does not integrate a Filippov sliding mode, which bondc's Python run loop does (a Coulomb "
+  "friction that sticks, a relay that chatters). `bondc fmu` refuses, before building, a model with a located "
+  "switch whose switching function reads a state whose rate reads that switch's own mode (the two sides' rates "
+  "can then push the state onto the surface and hold it there). The diagnostic points at the first such switch's "
+  "law, with notes at the others. Switches of time only (`step(t, t0)`), switches whose states' rates do not read "
+  "their mode, and kinks (laws continuous across their switch: `abs`, `min`, `max`, a relief valve, an orifice's "
+  "`sign(e)*sqrt(abs(e))`) export.",
+  "Simulate the model with `bondc simulate`. To export it, make the law continuous across its switch (a kink "
+  "needs no mode): a narrow linear band around zero speed instead of `sign(v)`, for instance.")
+d("E843", "no compiler or no SUNDIALS for an FMU",
+  "Building an FMU compiles C (bondc's compiler discovery: `$CC`, then `cc`/`gcc`/`clang`, then zig's from the "
+  "ziglang package) and links scikit-sundae's SUNDIALS libraries (Linux x86-64 wheels), which the FMU carries. "
+  "One of them was not found. It cannot be triggered from a model.",
+  "Install scikit-sundae from a Linux x86-64 wheel, and a C compiler (or the ziglang package).")
+d("E844", "the FMU's C code did not compile",
+  "The C compiler failed on the FMU's sources (the model's C code, bondc's driver and FMI wrapper). This is a "
+  "bug of bondc's export, not of the model; the message gives the compiler's first complaint. It cannot be "
+  "triggered from a model.",
+  "Report it with the model file; meanwhile simulate with `bondc simulate`.")
 d("E815", "the run diverged",
   "A state grew beyond 1e30 in SI units, a magnitude no physical quantity of a machine reaches: the model is "
   "unstable (a negative damping or resistance, a positive feedback) or a law grows without bound. The run "
@@ -1184,6 +1211,37 @@ live("E813", Api(_RUNTIME.format(file="spin.bg")
 
 live("E001", Cli("bondc simulate --t-end 2"), Cli("bondc report spin.bg --compare omega=omega_meas", {"spin.bg": SPIN}))
 live("E002", Cli("bondc check spin.gb", {"spin.bg": SPIN}))
+# -- export: C code and FMUs
+
+_RC_CSV = """model RC
+  param R  = 1000 [Ohm]
+  param C0 = 1e-3 [F]
+  input u [V] = csv("drive.csv", "u")   "the drive, measured"
+  Se supply : e = u
+  R  r      : e = R*f
+  C  c      : e = q/C0
+  1  j
+  supply -> j -> r
+  j -> c
+  output v [V] = c.e
+end
+"""
+_SLIDE = """model Slide "a block pushed against Coulomb friction"
+  param M   = 1 [kg]
+  param F_c = 2 [N]
+  param F0  = 1 [N]
+  Se push     : e = F0
+  I  block    : f = p/M
+  R  friction : e = F_c*sign(f)
+  1  j
+  push -> j
+  j -> block
+  j -> friction
+  output v [m/s] = block.f
+end
+"""
+live("E840", Cli("bondc compile rc.bg --target c -o rc_c", {"rc.bg": _RC_CSV, "drive.csv": "t [s],u [V]\n0,0\n1,5\n"}))
+live("E841", Cli("bondc fmu slide.bg", {"slide.bg": _SLIDE}))
 live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
 live("E003", Cli("bondc compile spin.bg -o spin.bg", {"spin.bg": SPIN}))
 live("E007", Cli("bondc check spin.bg --set b=", {"spin.bg": SPIN}))
@@ -1201,6 +1259,7 @@ STAGES = (  # (title, modules), in the order of the page
     ("Simulation", "`bondc/simulate.py`, `bondc/runtime/`"),
     ("Analyses and data files", "`bondc/analysis/`"),
     ("Validation against measured data", "`bondc/report/validate.py`"),
+    ("Export: C code and FMUs", "`bondc/export/`"),
     ("Calibration", "`bondc/analysis/fit.py`, `bondc/analysis/fit_write.py`"),
     ("Command line and files", "`bondc/cli.py`, `bondc/io.py`, `bondc/errors.py`"),
 )
@@ -1215,6 +1274,8 @@ def stage_of(code: str) -> str:
         return "Command line and files"
     if 950 <= number < 960:
         return "Validation against measured data"
+    if 840 <= number < 860:
+        return "Export: C code and FMUs"
     if 880 <= number < 900:
         return "Calibration"
     by_hundred = {1: "Syntax", 2: "Units", 3: "Names, expressions, files and experiments", 4: "Graph structure",
