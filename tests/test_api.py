@@ -77,6 +77,7 @@ def test_bondc_ships_its_types():
     assert any(requirement.startswith("mypy") for requirement in project["project"]["optional-dependencies"]["test"])
 
 
+@pytest.mark.slow
 def test_a_user_script_type_checks_with_mypy_strict(tmp_path):
     """tests/fixtures/api/user_script.py uses the API as docs/api.md shows, with assert_type on what it
     returns: mypy --strict finds nothing in it (an untyped or Any-returning API function fails it).

@@ -50,18 +50,36 @@ BUILDS = {
 }
 
 
+#: the FMUs `make test-fast` builds (one of each kind); the tests of the others are marked slow
+FAST = {"msd", "msd_me", "msd_fmi3", "msd_me_fmi3", "ball", "external", "motor"}
+
+
+def _fast(*cases):
+    """pytest params of cases whose first item names a build: slow unless it is in FAST."""
+    return [pytest.param(*case, marks=[] if case[0] in FAST else [pytest.mark.slow]) for case in cases]
+
+
+class _Builds(dict):
+    """The FMUs of BUILDS, each built on first use (once per test process)."""
+
+    def __init__(self, folder):
+        super().__init__()
+        self.folder = folder
+
+    def __missing__(self, name):
+        model, options = BUILDS[name]
+        path = self.folder / f"{name}.fmu"
+        assert main(["fmu", str(model), "-o", str(path), "-q", *options]) == 0
+        self[name] = path
+        return path
+
+
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("fmus")
-    built = {}
-    for name, (model, options) in BUILDS.items():
-        path = folder / f"{name}.fmu"
-        assert main(["fmu", str(model), "-o", str(path), "-q", *options]) == 0
-        built[name] = path
-    return built
+    return _Builds(tmp_path_factory.mktemp("fmus"))
 
 
-@pytest.mark.parametrize("name", sorted(BUILDS))
+@pytest.mark.parametrize("name", _fast(*((name,) for name in sorted(BUILDS))))
 def test_fmpy_validates_every_fmu(fmus, name):
     problems = validate_fmu(str(fmus[name]))
     print(f"validate_fmu({name}.fmu): {problems}")
@@ -80,7 +98,7 @@ def _compare(result, sim, names=None):
     return worst
 
 
-@pytest.mark.parametrize("name, model, overrides", [
+@pytest.mark.parametrize("name, model, overrides", _fast(
     ("msd", "mass_spring_damper.bg", {}),
     ("rlc", "series_rlc.bg", {}),
     ("motor", "dc_motor_gear.bg", {}),
@@ -92,7 +110,7 @@ def _compare(result, sim, names=None):
     ("motor_fmi3", "dc_motor_gear.bg", {}),
     ("msd", "mass_spring_damper.bg", {"k": 1600.0, "m": 3.0}),
     ("motor", "dc_motor_gear.bg", {"J_L": 0.02, "t_on": 0.02}),
-])
+))
 def test_co_simulation_matches_bondc_simulate(fmus, name, model, overrides):
     """FMPy's run of the Co-Simulation FMU (start_values for the parameter changes, in SI) against
     bondc's with the same parameters (overrides, as --set NAME=VALUE [SI unit]), on the same output
@@ -118,10 +136,10 @@ def test_a_parameter_change_changes_the_answer(fmus):
     assert plain["x"][-1] == pytest.approx(10 / 800, rel=2e-2)
 
 
-@pytest.mark.parametrize("name, model", [("msd_me", "mass_spring_damper.bg"), ("rlc_me", "series_rlc.bg"),
-                                         ("ball_me", ENGINE / "bouncing_ball.bg"),
-                                         ("msd_me_fmi3", "mass_spring_damper.bg"),
-                                         ("ball_me_fmi3", ENGINE / "bouncing_ball.bg")])
+@pytest.mark.parametrize("name, model", _fast(("msd_me", "mass_spring_damper.bg"), ("rlc_me", "series_rlc.bg"),
+                                             ("ball_me", ENGINE / "bouncing_ball.bg"),
+                                             ("msd_me_fmi3", "mass_spring_damper.bg"),
+                                             ("ball_me_fmi3", ENGINE / "bouncing_ball.bg")))
 def test_model_exchange_matches_bondc_simulate(fmus, name, model):
     """FMPy integrates the Model Exchange FMU (its CVODE, the switches as event indicators, the
     bouncing ball's impacts as when clauses that change the state at an event)."""
@@ -139,7 +157,7 @@ def test_model_exchange_matches_bondc_simulate(fmus, name, model):
     assert max(worst.values()) < 1e-3
 
 
-@pytest.mark.parametrize("name", ["external", "external_me"])
+@pytest.mark.parametrize("name", _fast(("external",), ("external_me",)))
 def test_an_external_input_from_fmpy_matches_the_same_signal_from_a_csv(fmus, name, tmp_path):
     """FMPy feeds the external input F_ext (steps at communication points, held between them: what a
     co-simulation master does); bondc reads the same samples from a CSV (--input F_ext=FILE.csv)."""

@@ -155,6 +155,7 @@ def test_an_inertia_free_model_by_hand():
     assert_complete(verdict, data)
 
 
+@pytest.mark.slow
 def test_a_sweeps_choice_is_the_single_runs_at_45_kg(capsys):
     """At 45 kg the load inertia is 45*(lead/2pi)^2 + I_z = 7.01e-5 kg*m^2, 13.7 SV-100 rotors: a
     single run rejects SV-100 on its inertia ratio, and so must the sweep's point."""
