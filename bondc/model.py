@@ -324,3 +324,28 @@ def external_input_notes(graph, supplied=()) -> list:
                                 hint=f"supply it: bondc simulate --input {name}=FILE.csv[:COLUMN], or "
                                      f"simulate(..., inputs={{{name!r}: (times, values)}}) in Python"))
     return notes
+
+
+def result_units(graph) -> dict:
+    """Each result column's unit and its factor (SI value / factor = value in that unit):
+    ``{"t": ("s", 1.0), "P_kPa": ("kPa", 1000.0), "mass.p": ("kg*m/s", 1.0)}``.
+
+    An output is shown in its declared unit; a state or bond variable in SI when its dimension is
+    known (the dimension check infers it); a column whose unit is unknown has none. Every result
+    file records these (:func:`bondc.runtime.write_result`), the generated module carries them
+    (``RESULT_UNITS``)."""
+    units = {"t": ("s", 1.0)}
+    if graph is None:
+        return units
+    for name, unit in getattr(graph, "si_units", {}).items():
+        units[name] = (unit, 1.0)
+    from bondc.units import lookup
+
+    for state in graph.states:
+        declared = lookup(state.unit_text) if state.unit_text else None
+        if declared is not None and declared.is_coherent:       # "chamber.P [Pa]" rather than kg/(m*s^2)
+            units[state.qualified] = (state.unit_text, 1.0)
+    for name, output in graph.outputs.items():
+        if output.unit_text:
+            units[name] = (output.unit_text, output.display_factor or 1.0)
+    return units

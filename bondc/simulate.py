@@ -49,7 +49,6 @@ from __future__ import annotations
 
 import difflib
 import math
-import io
 import sys
 import time
 import weakref
@@ -61,7 +60,7 @@ import numpy as np
 
 from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
 from bondc.io import atomic_write
-from bondc.model import bond_alias, readable, readable_names
+from bondc.model import bond_alias, readable, readable_names, result_units
 
 _COMPILED: dict = {}
 
@@ -438,28 +437,6 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
     return result
 
 
-def result_units(graph) -> dict:
-    """Each result column's unit: ``{"t": ("s", 1.0), "P_kPa": ("kPa", 1000.0), "mass.p": ("kg*m/s", 1.0)}``.
-
-    An output is shown in its declared unit; a state or bond variable in SI when its dimension is
-    known (the dimension check infers it); a column whose unit is unknown has none."""
-    units = {"t": ("s", 1.0)}
-    if graph is None:
-        return units
-    for name, unit in getattr(graph, "si_units", {}).items():
-        units[name] = (unit, 1.0)
-    from bondc.units import lookup
-
-    for state in graph.states:
-        declared = lookup(state.unit_text) if state.unit_text else None
-        if declared is not None and declared.is_coherent:       # "chamber.P [Pa]" rather than kg/(m*s^2)
-            units[state.qualified] = (state.unit_text, 1.0)
-    for name, output in graph.outputs.items():
-        if output.unit_text:
-            units[name] = (output.unit_text, output.display_factor or 1.0)
-    return units
-
-
 def dependent_states(ss, variables: Mapping) -> dict:
     """The states of storage elements in derivative causality (``ss.eliminated_names``), name ->
     values: the runtime evaluates their assignment (in the independent states) at every point, as
@@ -695,20 +672,15 @@ def column_header(name: str, units: Mapping) -> str:
 def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     """The result as csv: a header of names with units (``t [s]``, ``P_kPa [kPa]``), then one row per
     point; each output in its declared unit, states and bond variables in SI."""
+    from bondc.runtime import result_bytes
+
     names, columns = _columns(result, all_bonds)
-    scales = [result.units.get(name, (None, 1.0))[1] for name in names]
-    columns = [column if scale == 1.0 else np.asarray(column) / scale for column, scale in zip(columns, scales)]
-    out = io.StringIO()
-    out.write(",".join(_csv_cell(column_header(name, result.units)) for name in names) + "\n")
-    if result.t.size:
-        for row in np.column_stack(columns).tolist():
-            out.write(",".join(map(repr, row)) + "\n")
-    return out.getvalue()
+    return result_bytes("csv", names, columns, result.units).decode("utf-8")
 
 
-def _csv_cell(text: str) -> str:
-    """A header cell, quoted when it holds a comma or a quote (a unit never does; a name never can)."""
-    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
+def _metadata(result: SimResult) -> dict:
+    return {"model": result.model or "", "experiment": result.experiment or "", "complete": result.complete,
+            "message": result.message}
 
 
 def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
@@ -717,45 +689,72 @@ def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
     atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
 
 
+def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
+    """The csv's table as Parquet (needs pyarrow), atomically: each column in the csv's unit, with
+    its ``unit`` and ``si_factor`` in the field's metadata; the model, experiment and status in the
+    file's."""
+    from bondc.runtime import result_bytes
+
+    names, columns = _columns(result, all_bonds)
+    try:
+        data = result_bytes("parquet", names, columns, result.units, metadata=_metadata(result))
+    except ImportError as error:
+        raise UsageError(Diagnostic("error", "E001", f"cannot write '{path}': {error}",
+                                    hint="pip install pyarrow, or give -o run.csv (or run.npz)")) from None
+    atomic_write(Path(path), lambda handle: handle.write(data))
+
+
 def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
     """Write the arrays as a compressed ``.npz``, atomically: ``t``, ``states/NAME``, ``dependent/NAME``
-    (states in derivative causality), ``outputs/NAME``, ``bonds/NAME``, ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
+    (states in derivative causality), ``outputs/NAME``, ``bonds/NAME`` (SI), with ``unit/KEY`` and
+    ``si_factor/KEY`` of each (KEY / si_factor is in unit: an output's declared unit), then
+    ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
     ``parameter_values``."""
+    from bondc.runtime import result_bytes
+
     arrays = {"t": result.t}
     arrays.update({f"states/{k}": v for k, v in result.states.items()})
     arrays.update({f"dependent/{k}": v for k, v in result.dependent.items()})
     arrays.update({f"outputs/{k}": v for k, v in result.outputs.items()})
     if all_bonds:
         arrays.update({f"bonds/{k}": v for k, v in result.bonds.items()})
-    arrays["complete"] = np.array(result.complete)
-    arrays["message"] = np.array(result.message)
-    arrays["event_times"] = np.array([e[0] for e in result.events], dtype=float)
-    arrays["event_labels"] = np.array([e[1] for e in result.events], dtype=str)
-    arrays["parameter_names"] = np.array(list(result.parameters), dtype=str)
-    arrays["parameter_values"] = np.array(list(result.parameters.values()), dtype=float)
-    atomic_write(Path(path), lambda handle: np.savez_compressed(handle, **arrays))
+    metadata = {"complete": np.array(result.complete), "message": np.array(result.message),
+                "event_times": np.array([e[0] for e in result.events], dtype=float),
+                "event_labels": np.array([e[1] for e in result.events], dtype=str),
+                "parameter_names": np.array(list(result.parameters), dtype=str),
+                "parameter_values": np.array(list(result.parameters.values()), dtype=float)}
+    data = result_bytes("npz", [], [], result.units, arrays=arrays, metadata=metadata)
+    atomic_write(Path(path), lambda handle: handle.write(data))
 
 
 #: Suffixes of formats a result is not written in: a .json would otherwise get csv text.
-OTHER_FORMATS = (".json", ".xlsx", ".xls", ".mat", ".h5", ".hdf5", ".parquet", ".html", ".txt.gz", ".pkl")
+OTHER_FORMATS = (".json", ".xlsx", ".xls", ".mat", ".h5", ".hdf5", ".html", ".txt.gz", ".pkl")
 
 
 def check_result_path(path) -> None:
-    """E001 for an output file whose suffix names a format other than csv and npz (before any work)."""
+    """E001 for an output file whose suffix names a format other than csv, npz and parquet (before any
+    work)."""
     name = str(path).lower()
     other = next((suffix for suffix in OTHER_FORMATS if name.endswith(suffix)), None)
     if other is not None:
         raise UsageError(Diagnostic("error", "E001", f"cannot write '{path}' as {other[1:]}: a simulation "
-                                                     "is written as .csv (or .npz, numpy's arrays)",
-                                    hint="give -o run.csv (or run.npz); bondc simulate --json prints a "
+                                                     "is written as .csv (or .npz, numpy's arrays, or "
+                                                     ".parquet)",
+                                    hint="give -o run.csv (or run.npz, run.parquet); bondc simulate --json prints a "
                                          "JSON summary on stdout"))
 
 
 def write(result: SimResult, path, all_bonds: bool = False) -> None:
-    """``.npz`` -> :func:`write_npz`, anything else -> :func:`write_csv` (see :func:`check_result_path`)."""
+    """``.npz`` -> :func:`write_npz`, ``.parquet`` -> :func:`write_parquet`, anything else ->
+    :func:`write_csv` (see :func:`check_result_path`); every format records each column's unit."""
+    from bondc.runtime import result_format
+
     check_result_path(path)
-    if str(path).lower().endswith(".npz"):
+    kind = result_format(path)
+    if kind == "npz":
         write_npz(result, path)
+    elif kind == "parquet":
+        write_parquet(result, path, all_bonds)
     else:
         write_csv(result, path, all_bonds)
 

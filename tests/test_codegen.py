@@ -196,12 +196,12 @@ def test_module_imports_only_numpy_scipy_sundials_and_the_standard_library():
                           for a in node.names}
     standard = {"math", "os", "stat", "sys", "time", "argparse", "warnings", "csv", "importlib", "hashlib", "glob",
                 "shutil", "subprocess", "tempfile", "atexit", "ast", "functools", "collections", "shlex", "json",
-                "dataclasses", "weakref"}
-    optional = {"sksundae", "cffi", "platformdirs", "boost_headers"}
+                "dataclasses", "weakref", "io"}
+    optional = {"sksundae", "cffi", "platformdirs", "boost_headers", "pyarrow"}
     assert imported <= {"numpy", "scipy"} | standard | optional
     # SUNDIALS, cffi (native code), platformdirs (where native code is cached) and the Boost headers
-    # (the explicit stepper's build) are imported only where they are used: without them the module
-    # loads, runs LSODA and its numpy code
+    # (the explicit stepper's build), pyarrow (a .parquet result) are imported only where they are
+    # used: without them the module loads, runs LSODA and its numpy code
     assert not top_level & optional
 
 
@@ -375,7 +375,7 @@ def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "bondc not importable"
     header = (work / "out.csv").read_text().splitlines()[0]
-    assert header == "t,v,Ff,mass.p,x"
+    assert header == "t [s],v [m/s],Ff [N],mass.p [kg*m/s],x [m]"        # units, as bondc simulate -o writes
     data = np.loadtxt(work / "out.csv", delimiter=",", skiprows=1)
     reference = simulate(ss, experiment, dt=0.01)
     np.testing.assert_allclose(data[:, 0], reference.t, rtol=0, atol=1e-15)

@@ -8,6 +8,7 @@ read back as measured data, must match the simulation it came from to rounding.
 import io
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -147,3 +148,58 @@ def test_json_statistics_give_each_output_in_its_unit(model, capsys):
     assert stats["p_bar"]["max"] == pytest.approx(stats["p_si"]["max"] / 1e5, rel=1e-12)
     # the final values of the outputs too (states stay in SI)
     assert summary["final"]["p_kPa"] == stats["p_kPa"]["final"] and summary["final"]["p_si"] == stats["p_si"]["final"]
+
+
+def test_every_result_format_records_the_csvs_units(model, tmp_path):
+    """One writer: the csv, the Parquet file and the npz of one run hold the same numbers, each
+    column with its unit -- the csv in its header, Parquet in each field's metadata (the csv's
+    numbers), npz beside each SI array (``unit/KEY``, ``si_factor/KEY``). The factors are the
+    hand-written SCALES (1 kPa = 1e3 Pa, 1 rpm = 2 pi/60 rad/s, ...)."""
+    import pyarrow.parquet
+
+    paths = {kind: tmp_path / f"sim.{kind}" for kind in ("csv", "parquet", "npz")}
+    for path in paths.values():
+        assert main(["simulate", str(model), "--dt", "0.25", "-o", str(path)]) == 0
+    header, *rows = paths["csv"].read_text().splitlines()
+    csv = {cell.split(" [")[0]: (cell.split(" [")[1].rstrip("]") if " [" in cell else None, i)
+           for i, cell in enumerate(header.split(","))}
+    data = np.array([[float(cell) for cell in row.split(",")] for row in rows])
+    table = pyarrow.parquet.read_table(paths["parquet"])
+    assert table.column_names == list(csv)
+    for field in table.schema:
+        unit, index = csv[field.name]
+        assert field.metadata[b"unit"].decode() == (unit or "")
+        np.testing.assert_array_equal(table.column(field.name).to_numpy(), data[:, index])
+    assert table.schema.metadata[b"complete"] == b"True"
+    with np.load(paths["npz"]) as arrays:
+        for output, scale in SCALES.items():
+            key = f"outputs/{output}"
+            assert str(arrays[f"unit/{key}"]) == csv[output][0]
+            assert float(arrays[f"si_factor/{key}"]) == pytest.approx(scale, rel=1e-15)
+            np.testing.assert_allclose(arrays[key] / scale, data[:, csv[output][1]], rtol=1e-15)
+        assert str(arrays["unit/states/tank.p"]) == "Pa" and float(arrays["si_factor/states/tank.p"]) == 1.0
+        assert str(arrays["unit/t"]) == "s"
+
+
+def test_the_standalone_modules_csv_is_bondcs(model, tmp_path):
+    """The module `bondc compile --standalone` writes (run without bondc) writes the same csv as
+    `bondc simulate -o`: the same header with units, outputs in their declared units."""
+    import subprocess
+    import sys
+
+    module = tmp_path / "units_gen.py"
+    assert main(["compile", str(model), "--standalone", "-o", str(module)]) == 0
+    mine = tmp_path / "mine.csv"
+    env = {key: value for key, value in os.environ.items() if not key.startswith("PYTHON")}
+    done = subprocess.run([sys.executable, "-I", str(module), "--dt", "0.25", "-o", str(mine)], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    theirs = tmp_path / "theirs.csv"
+    assert main(["simulate", str(model), "--dt", "0.25", "-o", str(theirs)]) == 0
+    mine_header, *mine_rows = mine.read_text().splitlines()
+    header, *rows = theirs.read_text().splitlines()
+    assert mine_header == header == ("t [s],p_kPa [kPa],p_bar [bar],x_mm [mm],q_lpm [L/min],w_rpm [rpm],p_si [Pa],"
+                                     "tank.p [Pa],x [m]")
+    a = np.array([[float(c) for c in r.split(",")] for r in mine_rows])
+    b = np.array([[float(c) for c in r.split(",")] for r in rows])
+    np.testing.assert_allclose(a, b, rtol=1e-12)

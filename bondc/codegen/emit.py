@@ -62,7 +62,7 @@ from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,
                                    relative_data_path)
-from bondc.model import readable, readable_names
+from bondc.model import readable, readable_names, result_units
 from bondc.runtime import LOOP_START_OFFSETS, UNIT_MARK, native_file
 from bondc.symbolic import as_sympy, partial_derivative
 
@@ -71,7 +71,7 @@ RUNTIME_DIR = Path(__file__).resolve().parent.parent / "runtime"
 ARGUMENTS = ("t", "x", "p", "m")
 #: Module-level names of the generated model code (besides the runtime's).
 MODULE_NAMES = (
-    "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "VARIABLE_NAMES", "VARIABLE_LAWS", "VARIABLE_ROWS", "BOND_VARIABLES",
+    "STATE_NAMES", "STATE_UNITS", "OUTPUT_NAMES", "RESULT_UNITS", "VARIABLE_NAMES", "VARIABLE_LAWS", "VARIABLE_ROWS", "BOND_VARIABLES",
     "PARAMETERS", "DERIVED_PARAMETERS", "SWITCHES", "EVENT_SWITCHES", "SWITCH_DEPENDS", "SWITCH_VERTICES",
     "SWITCH_KINDS", "SWITCH_TRUTH", "SWITCH_OWNERS", "JACOBIAN_PATTERN", "TIME_SWITCHES", "WHEN_LABELS", "WHEN_TARGETS", "WHEN_SWITCHES", "WHEN_ACTIONS",
     "_when_conditions", "DEFAULTS",
@@ -1011,6 +1011,11 @@ class _Emitter:
         lines.append("STATE_NAMES = " + _tuple(s.name for s in plan.states))
         lines.append("STATE_UNITS = " + _tuple(s.unit_text for s in plan.states))
         lines.append("OUTPUT_NAMES = " + _tuple(name for name, _ in plan.outputs))
+        # each result column's unit and factor (SI value / factor = value in that unit), as bondc's
+        # own result files record them (bondc.model.result_units)
+        units = result_units(getattr(plan.ss, "graph", None))
+        lines.append("RESULT_UNITS = {" + "".join(f"\n    {name!r}: ({unit!r}, {float(factor)!r}),"
+                                                  for name, (unit, factor) in units.items()) + "\n}")
         lines.append("VARIABLE_NAMES = " + _tuple(name for name, _, _ in plan.variables))
         lines.append("VARIABLE_LAWS = " + _tuple((law for _, _, law in plan.variables), multiline=True))
         bonds = []
@@ -1469,7 +1474,8 @@ def main(argv=None):
     parser.add_argument("--all", action="store_true", help="also write every assigned variable")
     parser.add_argument("--method", help="solver: CVODE (needs scikit-sundae), LSODA, BDF, Radau, ... "
                                          "(default: the experiment's)")
-    parser.add_argument("-o", "--output", help="csv file to write (default: standard output)")
+    parser.add_argument("-o", "--output", help="file to write: .csv (units in the header), .npz or .parquet "
+                                               "(default: csv on standard output)")
     args = parser.parse_args(argv)
     overrides = {}
     for item in args.set:
@@ -1492,7 +1498,7 @@ def main(argv=None):
             print("hint: a measured signal's path is relative to the folder the module was compiled for; "
                   "set BONDC_DATA_DIR to the folder it is relative to now", file=sys.stderr)
         return 2
-    write_csv(result, args.output or sys.stdout, variables=args.all)
+    write_result(result, args.output or sys.stdout, variables=args.all)
     if not result.complete:
         print(f"{MODEL_NAME}: INCOMPLETE: {result.message}", file=sys.stderr)
         if result.failure and result.failure.get("hint"):

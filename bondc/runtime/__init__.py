@@ -12,7 +12,8 @@ The modules, one job each, in the order each imports only earlier ones (``MODULE
 - ``loops``: nonlinear algebraic loops (hybr, then Newton from the guesses).
 - ``adapter``: the model adapter (:class:`_Model`), parameters, the modes of the unfrozen law,
   Filippov's weights (``filippov_alpha``, ``corner_weights``), :func:`evaluate`.
-- ``results``: :class:`Result`, :class:`LazyRows`, :func:`write_csv`, the result's size limits,
+- ``results``: :class:`Result`, :class:`LazyRows`, the one writer of result files (:func:`result_bytes`:
+  csv, npz, parquet, each with its columns' units; :func:`write_result`), the result's size limits,
   the typed failure of a run (:class:`RunFailure`, carried by ``_Stop``), the result builder
   (``_ResultBuilder``) and the diagnosis of a failure (``_Diagnosis``).
 - ``native``: bondc's C and C++ sources (``bondc/native``), compiler discovery (zig as the
@@ -77,7 +78,8 @@ from bondc.runtime.adapter import (  # noqa: F401
 )
 from bondc.runtime.results import (  # noqa: F401
     DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
-    _ResultBuilder, _Stalled, _Stop, _evaluate_columns, _unique_rows, max_points, write_csv
+    _ResultBuilder, _Stalled, _Stop, _evaluate_columns, _unique_rows, max_points, write_csv,
+    RESULT_FORMATS, _header_cell, _shown, result_bytes, result_format, write_result
 )
 from bondc.runtime.native import (  # noqa: F401
     Compiler, UNIT_MARK, _COMPILERS, _COMPILER_PROBES, _ERK_FLAGS, _ERK_LOADED, _NATIVE_AT_FUNCTIONS,

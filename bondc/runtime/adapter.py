@@ -54,6 +54,8 @@ class _Model:
             rows, firsts = tuple(range(len(self.VARIABLE_NAMES))), dict(enumerate(range(len(self.VARIABLE_NAMES))))
         self.VARIABLE_ROWS, self.row_variables = rows, tuple(firsts.values())
         self.JACOBIAN_PATTERN = optional("JACOBIAN_PATTERN", tuple, None)
+        # each result column's (unit, factor): SI value / factor = value in that unit
+        self.RESULT_UNITS = optional("RESULT_UNITS", lambda u: {k: tuple(v) for k, v in u.items()}, {})
         self.WHEN_LABELS = optional("WHEN_LABELS", tuple, ())
         self.WHEN_TARGETS = optional("WHEN_TARGETS", lambda w: tuple(map(tuple, w)), ())
         self.WHEN_SWITCHES = optional("WHEN_SWITCHES", tuple, ())

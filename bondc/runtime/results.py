@@ -107,8 +107,9 @@ class Result:
     """
 
     def __init__(self, t, states, outputs, variables, events, complete, message, failure, stats,
-                 parameters, jumps=(), sliding=()):
+                 parameters, jumps=(), sliding=(), units=None):
         self.t = t
+        self.units = dict(units or {})     # name -> (unit, factor): the model's RESULT_UNITS
         self.states = states
         self.outputs = outputs
         self.variables = variables
@@ -131,31 +132,114 @@ class Result:
                 f"{len(self.events)} events>")
 
 
-def write_csv(result, path, variables=False):
-    """Write ``t``, the outputs, the states (and with ``variables`` every variable) as csv.
+#: The formats a result is written in, by the output file's suffix (anything else: csv).
+RESULT_FORMATS = {".csv": "csv", ".npz": "npz", ".parquet": "parquet"}
 
-    ``path`` may be a file name or an open text file; each value is the shortest text that
-    reads back to the same float.
+
+def result_format(path) -> str:
+    """``"csv"``, ``"npz"`` or ``"parquet"`` for an output file (by its suffix; csv otherwise)."""
+    name = str(path).lower()
+    return next((kind for suffix, kind in RESULT_FORMATS.items() if name.endswith(suffix)), "csv")
+
+
+def _header_cell(name, units) -> str:
+    """``P_kPa [kPa]`` (the language reference, section 14), quoted where it holds a comma or a quote."""
+    unit = units.get(name)
+    text = f"{name} [{unit[0]}]" if unit and unit[0] else name
+    return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
+
+
+def _shown(columns, names, units) -> list:
+    """Each column in its unit (SI value / factor), as the csv shows it."""
+    factors = [(units.get(name) or (None, 1.0))[1] or 1.0 for name in names]
+    return [np.asarray(column, dtype=float) / factor if factor != 1.0 else np.asarray(column, dtype=float)
+            for column, factor in zip(columns, factors)]
+
+
+def result_bytes(kind, names, columns, units, *, arrays=None, metadata=None) -> bytes:
+    """A result file's bytes, the one writer of every format; ``columns`` are SI arrays (one per
+    name), ``units`` each name's ``(unit, factor)`` (SI value / factor = value in that unit; a
+    name without one is SI of an unknown unit).
+
+    * ``csv``: a header of ``NAME [unit]``, then one row per point, each column in its unit, each
+      value the shortest text that reads back to the same float;
+    * ``parquet`` (needs pyarrow): the csv's columns and numbers, each field's ``unit`` and
+      ``si_factor`` in its metadata, ``metadata`` (model, status) in the file's;
+    * ``npz``: ``arrays`` (key -> SI array; default: the columns by name) as they are, and for each
+      ``unit/KEY`` and ``si_factor/KEY`` (KEY's name is the part after the last ``/``): the
+      array divided by its factor is in that unit; ``metadata`` entries as arrays.
     """
-    names = ["t"] + list(result.outputs) + list(result.states)
-    columns = [result.t] + list(result.outputs.values()) + list(result.states.values())
+    import io
+
+    if kind == "csv":
+        out = io.StringIO()
+        out.write(",".join(_header_cell(name, units) for name in names) + "\n")
+        shown = _shown(columns, names, units)
+        if shown and shown[0].size:
+            for row in np.column_stack(shown).tolist():
+                out.write(",".join(map(repr, row)) + "\n")
+        return out.getvalue().encode("utf-8")
+    if kind == "parquet":
+        try:
+            import pyarrow
+            import pyarrow.parquet
+        except ImportError:
+            raise ImportError("writing .parquet needs pyarrow (pip install pyarrow)") from None
+        fields, data = [], []
+        for name, column in zip(names, _shown(columns, names, units)):
+            unit, factor = units.get(name) or (None, 1.0)
+            fields.append(pyarrow.field(name, pyarrow.float64(),
+                                        metadata={"unit": unit or "", "si_factor": repr(float(factor or 1.0))}))
+            data.append(pyarrow.array(column, type=pyarrow.float64()))
+        schema = pyarrow.schema(fields, metadata={key: str(value) for key, value in (metadata or {}).items()})
+        sink = pyarrow.BufferOutputStream()
+        pyarrow.parquet.write_table(pyarrow.Table.from_arrays(data, schema=schema), sink)
+        return sink.getvalue().to_pybytes()
+    if kind == "npz":
+        arrays = dict(arrays) if arrays is not None else dict(zip(names, columns))
+        for key in list(arrays):
+            unit, factor = units.get(key.rpartition("/")[2]) or (None, 1.0)
+            arrays[f"unit/{key}"] = np.array(unit or "")
+            arrays[f"si_factor/{key}"] = np.array(float(factor or 1.0))
+        for key, value in (metadata or {}).items():
+            arrays[key] = np.asarray(value)
+        out = io.BytesIO()
+        np.savez_compressed(out, **arrays)
+        return out.getvalue()
+    raise ValueError(f"unknown result format {kind!r}")
+
+
+def write_result(result, path, variables=False):
+    """Write ``t``, the outputs, the states (and with ``variables`` every variable) of a generated
+    module's run, as csv with units (the module's ``RESULT_UNITS``), or as npz or parquet where
+    ``path``'s suffix says so (:func:`result_bytes`).
+
+    ``path`` may be a file name or an open text file (csv).
+    """
+    names = ["t"] + list(result.outputs) + [name for name in result.states if name not in result.outputs]
+    columns = [result.t] + list(result.outputs.values()) + [result.states[name] for name in names[1 + len(result.outputs):]]
     if variables:
         extra = [name for name in result.variables if name not in names]
         names += extra
         columns += [result.variables[name] for name in extra]
-    data = np.column_stack(columns).tolist() if columns[0].size else []
-    close = False
-    if isinstance(path, (str, os.PathLike)):
-        handle, close = open(path, "w", encoding="utf-8", newline=""), True
-    else:
-        handle = path
+    units = getattr(result, "units", None) or {}
+    if not isinstance(path, (str, os.PathLike)):
+        path.write(result_bytes("csv", names, columns, units).decode("utf-8"))
+        return
+    data = result_bytes(result_format(path), names, columns, units,
+                        metadata={"complete": result.complete, "message": result.message})
+    temporary = f"{os.fspath(path)}.{os.getpid()}.tmp"
     try:
-        handle.write(",".join(names) + "\n")
-        for row in data:
-            handle.write(",".join(map(repr, row)) + "\n")
+        with open(temporary, "wb") as handle:
+            handle.write(data)
+        os.replace(temporary, path)
     finally:
-        if close:
-            handle.close()
+        if os.path.exists(temporary):
+            os.remove(temporary)
+
+
+#: the name generated modules and scripts have called it by
+write_csv = write_result
 
 
 #: A state beyond this magnitude (in SI units) has left every physical range: the run has diverged.
@@ -482,6 +566,7 @@ class _ResultBuilder:
             jumps=[(time, dict(zip(model.STATE_NAMES, before)), dict(zip(model.STATE_NAMES, after)))
                    for time, before, after in jumps],
             sliding=sliding,
+            units=model.RESULT_UNITS,
         )
 
 
