@@ -24,9 +24,10 @@ no sympy.
 An entry whose imports changed is a miss. The compiled C library is cached
 separately, by the hash of its text (``bondc.runtime.load_native``).
 
-The compile cache keeps at most ``BONDC_CACHE_MAX_MB`` megabytes (default 1000: 1 GB; 0: no cap):
-a running total of what was stored (``models/.size.json``) says when to measure the folder and
-evict the least recently used entries (a hit marks its entry used). :func:`info` and
+The compile cache keeps at most ``BONDC_CACHE_MAX_MB`` megabytes (default 1000: 1 GB; 0: no cap)
+of compiled models and their C libraries: a running total of what was stored
+(``models/.size.json``) says when to measure both folders and evict the least recently used
+entries (a hit marks its entry used, loading a C library marks it). :func:`info` and
 :func:`clear` are ``bondc cache info`` and ``bondc cache clear``.
 
 Entries are written to a private temporary file and renamed into place, so
@@ -41,6 +42,7 @@ import hashlib
 import json
 import os
 import pickle
+import re
 import sys
 import tempfile
 import weakref
@@ -586,9 +588,15 @@ def _grown(added: int) -> None:
         return
 
 
+#: The native libraries of models the size cap counts and evicts (bondc's explicit stepper, built
+#: once per machine, and the compiler probes are kept).
+_MODEL_LIBRARY = re.compile(r"model_[0-9a-f]+\.so")
+
+
 def _trim(cap: int) -> int:
     """Evict the compile cache's least recently used entries until it holds at most ``cap`` bytes
-    (never the most recently used one); returns the bytes left."""
+    (never the most recently used one); returns the bytes left. The entries are the compiled
+    models (``models/``) and their C libraries (``native/model_*.so``, marked used when loaded)."""
     import shutil
 
     entries = []
@@ -600,12 +608,26 @@ def _trim(cap: int) -> int:
         except OSError:
             continue
         entries.append((used, entry.path, _size(entry.path)))
+    for entry in _entries("native"):
+        if not _MODEL_LIBRARY.fullmatch(entry.name) or not entry.is_file(follow_symlinks=False):
+            continue
+        try:
+            stat = entry.stat(follow_symlinks=False)
+        except OSError:
+            continue
+        entries.append((stat.st_mtime_ns, entry.path, stat.st_size))
     entries.sort()
     total = sum(size for _, _, size in entries)
     for _, path, size in entries[:-1]:          # oldest first; the newest stays
         if total <= cap:
             break
-        shutil.rmtree(path, ignore_errors=True)
+        if os.path.isdir(path):
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            try:
+                os.remove(path)
+            except OSError:
+                pass
         if not os.path.lexists(path):
             total -= size
     return total

@@ -635,3 +635,45 @@ def test_the_cap_evicts_the_least_recently_used_entries_first(tmp_path, isolated
     assert json.loads((folder / "models" / ".size.json").read_text())["bytes"] <= 2.5 * largest
     derive_file(paths["b"])                               # evicted: derived again
     assert len(loads) == 5
+
+
+def test_the_cap_counts_the_models_c_libraries_and_keeps_the_stepper(tmp_path, isolated, monkeypatch):
+    """The native libraries of models (``native/model_*.so``) are entries of the cap, evicted least
+    recently used first with the compiled models; bondc's explicit stepper (``erk_*.so``, built once
+    per machine) and the compiler probes are kept. A library loaded again is marked used."""
+    folder, _ = isolated
+    monkeypatch.setenv("BONDC_CACHE_MAX_MB", "0")
+    native = folder / "native"
+    native.mkdir(parents=True)
+    size = 200_000
+    old = native / ("model_" + "1" * 40 + ".so")
+    newer = native / ("model_" + "2" * 40 + ".so")
+    stepper = native / ("erk_" + "3" * 40 + ".so")
+    probe = native / ("compiler_" + "4" * 24 + ".json")
+    for when, path in enumerate((old, newer, stepper, probe)):
+        path.write_bytes(b"\0" * size)
+        os.utime(path, (1000.0 + when, 1000.0 + when))
+    model = _write(tmp_path / "m.bg", b=1)
+    derive_file(model)                                    # a compiled model: the newest entry
+    monkeypatch.setenv("BONDC_CACHE_MAX_MB", str((1.5 * size + cache._size(str(folder / "models"))) / 1e6))
+    left = cache._trim(cache.max_bytes())
+    assert not old.exists() and newer.exists()            # the older library went first, then enough
+    assert stepper.exists() and probe.exists()            # never evicted
+    assert cache.Entry.for_model(model).folder.is_dir()   # the newest entry stays
+    assert left <= cache.max_bytes()
+
+
+def test_loading_a_models_c_library_marks_it_used(tmp_path, isolated):
+    """A hit on a built library touches it (the cap's least recently used order). The C compiler
+    is always there (the system's, else the ziglang package's)."""
+    from bondc import runtime
+    from bondc.simulate import run
+
+    folder, _ = isolated
+    model = _write(tmp_path / "m.bg", b=1)
+    run(model, t_end=0.01)
+    (library,) = (folder / "native").glob("model_*.so")
+    os.utime(library, (1000.0, 1000.0))
+    runtime.native._NATIVE_LIBRARIES.clear()              # loaded again, from the cache folder
+    run(model, t_end=0.01)
+    assert library.stat().st_mtime > 2000.0

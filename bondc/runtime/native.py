@@ -495,8 +495,13 @@ def _build_native(source, libraries):
         finally:
             if build is not None:
                 build.discard()
-    elif build is not None:
-        build.discard()
+    else:
+        if build is not None:
+            build.discard()
+        try:        # used now: the compile cache's size cap evicts the least recently used first
+            os.utime(path)
+        except OSError:
+            pass
     ffi = cffi.FFI()
     ffi.cdef("".join(f"void {name}(double t, const double *x, const double *p, const double *m, double *out);\n"
                      for name in _NATIVE_FUNCTIONS + _NATIVE_POINT_FUNCTIONS)
