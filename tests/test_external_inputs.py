@@ -219,3 +219,21 @@ def test_compiled_module_takes_inputs(tmp_path):
     assert float(np.max(np.abs(default.outputs["v"]))) == 0.0
     # the first run's variables, read after the second, are those of its own signal
     assert float(step.variables["u"][-1]) == 10.0
+
+
+RELAY = (Path(__file__).resolve().parent / "fixtures" / "external" / "relay_external.bg").read_text()
+
+
+@pytest.mark.parametrize("given", ["table", "function"])
+def test_a_switch_on_an_external_input_switches_where_the_signal_does(given):
+    """A condition on an external input is a switch like any other (bondc derived it as a switch of
+    time with a closed-form root, and differentiating the host's signal failed with E703). The
+    command steps from 0 to 1 at t0 = 2 ms: i(t) = U/R (1 - exp(-(t - t0) R/L)) after it, 0 before."""
+    U, R, L, t0 = 12.0, 2.0, 1e-3, 2e-3
+    signal = (np.array([0.0, t0, t0, 0.01]), np.array([0.0, 0.0, 1.0, 1.0])) if given == "table" else \
+        (lambda t: 1.0 if t >= t0 else 0.0)
+    sim = bondc.simulate(text=RELAY, inputs={"cmd": signal}, dt=1e-4)
+    t, i = np.asarray(sim["t"]), np.asarray(sim["i"])
+    expected = np.where(t > t0, U / R * (1 - np.exp(-(t - t0) * R / L)), 0.0)
+    np.testing.assert_allclose(i, expected, atol=1e-6 * U / R)
+    assert any("cmd > 0.5" in label for _, label in sim.result.events)

@@ -47,6 +47,7 @@ BUILDS = {
     "thermostat": (ENGINE / "thermostat.bg", []),
     "external": (EXTERNAL, []),
     "external_me": (EXTERNAL, ["--kind", "me"]),
+    "relay": (ROOT / "tests" / "fixtures" / "external" / "relay_external.bg", []),
 }
 
 
@@ -336,3 +337,14 @@ def test_fmu_json_says_what_it_wrote(tmp_path, capsys):
     assert summary["complete"] and summary["written"] == [str(output)] and output.exists()
     assert (summary["fmi"], summary["kind"], summary["platforms"]) == (2, "me", ["linux64"])
     assert (summary["states"], summary["parameters"], summary["outputs"], summary["event_indicators"]) == (2, 5, 3, 1)
+
+
+@pytest.mark.slow
+def test_a_switch_on_an_external_input_switches_inside_the_fmu(fmus):
+    """The relay's source switches on the host's command (cmd > 0.5), a step from 0 to 1 at t0 = 2 ms:
+    i(t) = U/R (1 - exp(-(t - t0) R/L)) after it (U = 12 V, R = 2 Ohm, L = 1 mH)."""
+    signal = np.array([(0.0, 0.0), (0.002, 0.0), (0.002, 1.0), (0.01, 1.0)], dtype=[("time", float), ("cmd", float)])
+    result = simulate_fmu(str(fmus["relay"]), input=signal, stop_time=0.01, output_interval=1e-4)
+    t = result["time"]
+    expected = np.where(t > 0.002, 6.0 * (1 - np.exp(-(t - 0.002) * 2000.0)), 0.0)
+    assert np.max(np.abs(result["i"] - expected)) < 1e-3 * 6.0
