@@ -14,7 +14,6 @@ and its verification, escaped by the report's Jinja environment and self-contain
 from __future__ import annotations
 
 import hashlib
-import io
 from pathlib import Path
 
 import numpy as np
@@ -97,19 +96,20 @@ def bode_svg(responses, title: str, size=BODE_SIZE) -> Markup:
 
 
 def csv_text(bode) -> str:
-    """The responses as CSV: frequency, then per pair its gain (SI ratio), magnitude (dB) and phase (deg)."""
-    from bondc.simulate import _csv_cell
+    """The responses as CSV (bondc's one writer of tables, :func:`bondc.runtime.result_bytes`):
+    frequency, then per pair its gain (SI ratio), magnitude (dB) and phase (deg), units in the header."""
+    from bondc.runtime import result_bytes
 
-    header = ["frequency [Hz]"]
+    names, units = ["frequency"], {"frequency": ("Hz", 1.0)}
     columns = [np.asarray(bode.responses[0].frequency_hz, dtype=float)]
     for r in bode.responses:
-        header += [f"{_label(r)} gain [{r.unit}]", f"{_label(r)} magnitude [dB]", f"{_label(r)} phase [deg]"]
-        columns += [np.abs(r.response), r.magnitude_db, r.phase_deg]
-    out = io.StringIO()
-    out.write(",".join(_csv_cell(cell) for cell in header) + "\n")
-    for row in np.column_stack(columns).tolist():
-        out.write(",".join("" if not np.isfinite(v) else repr(v) for v in row) + "\n")
-    return out.getvalue()
+        for what, unit, values in (("gain", r.unit, np.abs(r.response)), ("magnitude", "dB", r.magnitude_db),
+                                   ("phase", "deg", r.phase_deg)):
+            name = f"{_label(r)} {what}"
+            names.append(name)
+            units[name] = (unit, 1.0)
+            columns.append(values)
+    return result_bytes("csv", names, columns, units).decode("utf-8")
 
 
 _PAGE = """<!DOCTYPE html>
