@@ -459,11 +459,13 @@ def switches_at_point(ss, lin) -> list[Diagnostic]:
     model takes the slope of one side."""
     import sympy
 
+    from bondc.symbolic import as_sympy
+
     values = None
     found = []
     fixed = set(numeric_parameters(ss)) | {ss.time}
     for g in ss.discontinuities:
-        g = sympy.sympify(g)
+        g = as_sympy(g)
         moving = [s for s in g.free_symbols if s not in fixed]
         if not moving:
             continue        # a switch of time alone (a step of an input): not a slope of the model

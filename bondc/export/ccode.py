@@ -19,12 +19,11 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import sympy
-
 from bondc import __version__
 from bondc.errors import BondcError, Diagnostic
 from bondc.codegen.cprinter import c_double
 from bondc.source import NO_SPAN
+from bondc.symbolic import as_sympy
 
 #: The C functions of an exported model (each ``void f(double t, const double *x, const double *p,
 #: const double *m, double *out)``), in the header's order
@@ -257,7 +256,7 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
     for name in external:
         _, expr = ss.inputs[name]
         try:
-            default = float(sympy.sympify(expr.default).xreplace(values))
+            default = float(as_sympy(expr.default).xreplace(values))
         except (TypeError, ValueError):
             default = 0.0
         declared = (getattr(graph, "inputs", {}) or {}).get(name) if graph is not None else None
