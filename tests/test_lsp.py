@@ -123,7 +123,12 @@ def test_diagnostics_as_you_type_with_codes_and_ranges(client, tmp_path):
     (problem,) = client.diagnostics(uri)
     assert problem["code"] == "E301" and problem["range"]["start"] == {"line": 3, "character": 16}
     assert "did you mean 'k'" in problem["message"] and problem["source"] == "bondc"
-    assert problem["codeDescription"]["href"].endswith("diagnostics.md#e301")
+    # the link is the code's section of the diagnostics page: a heading there, as GitHub anchors it
+    page, _, anchor = problem["codeDescription"]["href"].partition("#")
+    assert page.endswith("docs/diagnostics.md") and anchor.startswith("e301-")
+    headings = [line[3:].strip() for line in (ROOT / "docs" / "diagnostics.md").read_text().splitlines()
+                if line.startswith("## ")]
+    assert anchor in {"".join(c for c in h.lower() if c.isalnum() or c in "-_ ").replace(" ", "-") for h in headings}
     # every problem at once, dimensions too
     worse = text.replace("e = k*q", "e = k + q").replace("s -> c", "s -> c\n  s -> nowhere")
     client.notify("textDocument/didChange", {"textDocument": {"uri": uri, "version": 3},

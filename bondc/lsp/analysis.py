@@ -35,6 +35,13 @@ MAX_DOCUMENT_CHARS = 1_000_000
 DOCS = Path(__file__).resolve().parent.parent.parent / "docs" / "diagnostics.md"
 
 
+def code_link(code: str) -> str:
+    """The link of a diagnostic code: its section of docs/diagnostics.md (the registry's anchor)."""
+    from bondc.codes import anchor
+
+    return DOCS.as_uri() + "#" + anchor(code)
+
+
 class Superseded(BaseException):
     """An analysis stopped because a newer version of its buffer came (a BaseException, so that no
     ``except Exception`` of a stage takes it for the stage's own failure)."""
@@ -143,8 +150,7 @@ def to_lsp(diagnostic: Diagnostic, path: Path, positions: Positions) -> lsp.Diag
                                                              if r.span.file and r.span.line > 0 else path.as_uri(),
                                                              positions.range(r.span)), r.label)
                for r in diagnostic.related if r.span.line > 0 and not r.span.file.startswith("std:")]
-    description = (lsp.CodeDescription(href=DOCS.as_uri() + f"#{diagnostic.code.lower()}")
-                   if DOCS.exists() else None)
+    description = lsp.CodeDescription(href=code_link(diagnostic.code)) if DOCS.exists() else None
     fix = _quick_fix(diagnostic, positions) if diagnostic.span.file == str(path) else None
     return lsp.Diagnostic(range=positions.range(diagnostic.span), message=message, severity=severity,
                           code=diagnostic.code, code_description=description, source="bondc",
@@ -187,7 +193,7 @@ def too_large(text: str) -> lsp.Diagnostic | None:
         message=(f"the document is too large to analyse as you type: {lines} lines, {len(text)} characters "
                  f"(at most {MAX_DOCUMENT_LINES} lines and {MAX_DOCUMENT_CHARS} characters)\n"
                  "run 'bondc check FILE' on it, or split it into files that import each other"),
-        code_description=(lsp.CodeDescription(href=DOCS.as_uri() + "#e006") if DOCS.exists() else None))
+        code_description=(lsp.CodeDescription(href=code_link("E006")) if DOCS.exists() else None))
 
 
 def analyse(uri: str, text: str, version: int, encoding: str, previous: Analysis | None = None,
