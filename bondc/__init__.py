@@ -16,7 +16,7 @@ import sys
 import types
 from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+from bondc.version import __version__
 
 __all__ = ["load", "check", "equations", "linearize", "bode", "compile", "simulate", "fit", "Model", "CheckResult",
            "Simulation", "__version__"]

@@ -285,7 +285,7 @@ def compile(path: PathLike, output: PathLike | None = None, *, model: str | None
             overrides: Mapping[str, Any] | None = None, standalone: bool = False) -> Path:
     """Write the model's Python module (``bondc compile``); returns its path. ``standalone``: the
     module carries bondc's runtime (it runs where bondc is not installed)."""
-    from bondc.codegen import compile_file, default_output
+    from bondc.pipeline import compile_file, default_output
 
     output = Path(output) if output is not None else default_output(path)
     compile_file(Path(path), output, model=model, experiment=experiment, sets=_sets(overrides),
@@ -454,6 +454,7 @@ def fit(path: PathLike, *, data: PathLike | Sequence[DataSet], estimate: Sequenc
     False; a bad request raises (E880-E892).
     """
     from bondc.analysis.fit import DataSet, run_fit
+    from bondc.report.fit_report import write_fit_report
 
     if isinstance(data, (str, os.PathLike)):
         if not compare:
@@ -470,4 +471,4 @@ def fit(path: PathLike, *, data: PathLike | Sequence[DataSet], estimate: Sequenc
     if isinstance(estimate, str):
         estimate = [estimate]
     return run_fit(Path(path), datasets=datasets, estimates=list(estimate), model=model, sets=_sets(overrides),
-                   max_evaluations=max_evaluations, output=output, write=write)
+                   max_evaluations=max_evaluations, output=output, write=write, report=write_fit_report)

@@ -48,6 +48,8 @@ import tempfile
 import weakref
 from pathlib import Path
 
+from bondc.io import cache_dir  # noqa: F401  (bondc's cache folder: bondc.cache.cache_dir as before)
+
 #: Bump when the layout of an entry changes.
 _LAYOUT = "1"
 _CODE_HASH: list = []
@@ -57,19 +59,6 @@ _ENTRIES: dict = {}          # id(state space) -> (weakref to it, Entry)
 def enabled() -> bool:
     """Whether the cache is on (``BONDC_CACHE`` is not 0/no/off/false)."""
     return os.environ.get("BONDC_CACHE", "1").strip().lower() not in ("0", "no", "off", "false")
-
-
-def cache_dir() -> Path:
-    """bondc's cache folder, as :func:`bondc.runtime.cache_dir` gives it (a test keeps the two
-    equal): ``$BONDC_CACHE_DIR``, else the user cache directory (platformdirs). Written out here
-    because the runtime, which a generated module carries whole, imports numpy: ``bondc check``
-    needs the folder but not numpy."""
-    given = os.environ.get("BONDC_CACHE_DIR")
-    if given:
-        return Path(given)
-    import platformdirs
-
-    return Path(platformdirs.user_cache_dir("bondc", appauthor=False))
 
 
 def code_hash() -> str:
@@ -396,14 +385,14 @@ class LightStateSpace:
             self._full = derived.state_space
         return self._full
 
-    def light_energy(self, parameters) -> dict | None:
-        """The stored-energy functions for these parameter values, or None when they are not the
-        values the recipes were printed with (their numbers are the parameters')."""
+    def light_recipes(self, parameters) -> dict | None:
+        """The stored-energy recipes (name -> (kind, state, recipe): what
+        :func:`bondc.analysis.energy.energy_from_recipe` makes functions of) for these parameter
+        values, or None when they are not the values the recipes were printed with (their numbers
+        are the parameters')."""
         if any(float(parameters.get(name, value)) != value for name, value in self.values.items()):
             return None
-        from bondc.analysis.energy import energy_from_recipe
-
-        return {name: energy_from_recipe(kind, state, recipe) for name, (kind, state, recipe) in self.recipes.items()}
+        return dict(self.recipes)
 
     def __getattr__(self, name):
         # (only for names this object lacks: while unpickling, before its own attributes are set,

@@ -17,7 +17,7 @@ import traceback
 from dataclasses import dataclass
 from pathlib import Path
 
-from bondc import __version__
+from bondc.version import __version__
 from bondc.errors import BondcError, Diagnostic, UsageError, render_all
 from bondc.io import json_safe
 
@@ -577,7 +577,7 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_compile(args) -> int:
-    from bondc.codegen import compile_file, default_output
+    from bondc.pipeline import compile_file, default_output
 
     if args.target == "c":
         return _compile_c(args)
@@ -744,8 +744,11 @@ def _cmd_fit(args) -> int:
     from bondc.analysis.fit import parse_groups, run_fit
 
     datasets = parse_groups(getattr(args, "fit_items", None) or [])
+    from bondc.report.fit_report import write_fit_report
+
     result = run_fit(args.file, datasets=datasets, estimates=args.estimate or [], model=args.model,
                      sets=args.set or (), max_evaluations=args.max_evaluations, output=args.output,
+                     report=write_fit_report,
                      write=args.write, progress=not args.json and not _quiet(),
                      cache=False if args.no_cache else None)
     if args.json:

@@ -741,7 +741,7 @@ d("W884", "runs failed during the fit",
   "stepped back.",
   "Bounds that keep the parameters where the model runs make the fit faster and surer.")
 
-# -- validation against measured data (bondc/report/validate.py)
+# -- validation against measured data (bondc/analysis/validate.py)
 
 d("E950", "measured data file",
   "`bondc validate --data FILE` (and `report --data`): the file does not exist, cannot be read, is empty or "
@@ -846,7 +846,7 @@ STAGES = (  # (title, modules), in the order of the page
     ("Equations", "`bondc/equations.py`, `bondc/symbolic.py`"),
     ("Simulation", "`bondc/simulate.py`, `bondc/runtime/`"),
     ("Analyses and data files", "`bondc/analysis/`"),
-    ("Validation against measured data", "`bondc/report/validate.py`"),
+    ("Validation against measured data", "`bondc/analysis/validate.py`"),
     ("Export: C code and FMUs", "`bondc/export/`"),
     ("Calibration", "`bondc/analysis/fit.py`, `bondc/analysis/fit_write.py`"),
     ("Command line and files", "`bondc/cli.py`, `bondc/io.py`, `bondc/errors.py`"),

@@ -197,3 +197,16 @@ def read_source(path, name: str | None = None):
     except OSError as error:
         reason = error.strerror or str(error)
     raise UsageError(Diagnostic("error", "E002", f"cannot read '{name}': {reason}", hint=hint))
+
+
+def cache_dir() -> Path:
+    """bondc's cache folder (the compile cache, the parser's tables, the C libraries), as
+    :func:`bondc.runtime.cache_dir` gives it (a test keeps the two equal): ``$BONDC_CACHE_DIR``, else the user cache directory (platformdirs). Written out here
+    because the runtime, which a generated module carries whole, imports numpy: ``bondc check``
+    needs the folder but not numpy."""
+    given = os.environ.get("BONDC_CACHE_DIR")
+    if given:
+        return Path(given)
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("bondc", appauthor=False))

@@ -349,3 +349,32 @@ def result_units(graph) -> dict:
         if output.unit_text:
             units[name] = (output.unit_text, output.display_factor or 1.0)
     return units
+
+
+def law_span(graph, variable: str | None):
+    """The source span of the law that computes ``variable`` (a bond variable, input, output or state,
+    ``der(x)`` for its rate), or None: where a diagnostic about that variable points."""
+    if graph is None or not variable:
+        return None
+    name = variable[4:-1] if variable.startswith("der(") else variable
+    if name in getattr(graph, "inputs", {}):
+        return graph.inputs[name].span
+    if name in getattr(graph, "outputs", {}):
+        return graph.outputs[name].span
+    for state in getattr(graph, "states", ()):
+        if state.qualified == name:
+            return state.span
+    head, _, which = name.rpartition(".")
+    for bond in getattr(graph, "bonds", ()):
+        if bond.name == head:
+            ends = [graph.elements[end] for end in (bond.head, bond.tail) if end in graph.elements]
+            for element in ends:        # the law that computes this variable, at either end
+                if which in element.law_spans:
+                    return element.law_spans[which]
+            for element in ends:        # else a storage or resistor law written the other way round
+                if element.kind in ("C", "I", "R") and element.law_spans:
+                    return next(iter(element.law_spans.values()))
+            for end in (bond.head, bond.tail):
+                if end in graph.elements:
+                    return graph.elements[end].span
+    return None

@@ -67,24 +67,12 @@ def unit_scale(text: str | None) -> float:
     """The SI factor of a unit written as text (``"kPa"`` -> 1000.0); None -> 1.0."""
     if text is None:
         return 1.0
+    from bondc.units import unit_of
+
     resolved = unit_of(text)
     if resolved is None:
         raise ValueError(f"unknown unit [{text}]")
     return float(resolved.factor)
-
-
-def unit_of(text: str):
-    """The :class:`~bondc.units.SIUnit` of a unit written as text (``"kPa"``, ``"kg*m/s"``), or None
-    where it is not one."""
-    from bondc.errors import BondcError
-    from bondc.parse import parse_set_value
-    from bondc.units import resolve
-
-    try:
-        unit = parse_set_value(f"x = 1 [{text}]", "<header>").unit
-    except BondcError:
-        return None
-    return resolve(unit)[0] if unit is not None else None
 
 
 #: What ``lambdify``/generated numpy code needs besides numpy for bondc's functions.

@@ -171,7 +171,7 @@ def _parser_cache_path(grammar: str) -> Path | None:
     import lark
 
     try:
-        from bondc.cache import cache_dir
+        from bondc.io import cache_dir
 
         key = hashlib.sha256("\n".join((lark.__version__, sys.version, repr(sorted(_PARSER_OPTIONS.items())),
                                         grammar)).encode("utf-8")).hexdigest()[:32]

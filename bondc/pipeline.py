@@ -42,11 +42,6 @@ def fewer_collections():
         gc.set_threshold(*previous)
 
 
-#: The hint of every problem with a ``--set`` value: what one looks like.
-SET_HINT = 'a --set value is NAME=VALUE: a number, with a unit in [ ] or in the parameter\'s declared unit ' \
-           '(--set k=800, --set "k=0.8 [kN/m]"), or an expression of the model\'s parameters (--set "k=2*k0")'
-
-
 def parse_sets(sets: Sequence) -> list[ast.SetValue]:
     """``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) parsed; already parsed values pass through.
 
@@ -55,6 +50,7 @@ def parse_sets(sets: Sequence) -> list[ast.SetValue]:
     """
     from bondc.errors import Diagnostic, ParseError, UsageError
     from bondc.parse import parse_set_value
+    from bondc.semantic import SET_HINT
 
     parsed = []
     for index, item in enumerate(sets or (), 1):
@@ -226,16 +222,49 @@ def switches_of(path, graph, loaded=None, *, sets: Sequence = (), cache: bool = 
         return known
     from bondc.codegen.emit import switch_kinds
     from bondc.model import readable, readable_names
-    from bondc.simulate import _span_of
+    from bondc.model import law_span
 
     derived = derive_file(path, model=graph.name, sets=sets, cache=cache)
     names = readable_names(graph)
     rows = []
     for label, kind, variable in switch_kinds(derived.state_space):
-        span = _span_of(graph, variable.removeprefix("output "))
+        span = law_span(graph, variable.removeprefix("output "))
         rows.append({"switch": readable(names, label), "kind": kind, "variable": readable(names, variable),
                      "file": span.file if span else None, "line": span.line if span else None})
     rows = tuple(rows)
     if key:
         compile_cache.store_check(key, rows)
     return rows
+
+
+def default_output(path) -> Path:
+    """Where ``bondc compile model.bg`` writes without ``-o``: ``model_gen.py`` next to the model."""
+    path = Path(path)
+    return path.with_name(path.stem + "_gen.py")
+
+
+def compile_file(path, output=None, *, model: str | None = None, experiment: str | None = None,
+                 sets: Sequence = (), standalone: bool = False) -> str:
+    """``bondc compile``: load, check, derive and emit; write ``output`` (atomically) if given.
+
+    The module imports ``bondc.runtime``; ``standalone`` copies the runtime in instead, so the
+    module runs where bondc is not installed (numpy and scipy, and scikit-sundae for CVODE).
+
+    ``experiment`` None takes the model's first experiment (its settings become
+    the module's defaults); ``sets`` are ``--set`` texts or parsed SetValues;
+    csv data paths are written relative to ``output``'s directory. Returns the
+    module's source. Raises the stage errors (ModelError, CausalityError,
+    EquationError, UsageError) for a model that cannot be compiled.
+    """
+    from bondc.codegen.emit import emit
+    from bondc.io import atomic_write_text, check_output
+
+    if output is not None:
+        check_output(output)
+    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
+    module_dir = Path(output).resolve().parent if output is not None else Path(path).resolve().parent
+    source = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir,
+                  standalone=standalone)
+    if output is not None:
+        atomic_write_text(Path(output), source)
+    return source

@@ -58,6 +58,11 @@ from bondc.flatten import KIND_CODES, flatten, ports_of
 from bondc.std import LIBRARIES as STD_LIBRARIES, path_of as std_path_of
 from bondc.source import Source, Span
 
+#: The hint of every problem with a ``--set`` value: what one looks like (here and in
+#: :func:`bondc.pipeline.parse_sets`).
+SET_HINT = 'a --set value is NAME=VALUE: a number, with a unit in [ ] or in the parameter\'s declared unit ' \
+           '(--set k=800, --set "k=0.8 [kN/m]"), or an expression of the model\'s parameters (--set "k=2*k0")'
+
 # Built-in functions and how many arguments each takes: (at least, at most); None is "no limit".
 BUILTINS: Mapping[str, tuple[int, int | None]] = {name: b.arity for name, b in builtins.BUILTINS.items()}
 
@@ -821,7 +826,6 @@ class _ExpressionChecker:
             if owners:
                 hint = f"'{name}' is a state of '{owners[0]}': write {owners[0]}.{name}"
         if node.span.file.startswith("--set #"):     # --set k=abc
-            from bondc.pipeline import SET_HINT
 
             hint = f"{hint}; {SET_HINT}" if hint else SET_HINT
         self.report(_error("E301", f"undefined name '{name}'", node.span, hint=hint))

@@ -60,7 +60,7 @@ import numpy as np
 
 from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
 from bondc.io import atomic_write
-from bondc.model import bond_alias, readable, readable_names, result_units
+from bondc.model import bond_alias, law_span, readable, readable_names, result_units
 
 _COMPILED: dict = {}
 
@@ -372,7 +372,7 @@ def read_input_files(ss, specs: Sequence[str]) -> dict:
 
 def _check_header_unit(name, signal, path, column) -> None:
     """E807 when the unit a file's header gives a column is not of the input's declared dimension."""
-    from bondc.numeric import unit_of
+    from bondc.units import unit_of
     from bondc.runtime import csv_columns
 
     declared = getattr(signal, "unit_text", None)
@@ -495,7 +495,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
                 result.warnings.append(Diagnostic(
                     "warning", "W821", f"{group} '{shown}' is not finite at {bad.size} of {series.size} recorded "
                                        f"points, the first at t={result.t[first]:.6g} s{before}",
-                    _span_of(graph, name) or _no_span(),
+                    law_span(graph, name) or _no_span(),
                     hint="its law is evaluated outside its domain there; " + (
                         "the states are unaffected (none of their rates reads it)" if result.complete else
                         "the run stopped (the error says where and why)")))
@@ -512,7 +512,7 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
             "warning", "W820",
             f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
             "be located; integrated with the unfrozen law there",
-            _span_of(graph, raw.stats.get("chattering_law")) or NO_SPAN,
+            law_span(graph, raw.stats.get("chattering_law")) or NO_SPAN,
             hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
                  "switching instants there are not located, so results there are only as good as the solver's "
                  "steps (lower rtol for a tighter result)"))
@@ -536,7 +536,7 @@ def _failure_diagnostic(graph, failure, raw, names=None) -> Diagnostic:
         message += f". Likely cause: {failure['cause']}"
     from bondc.source import NO_SPAN
 
-    span = _span_of(graph, failure.get("variable")) or _when_span(graph, failure.get("when")) or NO_SPAN
+    span = law_span(graph, failure.get("variable")) or _when_span(graph, failure.get("when")) or NO_SPAN
     return Diagnostic("error", _CODES.get(failure.get("kind"), "E811"), message, span, hint=failure.get("hint"))
 
 
@@ -545,34 +545,6 @@ def _when_span(graph, label: str | None):
     for when in getattr(graph, "whens", ()) if label else ():
         if when.text == label:
             return when.span
-    return None
-
-
-def _span_of(graph, variable: str | None):
-    """The source span of the law that computes ``variable`` (a bond variable, input, output or state)."""
-    if graph is None or not variable:
-        return None
-    name = variable[4:-1] if variable.startswith("der(") else variable
-    if name in getattr(graph, "inputs", {}):
-        return graph.inputs[name].span
-    if name in getattr(graph, "outputs", {}):
-        return graph.outputs[name].span
-    for state in getattr(graph, "states", ()):
-        if state.qualified == name:
-            return state.span
-    head, _, which = name.rpartition(".")
-    for bond in getattr(graph, "bonds", ()):
-        if bond.name == head:
-            ends = [graph.elements[end] for end in (bond.head, bond.tail) if end in graph.elements]
-            for element in ends:        # the law that computes this variable, at either end
-                if which in element.law_spans:
-                    return element.law_spans[which]
-            for element in ends:        # else a storage or resistor law written the other way round
-                if element.kind in ("C", "I", "R") and element.law_spans:
-                    return next(iter(element.law_spans.values()))
-            for end in (bond.head, bond.tail):
-                if end in graph.elements:
-                    return graph.elements[end].span
     return None
 
 

@@ -411,3 +411,16 @@ def _factors_text(factors: tuple[ast.UnitFactor, ...]) -> str:
     for name in bottom:
         text += "/" + name
     return text
+
+
+def unit_of(text: str):
+    """The :class:`~bondc.units.SIUnit` of a unit written as text (``"kPa"``, ``"kg*m/s"``), or None
+    where it is not one."""
+    from bondc.errors import BondcError
+    from bondc.parse import parse_set_value
+
+    try:
+        unit = parse_set_value(f"x = 1 [{text}]", "<header>").unit
+    except BondcError:
+        return None
+    return resolve(unit)[0] if unit is not None else None

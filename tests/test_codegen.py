@@ -346,7 +346,7 @@ def test_equal_jacobian_entries_are_named_once_and_stay_right(tmp_path):
 def test_generated_module_runs_without_bondc_and_matches_in_process(tmp_path):
     from bondc.simulate import simulate
 
-    from bondc.codegen import compile_file
+    from bondc.pipeline import compile_file
 
     graph, ss, experiment = derive("friction")
     work = tmp_path / "elsewhere"
@@ -533,7 +533,7 @@ HOSTILE_NAMES = [
 @pytest.mark.parametrize("standalone", [pytest.param(False, marks=pytest.mark.slow), True],
                          ids=["imports-runtime", "standalone"])
 def test_a_hostile_file_name_never_runs_as_code(tmp_path, monkeypatch, name, standalone):
-    from bondc.codegen import compile_file
+    from bondc.pipeline import compile_file
 
     model = tmp_path / name
     model.write_text((SIM / "msd.bg").read_text())

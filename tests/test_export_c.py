@@ -55,7 +55,7 @@ def test_the_c_functions_equal_the_python_module(tmp_path, model, name):
     generated Python module's at random points (their modes: the unfrozen law's there)."""
     import cffi
 
-    from bondc.codegen import compile_file
+    from bondc.pipeline import compile_file
 
     folder = export(tmp_path, model)
     library = _build(folder, name)

@@ -24,7 +24,7 @@ from bondc.report.render import (
     causality_rows, environment, equation_markup, format_number, format_unit, math_markup, parameter_rows,
     content_security_policy, plot_svg, render_report, source_sha256, zoom_script,
 )
-from bondc.report.validate import compare, parse_compare_spec
+from bondc.analysis.validate import compare, parse_compare_spec
 from bondc.semantic import build
 
 SOURCE = """\

@@ -16,7 +16,7 @@ import pytest
 from bondc.cli import main
 from bondc.errors import DataError
 from bondc.report.build import run_validate
-from bondc.report.validate import load_measured_csv
+from bondc.analysis.validate import load_measured_csv
 from bondc.simulate import run
 
 MODEL = """model Units "a chamber filled by a varying flow, reported in engineering units"

@@ -483,10 +483,10 @@ def switches_at_point(ss, lin) -> list[Diagnostic]:
         if abs(value) <= 1e-9 * scale + 1e-12:
             from bondc.errors import NO_SPAN
             from bondc.model import readable, readable_names
-            from bondc.simulate import _span_of
+            from bondc.model import law_span
 
             graph = getattr(ss, "graph", None)
-            spans = [_span_of(graph, s.name) for s in sorted(moving, key=lambda s: s.name)] if graph else []
+            spans = [law_span(graph, s.name) for s in sorted(moving, key=lambda s: s.name)] if graph else []
             span = next((span for span in spans if span is not None), NO_SPAN)
             text = readable(readable_names(graph), str(g)) if graph is not None else str(g)
             found.append(Diagnostic(
@@ -651,7 +651,7 @@ def parse_amplitude(text, unit_text: str | None, name: str) -> float:
     """``--amplitude``: a positive number in the input's declared unit, or with a unit of its
     dimension (E946); SI."""
     from bondc.errors import BondcError
-    from bondc.numeric import unit_of
+    from bondc.units import unit_of
     from bondc.parse import parse_set_value
     from bondc.units import resolve
 
@@ -733,7 +733,7 @@ def _si_unit(text: str | None) -> str | None:
     """The SI unit the response is in for a signal declared in ``text`` (``kPa`` -> ``Pa``)."""
     if not text:
         return None
-    from bondc.numeric import unit_of
+    from bondc.units import unit_of
 
     unit = unit_of(text)
     if unit is None or abs(float(unit.factor) - 1.0) < 1e-12:

@@ -1092,11 +1092,11 @@ def stored_energy_functions(ss, parameters: Mapping[str, float] | None = None) -
     A state space read from the compile cache without its sympy part
     (:class:`bondc.cache.LightStateSpace`) gives them from its recipes.
     """
-    light = getattr(ss, "light_energy", None)
+    light = getattr(ss, "light_recipes", None)
     if light is not None:
-        found = light(parameters or {})
-        if found is not None:
-            return found
+        recipes = light(parameters or {})
+        if recipes is not None:
+            return {name: energy_from_recipe(kind, state, recipe) for name, (kind, state, recipe) in recipes.items()}
         ss = ss.full()
     import sympy
 

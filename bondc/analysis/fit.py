@@ -504,8 +504,7 @@ def _check_late(parameters: list[_Parameter], estimates, derived, path, model, e
 def _load_group(dataset: DataSet, derived) -> _Group:
     """The measured data of a data set at the instants its run covers (E886 missing column, E887 not
     a signal, E889 no overlap)."""
-    from bondc.report.build import _check_quantity, _signal_unit
-    from bondc.report.validate import TIME_KEY, CompareSpec, load_measured_csv
+    from bondc.analysis.validate import TIME_KEY, CompareSpec, check_quantity, load_measured_csv, signal_unit
 
     measured = load_measured_csv(dataset.data)
     columns = [c for c in measured if c != TIME_KEY]
@@ -527,13 +526,13 @@ def _load_group(dataset: DataSet, derived) -> _Group:
             raise DataError(Diagnostic("error", "E886", f"--compare '{spec.text}': the measured data "
                                                         f"'{dataset.data}' has no column '{spec.column}'",
                                        hint=_did_you_mean(spec.column, columns, "its columns")))
-        _check_quantity(graph, CompareSpec(spec.output, spec.column, text=spec.text),
+        check_quantity(graph, CompareSpec(spec.output, spec.column, text=spec.text),
                         getattr(measured, "units", {}).get(spec.column))
         values = np.asarray(measured[spec.column], dtype=float)[inside]
         scale = float(np.max(values) - np.min(values))
         if not scale > 0:
             scale = float(np.max(np.abs(values))) or 1.0
-        unit, factor = _signal_unit(graph, spec.output)
+        unit, factor = signal_unit(graph, spec.output)
         signals.append(_Signal(spec, values, scale, unit, factor))
     return _Group(dataset, derived, times[inside], signals)
 
@@ -552,7 +551,7 @@ class _Evaluator:
         self.progress = progress
 
     def simulate(self, group: _Group, x: np.ndarray):
-        from bondc.report.build import simulated_signals
+        from bondc.analysis.validate import simulated_signals
         from bondc.simulate import simulate
 
         experiment = group.derived.experiment
@@ -764,11 +763,14 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
 
 def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Estimate], model: str | None = None,
             sets: Sequence = (), max_evaluations: int | None = None, output=None, write=None,
-            progress: bool | Callable = False, cache: bool | None = None) -> FitResult:
+            progress: bool | Callable = False, cache: bool | None = None,
+            report: Callable | None = None) -> FitResult:
     """``bondc fit``: estimate ``estimates`` from ``datasets`` (see the module docstring).
 
     ``sets`` (``--set`` texts) fix other parameters and give the start value of an estimated one;
-    ``output``: the HTML report to write; ``write``: a copy of the model with the fitted values
+    ``output``: the HTML report to write, by ``report(result, output)`` (the caller's: the
+    command line and the API give :func:`bondc.report.fit_report.write_fit_report`; analysis does not
+    import the report layer); ``write``: a copy of the model with the fitted values
     (:func:`bondc.analysis.fit_write.write_fitted`). Raises UsageError/DataError for a bad request
     (E880-E892); a fit that does not converge is a result with ``converged`` False."""
     from scipy.optimize import least_squares
@@ -778,6 +780,8 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
     if max_evaluations is not None and max_evaluations < 1:
         raise _usage("E889", f"--max-evaluations must be at least 1, not {max_evaluations}")
     if output is not None:
+        if report is None:
+            raise TypeError("run_fit: an output needs report, the function that writes it")
         check_output(output, "the report", make_folder=True)
     if write is not None:
         from bondc.analysis.fit_write import check_write_target
@@ -828,9 +832,7 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
     r = fun(solution.x)
     result = _summarise(problem, x, r, jac(solution.x), solution, evaluations[0], failed[0])
     if output is not None:
-        from bondc.report.fit_report import write_fit_report
-
-        write_fit_report(result, output)
+        report(result, output)
         result.written.append(str(output))
     if write is not None:
         from bondc.analysis.fit_write import write_fitted

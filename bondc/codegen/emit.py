@@ -57,7 +57,7 @@ from pathlib import Path
 import sympy
 from sympy.printing.str import StrPrinter
 
-from bondc import __version__
+from bondc.version import __version__
 from bondc.codegen.freeze import Freezer
 from bondc.codegen.cprinter import LOOP_PRELUDE, PRELUDE, NativePrinter, c_name
 from bondc.codegen.printer import (BondcPrinter, QuickPrinting, UnsupportedExpression, negatives_last,

@@ -19,7 +19,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bondc import __version__
+from bondc.version import __version__
 from bondc.errors import BondcError, Diagnostic
 from bondc.codegen.cprinter import c_double
 from bondc.source import NO_SPAN
@@ -133,11 +133,11 @@ def export_error(code: str, message: str, span=NO_SPAN, hint: str | None = None)
 
 
 def _span(graph, variable):
-    from bondc.simulate import _span_of
+    from bondc.model import law_span
 
     if variable.startswith("output "):
         variable = variable.removeprefix("output ")
-    return _span_of(graph, variable) or NO_SPAN
+    return law_span(graph, variable) or NO_SPAN
 
 
 def _emitters(ss, source_name):

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from bondc import __version__
+from bondc.version import __version__
 from bondc.errors import Diagnostic, Related
 from bondc.export.ccode import CModel, ExportError, _span, c_model, export_error
 

@@ -17,7 +17,7 @@ from lsprotocol import types as lsp
 from pygls.exceptions import JsonRpcException
 from pygls.lsp.server import LanguageServer
 
-from bondc import __version__
+from bondc.version import __version__
 from bondc.errors import BondcError
 from bondc.lsp import features
 from bondc.lsp.analysis import Analysis, Job, Worker, too_large

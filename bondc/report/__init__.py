@@ -4,7 +4,7 @@ The building blocks, each taking plain values and returning text:
 
 - :mod:`bondc.report.lexer`: ``.bg`` source -> highlighted HTML (Pygments);
 - :mod:`bondc.report.diagram`: BondGraph (+ causality) -> SVG drawing;
-- :mod:`bondc.report.validate`: simulated signals + measured CSV -> metrics,
+- :mod:`bondc.analysis.validate`: simulated signals + measured CSV -> metrics,
   pass/fail and JUnit XML;
 - :mod:`bondc.report.render`: :class:`ReportContext` -> HTML, through the Jinja
   templates in ``bondc/report/templates`` (plus plots and MathML helpers);

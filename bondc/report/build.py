@@ -19,7 +19,7 @@ prints the run's diagnostics and returns an exit code (1 for an incomplete
 simulation).
 
 :func:`run_validate` is ``bondc validate``: it simulates, compares simulated
-signals with measured columns (:func:`bondc.report.validate.compare`), prints
+signals with measured columns (:func:`bondc.analysis.validate.compare`), prints
 a table, writes JUnit XML and, on request, the report with a validation
 section; its exit code is 1 when any signal fails (or the run is incomplete).
 
@@ -49,7 +49,7 @@ import numpy as np
 import sympy
 from markupsafe import Markup
 
-from bondc.errors import DataError, Diagnostic, UsageError, render as render_diagnostic
+from bondc.errors import Diagnostic, UsageError, render as render_diagnostic
 from bondc.io import atomic_write_text, check_output
 from bondc.model import KINDS, BondGraph, ExperimentDef
 from bondc.report.diagram import bond_graph_svg
@@ -59,8 +59,9 @@ from bondc.report.render import (
     RuleMargin, Table, ValidationSection,
     causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
 )
-from bondc.report.validate import (
-    TIME_KEY, CompareSpec, SignalResult, compare, load_measured_csv, parse_compare_spec, write_junit,
+from bondc.analysis.validate import (
+    TIME_KEY, CompareSpec, SignalResult, check_quantity, compare, load_measured_csv, parse_compare_spec, signal_unit,
+    simulated_signals, write_junit,
 )
 from bondc.symbolic import Translator, as_sympy
 
@@ -286,7 +287,7 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
     return {"complete": run.complete, "file": str(path), "model": run.graph.name,
             "experiment": run.experiment.name if run.experiment is not None else None,
             "written": [str(target)],
-            "signals": [signal_json(result, _signal_unit(run.graph, result.output)[0]) for result in results],
+            "signals": [signal_json(result, signal_unit(run.graph, result.output)[0]) for result in results],
             "failing": failing, "diagnostics": [d.to_json() for d in diagnostics],
             **({"ratio": study.to_json()} if study is not None else {}),
             "exit_status": interrupted or (0 if run.complete and not failing else 1)}
@@ -345,14 +346,6 @@ def _measured(data, compare_specs) -> tuple[list[CompareSpec], dict[str, np.ndar
 
 # ---------------------------------------------------------------- validation
 
-def simulated_signals(result) -> dict[str, np.ndarray]:
-    """Every simulated signal by name: bond variables, inputs and other variables, states, outputs (SI)."""
-    signals: dict[str, np.ndarray] = {}
-    for group in (result.bonds, result.variables, result.states, result.outputs):
-        signals.update(group)
-    return signals
-
-
 def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> list[Diagnostic]:
     """W954: a measured column without a unit compared with an output declared in a non-SI unit —
     the column is taken as SI, which the engineer may not have meant."""
@@ -373,7 +366,7 @@ def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> l
 
 def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
                 specs: Iterable[CompareSpec]) -> list[SignalResult]:
-    """:func:`~bondc.report.validate.compare` the run's signals with the measured columns, each pair
+    """:func:`~bondc.analysis.validate.compare` the run's signals with the measured columns, each pair
     in the signal's display unit (an output declared ``[mm]`` is compared in millimetres): its RMSE,
     largest error and the ``rmse``/``maxabs`` tolerances are in that unit, as the terminal table,
     the JUnit file and the report show them (NRMSE and R² do not depend on the unit). The
@@ -384,8 +377,8 @@ def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
     t, signals = _at_measured_times(run, measured)
     results = []
     for spec in specs:
-        _check_quantity(run.graph, spec, getattr(measured, "units", {}).get(spec.column))
-        _, factor = _signal_unit(run.graph, spec.output)
+        check_quantity(run.graph, spec, getattr(measured, "units", {}).get(spec.column))
+        _, factor = signal_unit(run.graph, spec.output)
         if spec.output not in signals or spec.column not in measured or factor == 1.0:
             results += compare(t, signals, measured, [spec])     # (its own errors, if any)
             continue
@@ -393,27 +386,6 @@ def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
         columns = {TIME_KEY: measured[TIME_KEY], spec.column: np.asarray(measured[spec.column], dtype=float) / factor}
         results += compare(t, shown, columns, [spec])
     return results
-
-
-def _check_quantity(graph: BondGraph, spec: CompareSpec, unit: str | None) -> None:
-    """E958 where the measured column's unit and the signal's measure different quantities (a force
-    compared with a column in kg); nothing where either is unknown."""
-    from bondc.numeric import unit_of
-    from bondc.units import compatible
-
-    output = graph.outputs.get(spec.output)
-    declared = output.unit_text if output is not None and output.unit_text else \
-        (getattr(graph, "si_units", None) or {}).get(spec.output)
-    if unit is None or declared is None:
-        return
-    measured, simulated = unit_of(unit), unit_of(declared)
-    if measured is None or simulated is None or compatible(measured, simulated):
-        return
-    raise DataError(Diagnostic(
-        "error", "E958", f"comparison '{spec}': column '{spec.column}' is in [{unit}] and '{spec.output}' in "
-                         f"[{declared}]: they measure different quantities ({measured.dimension_text()} and "
-                         f"{simulated.dimension_text()})",
-        hint="compare the signal with the column that measures it, or fix the unit in the column's header"))
 
 
 def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict]:
@@ -440,20 +412,12 @@ def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> 
     return reached, simulated_signals(again)
 
 
-def _signal_unit(graph: BondGraph, name: str) -> tuple[str | None, float]:
-    """The display unit of a signal and the factor SI value / display value (outputs only)."""
-    output = graph.outputs.get(name)
-    if output is not None and output.unit_text:
-        return output.unit_text, output.display_factor
-    return None, 1.0
-
-
 def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_file,
                        junit_file=None) -> ValidationSection:
     """The report's validation section: the metrics, and per signal the curves overlaid and the error."""
     plots = []
     for result in results:
-        unit, _ = _signal_unit(run.graph, result.output)
+        unit, _ = signal_unit(run.graph, result.output)
         simulated, measured = result.simulated, result.measured      # (in the signal's unit: compare_run)
         title = f"{result.output} simulated and {result.column} measured"
         plots.append(Plot(title, _time_plot(
@@ -569,7 +533,7 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
     return results, {
         "complete": run.complete, "passed": passed, "file": str(path), "model": run.graph.name,
         "experiment": run.experiment.name if run.experiment is not None else None, "data": str(data),
-        "signals": [signal_json(result, _signal_unit(run.graph, result.output)[0]) for result in results],
+        "signals": [signal_json(result, signal_unit(run.graph, result.output)[0]) for result in results],
         "written": written, "diagnostics": [d.to_json() for d in [*diagnostics, *assumed]],
         "exit_status": interrupted or (0 if passed else 1)}
 

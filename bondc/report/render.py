@@ -52,9 +52,9 @@ import numpy as np
 from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 from markupsafe import Markup, escape
 
-import bondc
 from bondc.model import BondGraph
 from bondc.report.lexer import lexer_css
+from bondc.version import __version__
 
 __all__ = [
     "ReportHeader", "ParameterRow", "CausalityRow", "Table", "Equation", "Plot", "ValidationSection",
@@ -73,7 +73,7 @@ class ReportHeader:
     source_file: str
     source_sha256: str
     description: str | None = None
-    bondc_version: str = bondc.__version__
+    bondc_version: str = __version__
     date: str = ""
     experiment_name: str | None = None
     experiment_description: str | None = None
@@ -249,7 +249,7 @@ class Answer:
 
 @dataclass(frozen=True)
 class ValidationSection:
-    """Validation against measured data: the results of :func:`bondc.report.validate.compare`."""
+    """Validation against measured data: the results of :func:`bondc.analysis.validate.compare`."""
 
     results: Sequence[Any]          # SignalResult
     data_file: str

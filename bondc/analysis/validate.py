@@ -478,3 +478,41 @@ def junit_xml(results: Sequence[SignalResult], suite_name: str) -> str:
 def write_junit(results: Sequence[SignalResult], suite_name: str, path: str | Path) -> None:
     """Write :func:`junit_xml` to ``path`` atomically."""
     atomic_write_text(path, junit_xml(results, suite_name))
+
+
+# ---------------------------------------------------------------- a model's signals against the data
+
+def simulated_signals(result) -> dict[str, np.ndarray]:
+    """Every simulated signal by name: bond variables, inputs and other variables, states, outputs (SI)."""
+    signals: dict[str, np.ndarray] = {}
+    for group in (result.bonds, result.variables, result.states, result.outputs):
+        signals.update(group)
+    return signals
+
+
+def check_quantity(graph, spec: CompareSpec, unit: str | None) -> None:
+    """E958 where the measured column's unit and the signal's measure different quantities (a force
+    compared with a column in kg); nothing where either is unknown."""
+    from bondc.units import compatible, unit_of
+
+    output = graph.outputs.get(spec.output)
+    declared = output.unit_text if output is not None and output.unit_text else \
+        (getattr(graph, "si_units", None) or {}).get(spec.output)
+    if unit is None or declared is None:
+        return
+    measured, simulated = unit_of(unit), unit_of(declared)
+    if measured is None or simulated is None or compatible(measured, simulated):
+        return
+    raise DataError(Diagnostic(
+        "error", "E958", f"comparison '{spec}': column '{spec.column}' is in [{unit}] and '{spec.output}' in "
+                         f"[{declared}]: they measure different quantities ({measured.dimension_text()} and "
+                         f"{simulated.dimension_text()})",
+        hint="compare the signal with the column that measures it, or fix the unit in the column's header"))
+
+
+def signal_unit(graph, name: str) -> tuple[str | None, float]:
+    """The display unit of a signal and the factor SI value / display value (outputs only)."""
+    output = graph.outputs.get(name)
+    if output is not None and output.unit_text:
+        return output.unit_text, output.display_factor
+    return None, 1.0
