@@ -340,6 +340,16 @@ def test_diagnostics(tmp_path, capsys, argv_tail, code, words):
         assert word in err, err
 
 
+def test_an_unknown_parameter_and_a_missing_column_are_reported_in_one_run(tmp_path, capsys):
+    """The estimates and the data sets are checked independently: both problems at once."""
+    data = msd_data(tmp_path, seed=0, name="measured.csv")
+    status, err = _code(tmp_path, capsys, ["fit", str(MSD), "--data", str(data), "--compare", "x=x_mes",
+                                           "--estimate", "bb=1:50"])
+    assert status == 2
+    assert "[E882]" in err and "did you mean 'b'" in err
+    assert "[E886]" in err and "x_meas" in err
+
+
 def test_diagnostic_compare_before_data(tmp_path, capsys):
     data = msd_data(tmp_path, seed=0, name="measured.csv")
     status, err = _code(tmp_path, capsys, ["fit", str(MSD), "--compare", "x=x_meas", "--data", str(data),

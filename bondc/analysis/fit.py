@@ -713,18 +713,34 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
         if dataset.experiment not in derived_of:
             derived_of[dataset.experiment] = _derive(path, model, dataset.experiment, sets, cache)
     first = derived_of[datasets[0].experiment]
-    parameters = _resolve_estimates(estimates, first, sets)
-    for experiment_name, derived in derived_of.items():
+    for derived in derived_of.values():
         if derived.experiment is None:
             raise _usage("E801", f"{derived.graph.name} has no experiment to run",
                          hint="add an experiment with t_end to the model")
-        others = _resolve_estimates(estimates, derived, sets) if derived is not first else parameters
-        _check_late(others, estimates, derived, path, model, experiment_name, sets)
-    if write is not None:
-        from bondc.analysis.fit_write import check_writable
+    # the estimates and the data sets are checked independently: one run reports the problems of both
+    problems: list[BondcError] = []
+    try:
+        parameters = _resolve_estimates(estimates, first, sets)
+        for experiment_name, derived in derived_of.items():
+            others = _resolve_estimates(estimates, derived, sets) if derived is not first else parameters
+            _check_late(others, estimates, derived, path, model, experiment_name, sets)
+        if write is not None:
+            from bondc.analysis.fit_write import check_writable
 
-        check_writable(path, first.graph, [p.name for p in parameters])
-    groups = [_load_group(dataset, derived_of[dataset.experiment]) for dataset in datasets]
+            check_writable(path, first.graph, [p.name for p in parameters])
+    except BondcError as error:
+        problems.append(error)
+    groups = []
+    for dataset in datasets:
+        try:
+            groups.append(_load_group(dataset, derived_of[dataset.experiment]))
+        except BondcError as error:
+            problems.append(error)
+    if problems:
+        sources: dict = {}
+        for error in problems:
+            sources.update(error.sources)
+        raise type(problems[0])([d for error in problems for d in error.diagnostics], sources)
     names = [p.name for p in parameters]
     diagnostics: list[Diagnostic] = []
     for derived in derived_of.values():
