@@ -112,13 +112,8 @@ def csv_text(bode) -> str:
     return result_bytes("csv", names, columns, units).decode("utf-8")
 
 
-_PAGE = """<!DOCTYPE html>
-<html lang="en">
-<head>
-<meta charset="utf-8">
-<meta http-equiv="Content-Security-Policy" content="{{ csp }}">
-<meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{{ name }} — bondc frequency response</title>
+#: The page after its head (render.PAGE_HEAD, the sweep's and the fit's too).
+_PAGE_BODY = """<title>{{ name }} — bondc frequency response</title>
 <style>
 {% include "report.css" %}
 </style>
@@ -151,9 +146,9 @@ def section_rows(bode) -> list[dict]:
 
 
 def html_page(bode, name: str, file: str) -> str:
-    from bondc.report.render import content_security_policy, environment
+    from bondc.report.render import PAGE_HEAD, content_security_policy, environment
 
-    template = environment().from_string(_PAGE)
+    template = environment().from_string(PAGE_HEAD + _PAGE_BODY)
     lin = bode.linearization
     return template.render(name=name, file=file, at=lin.at, time=lin.time, bode_rows=section_rows(bode),
                            bode_warnings=[d.message for d in bode.warnings], bode_notes=list(bode.notes),

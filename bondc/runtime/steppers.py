@@ -27,7 +27,7 @@ import numpy as np
 from bondc.runtime.native import native_file
 
 _STEPPER_TABLES: dict = {}  # (solver class, options) -> _StepperTable: made once per process, never freed
-_STEPPER_DRIVERS: dict = {}  # a C driver's address -> a weak reference to its _NativeDriver (its Jacobian)
+_STEPPER_DRIVERS = weakref.WeakValueDictionary()  # a C driver's address -> its _NativeDriver (its Jacobian)
 #: scipy's solvers that take a Jacobian (``jac``): given the driver's, the model's compiled entries
 _TAKE_JACOBIAN = ("Radau", "BDF", "LSODA")
 #: above this many states the Jacobian goes to scipy as a sparse matrix (its solvers then use SuperLU)
@@ -186,15 +186,14 @@ class _StepperTable:
 def register_stepper_driver(address: int, driver) -> None:
     """Make the Jacobian of the C driver at ``address`` (a :class:`_NativeDriver` with
     ``jacobian_entries``) the one scipy's implicit solvers use when that driver steps with them."""
-    _STEPPER_DRIVERS[address] = weakref.ref(driver)
+    _STEPPER_DRIVERS[address] = driver
 
 
 def _driver_jacobian(data, ffi, n):
     """``jac(t, y)`` for scipy from the driver whose address is ``data`` (the model's compiled
     Jacobian in the segment's modes): a dense array, sparse above ``_DENSE_UP_TO`` states; None
     where the driver or the model has none, or the segment slides."""
-    reference = _STEPPER_DRIVERS.get(int(ffi.cast("uintptr_t", data)))
-    driver = reference() if reference is not None else None
+    driver = _STEPPER_DRIVERS.get(int(ffi.cast("uintptr_t", data)))
     if driver is None or not driver.entries or driver.lib.bondc_driver_sliding(driver.handle):
         return None
     rows, cols = driver.keep["rows"][:driver.entries], driver.keep["cols"][:driver.entries]
