@@ -358,11 +358,12 @@ class Simulation:
             import pandas
         except ImportError:
             raise ImportError("to_dataframe needs pandas: pip install pandas") from None
-        from bondc.simulate import _columns, column_header
+        from bondc.runtime import column_name, shown_columns
+        from bondc.simulate import _columns
 
         names, columns = _columns(self.result, all_bonds)
-        data = {column_header(n, self.result.units): np.asarray(c) / self.result.units.get(n, (None, 1.0))[1]
-                for n, c in zip(names[1:], columns[1:])}
+        units = self.result.units
+        data = {column_name(n, units): c for n, c in zip(names[1:], shown_columns(columns[1:], names[1:], units))}
         return pandas.DataFrame(data, index=pandas.Index(self.result.t, name="t [s]"))
 
     def plot(self, names: Sequence[str] | None = None) -> Figure:

@@ -635,12 +635,6 @@ def _columns(result: SimResult, all_bonds: bool):
     return names, columns
 
 
-def column_header(name: str, units: Mapping) -> str:
-    """``P_kPa [kPa]``: a column's name with its unit (the language reference, section 14)."""
-    unit = units.get(name)
-    return f"{name} [{unit[0]}]" if unit else name
-
-
 def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     """The result as csv: a header of names with units (``t [s]``, ``P_kPa [kPa]``), then one row per
     point; each output in its declared unit, states and bond variables in SI."""

@@ -79,7 +79,7 @@ from bondc.runtime.adapter import (  # noqa: F401
 from bondc.runtime.results import (  # noqa: F401
     DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
     _ResultBuilder, _Stalled, _Stop, _evaluate_columns, _unique_rows, max_points, write_csv,
-    RESULT_FORMATS, _header_cell, _shown, result_bytes, result_format, write_result
+    RESULT_FORMATS, _header_cell, column_name, result_bytes, shown_columns, result_format, write_result
 )
 from bondc.runtime.native import (  # noqa: F401
     Compiler, UNIT_MARK, _COMPILERS, _COMPILER_PROBES, _ERK_FLAGS, _ERK_LOADED, _NATIVE_AT_FUNCTIONS,

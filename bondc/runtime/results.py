@@ -142,14 +142,19 @@ def result_format(path) -> str:
     return next((kind for suffix, kind in RESULT_FORMATS.items() if name.endswith(suffix)), "csv")
 
 
-def _header_cell(name, units) -> str:
-    """``P_kPa [kPa]`` (the language reference, section 14), quoted where it holds a comma or a quote."""
+def column_name(name, units) -> str:
+    """``P_kPa [kPa]``: a column's name with its unit (the language reference, section 14)."""
     unit = units.get(name)
-    text = f"{name} [{unit[0]}]" if unit and unit[0] else name
+    return f"{name} [{unit[0]}]" if unit and unit[0] else name
+
+
+def _header_cell(name, units) -> str:
+    """:func:`column_name`, quoted where it holds a comma or a quote."""
+    text = column_name(name, units)
     return '"' + text.replace('"', '""') + '"' if any(c in text for c in ',"\n') else text
 
 
-def _shown(columns, names, units) -> list:
+def shown_columns(columns, names, units) -> list:
     """Each column in its unit (SI value / factor), as the csv shows it."""
     factors = [(units.get(name) or (None, 1.0))[1] or 1.0 for name in names]
     return [np.asarray(column, dtype=float) / factor if factor != 1.0 else np.asarray(column, dtype=float)
@@ -174,7 +179,7 @@ def result_bytes(kind, names, columns, units, *, arrays=None, metadata=None) -> 
     if kind == "csv":
         out = io.StringIO()
         out.write(",".join(_header_cell(name, units) for name in names) + "\n")
-        shown = _shown(columns, names, units)
+        shown = shown_columns(columns, names, units)
         if shown and shown[0].size:
             for row in np.column_stack(shown).tolist():
                 out.write(",".join(map(repr, row)) + "\n")
@@ -186,7 +191,7 @@ def result_bytes(kind, names, columns, units, *, arrays=None, metadata=None) -> 
         except ImportError:
             raise ImportError("writing .parquet needs pyarrow (pip install pyarrow)") from None
         fields, data = [], []
-        for name, column in zip(names, _shown(columns, names, units)):
+        for name, column in zip(names, shown_columns(columns, names, units)):
             unit, factor = units.get(name) or (None, 1.0)
             fields.append(pyarrow.field(name, pyarrow.float64(),
                                         metadata={"unit": unit or "", "si_factor": repr(float(factor or 1.0))}))
