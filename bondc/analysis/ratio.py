@@ -141,18 +141,15 @@ def ratio_study(path: str | Path, spec: str, *, motors: str | Path, model: str |
     from bondc.analysis.sweep import parse_vary, run_sweep
 
     axis = parse_vary(spec)
-    result = run_sweep(path, model=model, experiment=experiment, sets=sets, vary=[spec], metrics=list(METRICS),
+    own = _own_value(path, model, experiment, axis.name, sets, axis.unit)
+    values = list(axis.values)
+    if own is not None and not any(math.isclose(own, value, rel_tol=1e-9) for value in values):
+        values.append(own)          # the model's own value: one more point of the same sweep
+    vary = f"{axis.name}=" + ",".join(repr(value) for value in values) + (f" [{axis.unit}]" if axis.unit else "")
+    result = run_sweep(path, model=model, experiment=experiment, sets=sets, vary=[vary], metrics=list(METRICS),
                        jobs=jobs, t_end=t_end, progress=progress, motors=str(motors), inertia_ratio=inertia_ratio)
     unit = result.axis_units[0]
-    own = _own_value(path, model, experiment, axis.name, sets, unit)
-    values = list(axis.values)
     rows = {point.values[0]: point for point in result.points}
-    if own is not None and not any(math.isclose(own, value, rel_tol=1e-9) for value in values):
-        extra = run_sweep(path, model=model, experiment=experiment, sets=sets, metrics=list(METRICS),
-                          vary=[f"{axis.name}={own!r}" + (f" [{unit}]" if unit else "")], jobs=1, t_end=t_end,
-                          motors=str(motors), inertia_ratio=inertia_ratio)
-        rows[own] = extra.points[0]
-        values.append(own)
     order = tuple(motor.name for motor in sorted(load_catalogue(motors), key=lambda motor: motor.size))
     table = []
     for value in sorted(values):
@@ -167,12 +164,16 @@ def ratio_study(path: str | Path, spec: str, *, motors: str | Path, model: str |
 
 
 def _own_value(path, model, experiment, name: str, sets: Sequence, unit: str | None) -> float | None:
-    """The parameter's value as the model (its experiment, ``--set``) gives it, in ``unit``."""
+    """The parameter's value as the model (its experiment, ``--set``) gives it, in ``unit`` (None:
+    its declared unit); None where it is not a parameter (the sweep says so: E961)."""
     from bondc import semantic
     from bondc.analysis.sweep import _resolve_unit
     from bondc.pipeline import parse_sets
 
     graph, _ = semantic.load(Path(path), model=model, experiment=experiment, sets=parse_sets(sets))
-    parameter = graph.parameters[name]          # the sweep has checked the name
-    value = _resolve_unit(unit).from_si(parameter.value) if unit else parameter.value
+    parameter = graph.parameters.get(name)
+    if parameter is None:
+        return None
+    shown = unit or parameter.unit_text
+    value = _resolve_unit(shown).from_si(parameter.value) if shown else parameter.value
     return float(value) if math.isfinite(value) else None
