@@ -233,6 +233,8 @@ def write_result(result, path, variables=False):
         return
     data = result_bytes(result_format(path), names, columns, units,
                         metadata={"complete": result.complete, "message": result.message})
+    # written beside it and renamed into place, as bondc.io.atomic_write does (a standalone module
+    # carries the runtime without bondc.io)
     temporary = f"{os.fspath(path)}.{os.getpid()}.tmp"
     try:
         with open(temporary, "wb") as handle:
