@@ -1097,6 +1097,9 @@ def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute
     namespace = compile_model(derived.state_space)
     source = namespace["NATIVE_SOURCE"]
     assert len(runtime._native_units(source)) == 1
+    # the whole library one unit (the model's text and the driver's together pass the size from
+    # which it is split by default)
+    monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", float("inf"))
     runtime._NATIVE_LIBRARIES.clear()
     whole_ffi, whole = runtime.load_native(source)
     monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", 0)
@@ -1309,14 +1312,17 @@ def test_the_engines_sources_are_files_of_the_package_and_are_built_with_their_h
     a build inlines their ``#include "..."`` headers, so the compiled text (what the cache key
     hashes) holds every file, and cffi's cdef reads driver.h as it is."""
     assert sorted(p.name for p in NATIVE.iterdir() if p.suffix in (".c", ".h", ".cpp")) == [
-        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "model.h", "sundials.h"]
+        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "filippov.c", "filippov.h", "model.h", "sundials.h"]
     for name in ("driver.c", "erk.cpp"):
         built = runtime.native_build_text(name)
         assert not [line for line in built.splitlines() if line.startswith('#include "')], name
         assert built.count("typedef struct {\n    int version;") == 1, name     # erk_api.h's table, once
     driver = runtime.native_build_text("driver.c")
-    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h"):
+    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.h"):
         assert runtime.native_file(header) in driver, header
+    # the Filippov functions are built into the driver (and, alone, for runs without it): one text
+    assert runtime.native_build_text("filippov.c") in driver
+    assert "#" not in runtime.native_file("filippov.h")
     assert "bondc_driver_new" in runtime.native_file("driver.h")
     assert "#" not in runtime.native_file("driver.h")        # no preprocessor line: cffi's cdef reads it
     import cffi

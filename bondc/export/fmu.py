@@ -41,7 +41,7 @@ NATIVE = Path(__file__).resolve().parent.parent / "native"
 FMI_SOURCES = NATIVE / "fmi"
 PLATFORM = "linux64"
 #: The driver's own sources the FMU's library is compiled from (bondc/native)
-DRIVER_FILES = ("driver.c", "driver.h", "model.h", "sundials.h", "erk_api.h")
+DRIVER_FILES = ("driver.c", "driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.c", "filippov.h")
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 

@@ -13,9 +13,11 @@
 #include "model.h"      /* the model's functions this driver calls */
 #include "erk_api.h"    /* the table of functions of bondc's explicit stepper (erk.cpp, a library of its own) */
 #include "driver.h"     /* this driver's functions, as Python calls them (through cffi) */
+#include "filippov.c"   /* Filippov sliding: the sliding set, the corners' weights, the deadbands */
 
 struct bondc_driver {
     void *cvode;
+    bondc_law law;      /* the model's laws as filippov.c calls them */
     /* the explicit stepper that integrates instead of CVODE (bondc_driver_explicit), or NULL */
     const bondc_erk_api *erk;
     void *erk_memory;
@@ -351,6 +353,8 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
     if (!d) return NULL;
     d->n = n; d->switches = switches; d->entries = entries; d->rows = rows; d->cols = cols;
     d->banded = banded; d->lower = lower; d->upper = upper; d->p = p;
+    d->law.n = n; d->law.switches = switches; d->law.p = p;
+    d->law.rhs = bondc_rhs; d->law.switching = bondc_switches; d->law.vertices = NULL;
     d->m = (double *)calloc(switches + 1, sizeof(double));
     d->g = (double *)calloc(switches + 1, sizeof(double));
     d->values = (double *)calloc(entries + 1, sizeof(double));
@@ -939,20 +943,12 @@ double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out)
 {
-    double *base = (double *)calloc(d->switches + 1, sizeof(double));
-    if (!base) return -1;
-    bondc_switches(t, y, d->p, m, base);
-    for (int j = 0; j < count; j++) out[j] = 0.0;
-    for (int i = 0; i < d->n; i++) {
-        for (int q = 0; q < d->n; q++) d->shifted[q] = y[q];
-        d->shifted[i] += atol + rtol * fabs(y[i]);
-        bondc_switches(t, d->shifted, d->p, m, d->g);
-        for (int j = 0; j < count; j++) out[j] += fabs(d->g[index[j]] - base[index[j]]);
-    }
-    for (int j = 0; j < count; j++)
-        if (!isfinite(out[j])) out[j] = 0.0;
-    free(base);
-    return 0;
+    double *scale = (double *)calloc(d->n + 1, sizeof(double));
+    if (!scale) return -1;
+    for (int i = 0; i < d->n; i++) scale[i] = atol + rtol * fabs(y[i]);
+    int code = bondc_law_deadbands(&d->law, t, y, m, scale, count, index, out);
+    free(scale);
+    return code;
 }
 
 /* y(t) (k = 0) or its derivative (k = 1) inside the last step. */
