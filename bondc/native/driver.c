@@ -784,6 +784,106 @@ static double slide_exits(bondc_driver *d, double t, const double *y, double *ex
     return alpha;
 }
 
+/* The value of exit j of the sliding mode at t inside the last step (on CVODE's interpolant) */
+static double slide_exit_at(bondc_driver *d, double t, int j, double *exits)
+{
+    if (driver_interpolate(d, t) != 0) return NAN;
+    slide_exits(d, t, N_VGetArrayPointer(d->work), exits);
+    return exits[j];
+}
+
+/* The earliest end of the sliding mode in (t_old, t_new] between exits `left` (at a) and `right`
+   (at b), as _Run.sliding_end: where an exit went from > 0 to <= 0 or from >= 0 to < 0, located on
+   the interpolant by the Illinois method to 4 eps; b + 1 where none did. `exits` is scratch. */
+static double slide_end_between(bondc_driver *d, int watched, const double *left, const double *right, double a,
+                                double b, double *exits)
+{
+    const double eps = 2.220446049250313e-16;
+    double hit = b + 1.0;
+    int found = 0;
+    for (int j = 0; j < watched; j++) {
+        if (!((left[j] > 0 && right[j] <= 0) || (left[j] >= 0 && right[j] < 0))) continue;
+        double root;
+        if (left[j] <= 0) {
+            root = a;
+        } else {
+            double lo = a, hi = b, flo = left[j], fhi = right[j];
+            int kept = 0;
+            for (int i = 0; i < 200 && hi - lo > 4 * eps * fmax(fabs(lo), fabs(hi)) + 1e-300; i++) {
+                double t = hi - fhi * (hi - lo) / (fhi - flo);
+                if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
+                double ft = slide_exit_at(d, t, j, exits);
+                if (ft != ft) { t = 0.5 * (lo + hi); ft = slide_exit_at(d, t, j, exits); }
+                if (ft <= 0) { hi = t; fhi = ft; if (kept == -1) flo *= 0.5; kept = -1; }
+                else { lo = t; flo = ft; if (kept == 1) fhi *= 0.5; kept = 1; }
+                if (ft == 0) break;
+            }
+            root = hi;
+        }
+        if (!found || root < hit) { hit = root; found = 1; }
+    }
+    return found ? hit : b + 1.0;
+}
+
+/* As _Run.sliding_dip: an end inside (a, b) where the exits are positive at both ends, each exit's
+   parabola through a, the middle and b searched while it may dip below 0 (at most *budget
+   evaluations); b + 1 where none */
+static double slide_dip_between(bondc_driver *d, int watched, const double *left, const double *right, double a,
+                                double b, int *budget, double *scratch)
+{
+    double middle_t = 0.5 * (a + b);
+    if (*budget <= 0 || !(a < middle_t && middle_t < b)) return b + 1.0;
+    (*budget)--;
+    double *middle = scratch, *exits = scratch + watched, *rest = scratch + 2 * watched;
+    if (driver_interpolate(d, middle_t) != 0) return b + 1.0;
+    slide_exits(d, middle_t, N_VGetArrayPointer(d->work), middle);
+    double hit = slide_end_between(d, watched, left, middle, a, middle_t, exits);
+    if (hit <= middle_t) return hit;
+    hit = slide_end_between(d, watched, middle, right, middle_t, b, exits);
+    if (hit <= b) return hit;
+    int dips = 0;
+    for (int j = 0; j < watched && !dips; j++) dips = may_dip(left[j], middle[j], right[j]);
+    if (!dips) return b + 1.0;
+    hit = slide_dip_between(d, watched, left, middle, a, middle_t, budget, rest);
+    if (hit <= middle_t) return hit;
+    return slide_dip_between(d, watched, middle, right, middle_t, b, budget, rest);
+}
+
+/* After bondc_driver_slide_advance returned 1 (a possible end in its last step (t_old, t_new], the
+   exits `old` before it and `now` at its end): the end of the sliding mode in that step, as
+   _Run.sliding_end_within finds it, into *t_end (0), or 1 where the mode goes on past t_new. The
+   exits are tested every `longest` (0: only at the ends) and, between two tests, for a dip. -1
+   where memory ran out. */
+int bondc_driver_slide_end(bondc_driver *d, double t_old, double t_new, const double *old, const double *now,
+                           double longest, double *t_end)
+{
+    int held = d->held > 1 ? d->held : 1, watched = 2 * held + d->exits;
+    long count = longest > 0 ? (long)fmin(ceil((t_new - t_old) / longest), 1e6) : 1;
+    if (count < 1) count = 1;
+    /* before, after, scratch: 2 (slide_dip_between's levels, 61 at most) x 3 each */
+    double *work = (double *)malloc(sizeof(double) * (size_t)watched * (2 + 3 * 62));
+    if (!work) return -1;
+    double *before = work, *after = work + watched, *scratch = work + 2 * watched;
+    memcpy(before, old, sizeof(double) * (size_t)watched);
+    int code = 1;
+    for (long i = 0; i < count; i++) {
+        double a = i == 0 ? t_old : t_old + (t_new - t_old) * (double)i / (double)count;
+        double b = i + 1 == count ? t_new : t_old + (t_new - t_old) * (double)(i + 1) / (double)count;
+        if (b == t_new) memcpy(after, now, sizeof(double) * (size_t)watched);
+        else if (driver_interpolate(d, b) == 0) slide_exits(d, b, N_VGetArrayPointer(d->work), after);
+        else { for (int j = 0; j < watched; j++) after[j] = NAN; }
+        double hit = slide_end_between(d, watched, before, after, a, b, scratch);
+        if (hit > b) {
+            int budget = 60;
+            hit = slide_dip_between(d, watched, before, after, a, b, &budget, scratch);
+        }
+        if (hit <= b) { *t_end = hit; code = 0; break; }
+        memcpy(before, after, sizeof(double) * (size_t)watched);
+    }
+    free(work);
+    return code;
+}
+
 /* The exits of the sliding mode (see bondc_driver_slide) at (t, y), into out (2 + count values). */
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
 {
@@ -1007,16 +1107,18 @@ static int same_values(const double *a, const double *b, int count)
    their law, until they agree (0), or until they repeat (1: switches that chatter, a sliding mode
    this function does not resolve; out holds the last modes). -1 when out of memory. */
 int bondc_driver_select(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
-                        double probe, double *out)
+                        double probe, double *out, int *flips)
 {
     enum { ROUNDS = 8 };
     int switches = d->switches, n = d->n;
+    if (flips)
+        for (int k = 0; k < switches; k++) flips[k] = 0;
     if (switches == 0) return 0;
     if (bondc_driver_restart(d, t, y, guess, floors, probe, 0, out) == 1) return 0;
     double *seen = (double *)calloc((size_t)(ROUNDS + 2) * switches, sizeof(double));
     double *ahead = (double *)calloc((size_t)switches, sizeof(double));
     double *shifted = (double *)calloc((size_t)n + 1, sizeof(double));
-    int code = 1, rounds = 1;
+    int code = 1, rounds = 1, first = 0;
     if (!seen || !ahead || !shifted) code = -1;
     else memcpy(seen, out, sizeof(double) * switches);
     for (int round = 0; code == 1 && round < ROUNDS; round++) {
@@ -1025,13 +1127,19 @@ int bondc_driver_select(bondc_driver *d, double t, const double *y, const double
         for (int i = 0; i < n; i++) shifted[i] = y[i] + probe * d->fp[i];
         driver_modes_at(d, t + probe, shifted, out, floors, ahead);
         if (same_values(ahead, out, switches)) { code = 0; break; }
-        for (int r = 0; r < rounds; r++)
-            if (same_values(ahead, seen + (long)r * switches, switches)) code = 2;
+        for (int r = rounds - 1; r >= 0; r--)
+            if (same_values(ahead, seen + (long)r * switches, switches)) { code = 2; first = r; }
         memcpy(out, ahead, sizeof(double) * switches);
         if (code == 2) { code = 1; break; }
         memcpy(seen + (long)rounds * switches, ahead, sizeof(double) * switches);
         rounds++;
     }
+    /* the switches that flip within the cycle (from its first repeated row; all rows where none
+       repeated), as _Run.restart_modes names them */
+    if (code == 1 && flips)
+        for (int r = first + 1; r < rounds; r++)
+            for (int k = 0; k < switches; k++)
+                if (seen[(long)r * switches + k] != seen[(long)first * switches + k]) flips[k] = 1;
     free(seen); free(ahead); free(shifted);
     return code;
 }
