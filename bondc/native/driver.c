@@ -14,6 +14,7 @@
 #include "erk_api.h"    /* the table of functions of bondc's explicit stepper (erk.cpp, a library of its own) */
 #include "driver.h"     /* this driver's functions, as Python calls them (through cffi) */
 #include "filippov.c"   /* Filippov sliding: the sliding set, the corners' weights, the deadbands */
+#include "locate.c"     /* where values that stay positive first fail to: exits, dips */
 
 struct bondc_driver {
     void *cvode;
@@ -445,20 +446,6 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
                        int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 
-/* As _may_dip, for one value positive while nothing happens (a sliding mode's exit, a switch's
-   m*g + band) at the start, the middle and the end of a step: 1 where it is past 0 in the middle,
-   or the parabola through the three comes within its own curvature of 0 inside the step. */
-static int may_dip(double left, double mid, double right)
-{
-    if ((left > 0 && mid <= 0) || (left >= 0 && mid < 0)) return 1;
-    double curve = 2 * left + 2 * right - 4 * mid, slope = 4 * mid - 3 * left - right;
-    double lowest = fmin(left, right);
-    if (curve > 0) {
-        double vertex = -slope / (2 * curve);
-        if (vertex > 0 && vertex < 1) lowest = left + slope * vertex + curve * vertex * vertex;
-    }
-    return left > 0 && right > 0 && lowest - 0.5 * fabs(curve) < 0;
-}
 
 /* Whether a watched switch in mode +-1 may cross twice inside the step just taken (to t), where it is
    on its side at both ends (g_old, d->g): its value at the step's middle (CVODE's interpolant) is
@@ -472,7 +459,7 @@ static int switch_dips(bondc_driver *d, double t, int watched, const int *watch,
     if (driver_interpolate(d, t - 0.5 * h) != 0) return 0;
     bondc_switches(t - 0.5 * h, N_VGetArrayPointer(d->work), d->p, d->m, d->gmid);
     for (int j = 0; j < watched; j++)
-        if (signs[j] != 0 && may_dip(signs[j] * g_old[j] + band[j], signs[j] * d->gmid[watch[j]] + band[j],
+        if (signs[j] != 0 && bondc_may_dip(signs[j] * g_old[j] + band[j], signs[j] * d->gmid[watch[j]] + band[j],
                                      signs[j] * d->g[watch[j]] + band[j])) return 1;
     return 0;
 }
@@ -784,104 +771,28 @@ static double slide_exits(bondc_driver *d, double t, const double *y, double *ex
     return alpha;
 }
 
-/* The value of exit j of the sliding mode at t inside the last step (on CVODE's interpolant) */
-static double slide_exit_at(bondc_driver *d, double t, int j, double *exits)
+/* The sliding mode's exits at t inside the last step, on CVODE's interpolant (locate.h's values) */
+static int driver_slide_values(void *context, double t, double *out)
 {
-    if (driver_interpolate(d, t) != 0) return NAN;
-    slide_exits(d, t, N_VGetArrayPointer(d->work), exits);
-    return exits[j];
-}
-
-/* The earliest end of the sliding mode in (t_old, t_new] between exits `left` (at a) and `right`
-   (at b), as _Run.sliding_end: where an exit went from > 0 to <= 0 or from >= 0 to < 0, located on
-   the interpolant by the Illinois method to 4 eps; b + 1 where none did. `exits` is scratch. */
-static double slide_end_between(bondc_driver *d, int watched, const double *left, const double *right, double a,
-                                double b, double *exits)
-{
-    const double eps = 2.220446049250313e-16;
-    double hit = b + 1.0;
-    int found = 0;
-    for (int j = 0; j < watched; j++) {
-        if (!((left[j] > 0 && right[j] <= 0) || (left[j] >= 0 && right[j] < 0))) continue;
-        double root;
-        if (left[j] <= 0) {
-            root = a;
-        } else {
-            double lo = a, hi = b, flo = left[j], fhi = right[j];
-            int kept = 0;
-            for (int i = 0; i < 200 && hi - lo > 4 * eps * fmax(fabs(lo), fabs(hi)) + 1e-300; i++) {
-                double t = hi - fhi * (hi - lo) / (fhi - flo);
-                if (!(t > lo && t < hi)) t = 0.5 * (lo + hi);
-                double ft = slide_exit_at(d, t, j, exits);
-                if (ft != ft) { t = 0.5 * (lo + hi); ft = slide_exit_at(d, t, j, exits); }
-                if (ft <= 0) { hi = t; fhi = ft; if (kept == -1) flo *= 0.5; kept = -1; }
-                else { lo = t; flo = ft; if (kept == 1) fhi *= 0.5; kept = 1; }
-                if (ft == 0) break;
-            }
-            root = hi;
-        }
-        if (!found || root < hit) { hit = root; found = 1; }
+    bondc_driver *d = (bondc_driver *)context;
+    if (driver_interpolate(d, t) != 0) {
+        int watched = 2 * (d->held > 1 ? d->held : 1) + d->exits;
+        for (int j = 0; j < watched; j++) out[j] = NAN;
+        return -1;
     }
-    return found ? hit : b + 1.0;
-}
-
-/* As _Run.sliding_dip: an end inside (a, b) where the exits are positive at both ends, each exit's
-   parabola through a, the middle and b searched while it may dip below 0 (at most *budget
-   evaluations); b + 1 where none */
-static double slide_dip_between(bondc_driver *d, int watched, const double *left, const double *right, double a,
-                                double b, int *budget, double *scratch)
-{
-    double middle_t = 0.5 * (a + b);
-    if (*budget <= 0 || !(a < middle_t && middle_t < b)) return b + 1.0;
-    (*budget)--;
-    double *middle = scratch, *exits = scratch + watched, *rest = scratch + 2 * watched;
-    if (driver_interpolate(d, middle_t) != 0) return b + 1.0;
-    slide_exits(d, middle_t, N_VGetArrayPointer(d->work), middle);
-    double hit = slide_end_between(d, watched, left, middle, a, middle_t, exits);
-    if (hit <= middle_t) return hit;
-    hit = slide_end_between(d, watched, middle, right, middle_t, b, exits);
-    if (hit <= b) return hit;
-    int dips = 0;
-    for (int j = 0; j < watched && !dips; j++) dips = may_dip(left[j], middle[j], right[j]);
-    if (!dips) return b + 1.0;
-    hit = slide_dip_between(d, watched, left, middle, a, middle_t, budget, rest);
-    if (hit <= middle_t) return hit;
-    return slide_dip_between(d, watched, middle, right, middle_t, b, budget, rest);
+    slide_exits(d, t, N_VGetArrayPointer(d->work), out);
+    return 0;
 }
 
 /* After bondc_driver_slide_advance returned 1 (a possible end in its last step (t_old, t_new], the
-   exits `old` before it and `now` at its end): the end of the sliding mode in that step, as
-   _Run.sliding_end_within finds it, into *t_end (0), or 1 where the mode goes on past t_new. The
-   exits are tested every `longest` (0: only at the ends) and, between two tests, for a dip. -1
-   where memory ran out. */
+   exits `old` before it and `now` at its end): the end of the sliding mode in that step
+   (bondc_first_end on the interpolant), into *t_end (0), or 1 where the mode goes on past t_new;
+   the exits are tested every `longest` (0: only at the ends). -1 where memory ran out. */
 int bondc_driver_slide_end(bondc_driver *d, double t_old, double t_new, const double *old, const double *now,
                            double longest, double *t_end)
 {
-    int held = d->held > 1 ? d->held : 1, watched = 2 * held + d->exits;
-    long count = longest > 0 ? (long)fmin(ceil((t_new - t_old) / longest), 1e6) : 1;
-    if (count < 1) count = 1;
-    /* before, after, scratch: 2 (slide_dip_between's levels, 61 at most) x 3 each */
-    double *work = (double *)malloc(sizeof(double) * (size_t)watched * (2 + 3 * 62));
-    if (!work) return -1;
-    double *before = work, *after = work + watched, *scratch = work + 2 * watched;
-    memcpy(before, old, sizeof(double) * (size_t)watched);
-    int code = 1;
-    for (long i = 0; i < count; i++) {
-        double a = i == 0 ? t_old : t_old + (t_new - t_old) * (double)i / (double)count;
-        double b = i + 1 == count ? t_new : t_old + (t_new - t_old) * (double)(i + 1) / (double)count;
-        if (b == t_new) memcpy(after, now, sizeof(double) * (size_t)watched);
-        else if (driver_interpolate(d, b) == 0) slide_exits(d, b, N_VGetArrayPointer(d->work), after);
-        else { for (int j = 0; j < watched; j++) after[j] = NAN; }
-        double hit = slide_end_between(d, watched, before, after, a, b, scratch);
-        if (hit > b) {
-            int budget = 60;
-            hit = slide_dip_between(d, watched, before, after, a, b, &budget, scratch);
-        }
-        if (hit <= b) { *t_end = hit; code = 0; break; }
-        memcpy(before, after, sizeof(double) * (size_t)watched);
-    }
-    free(work);
-    return code;
+    int watched = 2 * (d->held > 1 ? d->held : 1) + d->exits;
+    return bondc_first_end(driver_slide_values, d, watched, t_old, t_new, old, now, longest, t_end);
 }
 
 /* The exits of the sliding mode (see bondc_driver_slide) at (t, y), into out (2 + count values). */
@@ -934,7 +845,7 @@ static int slide_dips(bondc_driver *d, double middle, const double *left, const 
     int dip = 0;
     if (driver_interpolate(d, middle) == 0) {
         slide_exits(d, middle, N_VGetArrayPointer(d->work), mid);
-        for (int j = 0; j < watched && !dip; j++) dip = may_dip(left[j], mid[j], right[j]);
+        for (int j = 0; j < watched && !dip; j++) dip = bondc_may_dip(left[j], mid[j], right[j]);
     }
     d->alpha = alpha;
     for (int i = 0; i < held; i++) d->alphas[i] = d->kept[i];

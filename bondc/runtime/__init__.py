@@ -77,7 +77,10 @@ from bondc.runtime.adapter import (  # noqa: F401
     _MEMOS, _MODEL_NAMES, _Model, _PATTERNS, _columns_by_mode, _model_memo, evaluate, mode_values, modes_at,
     param_array, pattern_arrays
 )
-from bondc.runtime.filippov import SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, corner_weights, filippov_alpha  # noqa: F401,E501
+from bondc.runtime.filippov import (  # noqa: F401
+    SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, _located, _values_callback, corner_weights,
+    filippov_alpha, first_dip, first_end
+)
 from bondc.runtime.results import (  # noqa: F401
     DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
     _ResultBuilder, _Stalled, _Stop, _evaluate_columns, _unique_rows, max_points, write_csv,
@@ -87,15 +90,15 @@ from bondc.runtime.native import (  # noqa: F401
     Compiler, UNIT_MARK, _COMPILERS, _COMPILER_PROBES, _ERK_FLAGS, _ERK_LOADED, _NATIVE_AT_FUNCTIONS,
     _NATIVE_BY_TEXT, _NATIVE_FILES, _NATIVE_FLAGS, _NATIVE_FUNCTIONS, _NATIVE_LIBRARIES, _NATIVE_NOTES,
     _NATIVE_OPTIMIZE, _NATIVE_PENDING, _NATIVE_POINT_FUNCTIONS, _NATIVE_READ, _NATIVE_SPLIT_FROM, _NativeBuild,
-    _SUNDIALS_PARTS, _SYSTEM_COMPILERS, _ZIG_FLAGS, _FILIPPOV_FLAGS, _FILIPPOV_LOADED, NativeUnavailable, _build_erk, _build_native, _engine_library, _choose_compiler, _discard_pending,
+    _SUNDIALS_PARTS, _SYSTEM_COMPILERS, _ZIG_FLAGS, _POLICY_FLAGS, _POLICY_LOADED, NativeUnavailable, _build_erk, _build_native, _engine_library, _choose_compiler, _discard_pending,
     _link_flags, _native_plan, _native_units, _native_variants, _probe_compiler, _sundials_link, _zig,
-    attach_native, cache_dir, compiler_label, find_compiler, load_erk, load_filippov, load_native, native_build_text, native_file,
+    attach_native, cache_dir, compiler_label, find_compiler, load_erk, load_native, load_policy, native_build_text, native_file,
     native_text, native_turned_off, start_native
 )
 from bondc.runtime.solvers import (  # noqa: F401
     CVODE, CVODE_Adams, CvodeSolver, DEFAULT_SOLVER, DOPRI5, IDA, SOLVER_NAMES, _CREEP, _CREEP_STEPS,
     _CVODE_METHODS, _FiniteJacobian, _IMPLICIT, _METHODS, _NotFinite, _SUNDIALS_FOUND, _SolverChoice,
-    _UNFROZEN_STEPS, _all_finite, _creeping, _may_dip, difference_jacobian, solver_class, stiff_solver,
+    _UNFROZEN_STEPS, _all_finite, _creeping, difference_jacobian, solver_class, stiff_solver,
     sundials_available
 )
 from bondc.runtime.steppers import (  # noqa: F401

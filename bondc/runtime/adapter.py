@@ -1,7 +1,6 @@
 """The model adapter: a generated module's namespace as a :class:`_Model`, its parameters, the
 modes of the unfrozen law (:func:`modes_at`) and :func:`evaluate` of its functions at given points."""
 
-import math
 
 import numpy as np
 

@@ -1,14 +1,16 @@
 """Filippov sliding's one implementation (``bondc/native/filippov.c``) as the Python run loop calls
 it: the corners' weights (:func:`corner_weights`), the weights that hold the sliding switches on
 their surfaces (:func:`filippov_alpha`) and the choice of the switches a sliding mode holds
-(:class:`SlidingLaw`). The C library is built once per machine (:func:`load_filippov`); the
+(:class:`SlidingLaw`), and where values that stay positive first fail to (:func:`first_end`,
+:func:`first_dip`: a sliding mode's end, a switch's hump inside a step). The C library is built once
+per machine (:func:`load_policy`); the
 model's laws reach it as C callbacks of whatever evaluates them (its compiled C functions or its
 numpy ones), so every solver and both kinds of model use the same code as the CVODE driver and an
 FMU's engine."""
 
 import numpy as np
 
-from bondc.runtime.native import load_filippov
+from bondc.runtime.native import load_policy
 
 _LAW_SIGNATURE = "void(double, const double *, const double *, const double *, double *)"
 
@@ -31,7 +33,7 @@ def corner_weights(alpha, sides):
     >>> corner_weights(np.array([0.25]), np.array([[-1.0], [1.0]])).tolist()
     [0.75, 0.25]
     """
-    ffi, lib = load_filippov()
+    ffi, lib = load_policy()
     alpha = np.ascontiguousarray(alpha, dtype=float)
     out = np.empty(sides.shape[0])
     lib.bondc_corner_weights(alpha.size, int(_is_affine(sides)), _doubles(ffi, alpha), _doubles(ffi, out))
@@ -49,7 +51,7 @@ def filippov_alpha(rates, sides, guess=None):
     >>> filippov_alpha(np.array([[-3.0], [1.0]]), np.array([[-1.0], [1.0]])).tolist()
     [0.75]
     """
-    ffi, lib = load_filippov()
+    ffi, lib = load_policy()
     count = sides.shape[1]
     rates = np.ascontiguousarray(rates, dtype=float)
     alpha = np.empty(count)
@@ -64,7 +66,7 @@ class SlidingLaw:
     ``model.switches``."""
 
     def __init__(self, model, p):
-        ffi, lib = load_filippov()
+        ffi, lib = load_policy()
         self.ffi, self.lib, self.model = ffi, lib, model
         n, count = len(model.STATE_NAMES), len(model.SWITCHES)
         self.n, self.count = n, count
@@ -123,6 +125,66 @@ class SlidingLaw:
         if code == 0:
             return [], modes, None, vertices[:self.count], False
         return [int(k) for k in held[:code]], modes, alpha[:code].copy(), vertices[:self.count], bool(affine[0])
+
+
+def _values_callback(ffi, values_at, count):
+    """``values_at(t)`` (count values) as locate.h's ``bondc_values_at``, and a list that keeps the
+    first exception it met (raised again after the call)."""
+    failures = []
+
+    def values(_context, t, out):
+        try:
+            with np.errstate(all="ignore"):
+                got = np.asarray(values_at(float(t)), dtype=float).reshape(-1)
+            ffi.buffer(out, 8 * count)[:] = got.tobytes()
+            return 0
+        except Exception as error:      # C cannot take an exception: NaN, and raised after
+            failures.append(error)
+            ffi.buffer(out, 8 * count)[:] = np.full(count, np.nan).tobytes()
+            return -1
+    return ffi.callback("int(void *, double, double *)", values), failures
+
+
+def _located(code, t_end, failures):
+    if failures:
+        raise failures[0]
+    if code < 0:
+        raise MemoryError("bondc's location of an end ran out of memory")
+    return float(t_end[0]) if code == 0 else None
+
+
+def first_end(values_at, t_old, t_new, old, new, longest):
+    """The earliest end inside the step (t_old, t_new] of values (``values_at(t)``, positive while
+    nothing happens; ``old``, ``new`` at the step's ends): where one went from > 0 to <= 0 or from
+    >= 0 to < 0, tested every ``longest`` (inf or 0: at the ends only) and for dips between the
+    tests (``bondc_first_end``), or None.
+
+    >>> first_end(lambda t: [1.0 - t], 0.0, 2.0, [1.0], [-1.0], 0.0)
+    1.0
+    """
+    ffi, lib = load_policy()
+    old, new = (np.ascontiguousarray(v, dtype=float) for v in (old, new))
+    callback, failures = _values_callback(ffi, values_at, old.size)
+    t_end = ffi.new("double *")
+    code = lib.bondc_first_end(callback, ffi.NULL, old.size, float(t_old), float(t_new), _doubles(ffi, old),
+                               _doubles(ffi, new), float(longest) if np.isfinite(longest) else 0.0, t_end)
+    return _located(code, t_end, failures)
+
+
+def first_dip(values_at, a, b, left, right):
+    """Where one of the values, positive at both ends of (a, b), dips below 0 inside it
+    (``bondc_first_dip``), or None.
+
+    >>> round(first_dip(lambda t: [abs(t - 0.3) - 0.01], 0.0, 1.0, [0.29], [0.69]), 6)
+    0.29
+    """
+    ffi, lib = load_policy()
+    left, right = (np.ascontiguousarray(v, dtype=float) for v in (left, right))
+    callback, failures = _values_callback(ffi, values_at, left.size)
+    t_end = ffi.new("double *")
+    code = lib.bondc_first_dip(callback, ffi.NULL, left.size, float(a), float(b), _doubles(ffi, left),
+                               _doubles(ffi, right), t_end)
+    return _located(code, t_end, failures)
 
 
 class TooManyHeld(Exception):

@@ -361,23 +361,24 @@ def _engine_library(name, language, flags, extra, version, cdef, what):
     return ffi, lib, ""
 
 
-_FILIPPOV_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
-_FILIPPOV_LOADED: dict = {}     # (cache folder, $CC, $PATH) -> (ffi, lib, why not)
+_POLICY_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+_POLICY_LOADED: dict = {}       # (cache folder, $CC, $PATH) -> (ffi, lib, why not)
 
 
-def load_filippov():
-    """``(ffi, lib)`` of bondc's Filippov sliding functions (``bondc/native/filippov.c``, declared in
-    ``filippov.h``) as a library of their own, built once per machine and loaded once per process:
-    the run loop's one implementation of the sliding set and the corners' weights, whatever
-    computes the model's laws. Raises :class:`NativeUnavailable` where no C compiler builds it
-    (bondc installs one, zig, with its dependencies). ``BONDC_NATIVE=0`` does not turn it off: it
-    is the engine's code, not the model's."""
+def load_policy():
+    """``(ffi, lib)`` of bondc's run-loop functions (``bondc/native/policy.c``: Filippov sliding,
+    ``filippov.h``, and the location of ends and dips, ``locate.h``) as a library of their own,
+    built once per machine and loaded once per process: the one implementation the Python run
+    loop calls, whatever computes the model's laws (the CVODE driver and an FMU include the same
+    files). Raises :class:`NativeUnavailable` where no C compiler builds it (bondc installs one,
+    zig, with its dependencies). ``BONDC_NATIVE=0`` does not turn it off: it is the engine's code,
+    not the model's."""
     key = (cache_dir(), os.environ.get("CC", ""), os.environ.get("PATH", ""))
-    known = _FILIPPOV_LOADED.get(key)
+    known = _POLICY_LOADED.get(key)
     if known is None:
-        known = _FILIPPOV_LOADED[key] = _engine_library(
-            "filippov.c", "c", _FILIPPOV_FLAGS, ("-lm",), "", native_file("filippov.h"),
-            "bondc's Filippov sliding functions")
+        known = _POLICY_LOADED[key] = _engine_library(
+            "policy.c", "c", _POLICY_FLAGS, ("-lm",), "", native_file("filippov.h") + native_file("locate.h"),
+            "bondc's run-loop functions")
     if known[0] is None:
         raise NativeUnavailable(known[2])
     return known[0], known[1]

@@ -2,14 +2,11 @@
 their surfaces, the corners and weights of the combination, affine holds, sliding segments and
 their ends, holding at a stall."""
 
-import math
-
 import numpy as np
 
-from bondc.runtime.kernels import _EPS, brentq
-from bondc.runtime.filippov import SlidingLaw, TooManyHeld, corner_weights, filippov_alpha
+from bondc.runtime.filippov import SlidingLaw, TooManyHeld, corner_weights, filippov_alpha, first_end
 from bondc.runtime.results import RunFailure, _Stop
-from bondc.runtime.solvers import CvodeSolver, IDA, _may_dip, difference_jacobian
+from bondc.runtime.solvers import CvodeSolver, IDA, difference_jacobian
 
 
 _MAX_SLIDING = 8         # switches sliding at once in the multilinear combination (2**8 corners) ...
@@ -400,75 +397,17 @@ class _Sliding:
             old = new
 
     def sliding_end_within(self, old, new, exits_at, t_old, t_new):
-        """:meth:`sliding_end` of a step, its exits also tested inside it every
-        :meth:`sliding_check`: a mode whose states stand still (a mass held at rest or at a speed)
-        gives the solver nothing to limit its steps by, while the force that holds it follows an input
-        that may pass the holding limit and come back within one step. Between two tests, an exit
-        that dips below 0 and comes back is looked for too (:meth:`sliding_dip`): a step whose
-        states move is as long as their motion allows, which may be longer than the push is past
-        the limit."""
-        longest = self.sliding_check()
-        count = int(min(math.ceil((t_new - t_old) / longest), 1e6)) if longest > 0 else 1
-        times = np.linspace(t_old, t_new, max(count, 1) + 1)
-        before = old
-        for a, b in zip(times[:-1], times[1:]):
-            after = new if b == t_new else np.asarray(exits_at(b), dtype=float)
-            hit = self.sliding_end(before, after, exits_at, a, b)
-            if hit is None:
-                hit = self.sliding_dip(before, after, exits_at, a, b)
-            if hit is not None:
-                return hit
-            before = after
-        return None
-
-    def sliding_dip(self, left, right, exits_at, a, b, budget=None):
-        """The end of a sliding mode inside (a, b) where its exits are positive at both ends, or None:
-        an exit that dips below 0 and comes back between them (a push passing a static limit for less
-        than the spacing of the tests). Each exit's parabola through a, the middle and b is looked at
-        (:func:`_may_dip`): where it comes within its own curvature of 0 inside, the halves are
-        searched in turn, at most 60 evaluations in all."""
-        budget = [60] if budget is None else budget
-        middle_t = 0.5 * (a + b)
-        if budget[0] <= 0 or not a < middle_t < b:
-            return None
-        budget[0] -= 1
-        middle = np.asarray(exits_at(middle_t), dtype=float)
-        hit = self.sliding_end(left, middle, exits_at, a, middle_t)
-        if hit is not None:
-            return hit
-        hit = self.sliding_end(middle, right, exits_at, middle_t, b)
-        if hit is not None:
-            return hit
-        if not _may_dip(left, middle, right):
-            return None
-        hit = self.sliding_dip(left, middle, exits_at, a, middle_t, budget)
-        if hit is not None:
-            return hit
-        return self.sliding_dip(middle, right, exits_at, middle_t, b, budget)
+        """The end of a sliding mode inside the step (t_old, t_new] (``bondc_first_end``, the
+        engine's one implementation): its exits tested at the step's ends, every
+        :meth:`sliding_check` inside it (a mode whose states stand still gives the solver nothing to
+        limit its steps by, while the force that holds it may pass the limit and come back within
+        one step), and for a dip between two tests; or None."""
+        return first_end(exits_at, t_old, t_new, old, new, self.sliding_check())
 
     def sliding_check(self) -> float:
         """The longest stretch of a sliding mode whose exits are tested only at its ends: the run's
         span over SLIDING_CHECKS, or its max_step where that is shorter."""
         return min(self.span / SLIDING_CHECKS, float(self.options.get("max_step", np.inf)))
-
-    @staticmethod
-    def sliding_end(old, new, exits_at, t_old, t_new):
-        """The earliest end of a sliding mode in the step (t_old, t_new], or None: where an exit (an
-        entry of ``exits_at(tt)``, positive while the mode lasts) went from > 0 to <= 0 or from >= 0
-        to < 0 (``old``, ``new``: the exits at the step's ends), located by brentq."""
-        hit = None
-        for j in range(new.size):
-            if not (old[j] > 0 >= new[j] or old[j] >= 0 > new[j]):
-                continue
-            if old[j] <= 0:
-                root = t_old
-            else:
-                try:
-                    root = brentq(lambda tt, j=j: exits_at(tt)[j], t_old, t_new, 4 * _EPS, 4 * _EPS)
-                except ValueError:
-                    root = t_new
-            hit = root if hit is None else min(hit, root)
-        return hit
 
     def record_sliding(self, t_old, t_new, y_new, dense, corner_ids, weights_at):
         if self.t_eval is None:
