@@ -420,9 +420,8 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
             c.equal(Form.var(index), declared, state.span, "state", f"state '{state.qualified}'")
 
     for element in graph.elements.values():
-        kind = element.kind
-        tier = {"Se": 0, "Sf": 0, "MSe": 0, "MSf": 0, "TF": 0, "GY": 0, "MTF": 0, "MGY": 0, "C": 1, "I": 1}.get(kind, 2)
-        c.tier = tier
+        kind, info = element.kind, element.kind_info
+        c.tier = info.tier
         local: dict[str, object] = {}
         if len(element.bonds) == 1:
             bond = element.bond
@@ -430,8 +429,8 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
         for state in element.states:
             own = Form.var(c.state[state.qualified])
             local[state.name] = own
-            if state.rate is None:      # default q = integral of f, p = integral of e
-                integral = local["f" if state.name == "q" else "e"].plus(Form(_SECOND))
+            if state.rate is None and info.integrates:    # the default state: q integrates f, p integrates e
+                integral = local[info.integrates].plus(Form(_SECOND))
                 c.equal(own, integral, state.span, "state", f"'{state.qualified}'")
         for target, expr in element.laws.items():
             span = element.law_spans.get(target, element.span) if element.law_spans else element.span
@@ -439,15 +438,12 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
             if target in ("e", "f") and len(element.bonds) == 1:
                 c.equal(local[target], value, span, "law", f"{target} of {kind} '{element.name}'")
             elif target == "r" and len(element.bonds) == 2 and isinstance(value, Form):
-                b1, b2 = element.bonds
-                e1, f1 = Form.var(c.effort[b1]), Form.var(c.flow[b1])
-                e2, f2 = Form.var(c.effort[b2]), Form.var(c.flow[b2])
-                if kind in ("TF", "MTF"):
-                    c.equal(e1, value.plus(e2), span, "ratio", f"p1.e = r*p2.e of {kind} '{element.name}'")
-                    c.equal(f2, value.plus(f1), span, "ratio", f"p2.f = r*p1.f of {kind} '{element.name}'")
-                else:
-                    c.equal(e1, value.plus(f2), span, "ratio", f"p1.e = r*p2.f of {kind} '{element.name}'")
-                    c.equal(e2, value.plus(f1), span, "ratio", f"p2.e = r*p1.f of {kind} '{element.name}'")
+                ports = {}
+                for port, bond in zip(("p1", "p2"), element.bonds):
+                    ports[f"{port}.e"], ports[f"{port}.f"] = Form.var(c.effort[bond]), Form.var(c.flow[bond])
+                for left, right in info.ratios:     # left = r * right
+                    c.equal(ports[left], value.plus(ports[right]), span, "ratio",
+                            f"{left} = r*{right} of {kind} '{element.name}'")
         for state in element.states:
             own = Form.var(c.state[state.qualified])
             if state.rate is not None:

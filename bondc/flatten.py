@@ -56,7 +56,7 @@ from typing import Iterable, Mapping, Sequence
 
 from bondc import ast
 from bondc.errors import Diagnostic, Hint, Related
-from bondc.model import JUNCTION_KINDS, KINDS
+from bondc.kinds import JUNCTION_KINDS, KINDS
 from bondc.source import Span
 
 _BOND_NUMBER = re.compile(r"b([0-9]+)")

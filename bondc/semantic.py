@@ -49,8 +49,9 @@ from bondc import ast, builtins, units
 from bondc.io import read_source
 from bondc.errors import Diagnostic, Hint, ModelError, Related, sort_key
 from bondc.evaluate import EvaluationError, ExpansionBudget, evaluate
+from bondc.kinds import JUNCTION_KINDS, JUNCTIONS, KINDS, RESISTOR, STORAGE
 from bondc.model import (
-    JUNCTION_KINDS, KINDS, PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
+    PORT_NAMES, BondGraph, Bond, ElementNode, ExperimentDef, Function, JunctionNode,
     OutputDef, Parameter, Signal, StateVar, WhenDef,
 )
 from bondc.parse import parse_source
@@ -600,7 +601,7 @@ def _check_element_laws(m: _Model, element: ast.Element) -> _ElementLaws:
         if name not in laws.rates:
             m.report(_error("E504", f"state '{name}' of '{element.name}' has no rate law", state.name_span,
                             hint=f"add 'der({name}) = ...', driven by the element's "
-                                 f"{'flow f' if kind.storage == 'C' else 'effort e'}"))
+                                 f"{kind.stored_variable}"))
     return laws
 
 
@@ -620,7 +621,7 @@ def _check_state_law(m: _Model, element: ast.Element, laws: _ElementLaws, call: 
         if target in laws.custom:
             _store_once(m, laws.rates, target, call, f"'{element.name}' has two rate laws for {target}")
         elif target is not None and target == kind.state and not laws.custom:
-            port = "flow f" if kind.storage == "C" else "effort e"
+            port = kind.stored_variable or ""
             m.report(_error("E504", f"the rate of {target} is the {port} of '{element.name}' and cannot be given",
                             call.span, hint=f"der({target}) = {port[-1]} always; to integrate something else, declare "
                                             f"a state: 'state X [unit], der(X) = ..., X(0) = ...'"))
@@ -837,7 +838,7 @@ class _ExpressionChecker:
             return [f"{name}.e", f"{name}.f"]
         if decl.category == "junction":
             kind = self.m.junction_kind(name)
-            return [f"{name}.e"] if kind == "0" else [f"{name}.f"] if kind == "1" else []
+            return [f"{name}.{JUNCTIONS[kind].common}"] if kind is not None else []
         kind = self.m.known_kind(name)
         if kind is None:
             return []
@@ -902,11 +903,11 @@ class _ExpressionChecker:
         kind = self.m.junction_kind(name)
         if kind is None:
             return True  # unknown junction kind, reported by check_kinds
-        common = "e" if kind == "0" else "f"
+        common = JUNCTIONS[kind].common
         if rest == (common,):
             return True
         if rest in (("e",), ("f",)):
-            has, lacks = ("effort", "flow") if kind == "0" else ("flow", "effort")
+            has, lacks = JUNCTIONS[kind].common_word, JUNCTIONS[kind].summed_word
             bonds = [f"b{end.bond}" if self.m.bonds[end.bond - 1].label is None else self.m.bonds[end.bond - 1].label
                      for end in self.m.ends.get(name, [])]
             example = f", e.g. {bonds[0]}.{rest[0]}" if bonds else ""
@@ -2025,13 +2026,13 @@ def check_passive_orientation(m: _Model) -> None:
     is legal but almost never meant.
     """
     for element in m.elements:
-        if element.kind not in ("R", "C", "I"):
+        if element.kind not in KINDS or KINDS[element.kind].role not in (RESISTOR, STORAGE):
             continue
         ends = m.ends.get(element.name, ())
         if len(ends) != 1 or ends[0].side != "tail":
             continue
         bond = m.bonds[ends[0].bond - 1]
-        role = {"R": "it dissipates", "C": "it stores", "I": "it stores"}[element.kind]
+        role = "it stores" if KINDS[element.kind].stores else "it dissipates"
         m.report(_warning(
             "W304", f"the bond of {element.kind} '{element.name}' is drawn leaving it, so its e*f is the power "
                     f"it delivers, not the power {role}", element.name_span,
