@@ -516,32 +516,27 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
     return diagnostics, found
 
 
+#: What E210 says for each kind of equation: (message, hint), the message formatted with the two
+#: dimensions ``a`` and ``b`` and the equation's ``what``.
+_DECLARED = ("{what} is {a}, but its expression is {b}",
+             "declare the unit of what the expression computes, or fix the expression")
+_MESSAGES: Mapping[str, tuple[str, str]] = {
+    "sum": ("cannot add or subtract {a} and {b}",
+            "both terms of a sum must measure the same quantity; check the units of the names involved"),
+    "compare": ("cannot compare {a} with {b}", "both sides of a comparison must measure the same quantity"),
+    "branch": ("the branches of 'if' differ: {a} and {b}", "both branches must give the same quantity"),
+    "output": _DECLARED,
+    "input": _DECLARED,
+    "law": ("the two sides of the law differ: {what} is {a}, but the expression is {b}",
+            "the bond's domain comes from the elements around it; check the units of the parameters in the law"),
+    "assign": ("{what} sets {a} to {b}",
+               "the new value must measure the same quantity as the variable or state it replaces"),
+    "exponent": ("an exponent must be dimensionless, not {b}", "divide by a reference quantity of the same unit"),
+}
+_OTHER = ("dimensions differ in {what}: {a} and {b}", "check the units of the quantities involved")
+
+
 def _diagnostic(equation: _Equation, left, right, related=()) -> Diagnostic:
-    a, b = text(left), text(right)
-    kind = equation.kind
-    if kind == "sum":
-        message = f"cannot add or subtract {a} and {b}"
-        hint = "both terms of a sum must measure the same quantity; check the units of the names involved"
-    elif kind == "compare":
-        message = f"cannot compare {a} with {b}"
-        hint = "both sides of a comparison must measure the same quantity"
-    elif kind == "branch":
-        message = f"the branches of 'if' differ: {a} and {b}"
-        hint = "both branches must give the same quantity"
-    elif kind == "output" or kind == "input":
-        message = f"{equation.what} is {a}, but its expression is {b}"
-        hint = "declare the unit of what the expression computes, or fix the expression"
-    elif kind == "law":
-        message = f"the two sides of the law differ: {equation.what} is {a}, but the expression is {b}"
-        hint = ("the bond's domain comes from the elements around it; check the units of the parameters in "
-                "the law")
-    elif kind == "assign":
-        message = f"{equation.what} sets {a} to {b}"
-        hint = "the new value must measure the same quantity as the variable or state it replaces"
-    elif kind == "exponent":
-        message = f"an exponent must be dimensionless, not {b}"
-        hint = "divide by a reference quantity of the same unit"
-    else:
-        message = f"dimensions differ in {equation.what}: {a} and {b}"
-        hint = "check the units of the quantities involved"
+    template, hint = _MESSAGES.get(equation.kind, _OTHER)
+    message = template.format(a=text(left), b=text(right), what=equation.what)
     return Diagnostic("error", "E210", message, equation.span, hint, tuple(related))

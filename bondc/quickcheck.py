@@ -428,7 +428,7 @@ class _Verdict:
         if not junction.bonds:
             return
         strong = self.causal.strong_bond(junction.name)
-        common, summed = ("e", "f") if junction.kind == "0" else ("f", "e")
+        common, summed = junction.kind_info.common, junction.kind_info.summed
         for bond in junction.bonds:
             if bond != strong:
                 add((common, bond), {(common, strong)})
