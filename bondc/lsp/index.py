@@ -221,7 +221,7 @@ def resolve(index: Index, use: Use, part: int = 0) -> Symbol | None:
 
 
 def element_members(statement: ast.Element) -> list[str]:
-    """The variables ``NAME.x`` an element has, as semantic.py resolves them: a two-port's
+    """The variables ``NAME.x`` an element has, as bondc.semantic resolves them: a two-port's
     ``p1.e`` ... ``p2.f``; a one-port's ``e``, ``f`` and its states (the ones its laws declare,
     else its kind's own: ``q`` of a C, ``p`` of an I)."""
     kind = KINDS[statement.kind]
