@@ -14,15 +14,25 @@ from bondc import ast
 from bondc.errors import Diagnostic, ModelError, Related, sort_key
 from bondc.flatten import flatten, ports_of
 from bondc.kinds import KINDS
-from bondc.model import Bond, BondGraph, ElementNode, ExperimentDef, Function, JunctionNode, OutputDef, Parameter, Signal, StateVar, WhenDef
+from bondc.model import (
+    Bond, BondGraph, ElementNode, ExperimentDef, Function, JunctionNode, OutputDef, Parameter, Signal, StateVar,
+    WhenDef,
+)
 from bondc.source import Source, Span
 from bondc.semantic.bonds import _number_bonds, check_bonds, check_ports
-from bondc.semantic.context import FIRST, _Definition, _ElementLaws, _Model, _declare, _did_you_mean, _error, _file_span, _join_hints
-from bondc.semantic.experiments import _ExperimentPlan, _experiment_def, _signal, _with_defaults, check_defaults, check_experiments
+from bondc.semantic.context import (
+    FIRST, _Definition, _ElementLaws, _Model, _declare, _did_you_mean, _error, _file_span, _join_hints,
+)
+from bondc.semantic.experiments import (
+    _ExperimentPlan, _experiment_def, _signal, _with_defaults, check_defaults, check_experiments,
+)
 from bondc.semantic.laws import check_laws, check_model_states
 from bondc.semantic.lints import check_label_names, check_passive_orientation, check_unused
 from bondc.semantic.names import check_duplicate_names, check_kinds, check_reserved_names, check_shadowing
-from bondc.semantic.parameters import _check_override, _evaluate_parameters, _override, _parameter_definitions, _parameters, _try_evaluate, check_bindings, check_constants, check_divisors
+from bondc.semantic.parameters import (
+    _check_override, _evaluate_parameters, _override, _parameter_definitions, _parameters, _try_evaluate,
+    check_bindings, check_constants, check_divisors,
+)
 from bondc.semantic.rules import check_expressions, check_functions, check_signal_cycles
 from bondc.semantic.unit_checks import _resolve_unit, check_units
 

@@ -10,7 +10,9 @@ from bondc import ast
 from bondc.errors import Related
 from bondc.flatten import KIND_CODES
 from bondc.kinds import JUNCTION_KINDS, KINDS
-from bondc.semantic.context import BUILTINS, RESERVED, _Decl, _Model, _a, _did_you_mean, _error, _join_hints, _quoted, _warning
+from bondc.semantic.context import (
+    BUILTINS, RESERVED, _Decl, _Model, _a, _did_you_mean, _error, _join_hints, _quoted, _warning,
+)
 
 
 def check_reserved_names(m: _Model) -> None:

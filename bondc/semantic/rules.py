@@ -12,7 +12,10 @@ from bondc import ast
 from bondc.errors import Related
 from bondc.kinds import KINDS
 from bondc.semantic.context import _ElementLaws, _Model, _a, _did_you_mean, _error, _quoted
-from bondc.semantic.expressions import CONSTANT, DISCRETE_START, GENERAL, SIGNAL, _Above, _DISCRETE_RULE, _Scope, _calls, _check_expr, _cycles, _names
+from bondc.semantic.expressions import (
+    CONSTANT, DISCRETE_START, GENERAL, SIGNAL, _Above, _DISCRETE_RULE, _Scope, _calls, _check_expr, _cycles,
+    _names,
+)
 
 
 _PARAMETER_RULE = "a parameter is a constant: numbers, parameters defined above it, pi and functions"
