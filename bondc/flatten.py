@@ -237,13 +237,13 @@ class _Flattener:
         own = [m for m in (home.models if home is not None else ()) if m.name == kind]
         if own:
             return own[0]
-        found = [(f, m) for f in self.files for m in f.models if m.name == kind]
-        if len({id(f) for f, _ in found}) > 1:
-            names = [library_name(f) for f, _ in found]
-            self.report(_error("E331", f"'{kind}' is defined by two imports: {' and '.join(f.path for f, _ in found)}",
+        defined = [(f, m) for f in self.files for m in f.models if m.name == kind]
+        if len({id(f) for f, _ in defined}) > 1:
+            names = [library_name(f) for f, _ in defined]
+            self.report(_error("E331", f"'{kind}' is defined by two imports: {' and '.join(f.path for f, _ in defined)}",
                                span, hint=f"qualify it with its library, e.g. '{names[0]}.{kind}'"))
             return None
-        return found[0][1] if found else None
+        return defined[0][1] if defined else None
 
     # -- one model at one prefix
 
@@ -288,7 +288,7 @@ class _Flattener:
         # Instances first, so that references into them resolve.
         for statement in model.body:
             sub = kinds.get(id(statement))
-            if sub is None:
+            if sub is None or not isinstance(statement, ast.Element):
                 continue
             path = prefix + statement.name
             if any(sub is seen for seen, _ in stack):
@@ -328,9 +328,10 @@ class _Flattener:
             else:
                 x.statements.append(renamer.statement(statement))
         for statement in model.body:
-            sub = x.instances.get(statement.name) if id(statement) in kinds else None
-            if sub is not None:
-                self.unbonded_ports(x, sub, statement)
+            if isinstance(statement, ast.Element) and id(statement) in kinds:
+                expansion = x.instances.get(statement.name)
+                if expansion is not None:
+                    self.unbonded_ports(x, expansion, statement)
         for port in x.ports.values():
             if port.end is None:
                 self.report(_error("E333", f"port '{port.name}' is not bonded inside model '{model.name}'",
@@ -630,7 +631,7 @@ class _Renamer:
     def laws(self, laws: tuple, exempt: frozenset[str]) -> tuple:
         saved, self.exempt = self.exempt, exempt
         try:
-            out = []
+            out: list[ast.Law] = []
             for law in laws:
                 if isinstance(law, ast.LawAssign):
                     out.append(dataclasses.replace(law, value=self.expr(law.value)))

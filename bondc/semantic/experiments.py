@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, Union
 
 from bondc import ast, units
 from bondc.errors import Related
@@ -100,6 +100,10 @@ def _check_input_replacement(m: _Model, plan: _ExperimentPlan, item: ast.Input, 
                         hint=f"'external' belongs on the model's input ('input {item.name} [UNIT] external = ...'); "
                              f"an experiment replaces an input with a signal ('input {item.name} = ...')"))
         return
+    if item.value is None:      # (was an internal error)
+        m.report(_error("E334", f"{where} replaces input '{item.name}' without a value", item.name_span,
+                        hint=f"give it its signal: 'input {item.name} = ...'"))
+        return
     _require_coherent(m, item.unit, f"input '{item.name}'", "an input is computed in SI")
     _check_expr(m, item.value, _scope(m, "an input", SIGNAL, _INPUT_RULE))
     plan.inputs[item.name] = item
@@ -148,13 +152,17 @@ def _check_setting(m: _Model, plan: _ExperimentPlan, item: ast.Setting) -> None:
             resolved = _resolve_unit(m, item.unit)
         else:
             resolved = _require_coherent(m, item.unit, f"setting '{item.name}'", _COMPUTED_WHY.format("it"))
-        if resolved is not None and kind == "time" and resolved.dims != units.lookup("s").dims:
+        if resolved is not None and item.unit is not None and kind == "time" and resolved.dims != _TIME:
             m.report(_error("E204", f"{item.name} is a time, but [{item.unit.text}] is not a unit of time",
                             item.unit.span, hint="write it in s, ms, min or h"))
             return
         if item.unit is not None and resolved is None:
             return
     plan.settings[item.name] = item
+
+
+#: The dimensions of a time (the second's).
+_TIME = tuple(int(base == "s") for base in units.BASE_DIMENSIONS)
 
 
 #: Settings that list names: the node each entry must be, and the E313 message and hint for another.
@@ -175,7 +183,7 @@ def _list_setting_ok(m: _Model, item: ast.Setting, kind: str) -> bool:
             ok = False
         elif isinstance(entry, ast.Name):
             ok = _declared_as(m, entry, "output", f"declare it with 'output {entry.name} = ...'") and ok
-        else:
+        elif isinstance(entry, ast.Transfer):
             for name, category in ((entry.source, "input"), (entry.target, "output")):
                 if _declared_as(m, name, category, f"bode = [INPUT -> OUTPUT]: declare it with "
                                                    f"'{category} {name.name} [UNIT] = ...'"):
@@ -197,29 +205,37 @@ def _declared_as(m: _Model, entry: ast.Name, category: str, how: str) -> bool:
     return False
 
 
-def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]):
+#: A checked setting's value: SI float, solver or operating point name, output names, transfers.
+SettingValue = Union[float, str, tuple[str, ...], tuple[tuple[str, str], ...]]
+
+
+def _setting_value(m: _Model, item: ast.Setting, values: Mapping[str, float]) -> SettingValue | None:
     """A checked setting's value: SI float, solver string or output names."""
     kind = SETTINGS[item.name]
-    if kind == "solver":
-        return item.value.value
+    node = item.value
+    items = node.items if isinstance(node, ast.ListExpr) else (node,)
+    if kind in ("solver", "operating point"):
+        return node.value if isinstance(node, ast.Str) else None    # (checked: a string)
     if kind == "outputs":
-        items = item.value.items if isinstance(item.value, ast.ListExpr) else (item.value,)
-        return tuple(entry.name for entry in items)
+        return tuple(entry.name for entry in items if isinstance(entry, ast.Name))
     if kind == "transfers":
-        return tuple((entry.source.name, entry.target.name) for entry in item.value.items)
-    if kind == "operating point":
-        return item.value.value
-    value = _try_evaluate(m, item.value, values)
+        return tuple((entry.source.name, entry.target.name) for entry in items if isinstance(entry, ast.Transfer))
+    value = _try_evaluate(m, node, values)
     if value is None:
         return None
-    if _is_constant(item.value) and item.unit is not None:
-        value = _finite_si(m, m.units[id(item.unit)].to_si(value), value, item.unit, item.value.span)
+    unit = m.units.get(id(item.unit)) if item.unit is not None else None
+    if _is_constant(node) and item.unit is not None and unit is not None:
+        value = _finite_si(m, unit.to_si(value), value, item.unit, node.span)
         if value is None:
             return None
     if value <= 0:
         m.report(_error("E317", f"{item.name} must be positive, not {value:g}", item.value.span))
         return None
     return value
+
+
+def _number(value: SettingValue | None) -> float | None:
+    return value if isinstance(value, (int, float)) else None
 
 
 def _signal(item: ast.Input, description: str | None = None) -> Signal:
@@ -234,12 +250,17 @@ def _experiment_def(m: _Model, plan: _ExperimentPlan, base_values: Mapping[str, 
         value = _setting_value(m, item, values)
         if value is not None:
             settings[name] = value
-    known = {k: settings.pop(k) for k in ("t_end", "solver", "rtol", "atol", "max_step", "cycle", "outputs")
-             if k in settings}
+    t_end, rtol, atol, max_step, cycle = (_number(settings.pop(k, None)) for k in ("t_end", "rtol", "atol",
+                                                                                   "max_step", "cycle"))
+    solver, outputs = settings.pop("solver", None), settings.pop("outputs", ())
     descriptions = {i.name: i.description for i in m.inputs}
     changed = {name: value for name, value in values.items() if base_values.get(name) != value}
     experiment = plan.experiment
-    return ExperimentDef(experiment.name, experiment.description, **known,
+    return ExperimentDef(experiment.name, experiment.description, t_end=t_end,
+                         solver=solver if isinstance(solver, str) else None, rtol=rtol, atol=atol,
+                         max_step=max_step, cycle=cycle,
+                         outputs=tuple(name for name in outputs if isinstance(name, str)) if isinstance(outputs, tuple)
+                         else (),
                          parameters=changed,
                          inputs={name: _signal(item, descriptions.get(name)) for name, item in plan.inputs.items()},
                          settings=settings, span=experiment.span)

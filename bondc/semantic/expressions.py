@@ -334,10 +334,11 @@ class _ExpressionChecker:
             for item in lst.items:
                 self.check(item, entries)
         if len(lists) == 2:
-            if len(xs.items) != len(ys.items):
-                self.report(_error("E306", f"table() has {len(xs.items)} breakpoints but {len(ys.items)} values",
-                                   node.span, hint="give one value per breakpoint"))
-            elif len(xs.items) < 2:
+            breakpoints, values = lists
+            if len(breakpoints.items) != len(values.items):
+                self.report(_error("E306", f"table() has {len(breakpoints.items)} breakpoints but "
+                                           f"{len(values.items)} values", node.span, hint="give one value per breakpoint"))
+            elif len(breakpoints.items) < 2:
                 self.report(_error("E306", "table() needs at least two points", node.span,
                                    hint="for a constant, write the value itself"))
 
