@@ -21,7 +21,7 @@ from bondc.model import (
 from bondc.source import Source, Span
 from bondc.semantic.bonds import _number_bonds, check_bonds, check_ports
 from bondc.semantic.context import (
-    FIRST, _Definition, _ElementLaws, _Model, _declare, _did_you_mean, _error, _file_span, _join_hints,
+    FIRST, _Definition, _ElementLaws, _Model, _declare, _did_you_mean, _error, _file_span, _input_value, _join_hints,
 )
 from bondc.semantic.experiments import (
     _ExperimentPlan, _experiment_def, _signal, _with_defaults, check_defaults, check_experiments,
@@ -142,7 +142,8 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     inputs = {i.name: _signal(i) for i in m.inputs}
     for i in m.inputs:
         if i.external:          # its default's value (SI), for the note that says it is used
-            inputs[i.name] = dataclasses.replace(inputs[i.name], default=_try_evaluate(m, i.value, chosen_values))
+            default = _try_evaluate(m, _input_value(i), chosen_values)
+            inputs[i.name] = dataclasses.replace(inputs[i.name], default=default)
     if selected is not None:
         inputs.update(experiment_defs[selected.name].inputs)
     graph = _graph(m, _parameters(m, chosen_definitions, chosen_values), inputs, experiment_defs)

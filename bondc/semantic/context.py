@@ -12,7 +12,7 @@ from __future__ import annotations
 import difflib
 import re
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Mapping, Sequence, TypeVar, Union
 
 from bondc import ast, builtins, units
 from bondc.errors import Diagnostic, Hint, Related
@@ -99,6 +99,12 @@ def _file_span(name: str) -> Span:
 
 # ============================================================== declarations
 
+#: A statement that declares a name.
+Declaration = Union[ast.Param, ast.Input, ast.Output, ast.StateDecl, ast.Discrete, ast.FnDef, ast.Element,
+                    ast.Junction, ast.BondChain]
+_Statement = TypeVar("_Statement")
+
+
 @dataclass(frozen=True)
 class _Decl:
     """One name the model defines, in its single namespace."""
@@ -106,7 +112,7 @@ class _Decl:
     category: str       # parameter input output state element junction function "bond label"
     name: str
     span: Span          # the name as written
-    node: object
+    node: Declaration
 
 
 @dataclass
@@ -157,7 +163,7 @@ class _Model:
 
     # The model's statements by type, in order (each kind sorted out once: the checks ask ~60
     # times, and a 10000-section chain has 120000 statements).
-    def statements(self, kind) -> list:
+    def statements(self, kind: type[_Statement]) -> list[_Statement]:
         body = self.model.body
         if self.by_kind.get(None) is not body:      # (the body is a tuple: replaced, never changed)
             self.by_kind.clear()
@@ -192,7 +198,7 @@ class _Model:
 
     def element(self, name: str) -> ast.Element | None:
         decl = self.decls.get(name)
-        return decl.node if decl is not None and decl.category == "element" else None
+        return decl.node if decl is not None and isinstance(decl.node, ast.Element) else None
 
     def known_kind(self, name: str) -> str | None:
         """The kind of element ``name`` if it is an element of a known kind."""
@@ -201,9 +207,15 @@ class _Model:
 
     def junction_kind(self, name: str) -> str | None:
         decl = self.decls.get(name)
-        if decl is None or decl.category != "junction":
+        if decl is None or not isinstance(decl.node, ast.Junction):
             return None
         return decl.node.kind if decl.node.kind in JUNCTION_KINDS else None
+
+
+def _input_value(item: ast.Input) -> ast.Expr:
+    """An input's signal or default: flattening gives every input of the model one (0 for an
+    external input written without a default), so None does not reach the checks."""
+    return item.value if item.value is not None else ast.Num(0.0, "0", item.name_span)
 
 
 def _declare(m: _Model) -> None:
@@ -233,7 +245,7 @@ def _declare(m: _Model) -> None:
                 _add_decl(m, _Decl("junction", name, span, statement))
         elif isinstance(statement, ast.BondChain) and statement.label is not None:
             _add_decl(m, _Decl("bond label", statement.label, statement.label_span, statement))
-    m.functions = {d.name: d.node for d in m.decls.values() if d.category == "function"}
+    m.functions = {d.name: d.node for d in m.decls.values() if isinstance(d.node, ast.FnDef)}
 
 
 def _add_decl(m: _Model, decl: _Decl) -> None:

@@ -12,7 +12,9 @@ from typing import Mapping, Union
 from bondc import ast, units
 from bondc.errors import Related
 from bondc.model import ExperimentDef, Signal
-from bondc.semantic.context import OPERATING_POINTS, SETTINGS, SOLVERS, _Model, _a, _did_you_mean, _error, _join_hints
+from bondc.semantic.context import (
+    OPERATING_POINTS, SETTINGS, SOLVERS, _Model, _a, _did_you_mean, _error, _input_value, _join_hints,
+)
 from bondc.semantic.expressions import CONSTANT, SIGNAL, _check_expr
 from bondc.semantic.parameters import _check_override, _finite_si, _try_evaluate
 from bondc.semantic.rules import _CONSTANT_RULE, _INPUT_RULE, _scope, check_signal_cycles
@@ -239,7 +241,7 @@ def _number(value: SettingValue | None) -> float | None:
 
 
 def _signal(item: ast.Input, description: str | None = None) -> Signal:
-    return Signal(item.name, item.value, item.unit.text if item.unit else None,
+    return Signal(item.name, _input_value(item), item.unit.text if item.unit else None,
                   item.description or description, item.span, external=item.external, name_span=item.name_span)
 
 

@@ -128,7 +128,7 @@ class _ExpressionChecker:
             variables = self._variables_of(name)
             self.report(_error("E316", f"'{name}' is {_a(decl.category)}, not a value", node.span,
                                hint=f"use one of its variables: {', '.join(variables)}" if variables else None))
-        elif decl.category == "function":
+        elif isinstance(decl.node, ast.FnDef):
             params = ", ".join(decl.node.params)
             self.report(_error("E316", f"'{name}' is a function, not a value", node.span,
                                hint=f"call it: {name}({params})"))
@@ -366,7 +366,8 @@ class _ExpressionChecker:
                 self.report(_error("E313", f"the {position} of csv() must be a string", arg.span,
                                    hint='write csv("data/file.csv", "column")'))
         if len(strings) == 2:
-            _check_csv(self.m, node, *strings, report=self.report)
+            path_arg, column_arg = strings
+            _check_csv(self.m, node, path_arg, column_arg, report=self.report)
 
 
 def _is_table(path: Path, header: list[str]) -> bool:

@@ -58,7 +58,7 @@ def _check_element_laws(m: _Model, element: ast.Element) -> _ElementLaws:
                 laws.assigns[law.target] = law
         else:
             calls.append(law)
-    if kind.storage:
+    if kind.state is not None:
         laws.state_names = tuple(laws.custom) or (kind.state,)
     for call in calls:
         _check_state_law(m, element, laws, call)
@@ -79,8 +79,8 @@ def _check_state_law(m: _Model, element: ast.Element, laws: _ElementLaws, call: 
     kind = KINDS[element.kind]
     states = laws.state_names
     if not kind.storage:
-        target = call.arg.name if call.func == "der" and isinstance(call.arg, ast.Name) else call.func
-        if any(isinstance(law, ast.LawState) and law.name == target for law in element.laws):
+        written = call.arg.name if call.func == "der" and isinstance(call.arg, ast.Name) else call.func
+        if any(isinstance(law, ast.LawState) and law.name == written for law in element.laws):
             return  # the state itself is reported (E505)
         m.report(_error("E504", f"{element.kind} '{element.name}' has no states, so '{call.func}(...)' means nothing "
                                 f"here", call.func_span, hint=f"{_a(element.kind)} takes {_kind_takes(element.kind)}"))

@@ -40,10 +40,10 @@ def check_duplicate_names(m: _Model) -> None:
                 related=[Related(earlier.span, f"first defined here, as {_a(earlier.category)}")]))
     seen_experiments: dict[str, ast.Experiment] = {}
     for experiment in m.experiments:
-        earlier = seen_experiments.setdefault(experiment.name, experiment)
-        if earlier is not experiment:
+        first_experiment = seen_experiments.setdefault(experiment.name, experiment)
+        if first_experiment is not experiment:
             m.report(_error("E302", f"experiment '{experiment.name}' is defined twice", experiment.name_span,
-                            related=[Related(earlier.name_span, "first defined here")]))
+                            related=[Related(first_experiment.name_span, "first defined here")]))
     for function in m.functions.values():
         seen: set[str] = set()
         for name in function.params:

@@ -14,7 +14,7 @@ from bondc.errors import Diagnostic, Related
 from bondc.evaluate import EvaluationError, evaluate
 from bondc.model import Parameter
 from bondc.source import Span
-from bondc.semantic.context import _Definition, _Model, _a, _did_you_mean, _error
+from bondc.semantic.context import _Definition, _Model, _a, _did_you_mean, _error, _input_value
 from bondc.semantic.expressions import CONSTANT, _calls, _check_expr, _cycles, _names
 from bondc.semantic.rules import _BINDING_RULE, _OVERRIDE_RULE, _scope
 from bondc.semantic.unit_checks import _COMPUTED_WHY, _is_constant, _require_coherent, _resolve_unit
@@ -47,7 +47,7 @@ def _check_override(m: _Model, name: str, name_span: Span, expr: ast.Expr, unit:
                     where: str) -> bool:
     """An experiment's ``param`` or a ``--set``: the name is a parameter, the value and unit fit it."""
     decl = m.decls.get(name)
-    if decl is None or decl.category != "parameter":
+    if decl is None or not isinstance(decl.node, ast.Param):
         what = f"; '{name}' is {_a(decl.category)}" if decl is not None else ""
         m.report(_error("E301", f"{where} sets '{name}', which is not a parameter{what}", name_span,
                         hint=_did_you_mean(name, m.names("parameter"))))
@@ -63,13 +63,15 @@ def _check_override(m: _Model, name: str, name_span: Span, expr: ast.Expr, unit:
         resolved = _resolve_unit(m, unit)
     else:
         resolved = _require_coherent(m, unit, f"the value of '{name}'", _COMPUTED_WHY.format("the value"))
-    declared = _resolve_unit(m, decl.node.unit)
-    if resolved is not None and declared is not None and resolved.dims != declared.dims:
+    declared_unit = decl.node.unit
+    declared = _resolve_unit(m, declared_unit)
+    if (unit is not None and declared_unit is not None and resolved is not None and declared is not None
+            and resolved.dims != declared.dims):
         m.report(_error("E204", f"[{unit.text}] does not measure the same quantity as [{declared.text}], the unit "
                                 f"of '{name}'", unit.span,
                         hint=f"give the value in [{declared.text}] or a unit of the same kind "
                              f"({declared.dimension_text()})",
-                        related=[Related(decl.node.unit.span, f"'{name}' is declared in [{declared.text}] here")]))
+                        related=[Related(declared_unit.span, f"'{name}' is declared in [{declared.text}] here")]))
         ok = False
     return ok
 
@@ -179,7 +181,7 @@ def _parameters(m: _Model, definitions: Mapping[str, _Definition],
         unit = definition.unit if definition.unit is not None else definition.declared_unit
         resolved = m.units.get(id(unit)) if unit is not None else None
         out[name] = Parameter(name, values[name], definition.expr, unit.text if unit is not None else None,
-                              declared.description, declared.span,
+                              declared.description if isinstance(declared, ast.Param) else None, declared.span,
                               resolved.factor if resolved is not None else 1.0)
     return out
 
@@ -190,7 +192,7 @@ def check_constants(m: _Model, values: Mapping[str, float]) -> None:
     for laws in m.element_laws.values():
         constants += [law.value for law in laws.initials.values()]
     constants += [laws.initial.value for laws in m.model_states.values() if laws.initial is not None]
-    constants += [signal.value for signal in m.inputs if signal.external]      # external inputs' defaults
+    constants += [_input_value(signal) for signal in m.inputs if signal.external]      # external inputs' defaults
     for expr in constants:
         _try_evaluate(m, expr, values)
     for expr in _all_expressions(m):
@@ -207,7 +209,7 @@ def check_divisors(m: _Model, values: Mapping[str, float]) -> None:
     ``m = 0``): every evaluation of it would be inf or nan. The divisions are kept on the graph
     (``BondGraph.divisors``) so that values bound later (a sweep's points) are checked the same way
     (:func:`zero_divisors`)."""
-    exprs = [i.value for i in m.inputs] + [o.value for o in m.outputs]
+    exprs = [_input_value(i) for i in m.inputs] + [o.value for o in m.outputs]
     for element in m.elements:
         exprs += [law.value for law in element.laws if isinstance(law, (ast.LawAssign, ast.LawCall))]
     for state in m.statements(ast.StateDecl):
@@ -284,7 +286,7 @@ def _check_breakpoints(m: _Model, breakpoints: ast.ListExpr, values: Mapping[str
 
 
 def _all_expressions(m: _Model) -> list[ast.Expr]:
-    exprs = [p.value for p in m.params] + [i.value for i in m.inputs] + [o.value for o in m.outputs]
+    exprs = [p.value for p in m.params] + [_input_value(i) for i in m.inputs] + [o.value for o in m.outputs]
     for element in m.elements:
         for law in element.laws:
             if isinstance(law, (ast.LawAssign, ast.LawCall)):

@@ -11,7 +11,7 @@ from typing import Mapping, Sequence
 from bondc import ast
 from bondc.errors import Related
 from bondc.kinds import KINDS
-from bondc.semantic.context import _ElementLaws, _Model, _a, _did_you_mean, _error, _quoted
+from bondc.semantic.context import _ElementLaws, _Model, _input_value, _a, _did_you_mean, _error, _quoted
 from bondc.semantic.expressions import (
     CONSTANT, DISCRETE_START, GENERAL, SIGNAL, _Above, _DISCRETE_RULE, _Scope, _calls, _check_expr, _cycles,
     _names,
@@ -39,12 +39,13 @@ def _scope(m: _Model, what: str, allowed: frozenset[str], rule: str, **extra) ->
 def check_functions(m: _Model) -> None:
     """Names in function bodies (their arguments only) and E304 recursion."""
     for decl in m.all_decls:
-        if decl.category != "function" or m.decls[decl.name] is not decl:
-            continue
         function = decl.node
+        if not isinstance(function, ast.FnDef) or m.decls[decl.name] is not decl:
+            continue
         file_level = function.name in m.file_functions and m.file_functions[function.name] is function
         callable_ = m.file_functions if file_level else m.functions
         arguments = ", ".join(function.params) or "none"
+        allowed: frozenset[str]
         if file_level:
             allowed, rule = frozenset(), (f"a file-level function uses only its arguments ({arguments}), pi, "
                                           f"numbers and functions; pass other values as arguments")
@@ -81,10 +82,10 @@ def check_expressions(m: _Model) -> None:
         _check_expr(m, param.value, scope)
     for signal in m.inputs:
         if signal.external:
-            _check_expr(m, signal.value, _scope(m, f"the default of external input '{signal.name}'", CONSTANT,
+            _check_expr(m, _input_value(signal), _scope(m, f"the default of external input '{signal.name}'", CONSTANT,
                                                 _EXTERNAL_RULE, code="E344"))
         else:
-            _check_expr(m, signal.value, _scope(m, "an input", SIGNAL, _INPUT_RULE))
+            _check_expr(m, _input_value(signal), _scope(m, "an input", SIGNAL, _INPUT_RULE))
     for output in m.outputs:
         _check_expr(m, output.value, _scope(m, "an output", GENERAL, _GENERAL_RULE))
     for element in m.elements:
@@ -212,7 +213,8 @@ def check_signal_cycles(m: _Model, inputs: Mapping[str, ast.Input] | None = None
     groups = (("input", inputs if inputs is not None else {i.name: i for i in m.inputs}),
               ("output", {o.name: o for o in m.outputs}))
     for category, defs in groups:
-        edges = {name: _names(d.value) for name, d in defs.items()}
+        edges = {name: _names(_input_value(d) if isinstance(d, ast.Input) else d.value)
+                 for name, d in defs.items()}
         for cycle in _cycles(list(defs), edges):
             path = " -> ".join(cycle + [cycle[0]])
             m.report(_error("E305", f"{category}s defined in terms of each other: {path}",

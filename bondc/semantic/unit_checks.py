@@ -53,7 +53,7 @@ def _coherent_factors(name: str) -> tuple[tuple[str, int], ...] | None:
     si = units.lookup(name)
     if si is None or si.is_coherent:
         return ((name, 1),)
-    if si.dims == units.lookup("kg").dims:
+    if si.dims == _MASS:
         return (("kg", 1),)
     for prefix in units.PREFIXES:
         base = units.lookup(name[len(prefix):]) if name.startswith(prefix) else None
@@ -89,10 +89,14 @@ def coherent_suggestion(unit: ast.Unit) -> str:
     return text
 
 
+#: The dimensions of a mass (the kilogram's).
+_MASS = tuple(int(base == "kg") for base in units.BASE_DIMENSIONS)
+
+
 def _require_coherent(m: _Model, unit: ast.Unit | None, who: str, why: str) -> units.SIUnit | None:
     """E202 unless ``unit`` (if any) is coherent SI; returns the resolved unit."""
     resolved = _resolve_unit(m, unit)
-    if resolved is not None and not resolved.is_coherent:
+    if unit is not None and resolved is not None and not resolved.is_coherent:
         m.report(_error("E202", f"the unit of {who} must be a coherent SI unit, not [{unit.text}]", unit.span,
                         hint=f"{why}: write [{coherent_suggestion(unit)}]"))
     return resolved
