@@ -207,9 +207,9 @@ def resolve_reference(graph: BondGraph, effort_setter: Mapping[int, str], parts:
                 return (wanted, bond)
         return (wanted, junction.bonds[0]) if junction.bonds else None
     if len(parts) == 2 and parts[1] in ("e", "f"):
-        for bond in graph.bonds:
-            if bond.label == head:
-                return (parts[1], bond.number)
+        for labelled in graph.bonds:
+            if labelled.label == head:
+                return (parts[1], labelled.number)
         if head.startswith("b") and head[1:].isdigit() and 1 <= int(head[1:]) <= len(graph.bonds):
             return (parts[1], int(head[1:]))
     return None
@@ -396,7 +396,7 @@ class _Procedure:
         self._decide(element.bond, options, subject=element)
 
     def _decide(self, bond: int, options, subject: ElementNode | None) -> None:
-        first_conflict = None
+        first_conflict: tuple[_Conflict, _Assignment, str] | None = None
         for setter, origin in options:
             # try the option in place; undo it on a conflict (a copy of the whole assignment per
             # decision made causality quadratic in the number of bonds)
@@ -407,6 +407,7 @@ class _Procedure:
             if first_conflict is None:
                 first_conflict = (conflict, self.state.copy(), origin)
             self.state.undo(mark)
+        assert first_conflict is not None, "a decision has at least one option"
         conflict, trial, origin = first_conflict
         self.errors.append(_conflict_diagnostic(self.graph, conflict, trial, origin, subject))
 
@@ -466,7 +467,7 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
     culprits = [name for name in origins if name in graph.elements]
     where = conflict.node
     described = join_words([describe_node(graph, name) for name in culprits]) or "the bonds"
-    if where in graph.junctions:
+    if where is not None and where in graph.junctions:
         junction = graph.junctions[where].kind_info
         kind = junction.name
         if conflict.what == "none":
@@ -477,7 +478,7 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
             message = f"causal conflict: {described} {verb} the {conflict.what} of {kind}-junction '{where}'"
         hint = (f"a {kind}-junction takes its common {junction.common_word} from exactly one bond; "
                 "remove one of them, or put a resistor or storage element between them")
-    elif where in graph.elements:
+    elif where is not None and where in graph.elements:
         message = (f"causal conflict at {describe_node(graph, where)}: {described} impose incompatible causality "
                    f"on its two ports")
         hint = "a transformer passes an effort through in one direction only; a gyrator turns flow into effort"
@@ -496,9 +497,9 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
         if subject is not None and name == subject.name:
             continue
         related.append(Related(element_span(graph.elements[name]), f"{describe_node(graph, name)} is declared here"))
-    if where in graph.junctions:
+    if where is not None and where in graph.junctions:
         related.append(Related(graph.junctions[where].span, f"{describe_node(graph, where)}"))
-    elif where in graph.elements and (subject is None or where != subject.name):
+    elif where is not None and where in graph.elements and (subject is None or where != subject.name):
         related.append(Related(element_span(graph.elements[where]), describe_node(graph, where)))
     for bond in conflict.bonds:
         related.append(Related(graph.bond(bond).span, _bond_text(graph, bond)))
@@ -605,9 +606,9 @@ def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mappi
         for bond in others:
             relations.append((junction.name, f"{common}{bond}", (f"{common}{strong}",)))
         relations.append((junction.name, f"{summed}{strong}", tuple(f"{summed}{b}" for b in others)))
-    for output in graph.outputs.values():
-        relations.append((output.name, f"o:{output.name}",
-                          tuple(_law_references(graph, setter, output.expr, None))))
+    for declared in graph.outputs.values():
+        relations.append((declared.name, f"o:{declared.name}",
+                          tuple(_law_references(graph, setter, declared.expr, None))))
     return tuple(relations)
 
 

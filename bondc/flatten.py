@@ -612,6 +612,7 @@ class _Renamer:
             return dataclasses.replace(node, parts=(sub.prefix + head,) + rest)
         if head in sub.values and not rest:
             return ast.Name(sub.prefix + head, node.span)
+        hint: str | None
         if head in sub.ports:
             message = f"'{written}.{head}' is a port of '{sub.model.name}'; a port has no variables"
             hint = "use a variable of the element or junction the port is bonded to inside"
