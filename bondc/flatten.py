@@ -240,7 +240,8 @@ class _Flattener:
         defined = [(f, m) for f in self.files for m in f.models if m.name == kind]
         if len({id(f) for f, _ in defined}) > 1:
             names = [library_name(f) for f, _ in defined]
-            self.report(_error("E331", f"'{kind}' is defined by two imports: {' and '.join(f.path for f, _ in defined)}",
+            files = " and ".join(f.path for f, _ in defined)
+            self.report(_error("E331", f"'{kind}' is defined by two imports: {files}",
                                span, hint=f"qualify it with its library, e.g. '{names[0]}.{kind}'"))
             return None
         return defined[0][1] if defined else None

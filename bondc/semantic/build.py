@@ -199,10 +199,10 @@ def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -
         for law in element.laws:
             if isinstance(law, ast.LawState):
                 state_units[f"{element.name}.{law.name}"] = law.unit
-    for statement in m.statements(ast.StateDecl):
-        state_units[statement.name] = statement.unit
-    for statement in m.statements(ast.Discrete):
-        state_units[statement.name] = statement.unit
+    for declared in m.statements(ast.StateDecl):
+        state_units[declared.name] = declared.unit
+    for discrete in m.statements(ast.Discrete):
+        state_units[discrete.name] = discrete.unit
     context = dimensions.Context(
         graph=graph, unit_of=lambda unit: _resolve_unit(m, unit),
         params={p.name: p for p in m.params if m.decls.get(p.name) is not None and m.decls[p.name].node is p},
@@ -235,8 +235,8 @@ def check_experiment_values(m: _Model, plans: Sequence[_ExperimentPlan], sets: S
         definitions = _parameter_definitions(m)
         for item in plan.params:
             _override(item.name, item.value, item.unit, item.span, f"experiment '{experiment.name}'", definitions)
-        for item in sets:
-            _override(item.name, item.value, item.unit, item.span, "--set", definitions)
+        for assignment in sets:
+            _override(assignment.name, assignment.value, assignment.unit, assignment.span, "--set", definitions)
         values = _in_experiment(m, experiment, lambda: _evaluate_parameters(m, definitions))
         experiment_defs[experiment.name] = _experiment_def(m, plan, base_values, values)
         if experiment is selected:
@@ -249,16 +249,15 @@ def _in_experiment(m: _Model, experiment: ast.Experiment, run):
     start = len(m.diagnostics)
     result = run()
     inside = experiment.span
-    for index in range(start, len(m.diagnostics)):
-        d = m.diagnostics[index]
+    before = m.diagnostics[:start]
+    kept: list[Diagnostic] = []
+    for d in m.diagnostics[start:]:
         if d.span.file == inside.file and inside.start <= d.span.start <= inside.end:
-            continue
-        if any(d == earlier for earlier in m.diagnostics[:start]):
-            m.diagnostics[index] = None
-            continue
-        note = Related(experiment.name_span, f"with the overrides of experiment '{experiment.name}'")
-        m.diagnostics[index] = dataclasses.replace(d, related=d.related + (note,))
-    m.diagnostics[:] = [d for d in m.diagnostics if d is not None]
+            kept.append(d)
+        elif not any(d == earlier for earlier in before):
+            note = Related(experiment.name_span, f"with the overrides of experiment '{experiment.name}'")
+            kept.append(dataclasses.replace(d, related=d.related + (note,)))
+    m.diagnostics[start:] = kept
     return result
 
 
@@ -273,7 +272,8 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
     for state in m.statements(ast.StateDecl):
         laws = m.model_states[state.name]
         model_states.append(StateVar(state.name, state.name, None, state.unit.text if state.unit else None,
-                                     laws.initial.value if laws.initial else None, laws.rate.value,
+                                     laws.initial.value if laws.initial else None,
+                                     laws.rate.value if laws.rate else None,
                                      state.description, state.span))
     discrete = []
     for variable in m.statements(ast.Discrete):
@@ -297,7 +297,7 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
     return BondGraph(m.model.name, m.model.description, m.file.path, parameters, functions, inputs, outputs,
                      elements, junctions, bonds, tuple(model_states), experiments,
                      sources=dict(m.sources), span=m.model.span, discrete=tuple(discrete), whens=tuple(whens),
-                     divisors=getattr(m, "divisors", ()))
+                     divisors=m.divisors)
 
 
 def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], dict[str, JunctionNode],
@@ -311,12 +311,16 @@ def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], 
     elements = {}
     for element in m.elements:
         laws = m.element_laws[element.name]
+        bond_numbers: tuple[int, ...]
+        signs: tuple[int, ...]
         if KINDS[element.kind].ports == 2:
             (p1, p2), signs = m.ports[element.name]
             for number, port in ((p1, "p1"), (p2, "p2")):
                 bond = bonds[number - 1]
-                side = "tail_port" if bond.tail == element.name else "head_port"
-                bonds[number - 1] = dataclasses.replace(bond, **{side: port})
+                if bond.tail == element.name:
+                    bonds[number - 1] = dataclasses.replace(bond, tail_port=port)
+                else:
+                    bonds[number - 1] = dataclasses.replace(bond, head_port=port)
             bond_numbers = (p1, p2)
         else:
             (end,) = m.ends[element.name]
@@ -352,7 +356,7 @@ def _when_text(m: _Model, when: ast.When) -> str:
 
 def _element_states(element: ast.Element, laws: _ElementLaws) -> tuple[StateVar, ...]:
     kind = KINDS[element.kind]
-    if not kind.storage:
+    if kind.state is None:      # (not a storage element)
         return ()
     if not laws.custom:
         initial = laws.initials.get(kind.state)

@@ -155,6 +155,8 @@ class _Model:
     good_bindings: list = field(default_factory=list)  # those that fit their parameter
     instances: list = field(default_factory=list)      # flatten.Instance: the instance tree
     by_kind: dict = field(default_factory=dict, repr=False)     # statements(): kind -> statements
+    # every division by parameters alone: (divisor, parameter names), for BondGraph.divisors
+    divisors: tuple[tuple[ast.Expr, tuple[str, ...]], ...] = ()
     # what evaluating the constants may spend on expanding fn calls (E319)
     budget: ExpansionBudget = field(default_factory=ExpansionBudget, repr=False)
 

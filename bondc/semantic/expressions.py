@@ -337,7 +337,8 @@ class _ExpressionChecker:
             breakpoints, values = lists
             if len(breakpoints.items) != len(values.items):
                 self.report(_error("E306", f"table() has {len(breakpoints.items)} breakpoints but "
-                                           f"{len(values.items)} values", node.span, hint="give one value per breakpoint"))
+                                           f"{len(values.items)} values", node.span,
+                                   hint="give one value per breakpoint"))
             elif len(breakpoints.items) < 2:
                 self.report(_error("E306", "table() needs at least two points", node.span,
                                    hint="for a constant, write the value itself"))

@@ -78,7 +78,8 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
                                                                    f"std:{n}" for n in STD_LIBRARIES))))
                     continue
             else:
-                target = source.path.parent / item.path
+                folder = source.path.parent if source.path is not None else Path(os.path.dirname(source.name))
+                target = folder / item.path
                 name = os.path.normpath(os.path.join(os.path.dirname(source.name), item.path))
                 problem = _not_a_model_file(target, item.path)
                 if problem is not None:

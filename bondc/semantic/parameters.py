@@ -157,7 +157,7 @@ def _definition_value(m: _Model, definition: _Definition, values: Mapping[str, f
     resolved = m.units.get(id(unit)) if unit is not None else None
     if unit is not None and resolved is None:
         return None
-    if resolved is None:
+    if resolved is None or unit is None:
         return value
     return _finite_si(m, resolved.to_si(value), value, unit, definition.expr.span)
 
@@ -223,7 +223,7 @@ def check_divisors(m: _Model, values: Mapping[str, float]) -> None:
                       [getattr(node, k) for k in ("operand", "left", "right") if hasattr(node, k)]):
             yield from unguarded(child)
 
-    divisors = []
+    divisors: list[tuple[ast.Expr, tuple[str, ...]]] = []
     for expr in exprs:
         if not m.expr_ok.get(id(expr), False):
             continue
@@ -231,8 +231,9 @@ def check_divisors(m: _Model, values: Mapping[str, float]) -> None:
             if not (isinstance(node, ast.Binary) and node.op == "/"):
                 continue
             names = [n for n in ast.walk(node.right) if isinstance(n, (ast.Name, ast.Ref, ast.Call))]
-            if names and all(isinstance(n, ast.Name) and n.name in values for n in names):
-                divisors.append((node.right, tuple(dict.fromkeys(n.name for n in names))))
+            parameters = [n.name for n in names if isinstance(n, ast.Name) and n.name in values]
+            if names and len(parameters) == len(names):
+                divisors.append((node.right, tuple(dict.fromkeys(parameters))))
     m.divisors = tuple(divisors)
     for diagnostic in zero_divisors(m.divisors, values):
         m.report(diagnostic)
@@ -299,6 +300,6 @@ def _all_expressions(m: _Model) -> list[ast.Expr]:
         for action in when.actions:
             exprs += [action.value] if isinstance(action, ast.WhenAssign) else list(action.args)
     for experiment in m.experiments:
-        exprs += [item.value for item in experiment.body]
+        exprs += [_input_value(item) if isinstance(item, ast.Input) else item.value for item in experiment.body]
     exprs += [f.body for f in m.functions.values()]
     return exprs
