@@ -377,11 +377,11 @@ class _Verdict:
 
     def _storage(self, element, add) -> None:
         bond = element.bond
-        is_c = element.kind_info.storage == "C"
+        computed = element.kind_info.law_variable      # what its law computes: e (C) or f (I)
         for state in element.states:
             if state.rate is not None:
                 self.refs(state.rate, element)
-        add(("e" if is_c else "f", bond), self.law(element, "e" if is_c else "f"))
+        add((computed, bond), self.law(element, computed))
 
     def _resistor(self, element, add) -> None:
         bond = element.bond
