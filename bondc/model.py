@@ -17,11 +17,15 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 from bondc import ast
 from bondc.kinds import JUNCTION_KINDS, JUNCTIONS, KINDS, RESISTOR, STORAGE, JunctionKind, Kind
+from bondc.scope import Scope
 from bondc.source import NO_SPAN, Source, Span
+
+if TYPE_CHECKING:       # (flatten builds the instances; the graph only carries them)
+    from bondc.flatten import Instance
 
 
 PORT_NAMES = ("p1", "p2")
@@ -167,7 +171,7 @@ class WhenDef:
     ``"assign"`` (a discrete variable, by name) or ``"reinit"`` (a state: a Name or a Ref)."""
 
     condition: ast.Expr
-    actions: tuple
+    actions: tuple[tuple[str, ast.Expr, ast.Expr], ...]
     text: str
     span: Span = NO_SPAN
 
@@ -193,12 +197,12 @@ class BondGraph:
     whens: tuple[WhenDef, ...] = ()
     # the SI unit (as dimensions: "kg*m/s") of each state and bond variable whose dimension is known
     si_units: Mapping[str, str] = field(default_factory=dict, compare=False)
-    # submodel instances (flatten.Instance: path, model, description, ports), outermost first
-    instances: tuple = field(default=(), compare=False)
-    # every declaration and use of a name, with its span (bondc.scope.Scope)
-    scope: object = field(default=None, compare=False)
+    # submodel instances (path, model, description, ports), outermost first
+    instances: tuple[Instance, ...] = field(default=(), compare=False)
+    # every declaration and use of a name, with its span
+    scope: Scope | None = field(default=None, compare=False)
     # every division by parameters alone, as (divisor expression, parameter names): E311 for bound values
-    divisors: tuple = field(default=(), compare=False)
+    divisors: tuple[tuple[ast.Expr, tuple[str, ...]], ...] = field(default=(), compare=False)
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]
