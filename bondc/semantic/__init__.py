@@ -48,9 +48,7 @@ codes are listed in ``docs/diagnostics.md``.
 
 from __future__ import annotations
 
-from bondc.semantic.context import (
-    BUILTINS, FIRST, OPERATING_POINTS, RESERVED, SET_HINT, SETTINGS, SOLVERS,
-)
+from bondc.semantic.context import BUILTINS, FIRST, OPERATING_POINTS, RESERVED, SET_HINT, SETTINGS, SOLVERS
 from bondc.semantic.names import check_duplicate_names, check_kinds, check_reserved_names, check_shadowing
 from bondc.semantic.bonds import check_bonds, check_ports
 from bondc.semantic.laws import check_laws, check_model_states

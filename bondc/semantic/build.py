@@ -19,28 +19,29 @@ from bondc.model import (
     WhenDef,
 )
 from bondc.source import Source, Span
-from bondc.semantic.bonds import _number_bonds, check_bonds, check_ports
+from bondc.semantic.bonds import check_bonds, check_ports, number_bonds
 from bondc.semantic.context import (
-    FIRST, _Definition, _ElementLaws, _Model, _declare, _did_you_mean, _error, _file_span, _input_value, _join_hints,
+    FIRST, CheckContext, declare, Definition, did_you_mean, ElementLaws, error_at, file_span, input_value,
+    join_hints,
 )
 from bondc.semantic.experiments import (
-    _ExperimentPlan, _experiment_def, _signal, _with_defaults, check_defaults, check_experiments,
+    check_defaults, check_experiments, experiment_def, ExperimentPlan, signal_of, with_defaults,
 )
 from bondc.semantic.laws import check_laws, check_model_states
 from bondc.semantic.lints import check_label_names, check_passive_orientation, check_unused
 from bondc.semantic.names import check_duplicate_names, check_kinds, check_reserved_names, check_shadowing
 from bondc.semantic.parameters import (
-    _check_override, _evaluate_parameters, _override, _parameter_definitions, _parameters, _try_evaluate,
-    check_bindings, check_constants, check_divisors,
+    check_bindings, check_constants, check_divisors, check_override, evaluate_parameters, override,
+    parameter_definitions, parameters_of, try_evaluate,
 )
 from bondc.semantic.rules import check_expressions, check_functions, check_signal_cycles
-from bondc.semantic.unit_checks import _resolve_unit, check_units
+from bondc.semantic.unit_checks import check_units, resolve_unit
 
 
 def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Model | None, list[Diagnostic]]:
     """The model to build: the only one in the main file, or the one named (also from imports)."""
     main = files[0]
-    where = _file_span(main.path)
+    where = file_span(main.path)
     own = list(main.models)
     every = own + [model for file in files[1:] for model in file.models]
     listing = ", ".join(model.name for model in every) or "none"
@@ -48,9 +49,9 @@ def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Mode
         for model in own + every:
             if model.name == name:
                 return model, []
-        return None, [_error("E309", f"no model '{name}' in '{main.path}'", where,
-                             hint=_join_hints(_did_you_mean(name, [m.name for m in every]),
-                                              f"available models: {listing}"))]
+        return None, [error_at("E309", f"no model '{name}' in '{main.path}'", where,
+                               hint=join_hints(did_you_mean(name, [m.name for m in every]),
+                                                f"available models: {listing}"))]
     candidates = own or every
     runnable = [model for model in candidates if not ports_of(model)]   # a model with ports is a component
     if len(candidates) > 1 and len(runnable) == 1:
@@ -58,13 +59,13 @@ def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Mode
     if len(candidates) == 1:
         return candidates[0], []
     if not candidates:
-        return None, [_error("E309", f"no model in '{main.path}'", where,
-                             hint="a file describes a model in a 'model NAME ... end' block")]
-    return None, [_error("E309", f"'{main.path}' has {len(candidates)} models; choose one with --model", where,
-                         hint=f"available models: {', '.join(model.name for model in candidates)}")]
+        return None, [error_at("E309", f"no model in '{main.path}'", where,
+                               hint="a file describes a model in a 'model NAME ... end' block")]
+    return None, [error_at("E309", f"'{main.path}' has {len(candidates)} models; choose one with --model", where,
+                           hint=f"available models: {', '.join(model.name for model in candidates)}")]
 
 
-def _select_experiment(m: _Model, name: str | None) -> tuple[ast.Experiment | None, list[Diagnostic]]:
+def _select_experiment(m: CheckContext, name: str | None) -> tuple[ast.Experiment | None, list[Diagnostic]]:
     if name is None:
         return None, []
     experiments = m.experiments
@@ -74,23 +75,23 @@ def _select_experiment(m: _Model, name: str | None) -> tuple[ast.Experiment | No
         if experiment.name == name:
             return experiment, []
     listing = ", ".join(e.name for e in experiments) or "none"
-    return None, [_error("E318", f"model '{m.model.name}' has no experiment '{name}'", _file_span(m.file.path),
-                         hint=_join_hints(_did_you_mean(name, [e.name for e in experiments]),
-                                          f"its experiments: {listing}"))]
+    return None, [error_at("E318", f"model '{m.model.name}' has no experiment '{name}'", file_span(m.file.path),
+                           hint=join_hints(did_you_mean(name, [e.name for e in experiments]),
+                                            f"its experiments: {listing}"))]
 
 
-def check_sets(m: _Model, sets: Sequence[ast.SetValue]) -> list[ast.SetValue]:
+def check_sets(m: CheckContext, sets: Sequence[ast.SetValue]) -> list[ast.SetValue]:
     """The command line's ``--set`` overrides that name a parameter with a fitting value and unit."""
     good = []
     for item in sets:
         name_span = Span(item.span.file, item.span.line, item.span.column, item.span.line,
                          item.span.column + len(item.name), item.span.start, item.span.start + len(item.name))
-        if _check_override(m, item.name, name_span, item.value, item.unit, "an override (--set)"):
+        if check_override(m, item.name, name_span, item.value, item.unit, "an override (--set)"):
             good.append(item)
     return good
 
 
-def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str | None, experiment: str | None,
+def build_files(files: Sequence[ast.File], sources: Mapping[str, Source], model: str | None, experiment: str | None,
            sets: Sequence[ast.SetValue]) -> tuple[BondGraph | None, list[Diagnostic]]:
     chosen, problems = _select_model(files, model)
     if chosen is None:
@@ -99,13 +100,13 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     flat = flatten(chosen, files, standalone=component)
     if flat.too_large:
         return None, list(flat.diagnostics)
-    m = _Model(files[0], sources, _with_defaults(flat.model), tuple(files))
+    m = CheckContext(files[0], sources, with_defaults(flat.model), tuple(files))
     m.diagnostics += flat.diagnostics
     m.bindings, m.instances = flat.bindings, flat.instances
     selected, problems = _select_experiment(m, experiment)
     m.diagnostics += problems
-    _declare(m)
-    _number_bonds(m)
+    declare(m)
+    number_bonds(m)
     check_reserved_names(m)
     check_duplicate_names(m)
     check_kinds(m)
@@ -134,33 +135,33 @@ def _build(files: Sequence[ast.File], sources: Mapping[str, Source], model: str 
     check_label_names(m)
     check_unused(m)
 
-    diagnostics = _unique(m.diagnostics)
+    diagnostics = sorted_unique(m.diagnostics)
     if any(d.is_error for d in diagnostics):
         if structure_known and not component:
-            diagnostics = _unique(diagnostics + _structural_conflicts(m, diagnostics))
+            diagnostics = sorted_unique(diagnostics + _structural_conflicts(m, diagnostics))
         return None, diagnostics
-    inputs = {i.name: _signal(i) for i in m.inputs}
+    inputs = {i.name: signal_of(i) for i in m.inputs}
     for i in m.inputs:
         if i.external:          # its default's value (SI), for the note that says it is used
-            default = _try_evaluate(m, _input_value(i), chosen_values)
+            default = try_evaluate(m, input_value(i), chosen_values)
             inputs[i.name] = dataclasses.replace(inputs[i.name], default=default)
     if selected is not None:
         inputs.update(experiment_defs[selected.name].inputs)
-    graph = _graph(m, _parameters(m, chosen_definitions, chosen_values), inputs, experiment_defs)
+    graph = _graph(m, parameters_of(m, chosen_definitions, chosen_values), inputs, experiment_defs)
     dimension_errors, si_units = check_dimensions(m, graph, chosen_values)
     if dimension_errors:
         if not component:    # (the laws' targets are right: only their dimensions are not)
             from bondc.causality import structural_conflicts
 
             dimension_errors += structural_conflicts(graph)
-        return None, _unique(diagnostics + dimension_errors)
+        return None, sorted_unique(diagnostics + dimension_errors)
     from bondc.scope import build_scope
 
     return dataclasses.replace(graph, si_units=si_units, instances=tuple(m.instances),
                                scope=build_scope(m.model, m.all_decls)), diagnostics
 
 
-def _structural_conflicts(m: _Model, diagnostics: Sequence[Diagnostic]) -> list[Diagnostic]:
+def _structural_conflicts(m: CheckContext, diagnostics: Sequence[Diagnostic]) -> list[Diagnostic]:
     """E601: the causal conflicts of a model whose structure (elements, junctions, bonds, ports) is
     right and whose laws, parameters or experiments have errors, so that one run reports both.
 
@@ -189,7 +190,7 @@ def _structural_conflicts(m: _Model, diagnostics: Sequence[Diagnostic]) -> list[
     return structural_conflicts(graph, unknown)
 
 
-def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -> tuple[list[Diagnostic], dict]:
+def check_dimensions(m: CheckContext, graph: BondGraph, values: Mapping[str, float]) -> tuple[list[Diagnostic], dict]:
     """E210: laws, outputs and inputs dimensionally consistent (LANGUAGE.md section 14); and the SI
     unit of every state and bond variable whose dimension is known."""
     from bondc import dimensions
@@ -204,7 +205,7 @@ def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -
     for discrete in m.statements(ast.Discrete):
         state_units[discrete.name] = discrete.unit
     context = dimensions.Context(
-        graph=graph, unit_of=lambda unit: _resolve_unit(m, unit),
+        graph=graph, unit_of=lambda unit: resolve_unit(m, unit),
         params={p.name: p for p in m.params if m.decls.get(p.name) is not None and m.decls[p.name].node is p},
         inputs={i.name: i for i in m.inputs}, outputs={o.name: o for o in m.outputs},
         discretes={d.name: d for d in m.statements(ast.Discrete)}, state_units=state_units,
@@ -212,15 +213,15 @@ def check_dimensions(m: _Model, graph: BondGraph, values: Mapping[str, float]) -
     return dimensions.analyse(context)
 
 
-def check_parameters(m: _Model, sets: Sequence[ast.SetValue]) -> tuple[dict[str, _Definition], dict[str, float]]:
+def check_parameters(m: CheckContext, sets: Sequence[ast.SetValue]) -> tuple[dict[str, Definition], dict[str, float]]:
     """E305 override cycles and E311: every parameter's SI value with the ``--set`` overrides."""
-    definitions = _parameter_definitions(m)
+    definitions = parameter_definitions(m)
     for item in sets:
-        _override(item.name, item.value, item.unit, item.span, "--set", definitions)
-    return definitions, _evaluate_parameters(m, definitions)
+        override(item.name, item.value, item.unit, item.span, "--set", definitions)
+    return definitions, evaluate_parameters(m, definitions)
 
 
-def check_experiment_values(m: _Model, plans: Sequence[_ExperimentPlan], sets: Sequence[ast.SetValue],
+def check_experiment_values(m: CheckContext, plans: Sequence[ExperimentPlan], sets: Sequence[ast.SetValue],
                             base_values: Mapping[str, float], selected: ast.Experiment | None):
     """Each experiment's parameters (its overrides, then ``--set``) and settings, evaluated.
 
@@ -232,19 +233,19 @@ def check_experiment_values(m: _Model, plans: Sequence[_ExperimentPlan], sets: S
         experiment = plan.experiment
         if experiment.name in experiment_defs:
             continue  # a duplicate name, reported by check_duplicate_names
-        definitions = _parameter_definitions(m)
+        definitions = parameter_definitions(m)
         for item in plan.params:
-            _override(item.name, item.value, item.unit, item.span, f"experiment '{experiment.name}'", definitions)
+            override(item.name, item.value, item.unit, item.span, f"experiment '{experiment.name}'", definitions)
         for assignment in sets:
-            _override(assignment.name, assignment.value, assignment.unit, assignment.span, "--set", definitions)
-        values = _in_experiment(m, experiment, lambda: _evaluate_parameters(m, definitions))
-        experiment_defs[experiment.name] = _experiment_def(m, plan, base_values, values)
+            override(assignment.name, assignment.value, assignment.unit, assignment.span, "--set", definitions)
+        values = _in_experiment(m, experiment, lambda: evaluate_parameters(m, definitions))
+        experiment_defs[experiment.name] = experiment_def(m, plan, base_values, values)
         if experiment is selected:
             chosen = (definitions, values)
     return experiment_defs, chosen
 
 
-def _in_experiment(m: _Model, experiment: ast.Experiment, run):
+def _in_experiment(m: CheckContext, experiment: ast.Experiment, run):
     """Run ``run`` and add, to each problem it reports outside the experiment, a note naming the experiment."""
     start = len(m.diagnostics)
     result = run()
@@ -261,11 +262,11 @@ def _in_experiment(m: _Model, experiment: ast.Experiment, run):
     return result
 
 
-def _unique(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
+def sorted_unique(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
     return sorted(dict.fromkeys(diagnostics), key=sort_key)
 
 
-def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, Signal],
+def _graph(m: CheckContext, parameters: Mapping[str, Parameter], inputs: Mapping[str, Signal],
            experiments: Mapping[str, ExperimentDef]) -> BondGraph:
     elements, junctions, bonds = _structure(m)
     model_states = []
@@ -300,7 +301,7 @@ def _graph(m: _Model, parameters: Mapping[str, Parameter], inputs: Mapping[str, 
                      divisors=m.divisors)
 
 
-def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], dict[str, JunctionNode],
+def _structure(m: CheckContext, states: bool = True) -> tuple[dict[str, ElementNode], dict[str, JunctionNode],
                                                           tuple[Bond, ...]]:
     """The graph's elements, junctions and bonds; ``states``: with the storage elements' states
     (False: a model whose laws have errors, where they may be incomplete)."""
@@ -339,7 +340,7 @@ def _structure(m: _Model, states: bool = True) -> tuple[dict[str, ElementNode], 
     return elements, junctions, tuple(bonds)
 
 
-def _when_text(m: _Model, when: ast.When) -> str:
+def _when_text(m: CheckContext, when: ast.When) -> str:
     """``when CONDITION`` as written (one line), for event lists; inside a component, with the
     names as the flat model has them (``when r2.air.e > r2.T_set + r2.hyst``), so that the firings
     of two instances are told apart."""
@@ -354,7 +355,7 @@ def _when_text(m: _Model, when: ast.When) -> str:
     return head if len(head) <= 120 else head[:117] + "..."
 
 
-def _element_states(element: ast.Element, laws: _ElementLaws) -> tuple[StateVar, ...]:
+def _element_states(element: ast.Element, laws: ElementLaws) -> tuple[StateVar, ...]:
     kind = KINDS[element.kind]
     if kind.state is None:      # (not a storage element)
         return ()
@@ -380,7 +381,7 @@ def build(file: ast.File, sources: Mapping[str, Source] | None = None, *, model:
     ``imported`` are the files ``file`` imports (parsed); ``overrides`` are ``--set`` values, applied
     after the experiment's. Returns the graph and the warnings.
     """
-    graph, diagnostics = _build([file, *imported], sources or {}, model, experiment, overrides)
+    graph, diagnostics = build_files([file, *imported], sources or {}, model, experiment, overrides)
     if graph is None:
         raise ModelError([d for d in diagnostics if d.is_error])
     return graph, diagnostics

@@ -1,10 +1,10 @@
 """What every check of the semantic stage shares.
 
-Takes the parsed files and the chosen ``ast.Model``; holds them in :class:`_Model` with the
-model's declarations (:func:`_declare`: one namespace of parameters, inputs, outputs, states,
+Takes the parsed files and the chosen ``ast.Model``; holds them in :class:`CheckContext` with the
+model's declarations (:func:`declare`: one namespace of parameters, inputs, outputs, states,
 elements, junctions, functions and bond labels), its numbered bonds and ends, its elements'
-laws and the diagnostics collected so far. The checks read and fill a ``_Model``; nothing here
-reports a problem itself. Also the small helpers that word diagnostics (``_error``, hints).
+laws and the diagnostics collected so far. The checks read and fill a ``CheckContext``; nothing here
+reports a problem itself. Also the small helpers that word diagnostics (``error_at``, hints).
 """
 
 from __future__ import annotations
@@ -53,21 +53,21 @@ OPERATING_POINTS = ("initial", "equilibrium")
 # Pass as ``experiment=`` to use the model's first experiment (what a command does without --experiment).
 FIRST = "<first experiment>"
 
-_BOND_NUMBER = re.compile(r"b([0-9]+)")
+BOND_NUMBER = re.compile(r"b([0-9]+)")
 
 
-def _a(noun: str) -> str:
+def a_or_an(noun: str) -> str:
     """The noun with its article: "an input", "a C", "an R", "an MSe" (letters as spoken)."""
     first = noun[:1]
     vowel = first in "aeiou" if first.islower() else first in "AEFHILMNORSX"
     return f"{'an' if vowel else 'a'} {noun}"
 
 
-def _quoted(names: Iterable[str]) -> str:
+def quoted(names: Iterable[str]) -> str:
     return ", ".join(f"'{n}'" for n in names)
 
 
-def _did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
+def did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     """``"did you mean 'x'?"`` for the closest candidate, or None."""
     candidates = sorted(set(candidates))
     same_case = [c for c in candidates if c.lower() == name.lower() and c != name]
@@ -75,24 +75,24 @@ def _did_you_mean(name: str, candidates: Iterable[str]) -> str | None:
     return Hint(f"did you mean '{found[0]}'?", (found[0],)) if found else None
 
 
-def _join_hints(*hints: str | None) -> str | None:
+def join_hints(*hints: str | None) -> str | None:
     parts = [h for h in hints if h]
     return Hint.join(parts) if parts else None
 
 
-def _error(code: str, message: str, span: Span, hint: str | None = None,
-           related: Sequence[Related] = ()) -> Diagnostic:
+def error_at(code: str, message: str, span: Span, hint: str | None = None,
+             related: Sequence[Related] = ()) -> Diagnostic:
     return Diagnostic("error", code, message, span, hint=hint, related=tuple(related),
                       suggestions=getattr(hint, "suggestions", ()))
 
 
-def _warning(code: str, message: str, span: Span, hint: str | None = None,
-             related: Sequence[Related] = ()) -> Diagnostic:
+def warning_at(code: str, message: str, span: Span, hint: str | None = None,
+               related: Sequence[Related] = ()) -> Diagnostic:
     return Diagnostic("warning", code, message, span, hint=hint, related=tuple(related),
                       suggestions=getattr(hint, "suggestions", ()))
 
 
-def _file_span(name: str) -> Span:
+def file_span(name: str) -> Span:
     """A span naming only a file (rendered ``file: error...`` without source lines)."""
     return Span(name, 0, 0, 0, 0)
 
@@ -106,7 +106,7 @@ _Statement = TypeVar("_Statement")
 
 
 @dataclass(frozen=True)
-class _Decl:
+class Decl:
     """One name the model defines, in its single namespace."""
 
     category: str       # parameter input output state element junction function "bond label"
@@ -116,7 +116,7 @@ class _Decl:
 
 
 @dataclass
-class _Definition:
+class Definition:
     """How a parameter gets its value: its declaration, or an override of it."""
 
     name: str
@@ -128,7 +128,7 @@ class _Definition:
 
 
 @dataclass
-class _Model:
+class CheckContext:
     """Everything the checks share about the model being built."""
 
     file: ast.File
@@ -136,16 +136,16 @@ class _Model:
     model: ast.Model
     files: tuple[ast.File, ...]
     diagnostics: list[Diagnostic] = field(default_factory=list)
-    decls: dict[str, _Decl] = field(default_factory=dict)
-    all_decls: list[_Decl] = field(default_factory=list)
+    decls: dict[str, Decl] = field(default_factory=dict)
+    all_decls: list[Decl] = field(default_factory=list)
     file_functions: dict[str, ast.FnDef] = field(default_factory=dict)
     functions: dict[str, ast.FnDef] = field(default_factory=dict)
     bad_functions: set[str] = field(default_factory=set)
     bonds: list[Bond] = field(default_factory=list)
-    ends: dict[str, list["_End"]] = field(default_factory=dict)
+    ends: dict[str, list["BondEnd"]] = field(default_factory=dict)
     ports: dict[str, tuple[tuple[int, int], tuple[int, int]]] = field(default_factory=dict)
-    element_laws: dict[str, "_ElementLaws"] = field(default_factory=dict)
-    model_states: dict[str, "_StateLaws"] = field(default_factory=dict)
+    element_laws: dict[str, "ElementLaws"] = field(default_factory=dict)
+    model_states: dict[str, "StateLaws"] = field(default_factory=dict)
     units: dict[int, units.SIUnit | None] = field(default_factory=dict)
     expr_ok: dict[int, bool] = field(default_factory=dict)
     used: set[str] = field(default_factory=set)
@@ -214,49 +214,49 @@ class _Model:
         return decl.node.kind if decl.node.kind in JUNCTION_KINDS else None
 
 
-def _input_value(item: ast.Input) -> ast.Expr:
+def input_value(item: ast.Input) -> ast.Expr:
     """An input's signal or default: flattening gives every input of the model one (0 for an
     external input written without a default), so None does not reach the checks."""
     return item.value if item.value is not None else ast.Num(0.0, "0", item.name_span)
 
 
-def _declare(m: _Model) -> None:
+def declare(m: CheckContext) -> None:
     """Fill the model's one namespace: file-level functions, then the model's own names."""
     for file in m.files:
         for function in file.functions:
-            _add_decl(m, _Decl("function", function.name, function.name_span, function))
+            _add_decl(m, Decl("function", function.name, function.name_span, function))
             m.file_functions.setdefault(function.name, function)
     for statement in m.model.body:
         if isinstance(statement, ast.Param):
-            _add_decl(m, _Decl("parameter", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("parameter", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Input):
-            _add_decl(m, _Decl("input", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("input", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Output):
-            _add_decl(m, _Decl("output", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("output", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.StateDecl):
-            _add_decl(m, _Decl("state", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("state", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Discrete):
-            _add_decl(m, _Decl("discrete", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("discrete", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.FnDef):
-            _add_decl(m, _Decl("function", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("function", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Element):
-            _add_decl(m, _Decl("element", statement.name, statement.name_span, statement))
+            _add_decl(m, Decl("element", statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Junction):
             spans = statement.name_spans or (statement.span,) * len(statement.names)
             for name, span in zip(statement.names, spans):
-                _add_decl(m, _Decl("junction", name, span, statement))
+                _add_decl(m, Decl("junction", name, span, statement))
         elif isinstance(statement, ast.BondChain) and statement.label is not None:
-            _add_decl(m, _Decl("bond label", statement.label, statement.label_span, statement))
+            _add_decl(m, Decl("bond label", statement.label, statement.label_span, statement))
     m.functions = {d.name: d.node for d in m.decls.values() if isinstance(d.node, ast.FnDef)}
 
 
-def _add_decl(m: _Model, decl: _Decl) -> None:
+def _add_decl(m: CheckContext, decl: Decl) -> None:
     m.all_decls.append(decl)
     m.decls.setdefault(decl.name, decl)
 
 
 @dataclass(frozen=True)
-class _End:
+class BondEnd:
     """One end of a bond at a node."""
 
     bond: int
@@ -266,7 +266,7 @@ class _End:
 
 
 @dataclass
-class _ElementLaws:
+class ElementLaws:
     """An element's laws sorted out: what the expression checks and the graph need."""
 
     assigns: dict[str, ast.LawAssign] = field(default_factory=dict)
@@ -277,6 +277,6 @@ class _ElementLaws:
 
 
 @dataclass
-class _StateLaws:
+class StateLaws:
     initial: ast.LawCall | None = None
     rate: ast.LawCall | None = None

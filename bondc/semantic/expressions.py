@@ -1,5 +1,5 @@
 """Expressions against a scope: the categories of name each kind of expression may use
-(:class:`_Scope`), :class:`_ExpressionChecker` that walks one ``ast`` expression and reports
+(:class:`ExprScope`), :class:`_ExpressionChecker` that walks one ``ast`` expression and reports
 undefined or misplaced names, wrong calls, graph variables and ``csv(...)`` files and columns,
 and the name and dependency-cycle helpers the other checks share. Takes an expression and a
 scope, returns whether the expression is sound (diagnostics go to the model).
@@ -19,12 +19,14 @@ from bondc import ast
 from bondc.errors import Diagnostic, Related
 from bondc.kinds import JUNCTIONS, KINDS
 from bondc.model import PORT_NAMES
-from bondc.semantic.context import BUILTINS, SET_HINT, _BOND_NUMBER, _Model, _a, _did_you_mean, _error, _join_hints
+from bondc.semantic.context import (
+    BOND_NUMBER, BUILTINS, SET_HINT, a_or_an, CheckContext, did_you_mean, error_at, join_hints,
+)
 
 
 GENERAL = frozenset({"parameter", "input", "output", "state", "discrete", "graph", "time", "csv"})
 DISCRETE_START = frozenset({"parameter", "input", "state", "discrete", "graph"})
-_DISCRETE_RULE = ("a discrete variable's initial value is an expression of parameters, and of inputs and initial "
+DISCRETE_RULE = ("a discrete variable's initial value is an expression of parameters, and of inputs and initial "
                   "states at t = 0")
 SIGNAL = frozenset({"parameter", "input", "time", "csv"})
 CONSTANT = frozenset({"parameter"})
@@ -33,7 +35,7 @@ _CATEGORY_PHRASE = {"state": "model state", "time": "time", "discrete": "discret
 
 
 @dataclass(frozen=True)
-class _Scope:
+class ExprScope:
     """Where an expression is written: which names it may use, and how to explain it."""
 
     what: str                               # "a parameter", "an input", "the law e = ... of C 'spring'", ...
@@ -43,12 +45,12 @@ class _Scope:
     local: Mapping[str, str] = field(default_factory=dict)       # name -> what it is here
     forbidden: Mapping[str, str] = field(default_factory=dict)   # own names this law may not use -> why
     owner: str | None = None                # the element whose law this is
-    params_before: "_Above | frozenset[str] | None" = None   # in a parameter declaration: those above it
+    params_before: "ParamsAbove | frozenset[str] | None" = None   # in a parameter declaration: those above it
     current: str | None = None              # the name being defined (a parameter's self-reference)
     constant_locals: bool = False           # locals are constants (function arguments)
     code: str = "E316"                      # the code of a name this place may not use
 
-    def constant(self, what: str) -> "_Scope":
+    def constant(self, what: str) -> "ExprScope":
         """The scope of a table's breakpoints inside this one: constants only."""
         return dataclasses.replace(
             self, what=what, allowed=self.allowed & CONSTANT,
@@ -59,7 +61,7 @@ class _Scope:
 class _ExpressionChecker:
     """Checks one expression's names, references and calls; one ``_check_<Class>`` per node class."""
 
-    def __init__(self, m: _Model, scope: _Scope):
+    def __init__(self, m: CheckContext, scope: ExprScope):
         self.m = m
         self.scope = scope
         self.errors = 0
@@ -68,7 +70,7 @@ class _ExpressionChecker:
         self.errors += diagnostic.is_error
         self.m.report(diagnostic)
 
-    def check(self, node, scope: _Scope | None = None) -> None:
+    def check(self, node, scope: ExprScope | None = None) -> None:
         saved = self.scope
         self.scope = scope or self.scope
         try:
@@ -84,12 +86,12 @@ class _ExpressionChecker:
         pass
 
     def _check_Str(self, node: ast.Str) -> None:
-        self.report(_error("E313", "a string where a number is expected", node.span,
-                           hint="strings are descriptions, or the file and column of csv(...)"))
+        self.report(error_at("E313", "a string where a number is expected", node.span,
+                             hint="strings are descriptions, or the file and column of csv(...)"))
 
     def _check_ListExpr(self, node: ast.ListExpr) -> None:
-        self.report(_error("E313", "a list where a number is expected", node.span,
-                           hint="lists are the breakpoints of table(t, [t0, t1, ...], [v0, v1, ...])"))
+        self.report(error_at("E313", "a list where a number is expected", node.span,
+                             hint="lists are the breakpoints of table(t, [t0, t1, ...], [v0, v1, ...])"))
 
     def _check_Unary(self, node: ast.Unary) -> None:
         self.check(node.operand)
@@ -105,13 +107,13 @@ class _ExpressionChecker:
 
     # names -------------------------------------------------------------------
     def _not_allowed(self, node, phrase: str) -> None:
-        self.report(_error(self.scope.code, f"{self.scope.what} cannot use {phrase}", node.span,
-                           hint=self.scope.rule))
+        self.report(error_at(self.scope.code, f"{self.scope.what} cannot use {phrase}", node.span,
+                             hint=self.scope.rule))
 
     def _check_Name(self, node: ast.Name) -> None:
         scope, name = self.scope, node.name
         if name in scope.forbidden:
-            self.report(_error("E506", scope.forbidden[name], node.span, hint=scope.rule))
+            self.report(error_at("E506", scope.forbidden[name], node.span, hint=scope.rule))
             return
         if name in scope.local or name == "pi":
             return
@@ -126,22 +128,22 @@ class _ExpressionChecker:
         self.m.used.add(name)
         if decl.category in ("element", "junction", "bond label"):
             variables = self._variables_of(name)
-            self.report(_error("E316", f"'{name}' is {_a(decl.category)}, not a value", node.span,
-                               hint=f"use one of its variables: {', '.join(variables)}" if variables else None))
+            self.report(error_at("E316", f"'{name}' is {a_or_an(decl.category)}, not a value", node.span,
+                                 hint=f"use one of its variables: {', '.join(variables)}" if variables else None))
         elif isinstance(decl.node, ast.FnDef):
             params = ", ".join(decl.node.params)
-            self.report(_error("E316", f"'{name}' is a function, not a value", node.span,
-                               hint=f"call it: {name}({params})"))
+            self.report(error_at("E316", f"'{name}' is a function, not a value", node.span,
+                                 hint=f"call it: {name}({params})"))
         elif decl.category not in scope.allowed:
             self._not_allowed(node, f"{_CATEGORY_PHRASE.get(decl.category, decl.category)} '{name}'")
         elif decl.category == "parameter" and scope.params_before is not None:
             if name == scope.current:
-                self.report(_error("E305", f"parameter '{name}' is defined in terms of itself", node.span))
+                self.report(error_at("E305", f"parameter '{name}' is defined in terms of itself", node.span))
             elif name not in scope.params_before:
-                self.report(_error("E305", f"parameter '{name}' is used before it is defined", node.span,
-                                   hint=f"a parameter may use only parameters defined above it: move "
-                                        f"'param {name}' above this line",
-                                   related=[Related(decl.span, f"'{name}' is defined here")]))
+                self.report(error_at("E305", f"parameter '{name}' is used before it is defined", node.span,
+                                     hint=f"a parameter may use only parameters defined above it: move "
+                                          f"'param {name}' above this line",
+                                     related=[Related(decl.span, f"'{name}' is defined here")]))
 
     def _undefined(self, node: ast.Name) -> None:
         name, scope = node.name, self.scope
@@ -149,7 +151,7 @@ class _ExpressionChecker:
                    if d.category in scope.allowed or d.category == "function"] + list(scope.local) + ["pi"]
         if "time" in scope.allowed:
             visible.append("t")
-        hint = _did_you_mean(name, visible)
+        hint = did_you_mean(name, visible)
         if hint is None and name in ("e", "f"):
             hint = (f"'{name}' alone is an element's own {'effort' if name == 'e' else 'flow'}, usable in its laws; "
                     f"elsewhere write X.{name} for element X")
@@ -160,7 +162,7 @@ class _ExpressionChecker:
         if node.span.file.startswith("--set #"):     # --set k=abc
 
             hint = f"{hint}; {SET_HINT}" if hint else SET_HINT
-        self.report(_error("E301", f"undefined name '{name}'", node.span, hint=hint))
+        self.report(error_at("E301", f"undefined name '{name}'", node.span, hint=hint))
 
     def _variables_of(self, name: str) -> list[str]:
         """The variables an element, junction or bond exposes, as written in expressions."""
@@ -185,7 +187,7 @@ class _ExpressionChecker:
             return
         head = node.parts[0]
         if head == self.scope.owner and len(node.parts) == 2 and node.parts[1] in self.scope.forbidden:
-            self.report(_error("E506", self.scope.forbidden[node.parts[1]], node.span, hint=self.scope.rule))
+            self.report(error_at("E506", self.scope.forbidden[node.parts[1]], node.span, hint=self.scope.rule))
         elif "graph" not in self.scope.allowed:
             self._not_allowed(node, f"the graph variable '{node.dotted}'")
 
@@ -193,18 +195,18 @@ class _ExpressionChecker:
         head, rest = node.parts[0], node.parts[1:]
         decl = self.m.decls.get(head)
         if decl is not None and decl.category not in ("element", "junction", "bond label") \
-                and _BOND_NUMBER.fullmatch(head):
+                and BOND_NUMBER.fullmatch(head):
             decl = None  # bN names bond N unless an element, junction or label is called bN
         if decl is None:
-            match = _BOND_NUMBER.fullmatch(head)
+            match = BOND_NUMBER.fullmatch(head)
             if match is None:
-                self.report(_error("E301", f"undefined name '{head}' in '{node.dotted}'", node.span,
-                                   hint=_did_you_mean(head, self.m.names("element", "junction", "bond label"))))
+                self.report(error_at("E301", f"undefined name '{head}' in '{node.dotted}'", node.span,
+                                     hint=did_you_mean(head, self.m.names("element", "junction", "bond label"))))
                 return False
             number = int(match.group(1))
             if not 1 <= number <= len(self.m.bonds):
-                self.report(_error("E312", f"there is no bond {number}", node.span,
-                                   hint=f"bonds are numbered 1 to {len(self.m.bonds)} in order of appearance"))
+                self.report(error_at("E312", f"there is no bond {number}", node.span,
+                                     hint=f"bonds are numbered 1 to {len(self.m.bonds)} in order of appearance"))
                 return False
             return self._bond_variable(node, rest, f"bond {number}")
         self.m.used.add(head)
@@ -214,15 +216,15 @@ class _ExpressionChecker:
             return self._junction_variable(node, head, rest)
         if decl.category == "element":
             return self._element_variable(node, head, rest)
-        self.report(_error("E312", f"'{head}' is {_a(decl.category)}; only elements, junctions and bonds have "
-                                   f"variables", node.span, hint=f"write just '{head}'"))
+        self.report(error_at("E312", f"'{head}' is {a_or_an(decl.category)}; only elements, junctions and bonds have "
+                                     f"variables", node.span, hint=f"write just '{head}'"))
         return False
 
     def _unknown_variable(self, node: ast.Ref, owner: str, variables: list[str], extra: str | None = None) -> bool:
-        hint = None if extra else _did_you_mean(node.dotted, variables)
+        hint = None if extra else did_you_mean(node.dotted, variables)
         listing = f"its variables: {', '.join(variables)}" if variables else None
-        self.report(_error("E312", f"{owner} has no variable '{'.'.join(node.parts[1:])}'", node.span,
-                           hint=_join_hints(extra, hint, listing)))
+        self.report(error_at("E312", f"{owner} has no variable '{'.'.join(node.parts[1:])}'", node.span,
+                             hint=join_hints(extra, hint, listing)))
         return False
 
     def _bond_variable(self, node: ast.Ref, rest: tuple[str, ...], owner: str) -> bool:
@@ -242,10 +244,10 @@ class _ExpressionChecker:
             bonds = [f"b{end.bond}" if self.m.bonds[end.bond - 1].label is None else self.m.bonds[end.bond - 1].label
                      for end in self.m.ends.get(name, [])]
             example = f", e.g. {bonds[0]}.{rest[0]}" if bonds else ""
-            self.report(_error("E312", f"'{name}' is a {kind}-junction: it has a common {has} ({name}.{common}) but "
-                                       f"no common {lacks}", node.span,
-                               hint=f"each bond at a {kind}-junction has its own {lacks}: use a bond's variable"
-                                    f"{example}"))
+            self.report(error_at("E312", f"'{name}' is a {kind}-junction: it has a common {has} ({name}.{common}) but "
+                                         f"no common {lacks}", node.span,
+                                 hint=f"each bond at a {kind}-junction has its own {lacks}: use a bond's variable"
+                                      f"{example}"))
             return False
         return self._unknown_variable(node, f"junction '{name}'", [f"{name}.{common}"])
 
@@ -272,10 +274,10 @@ class _ExpressionChecker:
             self.m.used.add(func)
             function = scope.functions[func]
             if len(node.args) != len(function.params):
-                self.report(_error("E306", f"'{func}' takes {len(function.params)} argument"
-                                           f"{'' if len(function.params) == 1 else 's'} "
-                                           f"({', '.join(function.params)}), {len(node.args)} given", node.span,
-                                   related=[Related(function.name_span, f"'{func}' is defined here")]))
+                self.report(error_at("E306", f"'{func}' takes {len(function.params)} argument"
+                                             f"{'' if len(function.params) == 1 else 's'} "
+                                             f"({', '.join(function.params)}), {len(node.args)} given", node.span,
+                                     related=[Related(function.name_span, f"'{func}' is defined here")]))
             for arg in node.args:
                 self.check(arg)
             return
@@ -284,13 +286,13 @@ class _ExpressionChecker:
             return
         decl = self.m.decls.get(func)
         if decl is not None and decl.category != "function":
-            self.report(_error("E316", f"'{func}' is {_a(decl.category)}, not a function", node.func_span))
+            self.report(error_at("E316", f"'{func}' is {a_or_an(decl.category)}, not a function", node.func_span))
         else:
-            hint = _did_you_mean(func, list(BUILTINS) + list(scope.functions))
+            hint = did_you_mean(func, list(BUILTINS) + list(scope.functions))
             if decl is not None:
                 hint = f"'{func}' is defined inside the model; a function outside it cannot call it"
-            self.report(_error("E301", f"unknown function '{func}'", node.func_span,
-                               hint=hint or "built-in functions: " + " ".join(BUILTINS)))
+            self.report(error_at("E301", f"unknown function '{func}'", node.func_span,
+                                 hint=hint or "built-in functions: " + " ".join(BUILTINS)))
         for arg in node.args:
             self.check(arg)
 
@@ -305,8 +307,8 @@ class _ExpressionChecker:
             wanted = f"{least} argument{'' if least == 1 else 's'}"
         usage = {"table": "table(t, [t0, t1, ...], [v0, v1, ...])", "step": "step(t, t0)",
                  "csv": 'csv("file.csv", "column")', "atan2": "atan2(y, x)"}.get(node.func)
-        self.report(_error("E306", f"{node.func}() takes {wanted}, {given} given", node.span,
-                           hint=f"write {usage}" if usage else None))
+        self.report(error_at("E306", f"{node.func}() takes {wanted}, {given} given", node.span,
+                             hint=f"write {usage}" if usage else None))
         return False
 
     def _call_builtin(self, node: ast.Call) -> None:
@@ -327,8 +329,8 @@ class _ExpressionChecker:
             if isinstance(arg, ast.ListExpr):
                 lists.append(arg)
             else:
-                self.report(_error("E306", f"the {position} argument of table() must be a list [...]", arg.span,
-                                   hint="write table(t, [t0, t1, ...], [v0, v1, ...])"))
+                self.report(error_at("E306", f"the {position} argument of table() must be a list [...]", arg.span,
+                                     hint="write table(t, [t0, t1, ...], [v0, v1, ...])"))
         entries = self.scope.constant("a table breakpoint")
         for lst in lists:
             for item in lst.items:
@@ -336,12 +338,12 @@ class _ExpressionChecker:
         if len(lists) == 2:
             breakpoints, values = lists
             if len(breakpoints.items) != len(values.items):
-                self.report(_error("E306", f"table() has {len(breakpoints.items)} breakpoints but "
-                                           f"{len(values.items)} values", node.span,
-                                   hint="give one value per breakpoint"))
+                self.report(error_at("E306", f"table() has {len(breakpoints.items)} breakpoints but "
+                                             f"{len(values.items)} values", node.span,
+                                     hint="give one value per breakpoint"))
             elif len(breakpoints.items) < 2:
-                self.report(_error("E306", "table() needs at least two points", node.span,
-                                   hint="for a constant, write the value itself"))
+                self.report(error_at("E306", "table() needs at least two points", node.span,
+                                     hint="for a constant, write the value itself"))
 
     def _call_mod(self, node: ast.Call) -> None:
         self._call_builtin(node)
@@ -350,8 +352,8 @@ class _ExpressionChecker:
             while isinstance(divisor, ast.Unary) and divisor.op in "+-":
                 divisor = divisor.operand
             if isinstance(divisor, ast.Num) and divisor.value == 0:
-                self.report(_error("E306", "mod(x, 0): the divisor is zero", node.args[1].span,
-                                   hint="the remainder of a division by zero is undefined; give a non-zero divisor"))
+                self.report(error_at("E306", "mod(x, 0): the divisor is zero", node.args[1].span,
+                                     hint="the remainder of a division by zero is undefined; give a non-zero divisor"))
 
     def _call_csv(self, node: ast.Call) -> None:
         if "csv" not in self.scope.allowed:
@@ -364,8 +366,8 @@ class _ExpressionChecker:
             if isinstance(arg, ast.Str):
                 strings.append(arg)
             else:
-                self.report(_error("E313", f"the {position} of csv() must be a string", arg.span,
-                                   hint='write csv("data/file.csv", "column")'))
+                self.report(error_at("E313", f"the {position} of csv() must be a string", arg.span,
+                                     hint='write csv("data/file.csv", "column")'))
         if len(strings) == 2:
             path_arg, column_arg = strings
             _check_csv(self.m, node, path_arg, column_arg, report=self.report)
@@ -397,7 +399,7 @@ def _is_table(path: Path, header: list[str]) -> bool:
 _CONTROL = re.compile(r"[\x00-\x08\x0a-\x1f\x7f]")
 
 
-def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str, report) -> None:
+def _check_csv(m: CheckContext, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str, report) -> None:
     """E310: the CSV file exists (relative to the model file) and has the column."""
     source = m.sources.get(node.span.file)
     base = source.path.parent if source is not None and source.path is not None else Path(node.span.file).parent
@@ -415,49 +417,49 @@ def _check_csv(m: _Model, node: ast.Call, path_arg: ast.Str, column_arg: ast.Str
             m.csv_headers[key] = None
     header = m.csv_headers[key]
     if isinstance(header, str):
-        report(_error("E310", f"cannot read CSV file '{path_arg.value}': {header}", path_arg.span,
-                      hint="a data file is a regular text file with a header line"))
+        report(error_at("E310", f"cannot read CSV file '{path_arg.value}': {header}", path_arg.span,
+                        hint="a data file is a regular text file with a header line"))
     elif header is None:
-        report(_error("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span,
-                      hint=f"the path is relative to the model file: looked for '{shown}'"))
+        report(error_at("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span,
+                        hint=f"the path is relative to the model file: looked for '{shown}'"))
     elif not header or not any(header):
-        report(_error("E310", f"CSV file '{path_arg.value}' has no header line", path_arg.span,
-                      hint="the first line names the columns, e.g. t,omega"))
+        report(error_at("E310", f"CSV file '{path_arg.value}' has no header line", path_arg.span,
+                        hint="the first line names the columns, e.g. t,omega"))
     elif column_arg.value not in header and not _is_table(path, header):
         # a model may name any file (/etc/passwd, /proc/self/environ): what is not a table is not quoted
-        report(_error("E310", f"'{path_arg.value}' is not a CSV table", path_arg.span,
-                      hint="a data file is a header line of column names separated by commas (time first), "
-                           "then rows of numbers"))
+        report(error_at("E310", f"'{path_arg.value}' is not a CSV table", path_arg.span,
+                        hint="a data file is a header line of column names separated by commas (time first), "
+                             "then rows of numbers"))
     elif column_arg.value not in header:
         columns = [c for c in header if c]
-        report(_error("E310", f"CSV file '{path_arg.value}' has no column '{column_arg.value}'", column_arg.span,
-                      hint=_join_hints(_did_you_mean(column_arg.value, columns), f"its columns: {', '.join(columns)}")))
+        report(error_at("E310", f"CSV file '{path_arg.value}' has no column '{column_arg.value}'", column_arg.span,
+                        hint=join_hints(did_you_mean(column_arg.value, columns), f"its columns: {', '.join(columns)}")))
     elif len(header) < 2:
-        report(_error("E310", f"CSV file '{path_arg.value}' needs a time column and a value column",
-                      path_arg.span, hint="the first column (or the column t or time) is time"))
+        report(error_at("E310", f"CSV file '{path_arg.value}' needs a time column and a value column",
+                        path_arg.span, hint="the first column (or the column t or time) is time"))
     else:
         from bondc.numeric import csv_scales
 
         try:
             csv_scales(str(path), column_arg.value)
         except ValueError as problem:
-            report(_error("E310", f"CSV file '{path_arg.value}': {problem} in its header", column_arg.span,
-                          hint="a header names a column's unit in brackets, e.g. 'omega [rpm]', 't [ms]'; "
-                               "a column without one is SI"))
+            report(error_at("E310", f"CSV file '{path_arg.value}': {problem} in its header", column_arg.span,
+                            hint="a header names a column's unit in brackets, e.g. 'omega [rpm]', 't [ms]'; "
+                                 "a column without one is SI"))
             return
         from bondc.runtime import CsvError, load_csv
 
         try:
             load_csv(path, column_arg.value)        # the data rows, as the simulation reads them
         except CsvError as problem:
-            report(_error("E310", f"CSV file '{path_arg.value}': {str(problem).partition(': ')[2]}",
-                          path_arg.span, hint="rows (after the header, not counting blank lines and # comments) "
-                                              "are numbers, times in increasing order"))
+            report(error_at("E310", f"CSV file '{path_arg.value}': {str(problem).partition(': ')[2]}",
+                            path_arg.span, hint="rows (after the header, not counting blank lines and # comments) "
+                                                "are numbers, times in increasing order"))
         except (OSError, UnicodeDecodeError, csv.Error):
-            report(_error("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span))
+            report(error_at("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span))
 
 
-def _check_expr(m: _Model, expr: ast.Expr, scope: _Scope) -> bool:
+def check_expr(m: CheckContext, expr: ast.Expr, scope: ExprScope) -> bool:
     """Check one expression in its scope; remember and return whether it had no errors."""
     checker = _ExpressionChecker(m, scope)
     checker.check(expr)
@@ -465,15 +467,15 @@ def _check_expr(m: _Model, expr: ast.Expr, scope: _Scope) -> bool:
     return checker.errors == 0
 
 
-def _calls(expr: ast.Expr) -> list[str]:
+def calls_in(expr: ast.Expr) -> list[str]:
     return [node.func for node in ast.walk(expr) if isinstance(node, ast.Call)]
 
 
-def _names(expr: ast.Expr) -> list[str]:
+def names_in(expr: ast.Expr) -> list[str]:
     return [node.name for node in ast.walk(expr) if isinstance(node, ast.Name)]
 
 
-def _cycles(order: Sequence[str], edges: Mapping[str, Sequence[str]]) -> list[list[str]]:
+def cycles(order: Sequence[str], edges: Mapping[str, Sequence[str]]) -> list[list[str]]:
     """Each dependency cycle once, as the list of its members starting at the earliest in ``order``."""
     rank = {name: index for index, name in enumerate(order)}
     state: dict[str, str] = {}
@@ -504,7 +506,7 @@ def _cycles(order: Sequence[str], edges: Mapping[str, Sequence[str]]) -> list[li
     return found
 
 
-class _Above:
+class ParamsAbove:
     """The parameters declared above the one at ``index`` (``name in above``), without a copy."""
 
     __slots__ = ("order", "index")

@@ -17,8 +17,8 @@ from bondc.model import BondGraph
 from bondc.parse import parse_source
 from bondc.source import Source
 from bondc.std import LIBRARIES as STD_LIBRARIES, path_of as std_path_of
-from bondc.semantic.build import _build, _unique
-from bondc.semantic.context import _did_you_mean, _error, _join_hints
+from bondc.semantic.build import build_files, sorted_unique
+from bondc.semantic.context import did_you_mean, error_at, join_hints
 
 
 def _read(path: Path, name: str) -> Source:
@@ -72,10 +72,10 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
             if item.path.startswith("std:"):
                 target, name = _std_library(item.path[4:]), item.path
                 if target is None:
-                    diagnostics.append(_error("E307", f"no component library '{item.path}'", item.span,
-                                              hint=_join_hints(_did_you_mean(item.path[4:], STD_LIBRARIES),
-                                                               "shipped libraries: " + ", ".join(
-                                                                   f"std:{n}" for n in STD_LIBRARIES))))
+                    diagnostics.append(error_at("E307", f"no component library '{item.path}'", item.span,
+                                                hint=join_hints(did_you_mean(item.path[4:], STD_LIBRARIES),
+                                                                 "shipped libraries: " + ", ".join(
+                                                                     f"std:{n}" for n in STD_LIBRARIES))))
                     continue
             else:
                 folder = source.path.parent if source.path is not None else Path(os.path.dirname(source.name))
@@ -84,30 +84,30 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
                 problem = _not_a_model_file(target, item.path)
                 if problem is not None:
                     # (a model may name any file: one that is not a model is not read, nor quoted)
-                    diagnostics.append(_error("E307", problem, item.span,
-                                              hint="import names a model file (.bg), relative to the importing "
-                                                   "file, or a shipped library (std:NAME)"))
+                    diagnostics.append(error_at("E307", problem, item.span,
+                                                hint="import names a model file (.bg), relative to the importing "
+                                                     "file, or a shipped library (std:NAME)"))
                     continue
             key = target.resolve()
             keys = [k for k, _ in stack]
             if key in keys:
                 cycle = [n for _, n in stack[keys.index(key):]] + [name]
-                diagnostics.append(_error("E308", f"cyclic import: {' -> '.join(cycle)}", item.span,
-                                          hint="files cannot import each other; move what both need into a "
-                                               "third file"))
+                diagnostics.append(error_at("E308", f"cyclic import: {' -> '.join(cycle)}", item.span,
+                                            hint="files cannot import each other; move what both need into a "
+                                                 "third file"))
                 continue
             if key in loaded:
                 continue
             if not target.is_file():
-                diagnostics.append(_error("E307", f"cannot find imported file '{item.path}'", item.span,
-                                          hint=f"import paths are relative to the importing file: looked for "
-                                               f"'{name}'"))
+                diagnostics.append(error_at("E307", f"cannot find imported file '{item.path}'", item.span,
+                                            hint=f"import paths are relative to the importing file: looked for "
+                                                 f"'{name}'"))
                 continue
             try:
                 imported = Source(name, target.read_text(encoding="utf-8"), target)
             except (OSError, UnicodeDecodeError) as error:
-                diagnostics.append(_error("E307", f"cannot read imported file '{item.path}': "
-                                                  f"{getattr(error, 'strerror', None) or error}", item.span))
+                diagnostics.append(error_at("E307", f"cannot read imported file '{item.path}': "
+                                                    f"{getattr(error, 'strerror', None) or error}", item.span))
                 continue
             loaded.add(key)
             sources[imported.name] = imported
@@ -136,8 +136,8 @@ def load(path: str | Path, *, model: str | None = None, experiment: str | None =
     for assignment in sets:
         if assignment.source is not None:
             sources[assignment.source.name] = assignment.source
-    graph, more = _build(files, sources, model, experiment, sets)
-    diagnostics = _unique(diagnostics + more)
+    graph, more = build_files(files, sources, model, experiment, sets)
+    diagnostics = sorted_unique(diagnostics + more)
     if graph is None or any(d.is_error for d in diagnostics):
         raise ModelError([d for d in diagnostics if d.is_error], sources)
     return graph, diagnostics

@@ -9,11 +9,11 @@ from fractions import Fraction
 from typing import Mapping
 
 from bondc import ast, units
-from bondc.semantic.context import _Model, _error
-from bondc.semantic.expressions import _names
+from bondc.semantic.context import CheckContext, error_at
+from bondc.semantic.expressions import names_in
 
 
-def _resolve_unit(m: _Model, unit: ast.Unit | None) -> units.SIUnit | None:
+def resolve_unit(m: CheckContext, unit: ast.Unit | None) -> units.SIUnit | None:
     """The SI meaning of a written unit; E201/E203 reported once per unit."""
     if unit is None:
         return None
@@ -22,9 +22,9 @@ def _resolve_unit(m: _Model, unit: ast.Unit | None) -> units.SIUnit | None:
     numbers = [f for f in unit.factors if f.name != "1" and not f.name[:1].isalpha() and f.name[:1] != "_"]
     if numbers:
         bad = numbers[0]
-        m.report(_error("E203", f"[{unit.text}] is not a unit: '{bad.name}' is a number", bad.span,
-                        hint="a unit is a product of unit names (and 1); put a scale factor in the value, "
-                             f"e.g. {bad.name}*x [{_without(unit, bad)}]"))
+        m.report(error_at("E203", f"[{unit.text}] is not a unit: '{bad.name}' is a number", bad.span,
+                          hint="a unit is a product of unit names (and 1); put a scale factor in the value, "
+                               f"e.g. {bad.name}*x [{_without(unit, bad)}]"))
         resolved = None
     else:
         resolved, diagnostics = units.resolve(unit)
@@ -93,41 +93,41 @@ def coherent_suggestion(unit: ast.Unit) -> str:
 _MASS = tuple(int(base == "kg") for base in units.BASE_DIMENSIONS)
 
 
-def _require_coherent(m: _Model, unit: ast.Unit | None, who: str, why: str) -> units.SIUnit | None:
+def require_coherent(m: CheckContext, unit: ast.Unit | None, who: str, why: str) -> units.SIUnit | None:
     """E202 unless ``unit`` (if any) is coherent SI; returns the resolved unit."""
-    resolved = _resolve_unit(m, unit)
+    resolved = resolve_unit(m, unit)
     if unit is not None and resolved is not None and not resolved.is_coherent:
-        m.report(_error("E202", f"the unit of {who} must be a coherent SI unit, not [{unit.text}]", unit.span,
-                        hint=f"{why}: write [{coherent_suggestion(unit)}]"))
+        m.report(error_at("E202", f"the unit of {who} must be a coherent SI unit, not [{unit.text}]", unit.span,
+                          hint=f"{why}: write [{coherent_suggestion(unit)}]"))
     return resolved
 
 
-def _is_constant(expr: ast.Expr) -> bool:
+def is_constant(expr: ast.Expr) -> bool:
     """No parameter names: a number written with a unit, converted to SI by it."""
-    return all(name == "pi" for name in _names(expr))
+    return all(name == "pi" for name in names_in(expr))
 
 
-_COMPUTED_WHY = ("{} uses other parameters, which are in SI, so it is computed in SI and its unit only declares "
+COMPUTED_WHY = ("{} uses other parameters, which are in SI, so it is computed in SI and its unit only declares "
                  "the result")
 
 
-def check_units(m: _Model) -> None:
+def check_units(m: CheckContext) -> None:
     """E201 unknown unit, E202 non-coherent unit on a computed value, E203 not a plain unit."""
     for param in m.params:
-        if _is_constant(param.value):
-            _resolve_unit(m, param.unit)
+        if is_constant(param.value):
+            resolve_unit(m, param.unit)
         else:
-            _require_coherent(m, param.unit, f"parameter '{param.name}'",
-                              _COMPUTED_WHY.format(f"'{param.name}'"))
+            require_coherent(m, param.unit, f"parameter '{param.name}'",
+                              COMPUTED_WHY.format(f"'{param.name}'"))
     for signal in m.inputs:
-        _require_coherent(m, signal.unit, f"input '{signal.name}'", "an input is computed in SI")
+        require_coherent(m, signal.unit, f"input '{signal.name}'", "an input is computed in SI")
     for output in m.outputs:
-        _resolve_unit(m, output.unit)
+        resolve_unit(m, output.unit)
     for state in m.statements(ast.StateDecl):
-        _require_coherent(m, state.unit, f"state '{state.name}'", "states are integrated in SI")
+        require_coherent(m, state.unit, f"state '{state.name}'", "states are integrated in SI")
     for discrete in m.statements(ast.Discrete):
-        _require_coherent(m, discrete.unit, f"discrete variable '{discrete.name}'", "it is computed in SI")
+        require_coherent(m, discrete.unit, f"discrete variable '{discrete.name}'", "it is computed in SI")
     for element in m.elements:
         for law in element.laws:
             if isinstance(law, ast.LawState):
-                _require_coherent(m, law.unit, f"state '{law.name}'", "states are integrated in SI")
+                require_coherent(m, law.unit, f"state '{law.name}'", "states are integrated in SI")
