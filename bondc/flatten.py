@@ -415,8 +415,11 @@ class _Flattener:
                         for i, s in enumerate(sub.statements):
                             if isinstance(s, ast.Input) and (s.name in named or s.value is not None and any(
                                     isinstance(n, ast.Name) and n.name in named for n in ast.walk(s.value))):
-                                sub.statements[i] = ast.Output(s.name, s.unit, value if s.name == flat_name
-                                                               else s.value, s.description, s.span, s.name_span)
+                                expr = value if s.name == flat_name else s.value
+                                if expr is None:        # (a second input of the same name: E302)
+                                    continue
+                                sub.statements[i] = ast.Output(s.name, s.unit, expr, s.description, s.span,
+                                                               s.name_span)
                                 named.add(s.name)
                                 changed = True
             else:
