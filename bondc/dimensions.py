@@ -129,7 +129,7 @@ class _Equation:
     tier: int
 
 
-@dataclass
+@dataclass(frozen=True)
 class Context:
     """What the checker needs from the semantic stage."""
 
