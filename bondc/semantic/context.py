@@ -220,6 +220,13 @@ def input_value(item: ast.Input) -> ast.Expr:
     return item.value if item.value is not None else ast.Num(0.0, "0", item.name_span)
 
 
+#: The category of the one name each of these statements declares.
+_CATEGORY: Mapping[type, str] = {
+    ast.Param: "parameter", ast.Input: "input", ast.Output: "output", ast.StateDecl: "state",
+    ast.Discrete: "discrete", ast.FnDef: "function", ast.Element: "element",
+}
+
+
 def declare(m: CheckContext) -> None:
     """Fill the model's one namespace: file-level functions, then the model's own names."""
     for file in m.files:
@@ -227,20 +234,9 @@ def declare(m: CheckContext) -> None:
             _add_decl(m, Decl("function", function.name, function.name_span, function))
             m.file_functions.setdefault(function.name, function)
     for statement in m.model.body:
-        if isinstance(statement, ast.Param):
-            _add_decl(m, Decl("parameter", statement.name, statement.name_span, statement))
-        elif isinstance(statement, ast.Input):
-            _add_decl(m, Decl("input", statement.name, statement.name_span, statement))
-        elif isinstance(statement, ast.Output):
-            _add_decl(m, Decl("output", statement.name, statement.name_span, statement))
-        elif isinstance(statement, ast.StateDecl):
-            _add_decl(m, Decl("state", statement.name, statement.name_span, statement))
-        elif isinstance(statement, ast.Discrete):
-            _add_decl(m, Decl("discrete", statement.name, statement.name_span, statement))
-        elif isinstance(statement, ast.FnDef):
-            _add_decl(m, Decl("function", statement.name, statement.name_span, statement))
-        elif isinstance(statement, ast.Element):
-            _add_decl(m, Decl("element", statement.name, statement.name_span, statement))
+        if isinstance(statement, (ast.Param, ast.Input, ast.Output, ast.StateDecl, ast.Discrete, ast.FnDef,
+                                  ast.Element)):
+            _add_decl(m, Decl(_CATEGORY[type(statement)], statement.name, statement.name_span, statement))
         elif isinstance(statement, ast.Junction):
             spans = statement.name_spans or (statement.span,) * len(statement.names)
             for name, span in zip(statement.names, spans):
