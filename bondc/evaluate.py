@@ -116,12 +116,20 @@ class Exploded(Exception):
 
 
 class FunctionLike(Protocol):
-    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function`."""
+    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function` (read-only:
+    both are frozen)."""
 
-    name: str
-    params: tuple[str, ...]
-    body: ast.Expr
-    span: Span
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def params(self) -> tuple[str, ...]: ...
+
+    @property
+    def body(self) -> ast.Expr: ...
+
+    @property
+    def span(self) -> Span: ...
 
 
 class EvaluationError(ModelError):
@@ -375,13 +383,16 @@ class _Evaluator:
         return value
 
     def _table(self, node: ast.Call) -> float:
-        if len(node.args) != 3 or not all(isinstance(a, ast.ListExpr) for a in node.args[1:]):
+        if len(node.args) != 3:
             raise _fail(node, "table() takes a value and two lists")
-        xs = [self(item) for item in node.args[1].items]
-        ys = [self(item) for item in node.args[2].items]
+        value, breakpoints, values = node.args
+        if not isinstance(breakpoints, ast.ListExpr) or not isinstance(values, ast.ListExpr):
+            raise _fail(node, "table() takes a value and two lists")
+        xs = [self(item) for item in breakpoints.items]
+        ys = [self(item) for item in values.items]
         if len(xs) != len(ys) or not xs:
             raise _fail(node, "table() needs two lists of the same, non-zero length")
-        return float(interpolate(self(node.args[0]), xs, ys))
+        return float(interpolate(self(value), xs, ys))
 
 
 class _Expansion:

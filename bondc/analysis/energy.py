@@ -88,6 +88,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from bondc.errors import AnalysisError, Diagnostic
+from bondc.kinds import KINDS
 from bondc.runtime import _unique_rows, corner_weights, filippov_alpha, mode_values
 
 # Gauss-Lobatto, 5 points on [-1, 1]: exact for polynomials of degree 7.
@@ -112,9 +113,7 @@ _PIECE_NODES = np.concatenate([GAUSS_NODES, FINE_NODES])
 #: A residual above this fraction of the throughput gets warning W930.
 RESIDUAL_TOLERANCE = 1e-6
 
-ROLES = {"Se": "source", "MSe": "source", "Sf": "source", "MSf": "source", "R": "dissipator",
-         "C": "storage", "I": "storage", "TF": "converter", "MTF": "converter", "GY": "converter",
-         "MGY": "converter"}
+ROLES = {name: kind.energy for name, kind in KINDS.items()}     # the energy role of each kind (bondc.kinds)
 
 METHOD = ("5-point Gauss-Lobatto quadrature per solver step, states from the cubic Hermite interpolant refined "
           "by deferred correction (rates with the step's modes frozen); sliding-mode steps: a cubic spline "
