@@ -134,9 +134,10 @@ def test_state_event_is_located_at_the_crossing():
 
 
 def test_sliding_mode_follows_the_filippov_solution():
-    # x' = -sign(x): x = 1 - t until t = 1, then x stays 0 with the equivalent sign 0
+    # x' = 0.5 - sign(x): x = 1 - t/2 until t = 2, then x stays 0 (Filippov: below 0 the law pushes
+    # it back up at 1.5), where the equivalent sign, the weight that holds x' = 0, is 0.5
     model = _namespace(
-        _rhs=lambda t, x, p, m: np.array([-m[0]]),
+        _rhs=lambda t, x, p, m: np.array([0.5 - m[0]]),
         _jac=lambda t, x, p, m: np.zeros((1, 1)),
         SWITCHES=("sign(x)",), EVENT_SWITCHES=(0,),
         _switches=lambda t, x, p, m: np.array([x[0]]),
@@ -145,19 +146,20 @@ def test_sliding_mode_follows_the_filippov_solution():
     )
     result = runtime.simulate_model(model, 3.0, dt=0.25)
     assert result.complete
-    expected = np.maximum(1.0 - result.t, 0.0)
+    expected = np.maximum(1.0 - 0.5 * result.t, 0.0)
     np.testing.assert_allclose(result.states["x"], expected, atol=1e-8)
-    assert result.events[0][0] == pytest.approx(1.0, abs=1e-9)
-    assert result.events[0][1] == "sliding on sign(x)"
-    after = result.t > 1.0
-    np.testing.assert_allclose(result.outputs["y"][after], 0.0, atol=1e-6)   # the Filippov sign
-    np.testing.assert_array_equal(result.outputs["y"][result.t < 1.0], 1.0)
+    starts = [time for time, label in result.events if label == "sliding on sign(x)"]
+    assert starts == [pytest.approx(2.0, abs=1e-9)]
+    assert all(time == pytest.approx(2.0, abs=1e-9) for time, _ in result.events)
+    after = result.t > 2.0
+    np.testing.assert_allclose(result.outputs["y"][after], 0.5, atol=1e-6)   # the Filippov sign
+    np.testing.assert_array_equal(result.outputs["y"][result.t < 2.0], 1.0)
     assert result.stats["sliding_segments"] == 1
 
 
 def test_variables_are_evaluated_when_first_read_and_follow_their_laws():
     """A run stores its states; the variables are evaluated from them when one is first read (once),
-    and equal their laws there: y = 2 x = 2 exp(-3 t) on a smooth run, the Filippov sign (0 while
+    and equal their laws there: y = 2 x = 2 exp(-3 t) on a smooth run, the Filippov sign (0.5 while
     sliding) on a sliding one. States and variables are read-only; a pickle holds plain arrays."""
     import pickle
 
@@ -192,14 +194,14 @@ def test_variables_are_evaluated_when_first_read_and_follow_their_laws():
 
     calls.clear()
     sliding = _namespace(
-        _rhs=lambda t, x, p, m: np.array([-m[0]]), _jac=lambda t, x, p, m: np.zeros((1, 1)),
+        _rhs=lambda t, x, p, m: np.array([0.5 - m[0]]), _jac=lambda t, x, p, m: np.zeros((1, 1)),
         SWITCHES=("sign(x)",), EVENT_SWITCHES=(0,), _switches=lambda t, x, p, m: np.array([x[0]]),
         _outputs=lambda t, x, p, m: (m[0] + 0 * x[0],), _variables=counted(lambda t, x, p, m: (m[0] + 0 * x[0],)))
     result = runtime.simulate_model(sliding, 3.0, dt=0.25)
     assert result.stats["sliding_segments"] == 1 and not calls
     y = result.variables["y"]
-    np.testing.assert_array_equal(y[result.t < 1.0], 1.0)
-    np.testing.assert_allclose(y[result.t > 1.0], 0.0, atol=1e-6)
+    np.testing.assert_array_equal(y[result.t < 2.0], 1.0)
+    np.testing.assert_allclose(y[result.t > 2.0], 0.5, atol=1e-6)
     np.testing.assert_array_equal(y, result.outputs["y"])
 
 

@@ -935,20 +935,6 @@ int bondc_driver_unfrozen_advance(bondc_driver *d, int capacity, const int *floo
     return 0;
 }
 
-/* Switching function k with modes m at t, on the state of the last step (t_old, t_new] there:
-   y_new at t_new, else CVODE's interpolant at t clamped to the step (as _DriverStep.dense_output). */
-double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
-                           const double *m, int k)
-{
-    const double *y = y_new;
-    if (t != t_new) {
-        driver_interpolate(d, t < t_old ? t_old : (t > t_new ? t_new : t));
-        y = N_VGetArrayPointer(d->work);
-    }
-    bondc_switches(t, y, d->p, m, d->g);
-    return d->g[k];
-}
-
 /* _Run.deadbands in C: for each of the `count` switches `index`, the sum over the states i of
    |g(y + scale_i e_i) - g(y)|, scale_i = atol + rtol*|y_i| (0 where not finite); 0 on success. */
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
@@ -1055,91 +1041,42 @@ int bondc_driver_select(bondc_driver *d, double t, const double *y, const double
     return code;
 }
 
-/* One watched switch's test of a step, as a function of time: m*g + band (kind 0), the distance
-   inside [level, level + 1) of a floor switch (1), or level - |g| for a switch in mode 0 (2) */
+/* The switching functions with the modes q->m at t inside the last step (t_old, t_new], on CVODE's
+   interpolant (y_new itself at t_new): locate.h's values for bondc_first_crossing */
 typedef struct {
     bondc_driver *d;
     double t_old, t_new;
     const double *y_new, *m;
-    int k, kind;
-    double sign, band, level;
-} crossing_test;
+} driver_step_switches;
 
-static double crossing_value(const crossing_test *q, double t)
+static int driver_switches_at(void *context, double t, double *out)
 {
-    double g = bondc_driver_switch(q->d, t, q->t_old, q->t_new, q->y_new, q->m, q->k);
-    if (q->kind == 1) return fmin(g - q->level, q->level + 1.0 - g);
-    if (q->kind == 2) return q->level - fabs(g);
-    return q->sign * g + q->band;
-}
-
-/* Where the test goes from > 0 (at t_old) to <= 0 (at t_new) on the step's interpolant: the end of
-   a bracket narrowed by the Illinois method to 4 eps (brentq's xtol in _Run.crossing) on the side
-   past the zero; t_new where the test does not change sign there. */
-static double crossing_locate(const crossing_test *q)
-{
-    const double eps = 2.220446049250313e-16;
-    double a = q->t_old, b = q->t_new, fa = crossing_value(q, a), fb = crossing_value(q, b);
-    if (!(fa > 0) || !(fb <= 0)) return b;
-    int kept = 0;
-    for (int i = 0; i < 200 && b - a > 4 * eps * fmax(fabs(a), fabs(b)) + 1e-300; i++) {
-        double t = b - fb * (b - a) / (fb - fa);
-        if (!(t > a && t < b)) t = 0.5 * (a + b);
-        double ft = crossing_value(q, t);
-        if (ft != ft) { t = 0.5 * (a + b); ft = crossing_value(q, t); }
-        if (ft <= 0) {
-            b = t; fb = ft;
-            if (kept == -1) fa *= 0.5;
-            kept = -1;
-        } else {
-            a = t; fa = ft;
-            if (kept == 1) fb *= 0.5;
-            kept = 1;
-        }
-        if (ft == 0) break;
+    driver_step_switches *q = (driver_step_switches *)context;
+    const double *y = q->y_new;
+    if (t != q->t_new) {
+        driver_interpolate(q->d, t < q->t_old ? q->t_old : (t > q->t_new ? q->t_new : t));
+        y = N_VGetArrayPointer(q->d->work);
     }
-    return b;
+    bondc_switches(t, y, q->d->p, q->m, out);
+    return 0;
 }
 
 /* The earliest crossing in the last step (t_old, t_new] of the `watched` switches `watch` (modes m,
-   their signs, bands and values before the step g_old, as bondc_driver_advance watched them), as
-   _Run.crossing finds it: its switch, or -1 where none crossed (a step advance flagged for a dip
-   without a change of sign); its time into *t_event; the switching functions at the step's end
-   (y_new) into g_new. */
+   their signs, bands and values before the step g_old, as bondc_driver_advance watched them):
+   bondc_first_crossing on the step's interpolant. Its switch, or -1 where none crossed; its time
+   into *t_event; the switching functions at the step's end (y_new) into g_new. */
 int bondc_driver_crossing(bondc_driver *d, int watched, const int *watch, const double *signs, const double *band,
                           const double *g_old, const int *floors, const double *m, double t_old, double t_new,
                           const double *y_new, double *g_new, double *t_event)
 {
-    int found = -1;
-    double best = t_new;
     bondc_switches(t_new, y_new, d->p, m, g_new);
-    for (int j = 0; j < watched; j++) {
-        int k = watch[j];
-        double s = signs[j], b = band[j], old = g_old[j], now = g_new[k], root;
-        crossing_test q = {d, t_old, t_new, y_new, m, k, 0, s, b, 0.0};
-        if (floors[k]) {
-            double before = fmin(old - s, s + 1.0 - old) + b, after = fmin(now - s, s + 1.0 - now) + b;
-            if (!(after < 0)) continue;
-            if (before <= 0) root = t_old;
-            else { q.kind = 1; q.level = s; root = crossing_locate(&q); }
-        } else if (s != 0) {
-            double before = s * old + b, after = s * now + b;
-            if (!(after < 0 || (after == 0 && before > 0))) continue;
-            if (before <= 0) root = t_old;
-            else if (after == 0) root = t_new;
-            else {
-                /* the deadband decides whether it crossed; where the zero itself is in this step, the zero */
-                q.band = s * old > 0 ? 0.0 : b;
-                root = crossing_locate(&q);
-            }
-        } else {
-            if (!(isfinite(now) && fabs(now) > b && now != 0)) continue;
-            q.kind = 2;
-            q.level = b > 0 ? b : 1e-6 * fabs(now);
-            root = crossing_locate(&q);
-        }
-        if (found < 0 || root < best) { best = root; found = k; }
-    }
-    *t_event = best;
-    return found;
+    double *now = (double *)malloc(sizeof(double) * (size_t)(watched > 0 ? watched : 1));
+    if (!now) { *t_event = t_new; return -1; }
+    for (int j = 0; j < watched; j++) now[j] = g_new[watch[j]];
+    driver_step_switches q = {d, t_old, t_new, y_new, m};
+    int j = bondc_first_crossing(driver_switches_at, &q, d->switches, watched, watch, floors, signs, band, g_old, now,
+                                 t_old, t_new, t_event);
+    free(now);
+    bondc_switches(t_new, y_new, d->p, m, g_new);
+    return j >= 0 ? watch[j] : -1;
 }

@@ -14,8 +14,6 @@ int bondc_driver_jac_entries(bondc_driver *d, double t, const double *y, double 
 int bondc_driver_sliding(bondc_driver *d);
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out);
-double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new, const double *y_new,
-                           const double *m, int k);
 void bondc_driver_check(bondc_driver *d, double longest);
 void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *mm, double alpha, double probe,
                         int count, const int *others, const double *drift);

@@ -23,3 +23,16 @@ int bondc_first_end(bondc_values_at values, void *context, int count, double t_o
    ends: 0 with *t_end, 1 where none dips, -1 where memory ran out. */
 int bondc_first_dip(bondc_values_at values, void *context, int count, double a, double b, const double *left,
                     const double *right, double *t_end);
+
+/* The earliest crossing in the step (t_old, t_new] of the `watched` switches watch[j], as
+   _Run.crossing finds it: values(t) gives all `switches` switching functions on the step's
+   interpolant (the modes frozen); signs[j] is switch watch[j]'s mode, band[j] its deadband, old[j]
+   and now[j] its values at the step's ends; floors[k] marks a switch whose mode is floor(g). A switch
+   in mode +-1 crosses where m*g + band falls below 0 (the zero itself located where it lies in the
+   step), a floor switch where g leaves [m, m + 1) by its band, one in mode 0 where |g| passes its
+   band; where none changed sign at the step's ends, one that dips and comes back inside it
+   (bondc_first_dip, then its surface). Returns j (the earliest, the first of equals), -1 where none
+   crossed, -2 where memory ran out; the time into *t_event. */
+int bondc_first_crossing(bondc_values_at values, void *context, int switches, int watched, const int *watch,
+                         const int *floors, const double *signs, const double *band, const double *old,
+                         const double *now, double t_old, double t_new, double *t_event);

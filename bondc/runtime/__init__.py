@@ -77,9 +77,9 @@ from bondc.runtime.adapter import (  # noqa: F401
     _MEMOS, _MODEL_NAMES, _Model, _PATTERNS, _columns_by_mode, _model_memo, evaluate, mode_values, modes_at,
     param_array, pattern_arrays
 )
-from bondc.runtime.filippov import (  # noqa: F401
+from bondc.runtime.policy import (  # noqa: F401
     SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, _located, _values_callback, corner_weights,
-    filippov_alpha, first_dip, first_end
+    filippov_alpha, first_crossing, first_dip, first_end
 )
 from bondc.runtime.results import (  # noqa: F401
     DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
@@ -121,4 +121,4 @@ from bondc.runtime.run import (  # noqa: F401
 
 
 #: The modules in the order a standalone module carries them (each imports only earlier ones).
-MODULES = ('kernels', 'signals', 'loops', 'adapter', 'results', 'native', 'filippov', 'solvers', 'steppers', 'driver', 'events', 'sliding', 'run')
+MODULES = ('kernels', 'signals', 'loops', 'adapter', 'results', 'native', 'policy', 'solvers', 'steppers', 'driver', 'events', 'sliding', 'run')

@@ -67,6 +67,7 @@ class _Model:
         self.EXTERNAL_INPUT_NAMES = optional("EXTERNAL_INPUT_NAMES", tuple, ())
         self.EXTERNAL_INPUTS = optional("EXTERNAL_INPUTS", lambda store: store, None)
         self.native_library = None      # (ffi, lib) when the model's C code carries the CVODE driver
+        self.native_functions = None    # (ffi, lib) whose bondc_rhs and bondc_switches are the model's laws
         self.when_offsets = None        # clause k sets targets offsets[k]:offsets[k + 1], where C runs them
         self.floor_switches = np.array([kind == "floor" for kind in self.SWITCH_KINDS], dtype=bool)
         # the modes some switching function reads (a nested switch's); None: not known

@@ -161,6 +161,21 @@ class _NativeDriver:
             y, dtype=float)), self.ffi.from_buffer("double[]", out))
         return out
 
+    def crossing(self, index, signs, band, g_old, floors, modes, t_old, t_new, y_new):
+        """The earliest crossing in the last step (t_old, t_new] on the interpolant
+        (``bondc_driver_crossing``): (time, switch) or None."""
+        buffer = self.ffi.from_buffer
+        watch = np.ascontiguousarray(index, dtype=np.intc)
+        g_new = np.empty(max(modes.size, 1))
+        t_event = self.ffi.new("double *")
+        k = self.lib.bondc_driver_crossing(
+            self.handle, int(watch.size), buffer("int[]", watch), buffer("double[]", np.ascontiguousarray(signs, dtype=float)),
+            buffer("double[]", np.ascontiguousarray(band, dtype=float)),
+            buffer("double[]", np.ascontiguousarray(g_old, dtype=float)), buffer("int[]", floors),
+            buffer("double[]", modes), float(t_old), float(t_new),
+            buffer("double[]", np.ascontiguousarray(y_new, dtype=float)), buffer("double[]", g_new), t_event)
+        return None if k < 0 else (float(t_event[0]), int(k))
+
     def slide_end(self, t_old, t_new, old, new, longest):
         """The end of the sliding mode inside its last step (t_old, t_new] on the driver's
         interpolant, or None (``bondc_driver_slide_end``, as :meth:`_Run.sliding_end_within`)."""
@@ -230,19 +245,6 @@ class _NativeDriver:
         reported = self.eval_count[0]
         return self.et[:reported], self.ey[:reported], self.eval_next[0]
 
-    def deadbands(self, t, y, modes, index, rtol, atol):
-        """:meth:`_Run.deadbands` in C (the same sums in the same order), or None where it cannot run."""
-        buffer = self.ffi.from_buffer
-        y = np.ascontiguousarray(y, dtype=float)
-        modes = np.ascontiguousarray(modes, dtype=float)
-        index = np.ascontiguousarray(index, dtype=np.intc)
-        out = np.empty(index.size)
-        if y.size != self.n or self.lib.bondc_deadbands(
-                self.handle, float(t), buffer("double[]", y), buffer("double[]", modes) if modes.size else self.ffi.NULL,
-                float(rtol), float(atol), int(index.size), buffer("int[]", index), buffer("double[]", out)) != 0:
-            return None
-        return out
-
     def interpolate(self, t):
         out = np.empty(self.n)
         self.lib.bondc_driver_dky(self.handle, float(t), 0, self.ffi.from_buffer("double[]", out))
@@ -299,7 +301,8 @@ _Piece = _collections.namedtuple("_Piece", "t0 y0 t_stop modes guess ts ys count
 
 
 class _DriverStep:
-    """The driver's last step seen as a solver by :meth:`_Run.crossing`: t_old, t, y, dense_output()."""
+    """The driver's last step seen as a solver by :meth:`_Run.crossing` (which locates it in C):
+    driver, t_old, t, y, dense_output()."""
 
     def __init__(self, driver, t_old, t, y):
         self.driver, self.t_old, self.t, self.y = driver, t_old, t, y
@@ -314,14 +317,6 @@ class _DriverStep:
             return driver.interpolate(min(max(tt, t_old), t_new))
 
         return interpolate
-
-    def switch_value(self, modes, tt, k):
-        """Switching function ``k`` with ``modes`` at ``tt``, on the state ``dense_output()`` gives
-        there: one call into C (the crossing's root finding calls it a few times per event)."""
-        driver = self.driver
-        return driver.lib.bondc_driver_switch(driver.handle, float(tt), self.t_old, self.t,
-                                              driver.ffi.from_buffer("double[]", self.y),
-                                              driver.ffi.from_buffer("double[]", modes), int(k))
 
 
 class _DriverSegments:

@@ -2,14 +2,13 @@
 crossings located on the solver's dense output, the modes at a restart, when clauses, Zeno
 detection (:class:`_EventLocation`, a mixin of ``_Run``)."""
 
-import functools
 
 import numpy as np
 
-from bondc.runtime.kernels import _EPS, brentq
+from bondc.runtime.kernels import _EPS
 from bondc.runtime.loops import _BLOCK_SOLUTIONS, _ModeReader, _ReadingModes
 from bondc.runtime.adapter import mode_values
-from bondc.runtime.filippov import first_dip
+from bondc.runtime.policy import first_crossing
 from bondc.runtime.results import RunFailure, _Stop
 
 
@@ -545,20 +544,12 @@ class _EventLocation:
     def deadbands(self, t, y, modes, index):
         """How far each switching function moves when the state moves by its error tolerance
         (``atol + rtol*|x|``, state by state): crossings shallower than that are integration noise
-        (a chamber pressure sitting at its regulator's set point) and are not events."""
+        (a chamber pressure sitting at its regulator's set point) and are not events
+        (``bondc_law_deadbands``, the engine's one implementation)."""
         if index.size == 0:
             return np.zeros(0)
-        driver = self._driver
-        if driver and np.ndim(self.options["atol"]) == 0 and np.ndim(self.options["rtol"]) == 0:
-            total = driver.deadbands(t, y, modes, index, self.options["rtol"], self.options["atol"])
-            if total is not None:
-                return total
-        differences = self.switch_differences(t, y, modes, index)
-        total = np.zeros(index.size)
-        for j in range(y.size):
-            total += np.abs(differences[:, j])
-        total[~np.isfinite(total)] = 0.0
-        return total
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(np.asarray(y, dtype=float))
+        return self.law().deadbands(t, y, modes, index, scale)
 
     def switch_differences(self, t, y, modes, index):
         """How each switching function of ``index`` changes when state j alone moves by its error
@@ -572,116 +563,35 @@ class _EventLocation:
             differences[:, j] = self.switches_at(t, shifted, modes, index) - base
         return differences
 
-    def crossing_inside(self, solver, modes, index, signs, before, after, deadband, fused):
-        """A switch that crosses and comes back inside the last step, on its side at both ends
-        (``before``, ``after``: ``m*g + deadband``), as (time, switch index), or None: the sign test
-        at the step's ends sees nothing where a hump of a state passes a threshold and returns
-        within one step. Its values at the step's middle, and where their parabola comes within its
-        curvature of the band, the halves in turn (``bondc_first_dip``), as for a sliding mode's
-        exits."""
-        t_old, t_new = solver.t_old, solver.t
-        if not t_old < t_new:
-            return None
-        if fused is not None:
-            frozen = np.ascontiguousarray(modes, dtype=float)
-            values = lambda tt: signs * np.array([fused(frozen, tt, k) for k in index]) + deadband
-        else:
-            dense = solver.dense_output()
-            values = lambda tt: signs * self.model.switches(tt, dense(tt), self.p, modes)[index] + deadband
-        with np.errstate(all="ignore"):
-            hit = first_dip(values, t_old, t_new, before, after)
-        if hit is None:
-            return None
-        self._dense = None if fused is not None else dense
-        j = int(np.argmin(values(hit)))
-        # as a crossing at a step's end: the zero itself (no bias by the band) where it lies before
-        surface = lambda tt: values(tt)[j] - deadband[j]
-        if deadband[j] > 0 and t_old < hit and surface(t_old) > 0 >= surface(hit):
-            with np.errstate(all="ignore"):
-                try:
-                    hit = brentq(surface, t_old, hit, 4 * _EPS, 4 * _EPS)
-                except ValueError:
-                    pass
-        return hit, int(index[j])
-
     def crossing(self, solver, modes, index, signs, old, new, deadband):
         """The earliest switch crossing in the last step: (time, switch index), or None.
 
-        A switch in mode +-1 crosses when ``m*g`` falls below ``-deadband`` (located where it does:
-        at most a tolerance-sized shift of the event); a switch in mode 0 when ``|g|`` exceeds it.
+        The engine's one implementation (``bondc_first_crossing``, bondc/native/locate.c): a switch
+        in mode +-1 crosses when ``m*g`` falls below ``-deadband`` (the zero itself located where it
+        lies in the step), a switch in mode 0 when ``|g|`` exceeds it, a floor switch when g leaves
+        [m, m + 1); where none changed sign at the step's ends, one that crosses and comes back
+        inside the step (a hump of a state passing a threshold). The driver's step is located on
+        its interpolant in C; any other solver's on its dense output, called back.
         """
         t_old, t_new = solver.t_old, solver.t
-        found = []
-        floors = self.model.floor_switches
-        fused = getattr(solver, "switch_value", None)
-        if fused is not None:       # the driver's step: g_k at tt in one call
-            g = functools.partial(fused, np.ascontiguousarray(modes, dtype=float))
-        else:
-            g = lambda tt, k: self.model.switches(tt, self._dense(tt), self.p, modes)[k]
-        if not floors[index].any() and signs.all():
-            # the common step: no switch in mode +-1 went below its band (the loop's first test, at once)
-            before, after = signs * old + deadband, signs * new + deadband
-            if not ((after < 0) | ((after == 0) & (before > 0))).any():
-                # an algebraic loop's switches, evaluated between the steps, would move the warm starts
-                # of its Newton iteration (its last solutions) that the run's next points start from
-                kept = dict(_BLOCK_SOLUTIONS)
-                try:
-                    return self.crossing_inside(solver, modes, index, signs, before, after, deadband, fused)
-                finally:
-                    _BLOCK_SOLUTIONS.clear()
-                    _BLOCK_SOLUTIONS.update(kept)
-        for j, k in enumerate(index):
-            sign, band = signs[j], deadband[j]
-            if floors[k]:
-                # m = floor(g) holds while g stays in [m, m + 1): the distance to the nearer end
-                level = sign
-                inside = lambda g, lv=level: min(g - lv, lv + 1.0 - g)
-                before, after = inside(old[j]) + band, inside(new[j]) + band
-                if not after < 0:
-                    continue
-                if before <= 0:
-                    found.append((t_old, k))
-                    continue
-                if self._dense is None:
-                    self._dense = solver.dense_output()
-                function = lambda tt, k=k, f=inside: f(self.model.switches(tt, self._dense(tt), self.p, modes)[k])
-                with np.errstate(all="ignore"):
-                    try:
-                        root = brentq(function, t_old, t_new, 4 * _EPS, 4 * _EPS)
-                    except ValueError:
-                        root = t_new
-                found.append((root, k))
-                continue
-            if sign != 0:
-                before, after = sign * old[j] + band, sign * new[j] + band
-                if not (after < 0 or (after == 0 and before > 0)):
-                    continue
-                if before <= 0:
-                    found.append((t_old, k))
-                    continue
-                if after == 0:
-                    found.append((t_new, k))
-                    continue
-                # the deadband only decides *whether* it crossed; when the zero itself lies in this
-                # step, locate the zero (no bias), else where it left the band
-                band = 0.0 if sign * old[j] > 0 else band
-                function = lambda tt, k=k, s=sign, b=band: s * g(tt, k) + b
-            else:
-                if not (np.isfinite(new[j]) and abs(new[j]) > band and new[j] != 0):
-                    continue
-                level = band if band > 0 else 1e-6 * abs(new[j])   # leaving the surface
-                function = lambda tt, k=k, lv=level: lv - abs(g(tt, k))
+        index = np.asarray(index, dtype=int)
+        frozen = np.ascontiguousarray(modes, dtype=float)
+        # an algebraic loop's switches, evaluated between the steps, would move the warm starts of
+        # its Newton iteration (its last solutions) that the run's next points start from
+        kept = dict(_BLOCK_SOLUTIONS)
+        try:
+            driver = getattr(solver, "driver", None)
+            if driver is not None:      # the driver's step: located in C on its interpolant
+                return driver.crossing(index, signs, deadband, old, self.floors_c, frozen, t_old, t_new, solver.y)
             if self._dense is None:
                 self._dense = solver.dense_output()
+            dense = self._dense
             with np.errstate(all="ignore"):
-                try:
-                    root = brentq(function, t_old, t_new, 4 * _EPS, 4 * _EPS)
-                except ValueError:      # no sign change on the interpolant: take the step end
-                    root = t_new
-            found.append((root, k))
-        if not found:
-            return None
-        return min(found)
+                return first_crossing(lambda tt: self.model.switches(tt, dense(tt), self.p, frozen), self.switch_count,
+                                      index, self.model.floor_switches, signs, deadband, old, new, t_old, t_new)
+        finally:
+            _BLOCK_SOLUTIONS.clear()
+            _BLOCK_SOLUTIONS.update(kept)
 
     def collect(self, solver):
         self.stats["njev"] += int(getattr(solver, "njev", 0) or 0)

@@ -771,6 +771,9 @@ def attach_native(model, native=None):
 
     model.rhs, model.jac = vector(c_rhs, numpy_rhs, n, loops), jac
     model.switches = vector(c_switches, numpy_switches, count, loops)
+    # the engine's C functions (runtime.policy) call the library's own where its values are taken
+    # as they come (no algebraic loop, whose points numpy solves again where C's are not finite)
+    model.native_functions = None if loops else (ffi, lib)
     try:
         when_native = bool(model.WHEN_LABELS) and lib.bondc_when_native() == 1
     except AttributeError:      # a library built before C had the when clauses

@@ -4,7 +4,7 @@ their ends, holding at a stall."""
 
 import numpy as np
 
-from bondc.runtime.filippov import SlidingLaw, TooManyHeld, corner_weights, filippov_alpha, first_end
+from bondc.runtime.policy import SlidingLaw, TooManyHeld, corner_weights, filippov_alpha, first_end
 from bondc.runtime.results import RunFailure, _Stop
 from bondc.runtime.solvers import CvodeSolver, IDA, difference_jacobian
 
@@ -55,6 +55,12 @@ class _Sliding:
         if len(near) > _MAX_HELD:
             raise _Stop(self.too_many_held(t, near, f"more than {_MAX_HELD}"))
         raise _Stop(stalled.failure)
+
+    def law(self) -> SlidingLaw:
+        """The model's laws at the run's parameters as the engine's C functions call them (made once)."""
+        if self.sliding_law is None:
+            self.sliding_law = SlidingLaw(self.model, self.p)
+        return self.sliding_law
 
     def too_many_held(self, t, near, why):
         """The failure of a run whose switches on their surfaces at (t, y) cannot be held together."""
@@ -234,9 +240,7 @@ class _Sliding:
 
         Returns (sliding switches, modes, alpha).
         """
-        law = self.sliding_law
-        if law is None:
-            law = self.sliding_law = SlidingLaw(self.model, self.p)
+        law = self.law()
         scale = self.options["atol"] + self.options["rtol"] * np.abs(np.asarray(y, dtype=float))
         try:
             held, modes, alpha, vertices, affine = law.sliding_set(t, y, modes, candidates, self.probe, self.span,

@@ -1,5 +1,5 @@
-"""Filippov sliding's one implementation (``bondc/native/filippov.c``) as the Python run loop calls
-it: the corners' weights (:func:`corner_weights`), the weights that hold the sliding switches on
+"""The run loop's policy functions in C (``bondc/native/policy.c``: ``filippov.c`` and ``locate.c``)
+as the Python run loop calls them. Filippov sliding's one implementation: the corners' weights (:func:`corner_weights`), the weights that hold the sliding switches on
 their surfaces (:func:`filippov_alpha`) and the choice of the switches a sliding mode holds
 (:class:`SlidingLaw`), and where values that stay positive first fail to (:func:`first_end`,
 :func:`first_dip`: a sliding mode's end, a switch's hump inside a step). The C library is built once
@@ -61,9 +61,9 @@ def filippov_alpha(rates, sides, guess=None):
 
 
 class SlidingLaw:
-    """A model's laws at the parameters ``p`` as filippov.c calls them (``bondc_law``): its
-    right-hand side and switching functions as C callbacks of ``model.rhs`` and
-    ``model.switches``."""
+    """A model's laws at the parameters ``p`` as the engine's C functions call them (``bondc_law``):
+    its compiled ``bondc_rhs`` and ``bondc_switches`` where the model has them (``native_functions``),
+    else C callbacks of ``model.rhs`` and ``model.switches``."""
 
     def __init__(self, model, p):
         ffi, lib = load_policy()
@@ -87,7 +87,13 @@ class SlidingLaw:
                     ffi.buffer(out, 8 * size)[:] = np.full(size, np.nan).tobytes()
             return ffi.callback(_LAW_SIGNATURE, evaluate)
 
-        self._callbacks = (callback(model.rhs, n), callback(model.switches, count))
+        native = getattr(model, "native_functions", None)
+        if native is not None:      # the model's compiled functions themselves: no Python per call
+            model_ffi, model_lib = native
+            self._callbacks = tuple(ffi.cast("bondc_law_function", int(model_ffi.cast(
+                "uintptr_t", model_ffi.addressof(model_lib, name)))) for name in ("bondc_rhs", "bondc_switches"))
+        else:
+            self._callbacks = (callback(model.rhs, n), callback(model.switches, count))
         self.law = ffi.new("bondc_law *")
         self.law.n, self.law.switches = n, count
         self.law.p = _doubles(ffi, self.p)
@@ -98,6 +104,23 @@ class SlidingLaw:
         failure, self.failure = self.failure, None
         if failure is not None:
             raise failure
+
+    def deadbands(self, t, y, modes, index, scale):
+        """``bondc_law_deadbands``: how far each switching function of ``index`` moves when each
+        state moves by its tolerance ``scale``, summed over the states (not finite: 0)."""
+        ffi = self.ffi
+        y = np.ascontiguousarray(y, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        index = np.ascontiguousarray(index, dtype=np.intc)
+        scale = np.ascontiguousarray(np.broadcast_to(scale, y.shape), dtype=float)
+        out = np.empty(max(index.size, 1))
+        code = self.lib.bondc_law_deadbands(self.law, float(t), _doubles(ffi, y), _doubles(ffi, modes),
+                                            _doubles(ffi, scale), int(index.size), ffi.from_buffer("int[]", index),
+                                            _doubles(ffi, out))
+        self._raise_failure()
+        if code != 0:
+            raise MemoryError("bondc's deadbands ran out of memory")
+        return out[:index.size].copy()
 
     def sliding_set(self, t, y, modes, candidates, probe, span, scale):
         """``bondc_sliding_set`` at (t, y): (the held switches, the modes of the others, the held
@@ -185,6 +208,31 @@ def first_dip(values_at, a, b, left, right):
     code = lib.bondc_first_dip(callback, ffi.NULL, left.size, float(a), float(b), _doubles(ffi, left),
                                _doubles(ffi, right), t_end)
     return _located(code, t_end, failures)
+
+
+def first_crossing(values_at, switches, index, floors, signs, band, old, new, t_old, t_new):
+    """The earliest crossing in the step (t_old, t_new] of the switches ``index`` (``bondc_first_crossing``,
+    the engine's one implementation): ``values_at(t)`` gives every switching function on the step's
+    interpolant with the modes frozen, ``signs`` the switches' modes, ``band`` their deadbands, ``old`` and
+    ``new`` their values at the step's ends, ``floors`` a mask of floor switches. (time, switch) or None.
+
+    >>> first_crossing(lambda t: [0.5 - t], 1, [0], [False], [1.0], [0.0], [0.5], [-0.5], 0.0, 1.0)
+    (0.5, 0)
+    """
+    ffi, lib = load_policy()
+    watch = np.ascontiguousarray(index, dtype=np.intc)
+    floors = np.ascontiguousarray(floors, dtype=np.intc)
+    signs, band, old, new = (np.ascontiguousarray(v, dtype=float) for v in (signs, band, old, new))
+    callback, failures = _values_callback(ffi, values_at, switches)
+    t_event = ffi.new("double *")
+    j = lib.bondc_first_crossing(callback, ffi.NULL, int(switches), int(watch.size), ffi.from_buffer("int[]", watch),
+                                 ffi.from_buffer("int[]", floors), _doubles(ffi, signs), _doubles(ffi, band),
+                                 _doubles(ffi, old), _doubles(ffi, new), float(t_old), float(t_new), t_event)
+    if failures:
+        raise failures[0]
+    if j == -2:
+        raise MemoryError("bondc's crossing location ran out of memory")
+    return None if j < 0 else (float(t_event[0]), int(watch[j]))
 
 
 class TooManyHeld(Exception):
