@@ -37,12 +37,8 @@ is incomplete and exits with status 1. :func:`write_npz` writes the same
 arrays plus ``complete``, ``message``, events and parameters. Both write a
 temporary file in the target's directory and rename it over the target.
 
-:func:`run` is the whole ``bondc simulate`` command without argument parsing.
-
->>> from pathlib import Path
->>> result = run(Path(__file__).parent.parent / "tests/fixtures/sim/rc.bg", dt=0.5e-3)
->>> result.complete, round(float(result.outputs["v"][-1]), 4)
-(True, 9.9326)
+The whole ``bondc simulate`` command (load, check, derive, simulate, write) is
+:func:`bondc.pipeline.simulate_file`; this module is its simulation stage and its files.
 """
 
 from __future__ import annotations
@@ -52,9 +48,9 @@ import math
 import sys
 import time
 import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -65,7 +61,7 @@ from bondc.model import bond_alias, law_span, readable, readable_names, result_u
 _COMPILED: dict = {}
 
 
-@dataclass
+@dataclass(frozen=True)
 class SimResult:
     """The trajectories of one simulation run, arrays by name, SI units.
 
@@ -77,34 +73,37 @@ class SimResult:
     ``variables`` every assigned variable (inputs, bond variables, eliminated
     states); ``events`` is a list of ``(time, label)``; ``stats`` the solver's
     counts (nfev, njev, nlu, steps, segments, events, wall_time, ...).
+
+    A result is made once, complete, and not changed (a variant is ``dataclasses.replace``'s).
     """
 
     t: np.ndarray
-    states: dict
-    outputs: dict
-    bonds: dict
-    variables: dict
+    states: dict[str, np.ndarray]
+    outputs: dict[str, np.ndarray]
+    bonds: dict[str, np.ndarray]
+    variables: dict[str, np.ndarray]
     complete: bool
     message: str
-    events: list
-    stats: dict
-    parameters: dict
-    failure: dict | None = None
+    events: list[tuple[float, str]]
+    stats: dict[str, Any]
+    parameters: dict[str, float]
+    failure: dict[str, Any] | None = None
     model: str = ""
     experiment: str | None = None
-    diagnostics: list = field(default_factory=list)
-    warnings: list = field(default_factory=list)
-    settings: dict = field(default_factory=dict)
-    jumps: list = field(default_factory=list)    # (t, states before, states after) of when clauses
+    diagnostics: tuple[Diagnostic, ...] = ()
+    warnings: tuple[Diagnostic, ...] = ()
+    settings: dict[str, Any] = field(default_factory=dict)
+    # (t, states before, states after) of when clauses
+    jumps: list[tuple[float, Any, Any]] = field(default_factory=list)
     # (t0, t1, corners, times, weights) of each Filippov sliding mode (see bondc.runtime.Result): the
     # energy account evaluates the combination between the points from them
-    sliding: list = field(default_factory=list)
+    sliding: list[tuple[Any, ...]] = field(default_factory=list)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
-    units: dict = field(default_factory=dict)
+    units: dict[str, tuple[str | None, float]] = field(default_factory=dict)
     # dependent states (storage in derivative causality), name -> values at every point (SI); they
     # are also in ``variables``, and are not in ``states`` (which the solver integrates)
-    dependent: dict = field(default_factory=dict)
+    dependent: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def t_reached(self) -> float:
@@ -149,7 +148,24 @@ class SimResult:
         }
 
 
-def _json_float(value):
+_FIELDS = frozenset(f.name for f in fields(SimResult))
+_frozen_setattr = SimResult.__setattr__
+
+
+def _keep_memo(self: SimResult, name: str, value: object) -> None:
+    """A field cannot change (FrozenInstanceError); what an analysis computes once from the run (the
+    energy account's run at the solver's steps, ``_solver_steps``, ``_dense_steps``) may be kept on it
+    under a private name that is no field."""
+    if name.startswith("_") and name not in _FIELDS:
+        object.__setattr__(self, name, value)
+        return
+    _frozen_setattr(self, name, value)
+
+
+SimResult.__setattr__ = _keep_memo      # type: ignore[method-assign]
+
+
+def _json_float(value: object) -> float | str:
     value = float(value)
     return value if np.isfinite(value) else str(value)
 
@@ -430,11 +446,10 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
     finally:
         if bar is not None:
             bar.close()
-    result = _result(ss, experiment, namespace, raw, settings)
     from bondc.model import external_input_notes
 
-    result.warnings = external_input_notes(getattr(ss, "graph", None), supplied) + list(result.warnings)
-    return result
+    return _result(ss, experiment, namespace, raw, settings,
+                   notes=external_input_notes(getattr(ss, "graph", None), supplied))
 
 
 def dependent_states(ss, variables: Mapping) -> dict:
@@ -462,24 +477,36 @@ def _all_finite(series) -> bool:
     return all(math.isfinite(np.sum(base)) for base in bases.values())
 
 
-def _result(ss, experiment, namespace, raw, settings) -> SimResult:
-    bond_names = namespace["BOND_VARIABLES"]
+def _result(ss: Any, experiment: Any, namespace: Mapping[str, Any], raw: Any, settings: Mapping[str, Any],
+            notes: Sequence[Diagnostic] = ()) -> SimResult:
+    """What :func:`simulate` makes of the engine's raw run: readable names, units, the failure's
+    diagnostic and the warnings (``notes`` first) about values that are not finite and chattering."""
     graph = getattr(ss, "graph", None)
     names = readable_names(graph)
-    result = SimResult(
-        t=raw.t, states=dict(raw.states), outputs=dict(raw.outputs),
-        bonds={name: raw.variables[name] for name in bond_names},
+    t = raw.t
+    outputs = dict(raw.outputs)
+    bonds = {name: raw.variables[name] for name in namespace["BOND_VARIABLES"]}
+    events = [(time_, readable(names, label)) for time_, label in raw.events]
+    diagnostics = (_failure_diagnostic(graph, raw.failure, raw, names),) if raw.failure is not None else ()
+    warnings = [*notes, *_nonfinite_warnings(graph, t, outputs, bonds, raw.complete),
+                *_chattering_warnings(graph, events, raw.stats)]
+    return SimResult(
+        t=t, states=dict(raw.states), outputs=outputs, bonds=bonds,
         variables=dict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
-        events=[(time_, readable(names, label)) for time_, label in raw.events],
-        stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
+        events=events, stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
         model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
+        diagnostics=diagnostics, warnings=tuple(warnings),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
-        sliding=list(getattr(raw, "sliding", ())), dependent=dependent_states(ss, raw.variables),
+        sliding=list(getattr(raw, "sliding", ())), units=result_units(graph),
+        dependent=dependent_states(ss, raw.variables),
     )
-    result.units = result_units(graph)
-    if raw.failure is not None:
-        result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw, names))
-    for group, values in (("output", result.outputs), ("bond variable", result.bonds)):
+
+
+def _nonfinite_warnings(graph: Any, t: np.ndarray, outputs: Mapping[str, np.ndarray],
+                        bonds: Mapping[str, np.ndarray], complete: bool) -> list[Diagnostic]:
+    """W821: the first output, and the first bond variable, that is not finite at some point."""
+    found = []
+    for group, values in (("output", outputs), ("bond variable", bonds)):
         if _all_finite(values.values()):
             continue
         for name, series in values.items():
@@ -491,32 +518,36 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
                 shown = f"{name} ({alias})" if alias else name
                 first = int(bad[0])
                 # the recorded points bracket where it stops being finite, not the instant itself
-                before = f" (the point before it, at t={result.t[first - 1]:.6g} s, is finite)" if first > 0 else ""
-                result.warnings.append(Diagnostic(
+                before = f" (the point before it, at t={t[first - 1]:.6g} s, is finite)" if first > 0 else ""
+                found.append(Diagnostic(
                     "warning", "W821", f"{group} '{shown}' is not finite at {bad.size} of {series.size} recorded "
-                                       f"points, the first at t={result.t[first]:.6g} s{before}",
+                                       f"points, the first at t={t[first]:.6g} s{before}",
                     law_span(graph, name) or _no_span(),
                     hint="its law is evaluated outside its domain there; " + (
-                        "the states are unaffected (none of their rates reads it)" if result.complete else
+                        "the states are unaffected (none of their rates reads it)" if complete else
                         "the run stopped (the error says where and why)")))
                 break
-    chattering = [(time, label) for time, label in result.events if label.startswith("chattering")]
-    if chattering:
-        first_time, first_label = chattering[0]
-        switches = first_label.partition("(")[2].rstrip(")")
-        more = f" (and {len(chattering) - 1} more episode{'s' if len(chattering) > 2 else ''})" \
-            if len(chattering) > 1 else ""
-        from bondc.source import NO_SPAN
+    return found
 
-        result.warnings.append(Diagnostic(
-            "warning", "W820",
-            f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
-            "be located; integrated with the unfrozen law there",
-            law_span(graph, raw.stats.get("chattering_law")) or NO_SPAN,
-            hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
-                 "switching instants there are not located, so results there are only as good as the solver's "
-                 "steps (lower rtol for a tighter result)"))
-    return result
+
+def _chattering_warnings(graph: Any, events: Sequence[tuple[float, str]], stats: Mapping[str, Any]
+                         ) -> list[Diagnostic]:
+    """W820: switching faster than events can be located, at its first episode."""
+    chattering = [(time, label) for time, label in events if label.startswith("chattering")]
+    if not chattering:
+        return []
+    first_time, first_label = chattering[0]
+    switches = first_label.partition("(")[2].rstrip(")")
+    more = f" (and {len(chattering) - 1} more episode{'s' if len(chattering) > 2 else ''})" \
+        if len(chattering) > 1 else ""
+    return [Diagnostic(
+        "warning", "W820",
+        f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
+        "be located; integrated with the unfrozen law there",
+        law_span(graph, stats.get("chattering_law")) or _no_span(),
+        hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
+             "switching instants there are not located, so results there are only as good as the solver's "
+             "steps (lower rtol for a tighter result)")]
 
 
 _CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813", "points": "E814",
@@ -723,38 +754,3 @@ def write(result: SimResult, path, all_bonds: bool = False) -> None:
         write_parquet(result, path, all_bonds)
     else:
         write_csv(result, path, all_bonds)
-
-
-# ------------------------------------------------------------------- run
-
-
-def run(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
-        t_end: float | None = None, dt: float | None = None, output=None, all_bonds: bool = False,
-        progress: bool = False, inputs=None, input_files: Sequence[str] = ()) -> SimResult:
-    """``bondc simulate``: load, check, derive, simulate and write; returns the result.
-
-    ``experiment`` None uses the model's first experiment (if any); ``sets``
-    are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
-    ``ast.SetValue``; ``inputs``/``input_files`` supply external inputs (``{name: (times, values)
-    or f(t)}``; ``"u=FILE.csv[:COLUMN]"`` texts as ``--input``); ``output`` a ``.csv`` or ``.npz`` path (None: write
-    nothing). Raises ModelError/CausalityError/EquationError/UsageError for a
-    model or usage problem. A failed run writes what it computed, then raises
-    :class:`SimulationError` whose ``.result`` is the incomplete result.
-    """
-    from bondc.io import check_output
-    from bondc.pipeline import derive_file
-
-    if output is not None:
-        check_result_path(output)
-        check_output(output)        # before any work: a bad path is not found after the run
-    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
-    supplied = {**read_input_files(derived.state_space, input_files), **dict(inputs or {})}
-    result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress,
-                      inputs=supplied or None)
-    result.warnings = list(derived.notes) + result.warnings
-    if output is not None:
-        write(result, output, all_bonds)
-    error = result.error()
-    if error is not None:
-        raise error
-    return result

@@ -1,7 +1,7 @@
 """Report stage: a ``.bg`` file -> one self-contained HTML report, and validation against measurements.
 
 :func:`build_report` is ``bondc report`` without argument parsing. It runs the
-whole pipeline (:func:`run_pipeline`: load with the experiment's overrides,
+whole pipeline (:func:`bondc.pipeline.run_pipeline`: load with the experiment's overrides,
 causality, equations, simulation), gathers what a reader needs into a
 :class:`~bondc.report.render.ReportContext` (:func:`report_context`: header,
 highlighted source, parameters, the bond graph with causal strokes, the
@@ -43,7 +43,7 @@ import re
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence, TextIO
 
 import numpy as np
 import sympy
@@ -52,6 +52,7 @@ from markupsafe import Markup
 from bondc.errors import Diagnostic, UsageError, render as render_diagnostic
 from bondc.io import atomic_write_text, check_output
 from bondc.model import KINDS, BondGraph, ExperimentDef
+from bondc.pipeline import PipelineRun, run_pipeline
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
 from bondc.report.render import (
@@ -64,6 +65,9 @@ from bondc.analysis.validate import (
     simulated_signals, write_junit,
 )
 from bondc.symbolic import Translator, as_sympy
+
+if TYPE_CHECKING:
+    from bondc.simulate import SimResult
 
 __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
            "write_report", "run_validate", "report_summary", "report_text", "validate_summary",
@@ -87,72 +91,14 @@ MAX_MAGNITUDE_RATIO = 5.0
 LAW_OPERATIONS = 8
 
 
-# ---------------------------------------------------------------- the pipeline
+# ---------------------------------------------------------------- where it goes
 
-@dataclass(frozen=True)
-class PipelineRun:
-    """What the pipeline computed for one report: each stage's result, the simulation possibly partial.
+def _steps(run: PipelineRun) -> SimResult:
+    """The run at the solver's steps and between them (:func:`~bondc.analysis.energy.dense_steps`):
+    statistics and motor requirements are computed from it, plots show ``run.result``."""
+    from bondc.analysis.energy import dense_steps
 
-    ``result`` is None when the model could not be simulated because nothing
-    gives an end time (no experiment sets ``t_end`` and none was passed).
-    ``experiment`` is the experiment applied (None for a model without one),
-    ``default_experiment`` whether it is the model's first.
-    """
-
-    path: Path
-    source_text: str
-    graph: BondGraph
-    causal: Any                     # CausalGraph
-    state_space: Any                # StateSpace
-    experiment: ExperimentDef | None
-    default_experiment: bool
-    result: Any                     # SimResult or None
-    warnings: tuple[Diagnostic, ...]
-    overridden: tuple[str, ...]     # parameters set by the experiment or by ``sets``
-
-    @property
-    def complete(self) -> bool:
-        return self.result is not None and bool(self.result.complete)
-
-    @property
-    def steps(self):
-        """The run at the solver's steps and between them (:func:`~bondc.analysis.energy.dense_steps`):
-        statistics and motor requirements are computed from it, plots show ``result``."""
-        from bondc.analysis.energy import dense_steps
-
-        return dense_steps(self.state_space, self.result)
-
-
-def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str | None = None,
-                 sets: Sequence = (), t_end: float | None = None, progress: bool = False) -> PipelineRun:
-    """Load ``path`` with the experiment's overrides (default: the first), assign causality, derive, simulate.
-
-    ``sets`` are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
-    ``ast.SetValue``; ``t_end`` [s] overrides the experiment's end time.
-    Raises what the stages raise for a bad model (ParseError, ModelError,
-    CausalityError, EquationError, UsageError); a simulation that fails does
-    not raise: see :attr:`PipelineRun.complete`.
-    """
-    from bondc.pipeline import derive_file
-    from bondc.simulate import simulate
-
-    path = Path(path)
-    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
-    graph, causal, state_space, chosen, parsed = (derived.graph, derived.causal, derived.state_space,
-                                                  derived.experiment, derived.sets)
-    default = chosen is None or chosen.name == next(iter(graph.experiments))
-    result = None
-    if t_end is not None or (chosen is not None and chosen.t_end is not None):
-        result = simulate(state_space, chosen, t_end=t_end, progress=progress)
-    notes = list(derived.notes)
-    if result is not None:
-        notes += [d for d in result.warnings if d not in notes]
-    overridden = list(chosen.parameters) if chosen is not None else []
-    overridden += [item.name for item in parsed if item.name not in overridden]
-    source = graph.sources.get(graph.file)
-    text = source.text if source is not None else path.read_text(encoding="utf-8")
-    return PipelineRun(path, text, graph, causal, state_space, chosen, default, result, tuple(notes),
-                       tuple(overridden))
+    return dense_steps(run.state_space, run.result)
 
 
 def default_output(path: str | Path, run: PipelineRun) -> Path:
@@ -1255,7 +1201,7 @@ def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
     )
     from bondc.analysis.motors import requirements
 
-    result, graph = run.steps, run.graph
+    result, graph = _steps(run), run.graph
     try:
         torque = find_signal(result, (MOTOR_TORQUE,), "torque")
         speed = find_signal(result, (MOTOR_SPEED,), "speed")
@@ -1373,7 +1319,7 @@ def _result_tables(run: PipelineRun) -> list[Table]:
     """The outputs' minimum, maximum, time average, RMS and final value; the power outputs per cycle."""
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
 
-    graph, result = run.graph, run.steps
+    graph, result = run.graph, _steps(run)
     statistics = output_statistics(result)
     rows = []
     for name, values in statistics.items():
