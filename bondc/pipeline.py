@@ -35,7 +35,8 @@ from bondc import ast
 from bondc.errors import Diagnostic
 
 if TYPE_CHECKING:
-    from bondc.cache import LightStateSpace
+    import os
+
     from bondc.causality import CausalGraph
     from bondc.model import BondGraph, ExperimentDef
     from bondc.simulate import SimResult
@@ -43,6 +44,8 @@ if TYPE_CHECKING:
 
     #: A set value as a command gives it: ``"M=40 [kg]"``, or already parsed.
     SetText = str | ast.SetValue
+    #: A model file's path.
+    PathLike = str | os.PathLike[str]
 
 
 @contextlib.contextmanager
@@ -115,7 +118,7 @@ class Checked:
     sets: tuple[ast.SetValue, ...]          # the parsed --set values
 
 
-def check_file(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+def check_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
                sets: Sequence[SetText] = (), text: str | None = None) -> Checked:
     """Read and check ``path`` (``text``: its text, when it is not read from disk) with
     ``experiment``'s overrides (default: the first experiment) and ``sets``; raises ModelError
@@ -139,8 +142,9 @@ class Derived:
     graph: BondGraph
     warnings: tuple[Diagnostic, ...]        # of the semantic stage
     causal: CausalGraph
-    # a cached run may hold the light state space (what a simulation needs, without sympy)
-    state_space: StateSpace | LightStateSpace
+    # ``derive_file(light=True)`` may give a cache.LightStateSpace in its place: what a simulation
+    # needs without sympy, loading the full StateSpace when asked for anything else
+    state_space: StateSpace
     experiment: ExperimentDef | None        # the one whose overrides were applied
     sets: tuple[ast.SetValue, ...]          # the parsed --set values
 
@@ -165,7 +169,7 @@ def derive(checked: Checked) -> Derived:
                    checked.sets)
 
 
-def derive_file(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+def derive_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
                 sets: Sequence[SetText] = (), cache: bool | None = None, light: bool = False,
                 text: str | None = None) -> Derived:
     """Load ``path`` with ``experiment``'s overrides (default: the first experiment) and ``sets``,
@@ -213,7 +217,7 @@ def structure(graph: BondGraph) -> tuple[object, ...]:
             experiment_inputs)
 
 
-def _bind_to_base(path: str | Path, model: str | None, experiment: str | None, checked: Checked) -> Derived | None:
+def _bind_to_base(path: PathLike, model: str | None, experiment: str | None, checked: Checked) -> Derived | None:
     """``--set`` values bound late: the model derived and compiled without them (from the compile
     cache, or derived now and stored there) with ``checked``'s values (checked with them) as its
     parameters. None when the base model does not check or differs in structure."""
@@ -235,14 +239,13 @@ def file_texts(graph: BondGraph) -> dict[str, str]:
     return {name: source.text for name, source in graph.sources.items() if source.path is not None}
 
 
-def rebind(state_space: Any, graph: BondGraph) -> Any:
+def rebind(state_space: StateSpace, graph: BondGraph) -> StateSpace:
     """``state_space`` with ``graph``'s parameter values (and ``graph``); its compiled module is
     ``state_space``'s, given every parameter value (``bound_base``, used by ``simulate``)."""
     values = {name: (symbol, float(graph.parameters[name].value) if name in graph.parameters else value)
               for name, (symbol, value) in state_space.parameters.items()}
-    bound = dataclasses.replace(state_space, parameters=values, graph=graph)
-    object.__setattr__(bound, "bound_base", getattr(state_space, "bound_base", None) or state_space)
-    return bound
+    return dataclasses.replace(state_space, parameters=values, graph=graph,
+                               bound_base=state_space.bound_base or state_space)
 
 
 #: The built-in functions whose every use is a switch (LANGUAGE.md section 7); an ``if`` is one too.
@@ -262,7 +265,7 @@ def _has_switch(node: object) -> bool:
                if field.name not in ("span", "func_span"))
 
 
-def switches_of(path: str | Path, graph: BondGraph, loaded: tuple[Any, ...] | None = None, *,
+def switches_of(path: PathLike, graph: BondGraph, loaded: tuple[Any, ...] | None = None, *,
                 sets: Sequence[SetText] = (), cache: bool = True) -> tuple[dict[str, Any], ...]:
     """Every switch of ``graph``'s laws as the engine treats it (``codegen.emit.switch_kinds``),
     each ``{"switch", "kind", "variable", "file", "line"}`` with its law's place: ``check --json``.
@@ -299,13 +302,13 @@ def switches_of(path: str | Path, graph: BondGraph, loaded: tuple[Any, ...] | No
 # ------------------------------------------------------------------ compile
 
 
-def default_output(path: str | Path) -> Path:
+def default_output(path: PathLike) -> Path:
     """Where ``bondc compile model.bg`` writes without ``-o``: ``model_gen.py`` next to the model."""
     path = Path(path)
     return path.with_name(path.stem + "_gen.py")
 
 
-def compile_file(path: str | Path, output: str | Path | None = None, *, model: str | None = None,
+def compile_file(path: PathLike, output: PathLike | None = None, *, model: str | None = None,
                  experiment: str | None = None, sets: Sequence[SetText] = (), standalone: bool = False) -> str:
     """``bondc compile``: load, check, derive and emit; write ``output`` (atomically) if given.
 
@@ -350,9 +353,9 @@ def simulate_derived(derived: Derived, *, t_end: float | None = None, dt: float 
                     inputs=supplied)
 
 
-def simulate_file(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+def simulate_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
                   sets: Sequence[SetText] = (), t_end: float | None = None, dt: float | None = None,
-                  output: str | Path | None = None, all_bonds: bool = False, progress: bool = False,
+                  output: PathLike | None = None, all_bonds: bool = False, progress: bool = False,
                   inputs: Mapping[str, Any] | None = None, input_files: Sequence[str] = (),
                   text: str | None = None) -> SimResult:
     """``bondc simulate``: load, check, derive, simulate and write; returns the result, its
@@ -401,7 +404,7 @@ class PipelineRun:
     source_text: str
     graph: BondGraph
     causal: CausalGraph
-    state_space: StateSpace | LightStateSpace
+    state_space: StateSpace
     experiment: ExperimentDef | None
     default_experiment: bool
     result: SimResult | None
@@ -413,7 +416,7 @@ class PipelineRun:
         return self.result is not None and bool(self.result.complete)
 
 
-def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str | None = None,
+def run_pipeline(path: PathLike, *, model: str | None = None, experiment: str | None = None,
                  sets: Sequence[SetText] = (), t_end: float | None = None, progress: bool = False) -> PipelineRun:
     """Load ``path`` with the experiment's overrides (default: the first), assign causality, derive, simulate.
 

@@ -152,7 +152,7 @@ _FIELDS = frozenset(f.name for f in fields(SimResult))
 _frozen_setattr = SimResult.__setattr__
 
 
-def _keep_memo(self: SimResult, name: str, value: object) -> None:
+def _keep_memo(self: SimResult, name: str, value: Any) -> None:
     """A field cannot change (FrozenInstanceError); what an analysis computes once from the run (the
     energy account's run at the solver's steps, ``_solver_steps``, ``_dense_steps``) may be kept on it
     under a private name that is no field."""
@@ -162,10 +162,10 @@ def _keep_memo(self: SimResult, name: str, value: object) -> None:
     _frozen_setattr(self, name, value)
 
 
-SimResult.__setattr__ = _keep_memo      # type: ignore[method-assign]
+SimResult.__setattr__ = _keep_memo      # type: ignore[method-assign, assignment]
 
 
-def _json_float(value: object) -> float | str:
+def _json_float(value: Any) -> float | str:
     value = float(value)
     return value if np.isfinite(value) else str(value)
 
@@ -423,7 +423,7 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))
     p = _check_overrides(ss, overrides)
-    base = getattr(ss, "bound_base", None)         # values bound late (--set): the base's module
+    base = ss.bound_base                            # values bound late (--set): the base's module
     namespace = compile_model(base if base is not None else ss)
     if base is not None:
         p = {**{name: value for name, (_, value) in ss.parameters.items()}, **p}
