@@ -50,13 +50,13 @@ import time
 import weakref
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, BinaryIO, Mapping, Sequence
 
 import numpy as np
 
 from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
 from bondc.io import atomic_write
-from bondc.model import bond_alias, law_span, readable, readable_names, result_units
+from bondc.model import ExperimentDef, bond_alias, law_span, readable, readable_names, result_units
 
 _COMPILED: dict = {}
 
@@ -239,19 +239,29 @@ _RUNTIME_CODE: dict = {}
 # ------------------------------------------------------------------ simulate
 
 
-def _settings(experiment, t_end, dt, method, rtol, atol, max_step, first_step=None) -> dict:
-    extra = dict(getattr(experiment, "settings", {}) or {}) if experiment is not None else {}
-    pick = lambda given, name, default=None: given if given is not None else (
-        getattr(experiment, name, None) if experiment is not None and getattr(experiment, name, None) is not None
-        else default)
+def _first(*values: Any) -> Any:
+    """The first of ``values`` that is not None (None if all are)."""
+    return next((value for value in values if value is not None), None)
+
+
+#: What a run without an experiment takes its settings from: none declared.
+_NO_EXPERIMENT = ExperimentDef("", None)
+
+
+def _settings(experiment: ExperimentDef | None, t_end: float | None, dt: float | None, method: str | None,
+              rtol: float | None, atol: float | None, max_step: float | None,
+              first_step: float | None = None) -> dict[str, Any]:
+    """The run's settings: each one given here, else the experiment's, else the default."""
+    declared = experiment if experiment is not None else _NO_EXPERIMENT
+    extra = declared.settings
     settings = {
-        "t_end": pick(t_end, "t_end"),
-        "method": pick(method, "solver", None),
-        "rtol": float(pick(rtol, "rtol", 1e-6)),
-        "atol": float(pick(atol, "atol", 1e-9)),
-        "max_step": pick(max_step, "max_step"),
-        "dt": dt if dt is not None else extra.get("dt"),
-        "first_step": first_step if first_step is not None else extra.get("first_step"),
+        "t_end": _first(t_end, declared.t_end),
+        "method": _first(method, declared.solver),
+        "rtol": float(_first(rtol, declared.rtol, 1e-6)),
+        "atol": float(_first(atol, declared.atol, 1e-9)),
+        "max_step": _first(max_step, declared.max_step),
+        "dt": _first(dt, extra.get("dt")),
+        "first_step": _first(first_step, extra.get("first_step")),
     }
     # Settings from the model are checked by the semantic stage; these can come from the command line.
     for name in ("t_end", "dt", "max_step", "rtol", "atol", "first_step"):
@@ -477,7 +487,7 @@ def _all_finite(series) -> bool:
     return all(math.isfinite(np.sum(base)) for base in bases.values())
 
 
-def _result(ss: Any, experiment: Any, namespace: Mapping[str, Any], raw: Any, settings: Mapping[str, Any],
+def _result(ss: Any, experiment: ExperimentDef | None, namespace: Mapping[str, Any], raw: Any, settings: Mapping[str, Any],
             notes: Sequence[Diagnostic] = ()) -> SimResult:
     """What :func:`simulate` makes of the engine's raw run: readable names, units, the failure's
     diagnostic and the warnings (``notes`` first) about values that are not finite and chattering."""
@@ -494,7 +504,7 @@ def _result(ss: Any, experiment: Any, namespace: Mapping[str, Any], raw: Any, se
         t=t, states=dict(raw.states), outputs=outputs, bonds=bonds,
         variables=dict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
         events=events, stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
-        model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
+        model=getattr(graph, "name", "") or "", experiment=experiment.name if experiment is not None else None,
         diagnostics=diagnostics, warnings=tuple(warnings),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
         sliding=list(getattr(raw, "sliding", ())), units=result_units(graph),
@@ -675,6 +685,14 @@ def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     return result_bytes("csv", names, columns, result.units).decode("utf-8")
 
 
+def _write_bytes(path: str | Path, data: bytes) -> None:
+    """``data`` as the file ``path``, atomically."""
+    def write(handle: BinaryIO) -> None:
+        handle.write(data)
+
+    atomic_write(Path(path), write)
+
+
 def _metadata(result: SimResult) -> dict:
     return {"model": result.model or "", "experiment": result.experiment or "", "complete": result.complete,
             "message": result.message}
@@ -683,7 +701,7 @@ def _metadata(result: SimResult) -> dict:
 def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
     """Write ``t``, outputs, states (and bonds) as csv, atomically (see the module docstring)."""
     text = csv_text(result, all_bonds)
-    atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
+    _write_bytes(path, text.encode("utf-8"))
 
 
 def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
@@ -698,7 +716,7 @@ def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
     except ImportError as error:
         raise UsageError(Diagnostic("error", "E001", f"cannot write '{path}': {error}",
                                     hint="pip install pyarrow, or give -o run.csv (or run.npz)")) from None
-    atomic_write(Path(path), lambda handle: handle.write(data))
+    _write_bytes(path, data)
 
 
 def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
@@ -721,7 +739,7 @@ def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
                 "parameter_names": np.array(list(result.parameters), dtype=str),
                 "parameter_values": np.array(list(result.parameters.values()), dtype=float)}
     data = result_bytes("npz", [], [], result.units, arrays=arrays, metadata=metadata)
-    atomic_write(Path(path), lambda handle: handle.write(data))
+    _write_bytes(path, data)
 
 
 #: Suffixes of formats a result is not written in: a .json would otherwise get csv text.

@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from bondc.errors import DataError, Diagnostic, UsageError
 from bondc.io import atomic_write_text
@@ -390,7 +391,7 @@ def _passes(metric: str, value: float, limit: float) -> bool:
     return value <= limit if METRICS[metric] == "max" else value >= limit
 
 
-def compare(sim_t: Sequence[float], sim_values: Mapping[str, Sequence[float]],
+def compare(sim_t: npt.ArrayLike, sim_values: Mapping[str, npt.ArrayLike],
             measured: Mapping[str, np.ndarray], specs: Iterable[CompareSpec]) -> list[SignalResult]:
     """Compare simulated signals with measured columns; one :class:`SignalResult` per spec.
 

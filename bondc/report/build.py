@@ -42,7 +42,7 @@ import math
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Mapping, Sequence, TextIO
 
 import numpy as np
 
@@ -64,6 +64,9 @@ from bondc.report.render import (
     causality_rows, parameter_rows, render_report,
 )
 from bondc.report.state_equations import state_equations
+
+if TYPE_CHECKING:
+    from bondc.simulate import SimResult
 
 __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
            "write_report", "run_validate", "report_summary", "report_text", "validate_summary",
@@ -136,7 +139,7 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
     results: list[SignalResult] = []
     try:
         validation = None
-        if specs:
+        if specs and measured is not None:
             results = compare_run(run, measured, specs)
             validation = validation_section(run, results, data)
         write_report(report_context(run, validation=validation, motors=motors, date=date,
@@ -207,7 +210,7 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
                                   progress=progress, inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     diagnostics = _print_diagnostics(run, errors)
     failing = [result.name for result in results if not result.passed]
-    interrupted = getattr(run.result, "exit_status", None) if run.result is not None else None
+    interrupted = run.result.exit_status if run.result is not None else None
     return {"complete": run.complete, "file": str(path), "model": run.graph.name,
             "experiment": run.experiment.name if run.experiment is not None else None,
             "written": [str(target)],
@@ -231,7 +234,7 @@ def _print_diagnostics(run: PipelineRun, stream: TextIO) -> list[Diagnostic]:
 
     diagnostics = list(run.warnings)
     if run.result is not None and not run.result.complete:
-        diagnostics.append(_failure(run))
+        diagnostics.append(_failure(run.result))
     if diagnostics:
         print(render_all(diagnostics, run.graph.sources), file=stream)
     return diagnostics
@@ -340,7 +343,7 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
             raise
         written.append(str(output))
     passed = all(result.passed for result in results) and run.complete
-    interrupted = getattr(run.result, "exit_status", None)
+    interrupted = run.result.exit_status if run.result is not None else None
     return results, {
         "complete": run.complete, "passed": passed, "file": str(path), "model": run.graph.name,
         "experiment": run.experiment.name if run.experiment is not None else None, "data": str(data),
@@ -349,8 +352,8 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
         "exit_status": interrupted or (0 if passed else 1)}
 
 
-def _failure(run: PipelineRun) -> Diagnostic:
-    result = run.result
+def _failure(result: SimResult) -> Diagnostic:
+    """What stopped an incomplete run."""
     if result.diagnostics:
         return result.diagnostics[0]
     return Diagnostic("error", "E811", f"simulation stopped: {result.message}")
@@ -381,9 +384,12 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
     if result is None:
         warnings.insert(0, "Not simulated: no experiment of this model sets t_end (give an end time to simulate).")
     elif not result.complete:
-        incomplete = render_diagnostic(_failure(run), graph.sources)
+        incomplete = render_diagnostic(_failure(result), graph.sources)
 
-    plots, result_tables, power_plots, power_tables = [], [], [], []
+    plots: list[Plot] = []
+    result_tables: list[Table] = []
+    power_plots: list[Plot] = []
+    power_tables: list[Table] = []
     summary: list[tuple[str, Any, str | None]] = []
     motor_requirements = motor_candidates = verdict = answer = None
     if result is not None and result.t.size >= 2:
@@ -630,6 +636,8 @@ def format_unit_text(text: str | None) -> str:
 def _summary(run: PipelineRun) -> list[tuple[str, Any, str | None]]:
     """Key results: the peak of each of the experiment's outputs."""
     result, graph = run.result, run.graph
+    if result is None:
+        return []
     names = [n for n in (run.experiment.outputs if run.experiment is not None else ()) if n in result.outputs]
     items = []
     for name in names[:4]:

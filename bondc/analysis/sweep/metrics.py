@@ -172,7 +172,7 @@ def _measure(setup: _Setup, state_space, graph, experiment, result, warnings: li
         from bondc.analysis.stats import power_statistics
 
         outputs = sorted({name.rpartition(".")[0] for name in cycled})
-        per_cycle = power_statistics(result, outputs, getattr(experiment, "cycle", None))
+        per_cycle = power_statistics(result, outputs, experiment.cycle if experiment is not None else None)
         for name in cycled:
             output, _, statistic = name.rpartition(".")
             first = (per_cycle.get(output) or [None])[0]
@@ -188,7 +188,7 @@ def _measure(setup: _Setup, state_space, graph, experiment, result, warnings: li
 def _energy_metrics(state_space, result, experiment, warnings: list) -> dict:
     from bondc.analysis.energy import energy_account
 
-    cycle = getattr(experiment, "cycle", None)
+    cycle = experiment.cycle if experiment is not None else None
     try:
         account = energy_account(state_space, result, cycle=cycle)
     except BondcError as error:

@@ -163,7 +163,8 @@ def _plan(checked: Checked, path: Any, *, model: str | None, experiment: str | N
     graph, chosen = checked.graph, checked.experiment
     shown_units, si_units, converters = _check_axes(graph, axes, checked.sets)
     chosen_metrics = select_metrics(graph, metrics)
-    if t_end is None and (chosen is None or chosen.t_end is None):
+    end = t_end if t_end is not None else chosen.t_end if chosen is not None else None
+    if end is None:
         raise _usage("E801", "no end time for the simulation", hint="give --t-end, or set t_end in the experiment")
     if motors is not None:
         from bondc.analysis.motors import load_catalogue
@@ -181,12 +182,13 @@ def _plan(checked: Checked, path: Any, *, model: str | None, experiment: str | N
     grid = latin_hypercube(axes, samples, seed) if samples else list(itertools.product(*(axis.values for axis in axes)))
     names = [axis.name for axis in axes]
     keys = [_key({n: c.to_si(v) for n, c, v in zip(names, converters, values)}, names) for values in grid]
-    settings: dict[str, Any] = {"t_end": t_end if t_end is not None else chosen.t_end, "dt": dt,
+    settings: dict[str, Any] = {"t_end": end, "dt": dt,
                                 "rederive": rederive, "point_timeout": point_timeout, "executor": executor}
     if samples:
         settings.update(samples=samples, seed=seed)
     settings["study"] = _study(graph, model, experiment, sets, settings["t_end"], dt, motors, inertia_ratio)
-    table = SweepResult(model=graph.name, experiment=getattr(chosen, "name", None), file=str(path), axes=tuple(axes),
+    table = SweepResult(model=graph.name, experiment=chosen.name if chosen is not None else None,
+                        file=str(path), axes=tuple(axes),
                         axis_units=tuple(shown_units), axis_si_units=tuple(si_units), metrics=chosen_metrics,
                         points=(), settings=settings, total=len(grid), motors=motors is not None)
     return _Plan(setup, grid, keys, tuple(shown_units), table)

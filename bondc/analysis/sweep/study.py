@@ -14,6 +14,7 @@ from bondc.analysis.sweep.grid import _usage
 from bondc.analysis.sweep.metrics import MOTOR_RULES
 from bondc.analysis.sweep.table import STATUSES, SweepPoint
 from bondc.errors import UsageError
+from bondc.pipeline import file_texts
 
 
 def _key(parameters: Mapping, names: Sequence[str]) -> tuple:
@@ -116,8 +117,7 @@ def _study(graph, model, experiment, sets, t_end, dt, motors, inertia_ratio=None
     catalogue. A resumed sweep keeps the points of an earlier run only where these are the same."""
     import hashlib
 
-    texts = sorted((name, source.text) for name, source in graph.sources.items()
-                   if getattr(source, "path", None) is not None)
+    texts = sorted(file_texts(graph).items())
     digest = lambda data: hashlib.sha256(data).hexdigest()      # noqa: E731
     catalogue = None
     if motors is not None:
@@ -152,7 +152,8 @@ def _described(graph, path, experiment, axes, shown_units, converters, metrics) 
         offset = float(converter.to_si(0.0))
         parameters.append({"name": axis.name, "unit": unit, "factor": float(converter.to_si(1.0)) - offset,
                            "offset": offset})
-    return {"model name": graph.name, "model file": str(path), "experiment": getattr(experiment, "name", None),
+    return {"model name": graph.name, "model file": str(path),
+            "experiment": experiment.name if experiment is not None else None,
             "parameters": parameters,
             "metrics": [{"name": m.name, "si_unit": m.si_unit, "unit": m.unit, "factor": m.display_factor}
                         for m in metrics]}
