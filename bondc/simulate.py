@@ -45,12 +45,14 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import sys
 import time
 import weakref
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any, BinaryIO, Mapping, Sequence
+from types import CodeType
+from typing import TYPE_CHECKING, Any, BinaryIO, Iterable, Mapping, Sequence, TextIO
 
 import numpy as np
 
@@ -58,7 +60,11 @@ from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
 from bondc.io import atomic_write
 from bondc.model import ExperimentDef, bond_alias, law_span, readable, readable_names, result_units
 
-_COMPILED: dict = {}
+if TYPE_CHECKING:
+    from bondc.source import Span
+    from bondc.statespace import StateSpace
+
+_COMPILED: dict[int, tuple[weakref.ref[Any], dict[str, Any]]] = {}
 
 
 @dataclass(frozen=True)
@@ -125,7 +131,7 @@ class SimResult:
         error.result = self
         return error
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """A JSON-ready summary (what ``bondc simulate --json`` prints)."""
         return {
             "model": self.model,
@@ -173,7 +179,7 @@ def _json_float(value: Any) -> float | str:
 # ------------------------------------------------------------------ compile
 
 
-def compile_model(ss) -> dict:
+def compile_model(ss: StateSpace) -> dict[str, Any]:
     """The generated module of ``ss``, executed in a fresh namespace (cached per StateSpace object)."""
     key = id(ss)
     cached = _COMPILED.get(key)
@@ -212,7 +218,7 @@ def compile_model(ss) -> dict:
     return namespace
 
 
-def _module_codes(source: str, filename: str) -> tuple:
+def _module_codes(source: str, filename: str) -> tuple[CodeType, ...]:
     """The code of a generated module, as the code objects to execute in turn. The copy of the
     runtime's modules that a module carries (300 kB: 0.1 s of compiling, 30 times its model's
     part for a small model) is compiled once per process, each module under its own file name, so
@@ -233,7 +239,7 @@ def _module_codes(source: str, filename: str) -> tuple:
             compile("\n" * (head.count("\n") + runtime.count("\n")) + model, filename, "exec"))
 
 
-_RUNTIME_CODE: dict = {}
+_RUNTIME_CODE: dict[str, Any] = {}
 
 
 # ------------------------------------------------------------------ simulate
@@ -273,7 +279,7 @@ def _settings(experiment: ExperimentDef | None, t_end: float | None, dt: float |
     return settings
 
 
-def _check_overrides(ss, overrides) -> dict:
+def _check_overrides(ss: StateSpace, overrides: Mapping[str, float] | None) -> dict[str, float]:
     overrides = dict(overrides or {})
     names = list(ss.parameters)
     for name in overrides:
@@ -284,7 +290,7 @@ def _check_overrides(ss, overrides) -> dict:
     return {name: float(value) for name, value in overrides.items()}
 
 
-def _check_bound_divisors(ss, namespace, overrides: Mapping[str, float]) -> None:
+def _check_bound_divisors(ss: StateSpace, namespace: Mapping[str, Any], overrides: Mapping[str, float]) -> None:
     """E311 (raised as a ModelError) when parameter values given after the check (a sweep's point)
     make a divisor 0, as the check says for the same values given with ``--set``."""
     from bondc.errors import ModelError
@@ -307,7 +313,7 @@ def _input_error(code: str, message: str, hint: str | None = None) -> UsageError
     return UsageError(Diagnostic("error", code, message, hint=hint))
 
 
-def external_inputs(ss, inputs) -> dict:
+def external_inputs(ss: StateSpace, inputs: Any) -> dict[str, Any]:
     """The signals a host gives the external inputs of ``ss`` (``input u [V] external``), checked:
     ``{name: (times, values) or f(t)}``, SI. E805 for a name that is no input, E806 for an input
     the model computes itself, E807 for a signal that is not a table of numbers or a function."""
@@ -339,7 +345,7 @@ def external_inputs(ss, inputs) -> dict:
                                 "decreasing, in SI; or a function of t") from None
 
 
-def read_input_files(ss, specs: Sequence[str]) -> dict:
+def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, Any]:
     """``bondc simulate --input u=FILE.csv[:COLUMN]``: each external input's table from a CSV file,
     read by the reader of ``csv()`` (time column ``t`` or ``time``, else the first; units in the
     header applied; rows as csv() reads them). COLUMN defaults to the input's name, or to the only
@@ -350,7 +356,7 @@ def read_input_files(ss, specs: Sequence[str]) -> dict:
 
     graph = getattr(ss, "graph", None)
     signals = dict(getattr(graph, "inputs", None) or {})
-    tables: dict = {}
+    tables: dict[str, Any] = {}
     for spec in specs or ():
         name, equals, target = spec.partition("=")
         name = name.strip()
@@ -396,7 +402,7 @@ def read_input_files(ss, specs: Sequence[str]) -> dict:
     return external_inputs(ss, tables)
 
 
-def _check_header_unit(name, signal, path, column) -> None:
+def _check_header_unit(name: str, signal: Any, path: str, column: str) -> None:
     """E807 when the unit a file's header gives a column is not of the input's declared dimension."""
     from bondc.units import unit_of
     from bondc.runtime import csv_columns
@@ -412,10 +418,11 @@ def _check_header_unit(name, signal, path, column) -> None:
                            hint="give the column's unit in its header in a unit of the input's dimension")
 
 
-def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | None = None,
-             overrides: Mapping[str, float] | None = None, progress: bool = False, t_eval=None,
+def simulate(ss: StateSpace, experiment: ExperimentDef | None = None, *, t_end: float | None = None,
+             dt: float | None = None, overrides: Mapping[str, float] | None = None, progress: bool = False,
+             t_eval: Any = None,
              method: str | None = None, rtol: float | None = None, atol: float | None = None,
-             max_step: float | None = None, first_step: float | None = None, inputs=None) -> SimResult:
+             max_step: float | None = None, first_step: float | None = None, inputs: Any = None) -> SimResult:
     """Simulate ``ss`` with the settings of ``experiment`` (an ExperimentDef or None).
 
     Keyword arguments override the experiment: ``t_end`` [s], ``dt`` (report
@@ -462,7 +469,7 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
                    notes=external_input_notes(getattr(ss, "graph", None), supplied))
 
 
-def dependent_states(ss, variables: Mapping) -> dict:
+def dependent_states(ss: StateSpace, variables: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The states of storage elements in derivative causality (``ss.eliminated_names``), name ->
     values: the runtime evaluates their assignment (in the independent states) at every point, as
     it does every bond variable; the energy account uses the same values. (The names only: a
@@ -475,7 +482,7 @@ def dependent_states(ss, variables: Mapping) -> dict:
     return found
 
 
-def _all_finite(series) -> bool:
+def _all_finite(series: Iterable[np.ndarray]) -> bool:
     """Whether every value of every series is finite, checked per matrix the series are rows of
     (the runtime's results are rows of one matrix: one sum instead of thousands). False when unsure."""
     bases = {}
@@ -564,7 +571,7 @@ _CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted"
           "diverged": "E815"}
 
 
-def _failure_diagnostic(graph, failure, raw, names=None) -> Diagnostic:
+def _failure_diagnostic(graph: Any, failure: Mapping[str, Any], raw: Any, names: Any = None) -> Diagnostic:
     reached = float(raw.t[-1]) if raw.t.size else failure.get("time", 0.0)
     text = failure["message"]
     variable = failure.get("variable")
@@ -578,10 +585,10 @@ def _failure_diagnostic(graph, failure, raw, names=None) -> Diagnostic:
     from bondc.source import NO_SPAN
 
     span = law_span(graph, failure.get("variable")) or _when_span(graph, failure.get("when")) or NO_SPAN
-    return Diagnostic("error", _CODES.get(failure.get("kind"), "E811"), message, span, hint=failure.get("hint"))
+    return Diagnostic("error", _CODES.get(str(failure.get("kind")), "E811"), message, span, hint=failure.get("hint"))
 
 
-def _when_span(graph, label: str | None):
+def _when_span(graph: Any, label: str | None) -> Span | None:
     """The span of the when clause whose condition reads ``label``."""
     for when in getattr(graph, "whens", ()) if label else ():
         if when.text == label:
@@ -589,7 +596,7 @@ def _when_span(graph, label: str | None):
     return None
 
 
-def _no_span():
+def _no_span() -> Span:
     from bondc.source import NO_SPAN
 
     return NO_SPAN
@@ -598,7 +605,7 @@ def _no_span():
 # --------------------------------------------------------------- progress
 
 
-def _solver_note(method) -> str | None:
+def _solver_note(method: str | None) -> str | None:
     """Why a run on one of scipy's solvers may be slow, for the progress bar: None for the others.
 
     >>> _solver_note("Radau")[:45]
@@ -620,7 +627,8 @@ class ProgressBar:
     """A one-line progress bar on stderr, drawn only after 2 s and only on a terminal; ``note``
     (why the run may be slow) is written on its own line above the bar when it is first drawn."""
 
-    def __init__(self, t_start: float, t_end: float, stream=None, delay: float = 2.0, note: str | None = None):
+    def __init__(self, t_start: float, t_end: float, stream: TextIO | None = None, delay: float = 2.0,
+                 note: str | None = None) -> None:
         self.t_start, self.t_end = t_start, t_end
         self.stream = stream or sys.stderr
         self.note = note
@@ -661,7 +669,7 @@ class ProgressBar:
 # ------------------------------------------------------------------ files
 
 
-def _columns(result: SimResult, all_bonds: bool):
+def _columns(result: SimResult, all_bonds: bool) -> tuple[list[str], list[np.ndarray]]:
     """t, the outputs, the states, the dependent states (derivative causality), and with
     ``all_bonds`` every bond variable."""
     states = {**result.states, **{n: v for n, v in result.dependent.items() if n not in result.states}}
@@ -685,7 +693,7 @@ def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     return result_bytes("csv", names, columns, result.units).decode("utf-8")
 
 
-def _write_bytes(path: str | Path, data: bytes) -> None:
+def _write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
     """``data`` as the file ``path``, atomically."""
     def write(handle: BinaryIO) -> None:
         handle.write(data)
@@ -693,18 +701,18 @@ def _write_bytes(path: str | Path, data: bytes) -> None:
     atomic_write(Path(path), write)
 
 
-def _metadata(result: SimResult) -> dict:
+def _metadata(result: SimResult) -> dict[str, Any]:
     return {"model": result.model or "", "experiment": result.experiment or "", "complete": result.complete,
             "message": result.message}
 
 
-def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
+def write_csv(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """Write ``t``, outputs, states (and bonds) as csv, atomically (see the module docstring)."""
     text = csv_text(result, all_bonds)
     _write_bytes(path, text.encode("utf-8"))
 
 
-def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
+def write_parquet(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """The csv's table as Parquet (needs pyarrow), atomically: each column in the csv's unit, with
     its ``unit`` and ``si_factor`` in the field's metadata; the model, experiment and status in the
     file's."""
@@ -719,7 +727,7 @@ def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
     _write_bytes(path, data)
 
 
-def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
+def write_npz(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = True) -> None:
     """Write the arrays as a compressed ``.npz``, atomically: ``t``, ``states/NAME``, ``dependent/NAME``
     (states in derivative causality), ``outputs/NAME``, ``bonds/NAME`` (SI), with ``unit/KEY`` and
     ``si_factor/KEY`` of each (KEY / si_factor is in unit: an output's declared unit), then
@@ -746,7 +754,7 @@ def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
 OTHER_FORMATS = (".json", ".xlsx", ".xls", ".mat", ".h5", ".hdf5", ".html", ".txt.gz", ".pkl")
 
 
-def check_result_path(path) -> None:
+def check_result_path(path: str | os.PathLike[str]) -> None:
     """E001 for an output file whose suffix names a format other than csv, npz and parquet (before any
     work)."""
     name = str(path).lower()
@@ -759,7 +767,7 @@ def check_result_path(path) -> None:
                                          "JSON summary on stdout"))
 
 
-def write(result: SimResult, path, all_bonds: bool = False) -> None:
+def write(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """``.npz`` -> :func:`write_npz`, ``.parquet`` -> :func:`write_parquet`, anything else ->
     :func:`write_csv` (see :func:`check_result_path`); every format records each column's unit."""
     from bondc.runtime import result_format

@@ -10,25 +10,30 @@ import itertools
 import math
 import traceback
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from bondc.analysis.sweep.metrics import _measure, _qualifying_motors
 from bondc.analysis.sweep.table import SweepPoint
 from bondc.errors import BondcError, Diagnostic
 from bondc.pipeline import Checked, Derived, check_file, derive, file_texts, structure
 
+if TYPE_CHECKING:
+    from bondc.ast import SetValue
+    from bondc.units import SIUnit
+
 
 @dataclass(frozen=True)
 class _Setup:
     """What every point needs, picklable for worker processes. ``key`` finds the compiled base model."""
 
-    key: tuple
+    key: tuple[int, int]                     # (process id, sweep number)
     path: str
     model: str | None
     experiment: str | None
-    sets: tuple                  # parsed ast.SetValue, the base --set values
-    names: tuple[str, ...]       # the varied parameters, per axis
+    sets: tuple[SetValue, ...]               # the base --set values, parsed
+    names: tuple[str, ...]                   # the varied parameters, per axis
     units: tuple[str | None, ...]            # as given (None: the declared unit)
-    converters: tuple                        # per axis, the SIUnit its values are in (for a point not loaded)
+    converters: tuple[SIUnit, ...]           # per axis, the SIUnit its values are in (for a point not loaded)
     metrics: tuple[str, ...]
     t_end: float | None
     dt: float | None
