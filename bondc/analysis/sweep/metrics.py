@@ -145,6 +145,8 @@ def _qualifying_motors(setup: _Setup, result, graph, warnings: list) -> tuple[st
     from bondc.analysis.motor_report import size_motors
     from bondc.analysis.motors import load_catalogue
 
+    if setup.motors is None:
+        return None
     try:
         catalogue = _CATALOGUES.get(setup.motors)
         if catalogue is None:

@@ -179,8 +179,8 @@ class SweepResult:
         header += [_with_unit(m.name, m.si_unit) for m in self.metrics]
         return header + (["motors"] if self.motors else []) + ["status", "message", "wall_time [s]"]
 
-    def csv_row(self, point: SweepPoint) -> list:
-        row = [point.index]
+    def csv_row(self, point: SweepPoint) -> list[int | str]:
+        row: list[int | str] = [point.index]
         row += [_csv_number(point.parameters.get(axis.name)) for axis in self.axes]
         row += [_csv_number(point.metrics.get(m.name)) if point.ran else "" for m in self.metrics]
         if self.motors:
@@ -236,7 +236,9 @@ class SweepResult:
                 value = point.metrics.get(metric.name) if point.ran else None
                 cells.append("-" if value is None else _format(value / metric.display_factor))
             columns.append(cells)
-        blocks, block, used = [], [], sum(_width(c) + 2 for c in fixed) + _width(status)
+        blocks: list[list[list[str]]] = []
+        block: list[list[str]] = []
+        used = sum(_width(c) + 2 for c in fixed) + _width(status)
         for cells in columns:
             if block and used + _width(cells) + 2 > width:
                 blocks.append(block)
