@@ -9,8 +9,10 @@ run their model through these::
     simulate_file file ...                           -> SimResult    ``bondc simulate``: derive, run, write
     run_pipeline  file ...                           -> PipelineRun  what a report shows: every stage's value
 
-Each value is frozen and holds the one before it; a sweep's point binds new parameter values
-to a ``Derived`` without checking the file again (:func:`rebind`).
+Each value is a frozen dataclass carrying what the later stages need of the earlier ones (a
+``Derived`` keeps the checked graph and its warnings). Values are bound late: ``--set`` values
+reuse the ``Derived`` compiled without them (:func:`rebind`), and a sweep's points give theirs to
+the compiled module of its base model, so the model is not derived and compiled again.
 
 >>> from pathlib import Path
 >>> root = Path(__file__).resolve().parent.parent
