@@ -321,7 +321,7 @@ class Simulation:
         return self.result.dependent
 
     @property
-    def units(self) -> dict[str, tuple[str | None, float]]:
+    def units(self) -> dict[str, tuple[str, float]]:
         """``{name: (unit, scale)}``: a column's value in its unit is the SI value / scale."""
         return self.result.units
 

@@ -106,7 +106,7 @@ class SimResult:
     sliding: list[tuple[Any, ...]] = field(default_factory=list)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
-    units: dict[str, tuple[str | None, float]] = field(default_factory=dict)
+    units: dict[str, tuple[str, float]] = field(default_factory=dict)
     # dependent states (storage in derivative causality), name -> values at every point (SI); they
     # are also in ``variables``, and are not in ``states`` (which the solver integrates)
     dependent: dict[str, np.ndarray] = field(default_factory=dict)
