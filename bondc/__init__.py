@@ -1,9 +1,16 @@
 """bondc — a bond-graph modelling compiler.
 
-The compiler is a pipeline of typed stages, each one function in one module::
+The compiler is a pipeline of typed stages, each one function in one module, each taking a frozen
+value and returning a new one; :mod:`bondc.pipeline` runs them, in this order, for every command,
+the API and the analyses (its function in brackets)::
 
-    text --parse--> ast.File --build--> BondGraph --assign_causality--> CausalGraph
-         --derive--> StateSpace --emit--> Python module --simulate--> SimResult --render--> HTML
+    parse.parse_file            .bg text     -> ast.File
+    semantic.load               ast.File     -> BondGraph     names, units, dimensions  [check_file -> Checked]
+    causality.assign_causality  BondGraph    -> CausalGraph
+    equations.derive            CausalGraph  -> StateSpace                              [derive -> Derived]
+    codegen.emit                StateSpace   -> Python module                           [compile_file]
+    simulate.simulate           StateSpace   -> SimResult     the engine, bondc.runtime [simulate_file]
+    report.build.report_context PipelineRun  -> HTML report                             [run_pipeline]
 
 The Python API (``docs/api.md``) is exported from here: :func:`load`, :func:`check`,
 :func:`equations`, :func:`linearize`, :func:`bode`, :func:`compile`, :func:`simulate`, :func:`fit` and their

@@ -30,6 +30,7 @@ if TYPE_CHECKING:
     from bondc.analysis.fit import DataSet, FitResult
     from bondc.analysis.linearize import Linearization
     from bondc.model import BondGraph
+    from bondc.pipeline import Derived
     from bondc.simulate import SimResult
 
 #: A model file: a path as a string or a :class:`pathlib.Path`.
@@ -200,26 +201,20 @@ def check(path: PathLike | None = None, *, text: str | None = None, model: str |
     return CheckResult(not any(d.is_error for d in diagnostics), tuple(diagnostics), loaded)
 
 
-def _derived(path, text, model, experiment, overrides):
+def _derived(path: PathLike | None, text: str | None, model: str | None, experiment: str | None,
+             overrides: Mapping[str, Any] | None) -> Derived:
     from bondc.pipeline import derive_file
 
+    path, text = _given(path, text)
+    return derive_file(path, model=model, experiment=experiment, sets=_sets(overrides), text=text)
+
+
+def _given(path: PathLike | None, text: str | None) -> tuple[Path, str | None]:
+    """:func:`_source` of a model that must be given, as a file or as its text."""
     text = _text(text)
     if path is None and text is None:
         raise _usage("give the model: a file (path) or its text (text=...)")
-
-    if text is None:
-        return derive_file(Path(path), model=model, experiment=experiment, sets=_sets(overrides))
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
-    from bondc.pipeline import Derived, chosen_experiment, parse_sets
-
-    sets = parse_sets(_sets(overrides))
-    path, text = _source(path, text)
-    graph, warnings = semantic.load(path, model=model, text=text, sets=sets,
-                                    experiment=experiment if experiment is not None else semantic.FIRST)
-    causal = assign_causality(graph)
-    return Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment), tuple(sets))
+    return _source(path, text)
 
 
 def equations(path: PathLike | None = None, *, text: str | None = None, model: str | None = None, experiment: str | None = None,
@@ -425,16 +420,14 @@ def simulate(path: PathLike | None = None, *, text: str | None = None, model: st
     >>> sim.units["x"]
     ('m', 1.0)
     """
-    from bondc.simulate import simulate as run_simulation
+    from bondc.pipeline import simulate_file
 
     t_end = None if t_end is None else _number(t_end, "t_end")
     dt = None if dt is None else _number(dt, "dt")
-    derived = _derived(path, text, model, experiment, overrides)
-    result = run_simulation(derived.state_space, derived.experiment, t_end=t_end, dt=dt, inputs=inputs)
-    error = result.error()
-    if error is not None:
-        raise error
-    return Simulation(result, tuple(derived.notes) + tuple(result.warnings))
+    path, text = _given(path, text)
+    result = simulate_file(path, text=text, model=model, experiment=experiment, sets=_sets(overrides), t_end=t_end,
+                           dt=dt, inputs=inputs)
+    return Simulation(result, tuple(result.warnings))
 
 
 def fit(path: PathLike, *, data: PathLike | Sequence[DataSet], estimate: Sequence[str],

@@ -47,8 +47,12 @@ import sys
 import tempfile
 import weakref
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from bondc.io import cache_dir  # noqa: F401  (bondc's cache folder: bondc.cache.cache_dir as before)
+
+if TYPE_CHECKING:
+    from bondc.pipeline import Derived
 
 #: Bump when the layout of an entry changes.
 _LAYOUT = "1"
@@ -226,7 +230,7 @@ class Entry:
         except Exception:       # a miss
             return None
 
-    def load(self):
+    def load(self) -> Derived | None:
         """The cached ``Derived``, or None (a miss: absent, stale imports or unreadable)."""
         derived = self._read("derived.pickle") if self._current() else None
         if derived is not None:
@@ -234,7 +238,7 @@ class Entry:
             self.remember(derived.state_space)
         return derived
 
-    def load_light(self):
+    def load_light(self) -> Derived | None:
         """The cached ``Derived`` with a :class:`LightStateSpace` (no sympy), or None when the entry
         has none yet (it is written after the first full simulation) or is a miss."""
         if not self._current() or not (self.folder / "module.py").is_file():

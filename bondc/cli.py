@@ -476,7 +476,8 @@ def _cmd_simulate(args) -> int:
     from bondc.analysis.energy import dense_steps, energy_account
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
     from bondc.io import check_output
-    from bondc.simulate import check_result_path, simulate, write
+    from bondc.pipeline import simulate_derived
+    from bondc.simulate import check_result_path, write
 
     if args.output:
         check_result_path(args.output)
@@ -491,11 +492,8 @@ def _cmd_simulate(args) -> int:
         load_catalogue(args.motors)     # a catalogue that cannot be read is an error before the run
     derived = _derived(args, light=True)
     graph, state_space, experiment = derived.graph, derived.state_space, derived.experiment
-    from bondc.simulate import read_input_files
-
-    inputs = read_input_files(state_space, args.input)      # --input u=FILE.csv[:COLUMN]
-    result = simulate(state_space, experiment, t_end=args.t_end, dt=args.dt, progress=not args.json and not _quiet(),
-                      inputs=inputs)
+    result = simulate_derived(derived, t_end=args.t_end, dt=args.dt, progress=not args.json and not _quiet(),
+                              input_files=args.input)       # --input u=FILE.csv[:COLUMN]
     _print_diagnostics(result.warnings, graph.sources)
     if args.output:
         write(result, Path(args.output), args.all)

@@ -1,31 +1,57 @@
-"""The front half of every command: file -> checked graph -> causality -> state equations.
+"""The compiler's front half, one function per stage; every command, the API and the analyses
+run their model through these::
 
-``derive_file`` runs ``semantic.load`` (with the experiment's overrides and the
-command line's ``--set`` values), ``assign_causality`` and ``derive``, and
-picks the experiment to run. ``simulate``, ``compile``, ``report``,
-``equations``, ``linearize`` and ``sweep`` all start here.
+    check_file    file (+ model, experiment, --set)  -> Checked      semantic: names, units, dimensions
+    derive        Checked                            -> Derived      causality, then the state equations
+    derive_file   file ...                           -> Derived      both, through the compile cache
+    compile_file  file ...                           -> str          codegen: the model's Python module
+    simulate_derived  Derived                        -> SimResult    the engine, with the external inputs
+    simulate_file file ...                           -> SimResult    ``bondc simulate``: derive, run, write
+    run_pipeline  file ...                           -> PipelineRun  what a report shows: every stage's value
+
+Each value is a frozen dataclass carrying what the later stages need of the earlier ones (a
+``Derived`` keeps the checked graph and its warnings). Values are bound late: ``--set`` values
+reuse the ``Derived`` compiled without them (:func:`rebind`), and a sweep's points give theirs to
+the compiled module of its base model, so the model is not derived and compiled again.
 
 >>> from pathlib import Path
 >>> root = Path(__file__).resolve().parent.parent
 >>> run = derive_file(root / "tests" / "fixtures" / "language" / "s10_complete_model.bg", sets=["k=400"])
 >>> run.graph.parameters["k"].value, run.experiment.name, [s.name for s in run.state_space.states]
 (400.0, 'step', ['mass.p', 'spring.q'])
+>>> result = simulate_file(root / "tests/fixtures/sim/rc.bg", dt=0.5e-3)
+>>> result.complete, round(float(result.outputs["v"][-1]), 4)
+(True, 9.9326)
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import gc
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Any, Iterator, Mapping, Sequence
 
 from bondc import ast
 from bondc.errors import Diagnostic
 
+if TYPE_CHECKING:
+    import os
+
+    from bondc.causality import CausalGraph
+    from bondc.model import BondGraph, ExperimentDef
+    from bondc.simulate import SimResult
+    from bondc.statespace import StateSpace
+
+    #: A set value as a command gives it: ``"M=40 [kg]"``, or already parsed.
+    SetText = str | ast.SetValue
+    #: A model file's path.
+    PathLike = str | os.PathLike[str]
+
 
 @contextlib.contextmanager
-def fewer_collections():
+def fewer_collections() -> Iterator[None]:
     """Run the garbage collector's youngest generation every 100 000 allocations, not every 700.
 
     A compile allocates millions of parse-tree and sympy nodes and frees few of them, so the
@@ -42,13 +68,13 @@ def fewer_collections():
         gc.set_threshold(*previous)
 
 
-def parse_sets(sets: Sequence) -> list[ast.SetValue]:
+def parse_sets(sets: Sequence[SetText] | None) -> list[ast.SetValue]:
     """``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) parsed; already parsed values pass through.
 
     A text that is not ``NAME=VALUE [unit]`` is the command line's fault: a UsageError (E007, exit
     status 2), not a ParseError of the model.
     """
-    from bondc.errors import Diagnostic, ParseError, UsageError
+    from bondc.errors import ParseError, UsageError
     from bondc.parse import parse_set_value
     from bondc.semantic import SET_HINT
 
@@ -67,28 +93,62 @@ def parse_sets(sets: Sequence) -> list[ast.SetValue]:
     return parsed
 
 
-def on_command_line(diagnostics) -> bool:
+def on_command_line(diagnostics: Sequence[Diagnostic]) -> bool:
     """Whether an error among ``diagnostics`` is about a value given on the command line (``--set``,
     ``--vary``): the command line is at fault, and the command exits with status 2."""
     return any(d.is_error and (d.span.file.startswith("--set #") or d.span.file.startswith("--vary "))
                for d in diagnostics)
 
 
-def chosen_experiment(graph, name: str | None):
+def chosen_experiment(graph: BondGraph, name: str | None) -> ExperimentDef | None:
     """The experiment called ``name``, or the model's first one (None if it has none)."""
     if not graph.experiments:
         return None
     return graph.experiments[name] if name is not None else next(iter(graph.experiments.values()))
 
 
+# ------------------------------------------------------------------ check
+
+
+@dataclass(frozen=True)
+class Checked:
+    """A checked model: its graph with the experiment's overrides and the ``--set`` values applied."""
+
+    graph: BondGraph
+    warnings: tuple[Diagnostic, ...]        # of the semantic stage
+    experiment: ExperimentDef | None        # the one whose overrides were applied
+    sets: tuple[ast.SetValue, ...]          # the parsed --set values
+
+
+def check_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
+               sets: Sequence[SetText] = (), text: str | None = None) -> Checked:
+    """Read and check ``path`` (``text``: its text, when it is not read from disk) with
+    ``experiment``'s overrides (default: the first experiment) and ``sets``; raises ModelError
+    (or UsageError for a ``--set`` text that does not parse)."""
+    from bondc import semantic
+
+    parsed = parse_sets(sets)
+    graph, warnings = semantic.load(Path(path), model=model,
+                                    experiment=experiment if experiment is not None else semantic.FIRST,
+                                    sets=parsed, text=text)
+    return Checked(graph, tuple(warnings), chosen_experiment(graph, experiment), tuple(parsed))
+
+
+# ------------------------------------------------------------------ derive
+
+
 @dataclass(frozen=True)
 class Derived:
-    graph: object            # model.BondGraph
-    warnings: tuple          # from the semantic stage
-    causal: object           # causality.CausalGraph
-    state_space: object      # statespace.StateSpace
-    experiment: object       # model.ExperimentDef | None: the one whose overrides were applied
-    sets: tuple              # the parsed --set values
+    """A model's state equations and every value they were derived from."""
+
+    graph: BondGraph
+    warnings: tuple[Diagnostic, ...]        # of the semantic stage
+    causal: CausalGraph
+    # ``derive_file(light=True)`` may give a cache.LightStateSpace in its place: what a simulation
+    # needs without sympy, loading the full StateSpace when asked for anything else
+    state_space: StateSpace
+    experiment: ExperimentDef | None        # the one whose overrides were applied
+    sets: tuple[ast.SetValue, ...]          # the parsed --set values
 
     @property
     def notes(self) -> tuple[Diagnostic, ...]:
@@ -100,8 +160,20 @@ class Derived:
         return tuple(notes)
 
 
-def derive_file(path, *, model: str | None = None, experiment: str | None = None,
-                sets: Sequence = (), cache: bool | None = None, light: bool = False) -> Derived:
+def derive(checked: Checked) -> Derived:
+    """Assign causality to a checked model and derive its state equations; raises CausalityError
+    or EquationError."""
+    from bondc.causality import assign_causality
+    from bondc.equations import derive as state_equations
+
+    causal = assign_causality(checked.graph)
+    return Derived(checked.graph, checked.warnings, causal, state_equations(causal), checked.experiment,
+                   checked.sets)
+
+
+def derive_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
+                sets: Sequence[SetText] = (), cache: bool | None = None, light: bool = False,
+                text: str | None = None) -> Derived:
     """Load ``path`` with ``experiment``'s overrides (default: the first experiment) and ``sets``,
     assign causality and derive the state equations. Raises the stages' errors.
 
@@ -109,7 +181,10 @@ def derive_file(path, *, model: str | None = None, experiment: str | None = None
     same files with the same model, experiment and ``--set`` values (see :mod:`bondc.cache`).
     ``light``: a cached entry may give a :class:`bondc.cache.LightStateSpace` (what a simulation
     and its energy account need, without sympy); anything else it is asked for loads the rest.
+    ``text``: the file's text, not read from disk (never cached).
     """
+    if text is not None:
+        return derive(check_file(path, model=model, experiment=experiment, sets=sets, text=text))
     from bondc import cache as compile_cache
 
     use_cache = compile_cache.enabled() if cache is None else cache
@@ -123,27 +198,18 @@ def derive_file(path, *, model: str | None = None, experiment: str | None = None
         if derived is not None:
             return derived
 
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.equations import derive
-
-    parsed = parse_sets(sets)
-    graph, warnings = semantic.load(Path(path), model=model,
-                                    experiment=experiment if experiment is not None else semantic.FIRST,
-                                    sets=parsed)
-    if parsed and use_cache:
-        bound = _bind_to_base(path, model, experiment, graph, warnings, parsed)
+    checked = check_file(path, model=model, experiment=experiment, sets=sets)
+    if checked.sets and use_cache:
+        bound = _bind_to_base(path, model, experiment, checked)
         if bound is not None:
             return bound
-    causal = assign_causality(graph)
-    derived = Derived(graph, tuple(warnings), causal, derive(causal), chosen_experiment(graph, experiment),
-                      tuple(parsed))
+    derived = derive(checked)
     if entry is not None:
         entry.store(derived)
     return derived
 
 
-def structure(graph) -> tuple:
+def structure(graph: BondGraph) -> tuple[object, ...]:
     """What a model's derivation and compiled module are built from besides parameter values: the
     parameters' names, the inputs (the experiments' too). Two checks of one file with the same
     structure differ only in values, which the compiled module takes as its parameter vector."""
@@ -153,9 +219,9 @@ def structure(graph) -> tuple:
             experiment_inputs)
 
 
-def _bind_to_base(path, model, experiment, graph, warnings, parsed) -> Derived | None:
+def _bind_to_base(path: PathLike, model: str | None, experiment: str | None, checked: Checked) -> Derived | None:
     """``--set`` values bound late: the model derived and compiled without them (from the compile
-    cache, or derived now and stored there) with ``graph``'s values (checked with them) as its
+    cache, or derived now and stored there) with ``checked``'s values (checked with them) as its
     parameters. None when the base model does not check or differs in structure."""
     from bondc.errors import BondcError
 
@@ -163,27 +229,25 @@ def _bind_to_base(path, model, experiment, graph, warnings, parsed) -> Derived |
         base = derive_file(path, model=model, experiment=experiment, sets=(), cache=True)
     except BondcError:
         return None
-    if structure(base.graph) != structure(graph) or _texts(base.graph) != _texts(graph):
+    graph = checked.graph
+    if structure(base.graph) != structure(graph) or file_texts(base.graph) != file_texts(graph):
         return None
-    return Derived(graph, tuple(warnings), base.causal, rebind(base.state_space, graph),
-                   chosen_experiment(graph, experiment), tuple(parsed))
+    return Derived(graph, checked.warnings, base.causal, rebind(base.state_space, graph), checked.experiment,
+                   checked.sets)
 
 
-def _texts(graph) -> tuple:
-    """The text of every file a checked model read (not the --set texts)."""
-    return tuple(sorted((name, source.text) for name, source in graph.sources.items() if source.path is not None))
+def file_texts(graph: BondGraph) -> dict[str, str]:
+    """The text of every file a checked model read (not the --set texts), by file name."""
+    return {name: source.text for name, source in graph.sources.items() if source.path is not None}
 
 
-def rebind(state_space, graph):
+def rebind(state_space: StateSpace, graph: BondGraph) -> StateSpace:
     """``state_space`` with ``graph``'s parameter values (and ``graph``); its compiled module is
     ``state_space``'s, given every parameter value (``bound_base``, used by ``simulate``)."""
-    import dataclasses
-
     values = {name: (symbol, float(graph.parameters[name].value) if name in graph.parameters else value)
               for name, (symbol, value) in state_space.parameters.items()}
-    bound = dataclasses.replace(state_space, parameters=values, graph=graph)
-    object.__setattr__(bound, "bound_base", getattr(state_space, "bound_base", None) or state_space)
-    return bound
+    return dataclasses.replace(state_space, parameters=values, graph=graph,
+                               bound_base=state_space.bound_base or state_space)
 
 
 #: The built-in functions whose every use is a switch (LANGUAGE.md section 7); an ``if`` is one too.
@@ -191,19 +255,20 @@ SWITCH_FUNCTIONS = frozenset({"abs", "sign", "min", "max", "step", "table", "flo
                               "coulomb", "heaviside"})
 
 
-def _has_switch(node) -> bool:
+def _has_switch(node: object) -> bool:
     """Whether a parsed file (or any node of it) writes an ``if`` or a switching built-in."""
     if isinstance(node, ast.If) or (isinstance(node, ast.Call) and node.func in SWITCH_FUNCTIONS):
         return True
     if isinstance(node, (tuple, list)):
         return any(_has_switch(item) for item in node)
-    fields = getattr(node, "__dataclass_fields__", None)
-    if not fields:
+    if not dataclasses.is_dataclass(node):
         return False
-    return any(_has_switch(getattr(node, name)) for name in fields if name not in ("span", "func_span"))
+    return any(_has_switch(getattr(node, field.name)) for field in dataclasses.fields(node)
+               if field.name not in ("span", "func_span"))
 
 
-def switches_of(path, graph, loaded=None, *, sets: Sequence = (), cache: bool = True) -> tuple:
+def switches_of(path: PathLike, graph: BondGraph, loaded: tuple[Any, ...] | None = None, *,
+                sets: Sequence[SetText] = (), cache: bool = True) -> tuple[dict[str, Any], ...]:
     """Every switch of ``graph``'s laws as the engine treats it (``codegen.emit.switch_kinds``),
     each ``{"switch", "kind", "variable", "file", "line"}`` with its law's place: ``check --json``.
 
@@ -219,10 +284,9 @@ def switches_of(path, graph, loaded=None, *, sets: Sequence = (), cache: bool = 
     key = compile_cache.check_key(graph.sources, graph.name, sets) + "-switches" if cache else None
     known = compile_cache.load_check(key) if key else None
     if known is not None:
-        return known
+        return tuple(known)
     from bondc.codegen.emit import switch_kinds
-    from bondc.model import readable, readable_names
-    from bondc.model import law_span
+    from bondc.model import law_span, readable, readable_names
 
     derived = derive_file(path, model=graph.name, sets=sets, cache=cache)
     names = readable_names(graph)
@@ -231,20 +295,23 @@ def switches_of(path, graph, loaded=None, *, sets: Sequence = (), cache: bool = 
         span = law_span(graph, variable.removeprefix("output "))
         rows.append({"switch": readable(names, label), "kind": kind, "variable": readable(names, variable),
                      "file": span.file if span else None, "line": span.line if span else None})
-    rows = tuple(rows)
+    found = tuple(rows)
     if key:
-        compile_cache.store_check(key, rows)
-    return rows
+        compile_cache.store_check(key, found)
+    return found
 
 
-def default_output(path) -> Path:
+# ------------------------------------------------------------------ compile
+
+
+def default_output(path: PathLike) -> Path:
     """Where ``bondc compile model.bg`` writes without ``-o``: ``model_gen.py`` next to the model."""
     path = Path(path)
     return path.with_name(path.stem + "_gen.py")
 
 
-def compile_file(path, output=None, *, model: str | None = None, experiment: str | None = None,
-                 sets: Sequence = (), standalone: bool = False) -> str:
+def compile_file(path: PathLike, output: PathLike | None = None, *, model: str | None = None,
+                 experiment: str | None = None, sets: Sequence[SetText] = (), standalone: bool = False) -> str:
     """``bondc compile``: load, check, derive and emit; write ``output`` (atomically) if given.
 
     The module imports ``bondc.runtime``; ``standalone`` copies the runtime in instead, so the
@@ -263,8 +330,117 @@ def compile_file(path, output=None, *, model: str | None = None, experiment: str
         check_output(output)
     derived = derive_file(path, model=model, experiment=experiment, sets=sets)
     module_dir = Path(output).resolve().parent if output is not None else Path(path).resolve().parent
-    source = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir,
-                  standalone=standalone)
+    source: str = emit(derived.state_space, derived.experiment, source=Path(path).name, module_dir=module_dir,
+                       standalone=standalone)
     if output is not None:
         atomic_write_text(Path(output), source)
     return source
+
+
+# ------------------------------------------------------------------ simulate
+
+
+def simulate_derived(derived: Derived, *, t_end: float | None = None, dt: float | None = None,
+                     progress: bool = False, inputs: Mapping[str, Any] | None = None,
+                     input_files: Sequence[str] | None = ()) -> SimResult:
+    """Run ``derived`` with its experiment's settings (``t_end`` [s] and ``dt`` override them);
+    ``inputs`` and ``input_files`` (``"u=FILE.csv[:COLUMN]"`` texts, as ``--input``) supply its
+    external inputs. Never raises for a failed run (see ``SimResult.complete``)."""
+    from bondc.simulate import read_input_files, simulate
+
+    supplied = inputs
+    if input_files:
+        supplied = {**read_input_files(derived.state_space, input_files), **dict(inputs or {})}
+    return simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress,
+                    inputs=supplied)
+
+
+def simulate_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
+                  sets: Sequence[SetText] = (), t_end: float | None = None, dt: float | None = None,
+                  output: PathLike | None = None, all_bonds: bool = False, progress: bool = False,
+                  inputs: Mapping[str, Any] | None = None, input_files: Sequence[str] = (),
+                  text: str | None = None) -> SimResult:
+    """``bondc simulate``: load, check, derive, simulate and write; returns the result, its
+    warnings those of every stage.
+
+    ``experiment`` None uses the model's first experiment (if any); ``sets``
+    are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
+    ``ast.SetValue``; ``inputs``/``input_files`` supply external inputs (``{name: (times, values)
+    or f(t)}``; ``"u=FILE.csv[:COLUMN]"`` texts as ``--input``); ``output`` a ``.csv``, ``.npz`` or
+    ``.parquet`` path (None: write nothing); ``text`` the model's text when it is not read from
+    ``path``. Raises ModelError/CausalityError/EquationError/UsageError for a
+    model or usage problem. A failed run writes what it computed, then raises
+    :class:`SimulationError` whose ``.result`` is the incomplete result.
+    """
+    from bondc.io import check_output
+    from bondc.simulate import check_result_path, write
+
+    if output is not None:
+        check_result_path(output)
+        check_output(output)        # before any work: a bad path is not found after the run
+    derived = derive_file(path, model=model, experiment=experiment, sets=sets, text=text)
+    ran = simulate_derived(derived, t_end=t_end, dt=dt, progress=progress, inputs=inputs, input_files=input_files)
+    result = dataclasses.replace(ran, warnings=(*derived.notes, *ran.warnings))
+    if output is not None:
+        write(result, output, all_bonds)
+    error = result.error()
+    if error is not None:
+        raise error
+    return result
+
+
+# ------------------------------------------------------------------ report inputs
+
+
+@dataclass(frozen=True)
+class PipelineRun:
+    """What the pipeline computed for one report: each stage's result, the simulation possibly partial.
+
+    ``result`` is None when the model could not be simulated because nothing
+    gives an end time (no experiment sets ``t_end`` and none was passed).
+    ``experiment`` is the experiment applied (None for a model without one),
+    ``default_experiment`` whether it is the model's first.
+    """
+
+    path: Path
+    source_text: str
+    graph: BondGraph
+    causal: CausalGraph
+    state_space: StateSpace
+    experiment: ExperimentDef | None
+    default_experiment: bool
+    result: SimResult | None
+    warnings: tuple[Diagnostic, ...]
+    overridden: tuple[str, ...]     # parameters set by the experiment or by ``sets``
+
+    @property
+    def complete(self) -> bool:
+        return self.result is not None and bool(self.result.complete)
+
+
+def run_pipeline(path: PathLike, *, model: str | None = None, experiment: str | None = None,
+                 sets: Sequence[SetText] = (), t_end: float | None = None, progress: bool = False) -> PipelineRun:
+    """Load ``path`` with the experiment's overrides (default: the first), assign causality, derive, simulate.
+
+    ``sets`` are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
+    ``ast.SetValue``; ``t_end`` [s] overrides the experiment's end time.
+    Raises what the stages raise for a bad model (ParseError, ModelError,
+    CausalityError, EquationError, UsageError); a simulation that fails does
+    not raise: see :attr:`PipelineRun.complete`.
+    """
+    path = Path(path)
+    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
+    graph, chosen = derived.graph, derived.experiment
+    default = chosen is None or chosen.name == next(iter(graph.experiments))
+    result = None
+    if t_end is not None or (chosen is not None and chosen.t_end is not None):
+        result = simulate_derived(derived, t_end=t_end, progress=progress)
+    notes = list(derived.notes)
+    if result is not None:
+        notes += [d for d in result.warnings if d not in notes]
+    overridden = list(chosen.parameters) if chosen is not None else []
+    overridden += [item.name for item in derived.sets if item.name not in overridden]
+    source = graph.sources.get(graph.file)
+    text = source.text if source is not None else path.read_text(encoding="utf-8")
+    return PipelineRun(path, text, graph, derived.causal, derived.state_space, chosen, default, result,
+                       tuple(notes), tuple(overridden))

@@ -37,35 +37,37 @@ is incomplete and exits with status 1. :func:`write_npz` writes the same
 arrays plus ``complete``, ``message``, events and parameters. Both write a
 temporary file in the target's directory and rename it over the target.
 
-:func:`run` is the whole ``bondc simulate`` command without argument parsing.
-
->>> from pathlib import Path
->>> result = run(Path(__file__).parent.parent / "tests/fixtures/sim/rc.bg", dt=0.5e-3)
->>> result.complete, round(float(result.outputs["v"][-1]), 4)
-(True, 9.9326)
+The whole ``bondc simulate`` command (load, check, derive, simulate, write) is
+:func:`bondc.pipeline.simulate_file`; this module is its simulation stage and its files.
 """
 
 from __future__ import annotations
 
 import difflib
 import math
+import os
 import sys
 import time
 import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Mapping, Sequence
+from types import CodeType
+from typing import TYPE_CHECKING, Any, BinaryIO, Iterable, Mapping, Sequence, TextIO
 
 import numpy as np
 
 from bondc.errors import DataError, Diagnostic, SimulationError, UsageError
 from bondc.io import atomic_write
-from bondc.model import bond_alias, law_span, readable, readable_names, result_units
+from bondc.model import ExperimentDef, bond_alias, law_span, readable, readable_names, result_units
 
-_COMPILED: dict = {}
+if TYPE_CHECKING:
+    from bondc.source import Span
+    from bondc.statespace import StateSpace
+
+_COMPILED: dict[int, tuple[weakref.ref[Any], dict[str, Any]]] = {}
 
 
-@dataclass
+@dataclass(frozen=True)
 class SimResult:
     """The trajectories of one simulation run, arrays by name, SI units.
 
@@ -77,34 +79,37 @@ class SimResult:
     ``variables`` every assigned variable (inputs, bond variables, eliminated
     states); ``events`` is a list of ``(time, label)``; ``stats`` the solver's
     counts (nfev, njev, nlu, steps, segments, events, wall_time, ...).
+
+    A result is made once, complete, and not changed (a variant is ``dataclasses.replace``'s).
     """
 
     t: np.ndarray
-    states: dict
-    outputs: dict
-    bonds: dict
-    variables: dict
+    states: dict[str, np.ndarray]
+    outputs: dict[str, np.ndarray]
+    bonds: dict[str, np.ndarray]
+    variables: dict[str, np.ndarray]
     complete: bool
     message: str
-    events: list
-    stats: dict
-    parameters: dict
-    failure: dict | None = None
+    events: list[tuple[float, str]]
+    stats: dict[str, Any]
+    parameters: dict[str, float]
+    failure: dict[str, Any] | None = None
     model: str = ""
     experiment: str | None = None
-    diagnostics: list = field(default_factory=list)
-    warnings: list = field(default_factory=list)
-    settings: dict = field(default_factory=dict)
-    jumps: list = field(default_factory=list)    # (t, states before, states after) of when clauses
+    diagnostics: tuple[Diagnostic, ...] = ()
+    warnings: tuple[Diagnostic, ...] = ()
+    settings: dict[str, Any] = field(default_factory=dict)
+    # (t, states before, states after) of when clauses
+    jumps: list[tuple[float, Any, Any]] = field(default_factory=list)
     # (t0, t1, corners, times, weights) of each Filippov sliding mode (see bondc.runtime.Result): the
     # energy account evaluates the combination between the points from them
-    sliding: list = field(default_factory=list)
+    sliding: list[tuple[Any, ...]] = field(default_factory=list)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
-    units: dict = field(default_factory=dict)
+    units: dict[str, tuple[str, float]] = field(default_factory=dict)
     # dependent states (storage in derivative causality), name -> values at every point (SI); they
     # are also in ``variables``, and are not in ``states`` (which the solver integrates)
-    dependent: dict = field(default_factory=dict)
+    dependent: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def t_reached(self) -> float:
@@ -126,7 +131,7 @@ class SimResult:
         error.result = self
         return error
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """A JSON-ready summary (what ``bondc simulate --json`` prints)."""
         return {
             "model": self.model,
@@ -149,7 +154,24 @@ class SimResult:
         }
 
 
-def _json_float(value):
+_FIELDS = frozenset(f.name for f in fields(SimResult))
+_frozen_setattr = SimResult.__setattr__
+
+
+def _keep_memo(self: SimResult, name: str, value: Any) -> None:
+    """A field cannot change (FrozenInstanceError); what an analysis computes once from the run (the
+    energy account's run at the solver's steps, ``_solver_steps``, ``_dense_steps``) may be kept on it
+    under a private name that is no field."""
+    if name.startswith("_") and name not in _FIELDS:
+        object.__setattr__(self, name, value)
+        return
+    _frozen_setattr(self, name, value)
+
+
+SimResult.__setattr__ = _keep_memo      # type: ignore[method-assign, assignment]
+
+
+def _json_float(value: Any) -> float | str:
     value = float(value)
     return value if np.isfinite(value) else str(value)
 
@@ -157,7 +179,7 @@ def _json_float(value):
 # ------------------------------------------------------------------ compile
 
 
-def compile_model(ss) -> dict:
+def compile_model(ss: StateSpace) -> dict[str, Any]:
     """The generated module of ``ss``, executed in a fresh namespace (cached per StateSpace object)."""
     key = id(ss)
     cached = _COMPILED.get(key)
@@ -196,7 +218,7 @@ def compile_model(ss) -> dict:
     return namespace
 
 
-def _module_codes(source: str, filename: str) -> tuple:
+def _module_codes(source: str, filename: str) -> tuple[CodeType, ...]:
     """The code of a generated module, as the code objects to execute in turn. The copy of the
     runtime's modules that a module carries (300 kB: 0.1 s of compiling, 30 times its model's
     part for a small model) is compiled once per process, each module under its own file name, so
@@ -217,25 +239,35 @@ def _module_codes(source: str, filename: str) -> tuple:
             compile("\n" * (head.count("\n") + runtime.count("\n")) + model, filename, "exec"))
 
 
-_RUNTIME_CODE: dict = {}
+_RUNTIME_CODE: dict[str, Any] = {}
 
 
 # ------------------------------------------------------------------ simulate
 
 
-def _settings(experiment, t_end, dt, method, rtol, atol, max_step, first_step=None) -> dict:
-    extra = dict(getattr(experiment, "settings", {}) or {}) if experiment is not None else {}
-    pick = lambda given, name, default=None: given if given is not None else (
-        getattr(experiment, name, None) if experiment is not None and getattr(experiment, name, None) is not None
-        else default)
+def _first(*values: Any) -> Any:
+    """The first of ``values`` that is not None (None if all are)."""
+    return next((value for value in values if value is not None), None)
+
+
+#: What a run without an experiment takes its settings from: none declared.
+_NO_EXPERIMENT = ExperimentDef("", None)
+
+
+def _settings(experiment: ExperimentDef | None, t_end: float | None, dt: float | None, method: str | None,
+              rtol: float | None, atol: float | None, max_step: float | None,
+              first_step: float | None = None) -> dict[str, Any]:
+    """The run's settings: each one given here, else the experiment's, else the default."""
+    declared = experiment if experiment is not None else _NO_EXPERIMENT
+    extra = declared.settings
     settings = {
-        "t_end": pick(t_end, "t_end"),
-        "method": pick(method, "solver", None),
-        "rtol": float(pick(rtol, "rtol", 1e-6)),
-        "atol": float(pick(atol, "atol", 1e-9)),
-        "max_step": pick(max_step, "max_step"),
-        "dt": dt if dt is not None else extra.get("dt"),
-        "first_step": first_step if first_step is not None else extra.get("first_step"),
+        "t_end": _first(t_end, declared.t_end),
+        "method": _first(method, declared.solver),
+        "rtol": float(_first(rtol, declared.rtol, 1e-6)),
+        "atol": float(_first(atol, declared.atol, 1e-9)),
+        "max_step": _first(max_step, declared.max_step),
+        "dt": _first(dt, extra.get("dt")),
+        "first_step": _first(first_step, extra.get("first_step")),
     }
     # Settings from the model are checked by the semantic stage; these can come from the command line.
     for name in ("t_end", "dt", "max_step", "rtol", "atol", "first_step"):
@@ -247,7 +279,7 @@ def _settings(experiment, t_end, dt, method, rtol, atol, max_step, first_step=No
     return settings
 
 
-def _check_overrides(ss, overrides) -> dict:
+def _check_overrides(ss: StateSpace, overrides: Mapping[str, float] | None) -> dict[str, float]:
     overrides = dict(overrides or {})
     names = list(ss.parameters)
     for name in overrides:
@@ -258,7 +290,7 @@ def _check_overrides(ss, overrides) -> dict:
     return {name: float(value) for name, value in overrides.items()}
 
 
-def _check_bound_divisors(ss, namespace, overrides: Mapping[str, float]) -> None:
+def _check_bound_divisors(ss: StateSpace, namespace: Mapping[str, Any], overrides: Mapping[str, float]) -> None:
     """E311 (raised as a ModelError) when parameter values given after the check (a sweep's point)
     make a divisor 0, as the check says for the same values given with ``--set``."""
     from bondc.errors import ModelError
@@ -281,7 +313,7 @@ def _input_error(code: str, message: str, hint: str | None = None) -> UsageError
     return UsageError(Diagnostic("error", code, message, hint=hint))
 
 
-def external_inputs(ss, inputs) -> dict:
+def external_inputs(ss: StateSpace, inputs: Any) -> dict[str, Any]:
     """The signals a host gives the external inputs of ``ss`` (``input u [V] external``), checked:
     ``{name: (times, values) or f(t)}``, SI. E805 for a name that is no input, E806 for an input
     the model computes itself, E807 for a signal that is not a table of numbers or a function."""
@@ -313,7 +345,7 @@ def external_inputs(ss, inputs) -> dict:
                                 "decreasing, in SI; or a function of t") from None
 
 
-def read_input_files(ss, specs: Sequence[str]) -> dict:
+def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, Any]:
     """``bondc simulate --input u=FILE.csv[:COLUMN]``: each external input's table from a CSV file,
     read by the reader of ``csv()`` (time column ``t`` or ``time``, else the first; units in the
     header applied; rows as csv() reads them). COLUMN defaults to the input's name, or to the only
@@ -324,7 +356,7 @@ def read_input_files(ss, specs: Sequence[str]) -> dict:
 
     graph = getattr(ss, "graph", None)
     signals = dict(getattr(graph, "inputs", None) or {})
-    tables: dict = {}
+    tables: dict[str, Any] = {}
     for spec in specs or ():
         name, equals, target = spec.partition("=")
         name = name.strip()
@@ -370,7 +402,7 @@ def read_input_files(ss, specs: Sequence[str]) -> dict:
     return external_inputs(ss, tables)
 
 
-def _check_header_unit(name, signal, path, column) -> None:
+def _check_header_unit(name: str, signal: Any, path: str, column: str) -> None:
     """E807 when the unit a file's header gives a column is not of the input's declared dimension."""
     from bondc.units import unit_of
     from bondc.runtime import csv_columns
@@ -386,10 +418,11 @@ def _check_header_unit(name, signal, path, column) -> None:
                            hint="give the column's unit in its header in a unit of the input's dimension")
 
 
-def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | None = None,
-             overrides: Mapping[str, float] | None = None, progress: bool = False, t_eval=None,
+def simulate(ss: StateSpace, experiment: ExperimentDef | None = None, *, t_end: float | None = None,
+             dt: float | None = None, overrides: Mapping[str, float] | None = None, progress: bool = False,
+             t_eval: Any = None,
              method: str | None = None, rtol: float | None = None, atol: float | None = None,
-             max_step: float | None = None, first_step: float | None = None, inputs=None) -> SimResult:
+             max_step: float | None = None, first_step: float | None = None, inputs: Any = None) -> SimResult:
     """Simulate ``ss`` with the settings of ``experiment`` (an ExperimentDef or None).
 
     Keyword arguments override the experiment: ``t_end`` [s], ``dt`` (report
@@ -407,7 +440,7 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
         raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))
     p = _check_overrides(ss, overrides)
-    base = getattr(ss, "bound_base", None)         # values bound late (--set): the base's module
+    base = ss.bound_base                            # values bound late (--set): the base's module
     namespace = compile_model(base if base is not None else ss)
     if base is not None:
         p = {**{name: value for name, (_, value) in ss.parameters.items()}, **p}
@@ -430,14 +463,13 @@ def simulate(ss, experiment=None, *, t_end: float | None = None, dt: float | Non
     finally:
         if bar is not None:
             bar.close()
-    result = _result(ss, experiment, namespace, raw, settings)
     from bondc.model import external_input_notes
 
-    result.warnings = external_input_notes(getattr(ss, "graph", None), supplied) + list(result.warnings)
-    return result
+    return _result(ss, experiment, namespace, raw, settings,
+                   notes=external_input_notes(getattr(ss, "graph", None), supplied))
 
 
-def dependent_states(ss, variables: Mapping) -> dict:
+def dependent_states(ss: StateSpace, variables: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The states of storage elements in derivative causality (``ss.eliminated_names``), name ->
     values: the runtime evaluates their assignment (in the independent states) at every point, as
     it does every bond variable; the energy account uses the same values. (The names only: a
@@ -450,7 +482,7 @@ def dependent_states(ss, variables: Mapping) -> dict:
     return found
 
 
-def _all_finite(series) -> bool:
+def _all_finite(series: Iterable[np.ndarray]) -> bool:
     """Whether every value of every series is finite, checked per matrix the series are rows of
     (the runtime's results are rows of one matrix: one sum instead of thousands). False when unsure."""
     bases = {}
@@ -462,24 +494,36 @@ def _all_finite(series) -> bool:
     return all(math.isfinite(np.sum(base)) for base in bases.values())
 
 
-def _result(ss, experiment, namespace, raw, settings) -> SimResult:
-    bond_names = namespace["BOND_VARIABLES"]
+def _result(ss: Any, experiment: ExperimentDef | None, namespace: Mapping[str, Any], raw: Any, settings: Mapping[str, Any],
+            notes: Sequence[Diagnostic] = ()) -> SimResult:
+    """What :func:`simulate` makes of the engine's raw run: readable names, units, the failure's
+    diagnostic and the warnings (``notes`` first) about values that are not finite and chattering."""
     graph = getattr(ss, "graph", None)
     names = readable_names(graph)
-    result = SimResult(
-        t=raw.t, states=dict(raw.states), outputs=dict(raw.outputs),
-        bonds={name: raw.variables[name] for name in bond_names},
+    t = raw.t
+    outputs = dict(raw.outputs)
+    bonds = {name: raw.variables[name] for name in namespace["BOND_VARIABLES"]}
+    events = [(time_, readable(names, label)) for time_, label in raw.events]
+    diagnostics = (_failure_diagnostic(graph, raw.failure, raw, names),) if raw.failure is not None else ()
+    warnings = [*notes, *_nonfinite_warnings(graph, t, outputs, bonds, raw.complete),
+                *_chattering_warnings(graph, events, raw.stats)]
+    return SimResult(
+        t=t, states=dict(raw.states), outputs=outputs, bonds=bonds,
         variables=dict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
-        events=[(time_, readable(names, label)) for time_, label in raw.events],
-        stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
-        model=getattr(graph, "name", "") or "", experiment=getattr(experiment, "name", None),
+        events=events, stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
+        model=getattr(graph, "name", "") or "", experiment=experiment.name if experiment is not None else None,
+        diagnostics=diagnostics, warnings=tuple(warnings),
         settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
-        sliding=list(getattr(raw, "sliding", ())), dependent=dependent_states(ss, raw.variables),
+        sliding=list(getattr(raw, "sliding", ())), units=result_units(graph),
+        dependent=dependent_states(ss, raw.variables),
     )
-    result.units = result_units(graph)
-    if raw.failure is not None:
-        result.diagnostics.append(_failure_diagnostic(graph, raw.failure, raw, names))
-    for group, values in (("output", result.outputs), ("bond variable", result.bonds)):
+
+
+def _nonfinite_warnings(graph: Any, t: np.ndarray, outputs: Mapping[str, np.ndarray],
+                        bonds: Mapping[str, np.ndarray], complete: bool) -> list[Diagnostic]:
+    """W821: the first output, and the first bond variable, that is not finite at some point."""
+    found = []
+    for group, values in (("output", outputs), ("bond variable", bonds)):
         if _all_finite(values.values()):
             continue
         for name, series in values.items():
@@ -491,39 +535,43 @@ def _result(ss, experiment, namespace, raw, settings) -> SimResult:
                 shown = f"{name} ({alias})" if alias else name
                 first = int(bad[0])
                 # the recorded points bracket where it stops being finite, not the instant itself
-                before = f" (the point before it, at t={result.t[first - 1]:.6g} s, is finite)" if first > 0 else ""
-                result.warnings.append(Diagnostic(
+                before = f" (the point before it, at t={t[first - 1]:.6g} s, is finite)" if first > 0 else ""
+                found.append(Diagnostic(
                     "warning", "W821", f"{group} '{shown}' is not finite at {bad.size} of {series.size} recorded "
-                                       f"points, the first at t={result.t[first]:.6g} s{before}",
+                                       f"points, the first at t={t[first]:.6g} s{before}",
                     law_span(graph, name) or _no_span(),
                     hint="its law is evaluated outside its domain there; " + (
-                        "the states are unaffected (none of their rates reads it)" if result.complete else
+                        "the states are unaffected (none of their rates reads it)" if complete else
                         "the run stopped (the error says where and why)")))
                 break
-    chattering = [(time, label) for time, label in result.events if label.startswith("chattering")]
-    if chattering:
-        first_time, first_label = chattering[0]
-        switches = first_label.partition("(")[2].rstrip(")")
-        more = f" (and {len(chattering) - 1} more episode{'s' if len(chattering) > 2 else ''})" \
-            if len(chattering) > 1 else ""
-        from bondc.source import NO_SPAN
+    return found
 
-        result.warnings.append(Diagnostic(
-            "warning", "W820",
-            f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
-            "be located; integrated with the unfrozen law there",
-            law_span(graph, raw.stats.get("chattering_law")) or NO_SPAN,
-            hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
-                 "switching instants there are not located, so results there are only as good as the solver's "
-                 "steps (lower rtol for a tighter result)"))
-    return result
+
+def _chattering_warnings(graph: Any, events: Sequence[tuple[float, str]], stats: Mapping[str, Any]
+                         ) -> list[Diagnostic]:
+    """W820: switching faster than events can be located, at its first episode."""
+    chattering = [(time, label) for time, label in events if label.startswith("chattering")]
+    if not chattering:
+        return []
+    first_time, first_label = chattering[0]
+    switches = first_label.partition("(")[2].rstrip(")")
+    more = f" (and {len(chattering) - 1} more episode{'s' if len(chattering) > 2 else ''})" \
+        if len(chattering) > 1 else ""
+    return [Diagnostic(
+        "warning", "W820",
+        f"chattering from t={first_time:.6g} s{more}: {switches} kept changing mode faster than events can "
+        "be located; integrated with the unfrozen law there",
+        law_span(graph, stats.get("chattering_law")) or _no_span(),
+        hint="switching that accumulates (a Zeno approach to rest) or that no sliding mode resolves; the "
+             "switching instants there are not located, so results there are only as good as the solver's "
+             "steps (lower rtol for a tighter result)")]
 
 
 _CODES = {"nonfinite": "E810", "solver": "E811", "events": "E812", "interrupted": "E813", "points": "E814",
           "diverged": "E815"}
 
 
-def _failure_diagnostic(graph, failure, raw, names=None) -> Diagnostic:
+def _failure_diagnostic(graph: Any, failure: Mapping[str, Any], raw: Any, names: Any = None) -> Diagnostic:
     reached = float(raw.t[-1]) if raw.t.size else failure.get("time", 0.0)
     text = failure["message"]
     variable = failure.get("variable")
@@ -537,10 +585,10 @@ def _failure_diagnostic(graph, failure, raw, names=None) -> Diagnostic:
     from bondc.source import NO_SPAN
 
     span = law_span(graph, failure.get("variable")) or _when_span(graph, failure.get("when")) or NO_SPAN
-    return Diagnostic("error", _CODES.get(failure.get("kind"), "E811"), message, span, hint=failure.get("hint"))
+    return Diagnostic("error", _CODES.get(str(failure.get("kind")), "E811"), message, span, hint=failure.get("hint"))
 
 
-def _when_span(graph, label: str | None):
+def _when_span(graph: Any, label: str | None) -> Span | None:
     """The span of the when clause whose condition reads ``label``."""
     for when in getattr(graph, "whens", ()) if label else ():
         if when.text == label:
@@ -548,7 +596,7 @@ def _when_span(graph, label: str | None):
     return None
 
 
-def _no_span():
+def _no_span() -> Span:
     from bondc.source import NO_SPAN
 
     return NO_SPAN
@@ -557,7 +605,7 @@ def _no_span():
 # --------------------------------------------------------------- progress
 
 
-def _solver_note(method) -> str | None:
+def _solver_note(method: str | None) -> str | None:
     """Why a run on one of scipy's solvers may be slow, for the progress bar: None for the others.
 
     >>> _solver_note("Radau")[:45]
@@ -579,7 +627,8 @@ class ProgressBar:
     """A one-line progress bar on stderr, drawn only after 2 s and only on a terminal; ``note``
     (why the run may be slow) is written on its own line above the bar when it is first drawn."""
 
-    def __init__(self, t_start: float, t_end: float, stream=None, delay: float = 2.0, note: str | None = None):
+    def __init__(self, t_start: float, t_end: float, stream: TextIO | None = None, delay: float = 2.0,
+                 note: str | None = None) -> None:
         self.t_start, self.t_end = t_start, t_end
         self.stream = stream or sys.stderr
         self.note = note
@@ -620,7 +669,7 @@ class ProgressBar:
 # ------------------------------------------------------------------ files
 
 
-def _columns(result: SimResult, all_bonds: bool):
+def _columns(result: SimResult, all_bonds: bool) -> tuple[list[str], list[np.ndarray]]:
     """t, the outputs, the states, the dependent states (derivative causality), and with
     ``all_bonds`` every bond variable."""
     states = {**result.states, **{n: v for n, v in result.dependent.items() if n not in result.states}}
@@ -644,18 +693,26 @@ def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     return result_bytes("csv", names, columns, result.units).decode("utf-8")
 
 
-def _metadata(result: SimResult) -> dict:
+def _write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
+    """``data`` as the file ``path``, atomically."""
+    def write(handle: BinaryIO) -> None:
+        handle.write(data)
+
+    atomic_write(Path(path), write)
+
+
+def _metadata(result: SimResult) -> dict[str, Any]:
     return {"model": result.model or "", "experiment": result.experiment or "", "complete": result.complete,
             "message": result.message}
 
 
-def write_csv(result: SimResult, path, all_bonds: bool = False) -> None:
+def write_csv(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """Write ``t``, outputs, states (and bonds) as csv, atomically (see the module docstring)."""
     text = csv_text(result, all_bonds)
-    atomic_write(Path(path), lambda handle: handle.write(text.encode("utf-8")))
+    _write_bytes(path, text.encode("utf-8"))
 
 
-def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
+def write_parquet(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """The csv's table as Parquet (needs pyarrow), atomically: each column in the csv's unit, with
     its ``unit`` and ``si_factor`` in the field's metadata; the model, experiment and status in the
     file's."""
@@ -667,10 +724,10 @@ def write_parquet(result: SimResult, path, all_bonds: bool = False) -> None:
     except ImportError as error:
         raise UsageError(Diagnostic("error", "E001", f"cannot write '{path}': {error}",
                                     hint="pip install pyarrow, or give -o run.csv (or run.npz)")) from None
-    atomic_write(Path(path), lambda handle: handle.write(data))
+    _write_bytes(path, data)
 
 
-def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
+def write_npz(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = True) -> None:
     """Write the arrays as a compressed ``.npz``, atomically: ``t``, ``states/NAME``, ``dependent/NAME``
     (states in derivative causality), ``outputs/NAME``, ``bonds/NAME`` (SI), with ``unit/KEY`` and
     ``si_factor/KEY`` of each (KEY / si_factor is in unit: an output's declared unit), then
@@ -690,14 +747,14 @@ def write_npz(result: SimResult, path, all_bonds: bool = True) -> None:
                 "parameter_names": np.array(list(result.parameters), dtype=str),
                 "parameter_values": np.array(list(result.parameters.values()), dtype=float)}
     data = result_bytes("npz", [], [], result.units, arrays=arrays, metadata=metadata)
-    atomic_write(Path(path), lambda handle: handle.write(data))
+    _write_bytes(path, data)
 
 
 #: Suffixes of formats a result is not written in: a .json would otherwise get csv text.
 OTHER_FORMATS = (".json", ".xlsx", ".xls", ".mat", ".h5", ".hdf5", ".html", ".txt.gz", ".pkl")
 
 
-def check_result_path(path) -> None:
+def check_result_path(path: str | os.PathLike[str]) -> None:
     """E001 for an output file whose suffix names a format other than csv, npz and parquet (before any
     work)."""
     name = str(path).lower()
@@ -710,7 +767,7 @@ def check_result_path(path) -> None:
                                          "JSON summary on stdout"))
 
 
-def write(result: SimResult, path, all_bonds: bool = False) -> None:
+def write(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """``.npz`` -> :func:`write_npz`, ``.parquet`` -> :func:`write_parquet`, anything else ->
     :func:`write_csv` (see :func:`check_result_path`); every format records each column's unit."""
     from bondc.runtime import result_format
@@ -723,38 +780,3 @@ def write(result: SimResult, path, all_bonds: bool = False) -> None:
         write_parquet(result, path, all_bonds)
     else:
         write_csv(result, path, all_bonds)
-
-
-# ------------------------------------------------------------------- run
-
-
-def run(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
-        t_end: float | None = None, dt: float | None = None, output=None, all_bonds: bool = False,
-        progress: bool = False, inputs=None, input_files: Sequence[str] = ()) -> SimResult:
-    """``bondc simulate``: load, check, derive, simulate and write; returns the result.
-
-    ``experiment`` None uses the model's first experiment (if any); ``sets``
-    are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
-    ``ast.SetValue``; ``inputs``/``input_files`` supply external inputs (``{name: (times, values)
-    or f(t)}``; ``"u=FILE.csv[:COLUMN]"`` texts as ``--input``); ``output`` a ``.csv`` or ``.npz`` path (None: write
-    nothing). Raises ModelError/CausalityError/EquationError/UsageError for a
-    model or usage problem. A failed run writes what it computed, then raises
-    :class:`SimulationError` whose ``.result`` is the incomplete result.
-    """
-    from bondc.io import check_output
-    from bondc.pipeline import derive_file
-
-    if output is not None:
-        check_result_path(output)
-        check_output(output)        # before any work: a bad path is not found after the run
-    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
-    supplied = {**read_input_files(derived.state_space, input_files), **dict(inputs or {})}
-    result = simulate(derived.state_space, derived.experiment, t_end=t_end, dt=dt, progress=progress,
-                      inputs=supplied or None)
-    result.warnings = list(derived.notes) + result.warnings
-    if output is not None:
-        write(result, output, all_bonds)
-    error = result.error()
-    if error is not None:
-        raise error
-    return result

@@ -128,6 +128,9 @@ class StateSpace:
     # whether a parameter's value decided anything here (which solution of a law to keep): when
     # not, the equations are those of any other values of the parameters
     values_consulted: bool = False
+    # values bound late (pipeline.rebind: --set, a sweep's point): the state space derived without
+    # them, whose compiled module this one runs with its parameter values
+    bound_base: StateSpace | None = field(default=None, compare=False, repr=False)
 
     # -- lookups
 

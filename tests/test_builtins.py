@@ -22,7 +22,7 @@ from bondc.model import KINDS
 from bondc.parse import parse_set_value
 from bondc.report import lexer
 from bondc.semantic import load
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 
 
 def _pwm(t, f, d):

@@ -670,7 +670,7 @@ def test_loading_a_models_c_library_marks_it_used(tmp_path, isolated):
     """A hit on a built library touches it (the cap's least recently used order). The C compiler
     is always there (the system's, else the ziglang package's)."""
     from bondc import runtime
-    from bondc.simulate import run
+    from bondc.pipeline import simulate_file as run
 
     folder, _ = isolated
     model = _write(tmp_path / "m.bg", b=1)

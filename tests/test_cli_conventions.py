@@ -194,7 +194,7 @@ def test_compile_json_says_what_it_wrote(capsys, tmp_path):
 # ------------------------------------------------------------------ validate --json, report --json
 
 def _rlc_measured(tmp_path, scale=1.0):
-    from bondc.simulate import run as simulate_run
+    from bondc.pipeline import simulate_file as simulate_run
 
     result = simulate_run(ROOT / "models" / "series_rlc.bg")
     lines = ["time,i_meas,v_C_meas"] + [f"{float(t)!r},{scale * float(i)!r},{float(v)!r}"

@@ -19,7 +19,7 @@ from bondc.errors import ModelError
 from bondc.equations import _display
 from bondc.pipeline import derive_file
 from bondc.semantic import load
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 
 FIXTURES = Path(__file__).parent / "fixtures" / "components"
 MODELS = Path(__file__).parent.parent / "models"

@@ -18,7 +18,7 @@ import pytest
 
 import bondc
 from bondc.cli import main
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 
 ROOT = Path(__file__).resolve().parent.parent
 GEAR = ROOT / "models" / "dc_motor_gear.bg"

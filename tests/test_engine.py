@@ -15,7 +15,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
-from bondc.simulate import run, simulate
+from bondc.pipeline import simulate_file as run
+from bondc.simulate import simulate
 from bondc.pipeline import derive_file
 
 ENGINE = Path(__file__).parent / "fixtures" / "engine"

@@ -23,7 +23,7 @@ from bondc import semantic
 from bondc.analysis.motors import requirements
 from bondc.causality import assign_causality
 from bondc.equations import derive
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 
 # the whole file simulates the flagship's experiments: out of `make test-fast`
 pytestmark = pytest.mark.slow

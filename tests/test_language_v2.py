@@ -14,7 +14,7 @@ from bondc.errors import BondcError, ModelError
 from bondc.parse import parse_set_value
 from bondc.pipeline import derive_file
 from bondc.semantic import load
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 from bondc.symbolic import Translator
 
 ROOT = Path(__file__).resolve().parent.parent

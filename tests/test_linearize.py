@@ -257,7 +257,7 @@ def test_equilibrium_behind_a_relief_valve_that_is_closed_at_the_start():
 def test_check_equations_and_simulation_read_a_csv_file_alike(tmp_path):
     # quoted header cells, a comment row and a blank line: one reader for every stage
     from bondc.runtime import load_csv
-    from bondc.simulate import run
+    from bondc.pipeline import simulate_file as run
     from bondc.numeric import read_csv_column
 
     (tmp_path / "data").mkdir()

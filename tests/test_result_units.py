@@ -17,7 +17,7 @@ from bondc.cli import main
 from bondc.errors import DataError
 from bondc.report.build import run_validate
 from bondc.analysis.validate import load_measured_csv
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 
 MODEL = """model Units "a chamber filled by a varying flow, reported in engineering units"
   param beta = 1e8   [Pa]

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 from bondc.errors import SimulationError, UsageError
-from bondc.simulate import ProgressBar, run, simulate, write_csv, write_npz
+from bondc.pipeline import simulate_file as run
+from bondc.simulate import ProgressBar, simulate, write_csv, write_npz
 
 from test_codegen import SIM, derive
 

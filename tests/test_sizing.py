@@ -127,7 +127,7 @@ def test_an_inertia_free_model_by_hand():
     from bondc.analysis.motor_report import motor_report
     from bondc.analysis.energy import dense_steps
     from bondc.pipeline import derive_file
-    from bondc.simulate import run
+    from bondc.pipeline import simulate_file as run
 
     path = FIXTURES / "spindle.bg"
     result = dense_steps(derive_file(path).state_space, run(path))

@@ -15,7 +15,7 @@ from scipy.optimize import brentq
 from bondc.flatten import ports_of
 from bondc.parse import parse_source
 from bondc.semantic import STD_LIBRARIES, _std_library
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 from bondc.source import Source
 
 # each test compiles and simulates a model: the whole module runs with the slow tests (CI runs all)

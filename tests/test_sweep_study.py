@@ -20,7 +20,7 @@ from bondc.analysis.motors import load_catalogue
 from bondc.analysis.stats import output_statistics
 from bondc.analysis.sweep import latin_hypercube, parse_range, run_sweep
 from bondc.pipeline import derive_file
-from bondc.simulate import run
+from bondc.pipeline import simulate_file as run
 
 ROOT = Path(__file__).resolve().parent.parent
 MSD = ROOT / "models" / "mass_spring_damper.bg"

@@ -12,7 +12,7 @@ import pytest
 
 from bondc.errors import DataError
 from bondc.report.build import build_report, run_validate
-from bondc.simulate import run as simulate_run
+from bondc.pipeline import simulate_file as simulate_run
 from test_report_build import assert_self_contained, check_html
 
 MODEL = Path(__file__).parent.parent / "models" / "series_rlc.bg"

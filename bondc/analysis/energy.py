@@ -1308,12 +1308,13 @@ def repeat_run(ss, result, t_eval=None):
     rerun = simulate(ss, None, t_end=settings.get("t_end", float(result.t[-1])), method=settings.get("method"),
                      rtol=settings.get("rtol"), atol=settings.get("atol"), max_step=settings.get("max_step"),
                      first_step=settings.get("first_step"), overrides=dict(result.parameters), t_eval=t_eval)
-    if not result.complete:
+    if not result.complete:         # (a SimResult is frozen: the cut run is a new one)
+        import dataclasses
+
         keep = rerun.t <= result.t[-1]
-        rerun.t = rerun.t[keep]
-        for group in (rerun.states, rerun.outputs, rerun.bonds, rerun.variables):
-            for name in group:
-                group[name] = group[name][keep]
+        rerun = dataclasses.replace(rerun, t=rerun.t[keep], **{
+            group: {name: values[keep] for name, values in getattr(rerun, group).items()}
+            for group in ("states", "outputs", "bonds", "variables")})
     return rerun
 
 

@@ -461,9 +461,8 @@ def _check_late(parameters: list[_Parameter], estimates, derived, path, model, e
     parameter moved (to its bounds, or by 10 % when open) and compared with the base, as ``bondc
     sweep`` decides whether its points can be bound late. A value the model rejects (a divisor that
     becomes 0 at a bound) is E892."""
-    from bondc import semantic
     from bondc.parse import parse_set_value
-    from bondc.pipeline import chosen_experiment, parse_sets, structure
+    from bondc.pipeline import check_file, chosen_experiment, parse_sets, structure
 
     base_graph = derived.graph
     base_structure = structure(base_graph)
@@ -477,9 +476,7 @@ def _check_late(parameters: list[_Parameter], estimates, derived, path, model, e
             moved = [s for s in parse_sets(sets) if s.name != parameter.name] + [parse_set_value(f"{parameter.name}={value / parameter.factor!r}",
                                                               f"--estimate {parameter.name}")]
             try:
-                graph, _ = semantic.load(Path(path), model=model,
-                                         experiment=experiment_name if experiment_name is not None else semantic.FIRST,
-                                         sets=moved)
+                graph = check_file(path, model=model, experiment=experiment_name, sets=moved).graph
             except BondcError as error:
                 first = error.diagnostics[0] if error.diagnostics else None
                 detail = f"{first.code}: {first.message}" if first is not None else str(error)

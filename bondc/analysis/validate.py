@@ -42,15 +42,20 @@ import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Iterable, Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
-from bondc.errors import DataError, Diagnostic
+from bondc.errors import DataError, Diagnostic, UsageError
 from bondc.io import atomic_write_text
 from bondc.runtime import CsvError, header_cell, open_data
 from bondc.source import NO_SPAN, Span
 from bondc.numeric import unit_scale
+
+
+if TYPE_CHECKING:
+    from bondc.pipeline import PipelineRun
 
 __all__ = [
     "TIME_KEY", "METRICS", "DEFAULT_TOLERANCES", "CompareSpec", "Check", "SignalResult",
@@ -386,7 +391,7 @@ def _passes(metric: str, value: float, limit: float) -> bool:
     return value <= limit if METRICS[metric] == "max" else value >= limit
 
 
-def compare(sim_t: Sequence[float], sim_values: Mapping[str, Sequence[float]],
+def compare(sim_t: npt.ArrayLike, sim_values: Mapping[str, npt.ArrayLike],
             measured: Mapping[str, np.ndarray], specs: Iterable[CompareSpec]) -> list[SignalResult]:
     """Compare simulated signals with measured columns; one :class:`SignalResult` per spec.
 
@@ -516,3 +521,118 @@ def signal_unit(graph, name: str) -> tuple[str | None, float]:
     if output is not None and output.unit_text:
         return output.unit_text, output.display_factor
     return None, 1.0
+
+
+# ---------------------------------------------------------------- a run against measured data
+
+def signal_json(result: SignalResult, unit: str | None = None) -> dict:
+    """One compared signal for ``--json``: its output and column, pass or fail, each metric and each
+    check (metric, value, limit, passed); RMSE and the largest error in ``unit`` (the output's)."""
+    return {"name": result.name, "output": result.output, "column": result.column, "passed": result.passed,
+            "unit": unit, "samples": result.n_samples, "t_start": result.t_start, "t_end": result.t_end,
+            "rmse": result.rmse, "nrmse": result.nrmse, "maxabs": result.maxabs, "r2": result.r2,
+            "checks": [{"metric": check.metric, "value": check.value, "limit": check.limit,
+                        "passed": check.passed} for check in result.checks]}
+
+
+def measured_data(data, compare_specs) -> tuple[list[CompareSpec], dict[str, np.ndarray] | None]:
+    specs = [spec if isinstance(spec, CompareSpec) else parse_compare_spec(spec) for spec in compare_specs or ()]
+    if data is None and specs:
+        raise UsageError(Diagnostic("error", "E001", "--compare needs measured data",
+                                    hint="give the measured CSV with --data FILE"))
+    if data is not None and not specs:
+        raise UsageError(Diagnostic("error", "E001", "--data needs at least one comparison",
+                                    hint="say which simulated signal each measured column is: --compare OUT=COLUMN"))
+    if data is None:
+        return [], None
+    return specs, load_measured_csv(data, columns=[spec.column for spec in specs])
+
+
+def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> list[Diagnostic]:
+    """W954: a measured column without a unit compared with an output declared in a non-SI unit —
+    the column is taken as SI, which the engineer may not have meant."""
+    units = getattr(measured, "units", {})
+    found = []
+    for spec in specs:
+        output = run.graph.outputs.get(spec.output)
+        if output is None or not output.unit_text or units.get(spec.column) is not None:
+            continue
+        if abs((output.display_factor or 1.0) - 1.0) > 1e-12:
+            found.append(Diagnostic(
+                "warning", "W954", f"measured column '{spec.column}' has no unit: it is taken as SI, while output "
+                                   f"'{spec.output}' is declared in [{output.unit_text}]",
+                hint=f"if the data is in {output.unit_text}, write the header as '{spec.column} "
+                     f"[{output.unit_text}]'"))
+    return found
+
+
+def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
+                specs: Iterable[CompareSpec]) -> list[SignalResult]:
+    """:func:`~bondc.analysis.validate.compare` the run's signals with the measured columns, each pair
+    in the signal's display unit (an output declared ``[mm]`` is compared in millimetres): its RMSE,
+    largest error and the ``rmse``/``maxabs`` tolerances are in that unit, as the terminal table,
+    the JUnit file and the report show them (NRMSE and R² do not depend on the unit). The
+    comparison is at the measured samples the run covers (:func:`_at_measured_times`)."""
+    if run.result is None:
+        raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
+                                    hint="give --t-end, or set t_end in the experiment"))
+    t, signals = _at_measured_times(run, measured)
+    results = []
+    for spec in specs:
+        check_quantity(run.graph, spec, getattr(measured, "units", {}).get(spec.column))
+        _, factor = signal_unit(run.graph, spec.output)
+        if spec.output not in signals or spec.column not in measured or factor == 1.0:
+            results += compare(t, signals, measured, [spec])     # (its own errors, if any)
+            continue
+        shown = {spec.output: np.asarray(signals[spec.output], dtype=float) / factor}
+        columns = {TIME_KEY: measured[TIME_KEY], spec.column: np.asarray(measured[spec.column], dtype=float) / factor}
+        results += compare(t, shown, columns, [spec])
+    return results
+
+
+def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict]:
+    """(times, signals) to compare at: the measured samples the run covers, the model evaluated there
+    (the run repeated with those report times, from the solver's own interpolant), so that a
+    measurement sampled more coarsely than the solver steps is compared sample by sample and not
+    interpolated between them. The run's own points where that is not possible (fewer than two
+    samples inside the run, more than a run may record, or a repeat that does not reach as far)."""
+    from bondc.analysis.energy import repeat_run
+    from bondc.runtime import MAX_POINTS
+
+    result = run.result
+    own = (np.asarray(result.t, dtype=float), simulated_signals(result))
+    times = np.asarray(measured.get(TIME_KEY, ()), dtype=float)
+    if not len(own[0]) or times.size < 2:
+        return own
+    inside = times[(times >= own[0][0]) & (times <= own[0][-1])]
+    if inside.size < 2 or inside.size > MAX_POINTS:
+        return own
+    again = repeat_run(run.state_space, result, t_eval=inside)
+    reached = np.asarray(again.t, dtype=float)
+    if reached.size != inside.size or not np.array_equal(reached, inside):
+        return own
+    return reached, simulated_signals(again)
+
+
+def validation_table(results: Sequence[SignalResult], units: Mapping[str, str | None] | None = None) -> str:
+    """The metrics of every compared signal as a text table, then what failed; ``units``: each
+    signal's display unit (RMSE and max |err| are in it; "SI" where it has none)."""
+    units = units or {}
+    header = ("signal", "measured", "unit", "samples", "RMSE", "NRMSE", "max |err|", "R²", "result")
+    rows = [(r.output, r.column, units.get(r.output) or "SI", str(r.n_samples), f"{r.rmse:.4g}", f"{r.nrmse:.4g}",
+             f"{r.maxabs:.4g}", f"{r.r2:.4g}", "pass" if r.passed else "FAIL") for r in results]
+    widths = [max(len(cell) for cell in column) for column in zip(header, *rows)]
+    numeric = {3, 4, 5, 6, 7}
+
+    def line(cells):
+        return "  ".join(cell.rjust(w) if i in numeric else cell.ljust(w)
+                         for i, (cell, w) in enumerate(zip(cells, widths))).rstrip()
+
+    lines = [line(header), line(["-" * w for w in widths])] + [line(row) for row in rows]
+    for result in results:
+        for check in result.checks:
+            if not check.passed:
+                lines.append(f"{result.name}: {check.describe()}")
+    failed = sum(not r.passed for r in results)
+    lines.append(f"{len(results) - failed} of {len(results)} signal{'s' if len(results) != 1 else ''} passed")
+    return "\n".join(lines)

@@ -20,12 +20,17 @@ import threading
 from dataclasses import dataclass, field
 from difflib import SequenceMatcher
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from lsprotocol import types as lsp
 
 from bondc.errors import BondcError, Diagnostic
 from bondc.lsp.index import Index, build_index
 from bondc.lsp.positions import Lines, Positions, path_of
+
+if TYPE_CHECKING:
+    from bondc.causality import CausalGraph
+    from bondc.model import BondGraph
 
 logger = logging.getLogger(__name__)
 
@@ -58,8 +63,8 @@ class Analysis:
     lines: Lines
     files: list = field(default_factory=list)
     index: Index | None = None
-    graph: object = None
-    causal: object = None            # the graph's causality (hover shows it)
+    graph: BondGraph | None = None
+    causal: CausalGraph | None = None     # the graph's causality (hover shows it)
     too_large: bool = False          # beyond MAX_DOCUMENT_LINES or MAX_DOCUMENT_CHARS: not analysed (E006)
     shown: list = field(default_factory=list)                 # its own diagnostics, as published
     imported: dict[str, list] = field(default_factory=dict)   # an imported file's URI: its diagnostics
@@ -106,7 +111,7 @@ def check(path: Path, text: str, checkpoint=_nothing):
     return found, graph, causal, files
 
 
-def check_text(path: Path, text: str) -> tuple[list[Diagnostic], object]:
+def check_text(path: Path, text: str) -> tuple[list[Diagnostic], BondGraph | None]:
     """Every diagnostic of the buffer (all its models), and the graph of its runnable model (or None)."""
     found, graph, _, _ = check(path, text)
     return found, graph

@@ -12,12 +12,13 @@ from dataclasses import dataclass, field
 from bondc import ast
 from bondc.kinds import JUNCTIONS, KINDS
 from bondc.lsp.positions import contains
+from bondc.source import Span
 
 @dataclass
 class Symbol:
     name: str
     category: str             # parameter element junction input output state function model port ...
-    span: object              # the name as written
+    span: Span                # the name as written
     statement: object         # its AST statement (for hover)
     model: str | None         # the model it belongs to (None: file level)
     file: str
@@ -26,10 +27,10 @@ class Symbol:
 @dataclass
 class Use:
     name: str                 # the name used (its first part for dotted references)
-    span: object
+    span: Span
     model: str | None
     parts: tuple[str, ...] = ()
-    part_spans: tuple = ()
+    part_spans: tuple[Span, ...] = ()
     call: bool = False        # a function called by this name: an fn (or a built-in), nothing else
 
 

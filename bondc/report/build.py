@@ -1,7 +1,7 @@
 """Report stage: a ``.bg`` file -> one self-contained HTML report, and validation against measurements.
 
 :func:`build_report` is ``bondc report`` without argument parsing. It runs the
-whole pipeline (:func:`run_pipeline`: load with the experiment's overrides,
+whole pipeline (:func:`bondc.pipeline.run_pipeline`: load with the experiment's overrides,
 causality, equations, simulation), gathers what a reader needs into a
 :class:`~bondc.report.render.ReportContext` (:func:`report_context`: header,
 highlighted source, parameters, the bond graph with causal strokes, the
@@ -39,36 +39,40 @@ variable (``b3.e``).
 from __future__ import annotations
 
 import math
-import re
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, Mapping, Sequence, TextIO
 
 import numpy as np
-import sympy
-from markupsafe import Markup
 
+from bondc.analysis.validate import (
+    CompareSpec, SignalResult, compare_run, measured_data, signal_json, signal_unit, unit_warnings, validation_table,
+    write_junit,
+)
 from bondc.errors import Diagnostic, UsageError, render as render_diagnostic
 from bondc.io import atomic_write_text, check_output
-from bondc.model import KINDS, BondGraph, ExperimentDef
+from bondc.pipeline import PipelineRun, run_pipeline
 from bondc.report.diagram import bond_graph_svg
 from bondc.report.lexer import highlight_bg
+from bondc.report.motor_section import motor_sections
+from bondc.report.plots import (
+    MAX_SERIES_PER_PLOT, element_power, output_groups, output_plots, plot_unit, power_plots, time_plot,
+)
 from bondc.report.render import (
-    FULL_SIZE, HALF_SIZE, Answer, BodeSection, CandidateRow, Equation, HLine, ParameterRow, Plot, ReportContext, ReportHeader,
-    RuleMargin, Table, ValidationSection,
-    causality_notes, causality_rows, equation_markup, parameter_rows, plot_svg, render_report,
+    BodeSection, ParameterRow, Plot, ReportContext, ReportHeader, Table, ValidationSection, causality_notes,
+    causality_rows, parameter_rows, render_report,
 )
-from bondc.analysis.validate import (
-    TIME_KEY, CompareSpec, SignalResult, check_quantity, compare, load_measured_csv, parse_compare_spec, signal_unit,
-    simulated_signals, write_junit,
-)
-from bondc.symbolic import Translator, as_sympy
+from bondc.report.state_equations import state_equations
+
+if TYPE_CHECKING:
+    from bondc.simulate import SimResult
 
 __all__ = ["PipelineRun", "run_pipeline", "report_context", "build_report", "run_report", "default_output",
            "write_report", "run_validate", "report_summary", "report_text", "validate_summary",
            "validate_text", "signal_json",
-           "compare_run", "validation_table", "state_equations", "output_groups", "REPORTS_DIR"]
+           "compare_run", "validation_table", "state_equations", "output_groups", "element_power",
+           "MAX_SERIES_PER_PLOT", "REPORTS_DIR"]
 
 #: Frequencies of each Bode plot in a report (the plot is small; ``bondc bode`` takes 400 by default).
 REPORT_BODE_POINTS = 150
@@ -76,84 +80,7 @@ REPORT_BODE_POINTS = 150
 #: Where reports go unless ``output`` says otherwise (relative to the working directory).
 REPORTS_DIR = Path("reports")
 
-#: Most series drawn in one plot; signals that share a unit are drawn together up to this.
-MAX_SERIES_PER_PLOT = 4
-
-#: Signals sharing a unit are drawn apart when their peak magnitudes differ more than this.
-MAX_MAGNITUDE_RATIO = 5.0
-
-#: Element laws whose expanded form has more operations than this are kept as named
-#: quantities in the state equations and written out once under "where".
-LAW_OPERATIONS = 8
-
-
-# ---------------------------------------------------------------- the pipeline
-
-@dataclass(frozen=True)
-class PipelineRun:
-    """What the pipeline computed for one report: each stage's result, the simulation possibly partial.
-
-    ``result`` is None when the model could not be simulated because nothing
-    gives an end time (no experiment sets ``t_end`` and none was passed).
-    ``experiment`` is the experiment applied (None for a model without one),
-    ``default_experiment`` whether it is the model's first.
-    """
-
-    path: Path
-    source_text: str
-    graph: BondGraph
-    causal: Any                     # CausalGraph
-    state_space: Any                # StateSpace
-    experiment: ExperimentDef | None
-    default_experiment: bool
-    result: Any                     # SimResult or None
-    warnings: tuple[Diagnostic, ...]
-    overridden: tuple[str, ...]     # parameters set by the experiment or by ``sets``
-
-    @property
-    def complete(self) -> bool:
-        return self.result is not None and bool(self.result.complete)
-
-    @property
-    def steps(self):
-        """The run at the solver's steps and between them (:func:`~bondc.analysis.energy.dense_steps`):
-        statistics and motor requirements are computed from it, plots show ``result``."""
-        from bondc.analysis.energy import dense_steps
-
-        return dense_steps(self.state_space, self.result)
-
-
-def run_pipeline(path: str | Path, *, model: str | None = None, experiment: str | None = None,
-                 sets: Sequence = (), t_end: float | None = None, progress: bool = False) -> PipelineRun:
-    """Load ``path`` with the experiment's overrides (default: the first), assign causality, derive, simulate.
-
-    ``sets`` are ``--set`` texts (``"M=40"``, ``"M=40 [kg]"``) or parsed
-    ``ast.SetValue``; ``t_end`` [s] overrides the experiment's end time.
-    Raises what the stages raise for a bad model (ParseError, ModelError,
-    CausalityError, EquationError, UsageError); a simulation that fails does
-    not raise: see :attr:`PipelineRun.complete`.
-    """
-    from bondc.pipeline import derive_file
-    from bondc.simulate import simulate
-
-    path = Path(path)
-    derived = derive_file(path, model=model, experiment=experiment, sets=sets)
-    graph, causal, state_space, chosen, parsed = (derived.graph, derived.causal, derived.state_space,
-                                                  derived.experiment, derived.sets)
-    default = chosen is None or chosen.name == next(iter(graph.experiments))
-    result = None
-    if t_end is not None or (chosen is not None and chosen.t_end is not None):
-        result = simulate(state_space, chosen, t_end=t_end, progress=progress)
-    notes = list(derived.notes)
-    if result is not None:
-        notes += [d for d in result.warnings if d not in notes]
-    overridden = list(chosen.parameters) if chosen is not None else []
-    overridden += [item.name for item in parsed if item.name not in overridden]
-    source = graph.sources.get(graph.file)
-    text = source.text if source is not None else path.read_text(encoding="utf-8")
-    return PipelineRun(path, text, graph, causal, state_space, chosen, default, result, tuple(notes),
-                       tuple(overridden))
-
+# ---------------------------------------------------------------- where it goes
 
 def default_output(path: str | Path, run: PipelineRun) -> Path:
     """``reports/<file stem>.html``, or ``reports/<stem>-<experiment>.html`` for an experiment not the first."""
@@ -202,7 +129,7 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
     from bondc.analysis.ratio import check_ratio, ratio_study
 
     check_ratio(ratio, motors)
-    specs, measured = _measured(data, compare)
+    specs, measured = measured_data(data, compare)
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     study = None
     if ratio is not None and run.result is not None:
@@ -212,7 +139,7 @@ def _build(path, *, model, experiment, sets, data, compare, motors, output, t_en
     results: list[SignalResult] = []
     try:
         validation = None
-        if specs:
+        if specs and measured is not None:
             results = compare_run(run, measured, specs)
             validation = validation_section(run, results, data)
         write_report(report_context(run, validation=validation, motors=motors, date=date,
@@ -283,7 +210,7 @@ def report_summary(path: str | Path, *, model: str | None = None, experiment: st
                                   progress=progress, inertia_ratio=inertia_ratio, ratio=ratio, jobs=jobs)
     diagnostics = _print_diagnostics(run, errors)
     failing = [result.name for result in results if not result.passed]
-    interrupted = getattr(run.result, "exit_status", None) if run.result is not None else None
+    interrupted = run.result.exit_status if run.result is not None else None
     return {"complete": run.complete, "file": str(path), "model": run.graph.name,
             "experiment": run.experiment.name if run.experiment is not None else None,
             "written": [str(target)],
@@ -302,22 +229,12 @@ def report_text(summary: Mapping) -> str:
             + (f"; validation failed: {', '.join(failing)}" if failing else ""))
 
 
-def signal_json(result: SignalResult, unit: str | None = None) -> dict:
-    """One compared signal for ``--json``: its output and column, pass or fail, each metric and each
-    check (metric, value, limit, passed); RMSE and the largest error in ``unit`` (the output's)."""
-    return {"name": result.name, "output": result.output, "column": result.column, "passed": result.passed,
-            "unit": unit, "samples": result.n_samples, "t_start": result.t_start, "t_end": result.t_end,
-            "rmse": result.rmse, "nrmse": result.nrmse, "maxabs": result.maxabs, "r2": result.r2,
-            "checks": [{"metric": check.metric, "value": check.value, "limit": check.limit,
-                        "passed": check.passed} for check in result.checks]}
-
-
 def _print_diagnostics(run: PipelineRun, stream: TextIO) -> list[Diagnostic]:
     from bondc.errors import render_all
 
     diagnostics = list(run.warnings)
     if run.result is not None and not run.result.complete:
-        diagnostics.append(_failure(run))
+        diagnostics.append(_failure(run.result))
     if diagnostics:
         print(render_all(diagnostics, run.graph.sources), file=stream)
     return diagnostics
@@ -331,86 +248,7 @@ def write_report(context: ReportContext, target: str | Path) -> None:
     atomic_write_text(target, html)
 
 
-def _measured(data, compare_specs) -> tuple[list[CompareSpec], dict[str, np.ndarray] | None]:
-    specs = [spec if isinstance(spec, CompareSpec) else parse_compare_spec(spec) for spec in compare_specs or ()]
-    if data is None and specs:
-        raise UsageError(Diagnostic("error", "E001", "--compare needs measured data",
-                                    hint="give the measured CSV with --data FILE"))
-    if data is not None and not specs:
-        raise UsageError(Diagnostic("error", "E001", "--data needs at least one comparison",
-                                    hint="say which simulated signal each measured column is: --compare OUT=COLUMN"))
-    if data is None:
-        return [], None
-    return specs, load_measured_csv(data, columns=[spec.column for spec in specs])
-
-
 # ---------------------------------------------------------------- validation
-
-def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> list[Diagnostic]:
-    """W954: a measured column without a unit compared with an output declared in a non-SI unit —
-    the column is taken as SI, which the engineer may not have meant."""
-    units = getattr(measured, "units", {})
-    found = []
-    for spec in specs:
-        output = run.graph.outputs.get(spec.output)
-        if output is None or not output.unit_text or units.get(spec.column) is not None:
-            continue
-        if abs((output.display_factor or 1.0) - 1.0) > 1e-12:
-            found.append(Diagnostic(
-                "warning", "W954", f"measured column '{spec.column}' has no unit: it is taken as SI, while output "
-                                   f"'{spec.output}' is declared in [{output.unit_text}]",
-                hint=f"if the data is in {output.unit_text}, write the header as '{spec.column} "
-                     f"[{output.unit_text}]'"))
-    return found
-
-
-def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
-                specs: Iterable[CompareSpec]) -> list[SignalResult]:
-    """:func:`~bondc.analysis.validate.compare` the run's signals with the measured columns, each pair
-    in the signal's display unit (an output declared ``[mm]`` is compared in millimetres): its RMSE,
-    largest error and the ``rmse``/``maxabs`` tolerances are in that unit, as the terminal table,
-    the JUnit file and the report show them (NRMSE and R² do not depend on the unit). The
-    comparison is at the measured samples the run covers (:func:`_at_measured_times`)."""
-    if run.result is None:
-        raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
-                                    hint="give --t-end, or set t_end in the experiment"))
-    t, signals = _at_measured_times(run, measured)
-    results = []
-    for spec in specs:
-        check_quantity(run.graph, spec, getattr(measured, "units", {}).get(spec.column))
-        _, factor = signal_unit(run.graph, spec.output)
-        if spec.output not in signals or spec.column not in measured or factor == 1.0:
-            results += compare(t, signals, measured, [spec])     # (its own errors, if any)
-            continue
-        shown = {spec.output: np.asarray(signals[spec.output], dtype=float) / factor}
-        columns = {TIME_KEY: measured[TIME_KEY], spec.column: np.asarray(measured[spec.column], dtype=float) / factor}
-        results += compare(t, shown, columns, [spec])
-    return results
-
-
-def _at_measured_times(run: PipelineRun, measured: Mapping[str, np.ndarray]) -> tuple[np.ndarray, dict]:
-    """(times, signals) to compare at: the measured samples the run covers, the model evaluated there
-    (the run repeated with those report times, from the solver's own interpolant), so that a
-    measurement sampled more coarsely than the solver steps is compared sample by sample and not
-    interpolated between them. The run's own points where that is not possible (fewer than two
-    samples inside the run, more than a run may record, or a repeat that does not reach as far)."""
-    from bondc.analysis.energy import repeat_run
-    from bondc.runtime import MAX_POINTS
-
-    result = run.result
-    own = (np.asarray(result.t, dtype=float), simulated_signals(result))
-    times = np.asarray(measured.get(TIME_KEY, ()), dtype=float)
-    if not len(own[0]) or times.size < 2:
-        return own
-    inside = times[(times >= own[0][0]) & (times <= own[0][-1])]
-    if inside.size < 2 or inside.size > MAX_POINTS:
-        return own
-    again = repeat_run(run.state_space, result, t_eval=inside)
-    reached = np.asarray(again.t, dtype=float)
-    if reached.size != inside.size or not np.array_equal(reached, inside):
-        return own
-    return reached, simulated_signals(again)
-
 
 def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_file,
                        junit_file=None) -> ValidationSection:
@@ -420,7 +258,7 @@ def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_f
         unit, _ = signal_unit(run.graph, result.output)
         simulated, measured = result.simulated, result.measured      # (in the signal's unit: compare_run)
         title = f"{result.output} simulated and {result.column} measured"
-        plots.append(Plot(title, _time_plot(
+        plots.append(Plot(title, time_plot(
             result.t, {f"{result.column} (measured)": measured, f"{result.output} (simulated)": simulated},
             title, result.output + (f" [{plot_unit(unit)}]" if unit else " (SI)"), half=True,
             styles={f"{result.column} (measured)": {"color": "#8c959f", "linewidth": 1.0},
@@ -428,34 +266,10 @@ def validation_section(run: PipelineRun, results: Sequence[SignalResult], data_f
             f"NRMSE {result.nrmse:.3g}, R² {result.r2:.4g}: {'pass' if result.passed else 'FAIL'}", True))
         title = f"{result.output} error, simulated − measured"
         ylabel = "error" + (f" [{plot_unit(unit)}]" if unit else " (SI)")
-        plots.append(Plot(title, _time_plot(result.t, {"error": simulated - measured}, title, ylabel, half=True,
+        plots.append(Plot(title, time_plot(result.t, {"error": simulated - measured}, title, ylabel, half=True,
                                             styles={"error": {"color": "#a40e26", "linewidth": 1.0}}),
                           f"Largest |error| {result.maxabs:.4g}{' ' + plot_unit(unit) if unit else ''}", True))
     return ValidationSection(results, str(data_file), plots, str(junit_file) if junit_file else None)
-
-
-def validation_table(results: Sequence[SignalResult], units: Mapping[str, str | None] | None = None) -> str:
-    """The metrics of every compared signal as a text table, then what failed; ``units``: each
-    signal's display unit (RMSE and max |err| are in it; "SI" where it has none)."""
-    units = units or {}
-    header = ("signal", "measured", "unit", "samples", "RMSE", "NRMSE", "max |err|", "R²", "result")
-    rows = [(r.output, r.column, units.get(r.output) or "SI", str(r.n_samples), f"{r.rmse:.4g}", f"{r.nrmse:.4g}",
-             f"{r.maxabs:.4g}", f"{r.r2:.4g}", "pass" if r.passed else "FAIL") for r in results]
-    widths = [max(len(cell) for cell in column) for column in zip(header, *rows)]
-    numeric = {3, 4, 5, 6, 7}
-
-    def line(cells):
-        return "  ".join(cell.rjust(w) if i in numeric else cell.ljust(w)
-                         for i, (cell, w) in enumerate(zip(cells, widths))).rstrip()
-
-    lines = [line(header), line(["-" * w for w in widths])] + [line(row) for row in rows]
-    for result in results:
-        for check in result.checks:
-            if not check.passed:
-                lines.append(f"{result.name}: {check.describe()}")
-    failed = sum(not r.passed for r in results)
-    lines.append(f"{len(results) - failed} of {len(results)} signal{'s' if len(results) != 1 else ''} passed")
-    return "\n".join(lines)
 
 
 def run_validate(path: str | Path, *, data: str | Path, compare: Sequence[str | CompareSpec],
@@ -501,7 +315,7 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
     for given, what in ((junit, "the JUnit XML"), (output, "the report")):
         if given is not None:
             check_output(given, what, make_folder=True)
-    specs, measured = _measured(data, compare)
+    specs, measured = measured_data(data, compare)
     if not specs:
         raise UsageError(Diagnostic("error", "E001", "validate needs at least one comparison",
                                     hint="--compare OUT=COLUMN[:nrmse=0.05]"))
@@ -529,7 +343,7 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
             raise
         written.append(str(output))
     passed = all(result.passed for result in results) and run.complete
-    interrupted = getattr(run.result, "exit_status", None)
+    interrupted = run.result.exit_status if run.result is not None else None
     return results, {
         "complete": run.complete, "passed": passed, "file": str(path), "model": run.graph.name,
         "experiment": run.experiment.name if run.experiment is not None else None, "data": str(data),
@@ -538,8 +352,8 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
         "exit_status": interrupted or (0 if passed else 1)}
 
 
-def _failure(run: PipelineRun) -> Diagnostic:
-    result = run.result
+def _failure(result: SimResult) -> Diagnostic:
+    """What stopped an incomplete run."""
     if result.diagnostics:
         return result.diagnostics[0]
     return Diagnostic("error", "E811", f"simulation stopped: {result.message}")
@@ -570,9 +384,12 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
     if result is None:
         warnings.insert(0, "Not simulated: no experiment of this model sets t_end (give an end time to simulate).")
     elif not result.complete:
-        incomplete = render_diagnostic(_failure(run), graph.sources)
+        incomplete = render_diagnostic(_failure(result), graph.sources)
 
-    plots, result_tables, power_plots, power_tables = [], [], [], []
+    plots: list[Plot] = []
+    result_tables: list[Table] = []
+    power_plots: list[Plot] = []
+    power_tables: list[Table] = []
     summary: list[tuple[str, Any, str | None]] = []
     motor_requirements = motor_candidates = verdict = answer = None
     if result is not None and result.t.size >= 2:
@@ -580,7 +397,7 @@ def report_context(run: PipelineRun, *, validation: ValidationSection | None = N
         result_tables = _result_tables(run)
         power_plots, power_tables, energy_summary, energy_warnings = _energy_sections(run)
         warnings += energy_warnings
-        motor_requirements, motor_candidates, motor_summary, verdict, answer = _motor_sections(
+        motor_requirements, motor_candidates, motor_summary, verdict, answer = motor_sections(
             run, motors, inertia_ratio)
         summary = (motor_summary or _summary(run)) + energy_summary
     return ReportContext(
@@ -670,357 +487,7 @@ def _parameter_rows(run: PipelineRun) -> list[ParameterRow]:
     return rows
 
 
-# -- equations
-
-def _display_names(ss) -> dict[sympy.Symbol, sympy.Symbol]:
-    """Symbols renamed for reading: ``mass.p`` -> p_mass, a bond's effort -> e_<element that sets it>."""
-    graph = ss.graph
-    taken = set(ss.symbols)
-    renamed: dict[sympy.Symbol, sympy.Symbol] = {}
-
-    def rename(symbol, name):
-        if name not in taken:
-            taken.add(name)
-            renamed[symbol] = sympy.Symbol(name, real=True)
-
-    owned = {s.qualified: s for s in graph.states if s.owner is not None}     # the graph says whose
-    for state in ss.states:
-        own = owned.get(state.name)
-        if own is not None:                               # valve.chamber.p: p of valve.chamber
-            rename(state.symbol, f"{own.name}_{own.owner}")
-    for name, symbol in ss.eliminated.items():
-        own = owned.get(name)
-        if own is not None:
-            rename(symbol, f"{own.name}_{own.owner}")
-    for number, (effort, flow) in ss.bond_symbols.items():
-        bond = graph.bond(number)
-        for which, symbol in (("e", effort), ("f", flow)):
-            ends = [(end, port) for end, port in ((bond.head, bond.head_port), (bond.tail, bond.tail_port))
-                    if end in graph.elements]
-            setting = [(end, port) for end, port in ends if which in graph.elements[end].laws]
-            chosen = (setting or ends or [(None, None)])[0]
-            if bond.label:
-                rename(symbol, f"{which}_{bond.label}")
-            elif chosen[0] is not None:
-                end, port = chosen
-                rename(symbol, f"{which}_{end}" + (f".{port}" if port else ""))
-    return renamed
-
-
-def _law_owner(ss, symbol) -> str | None:
-    """The element whose own law computes the bond variable ``symbol`` (a store, resistor or source)."""
-    graph = ss.graph
-    for number, (effort, flow) in ss.bond_symbols.items():
-        if symbol in (effort, flow):
-            which = "e" if symbol == effort else "f"
-            bond = graph.bond(number)
-            for end in (bond.head, bond.tail):
-                element = graph.elements.get(end)
-                if element is not None and KINDS[element.kind].ports == 1 and which in element.laws:
-                    return end
-    return None
-
-
-class _CallsKept(Translator):
-    """Translates a law as the model writes it: calls of its ``fn`` functions stay calls, recorded in ``called``.
-
-    The equations stage inlines every function; for reading, ``f_valve =
-    valve_mdot(P1, P_chamber, ...)`` and the function once are clearer than
-    the function's body pasted into every law that calls it.
-    """
-
-    def __init__(self, ss, owner=None):
-        self.ss = ss
-        self.called: list[str] = []
-        local: dict = {}
-        if owner is not None:
-            if len(owner.bonds) == 1:
-                local["e"], local["f"] = ss.bond_symbols[owner.bond]
-            for state in owner.states:
-                if state.qualified in ss.symbols:
-                    local[state.name] = ss.symbols[state.qualified]
-
-        def resolve_name(name, node):
-            if name in local:
-                return local[name]
-            if name == "t":
-                return ss.time
-            if name in ss.parameters:
-                return ss.parameters[name][0]
-            if name in ss.inputs:
-                return ss.inputs[name][0]
-            if name in ss.symbols:
-                return ss.symbols[name]
-            if name == "pi":
-                return sympy.pi
-            raise KeyError(f"'{name}' is not a name of the model (the equations stage accepted it)")
-
-        def resolve_ref(node):
-            kind, what = ss.causal.reference(node.parts, owner.name if owner is not None else None)
-            if kind == "state":
-                return ss.symbols[what]
-            return ss.bond_symbols[what][0 if kind == "e" else 1]
-
-        graph = ss.graph
-        super().__init__(resolve_name, resolve_ref, graph.functions,
-                         Path(graph.file).parent if graph.file else None, ss.time)
-
-    def _inline(self, node, function):
-        if function.name not in self.called:
-            self.called.append(function.name)
-        return sympy.Function(function.name, real=True)(*[self(arg) for arg in node.args])
-
-    def law(self, element, which: str):
-        """The law of ``element`` for its ``which`` ("e" or "f") variable."""
-        return self(element.laws[which])
-
-    def function(self, function) -> tuple[Any, Any]:
-        """``name(params)`` and its body, calls kept."""
-        parameters = [sympy.Symbol(name, real=True) for name in function.params]
-        self._bound.append(dict(zip(function.params, parameters)))
-        try:
-            body = self(function.body)
-        finally:
-            self._bound.pop()
-        return sympy.Function(function.name, real=True)(*parameters), body
-
-
-def state_equations(ss) -> tuple[list[Equation], list[Equation], Table | None]:
-    """The state equations for reading: (d(state)/dt = ..., the laws they name, a table of the states).
-
-    Every assignment is expanded into the derivatives except the inputs (kept
-    by name) and the element laws that are long or piecewise (friction,
-    orifice flow, backlash): those stay named (e_friction) and are written out
-    once under "where", as the model writes them (its ``fn`` functions called,
-    not inlined; the functions follow), in causal order.
-    """
-    names = _display_names(ss)
-    keep = set(ss.input_symbols)
-    mapping: dict = {}
-    laws: list[tuple[sympy.Symbol, str]] = []
-    for symbol, rhs in ss.assignments:
-        if symbol in keep:
-            continue
-        value = rhs.xreplace(mapping)
-        owner = _law_owner(ss, symbol)
-        if owner is not None and (value.has(sympy.Piecewise) or sympy.count_ops(value) > LAW_OPERATIONS):
-            laws.append((symbol, owner))
-            continue
-        mapping[symbol] = value
-
-    def show(expr):
-        return as_sympy(expr).xreplace(mapping).xreplace(names)
-
-    time = ss.time
-    equations = []
-    for state in ss.states:
-        lhs = sympy.Derivative(names.get(state.symbol, state.symbol), time)
-        equations.append(Equation(equation_markup(lhs, show(ss.derivatives[state.name])), state.name))
-    where = []
-    functions: list[str] = []
-    for symbol, owner in laws:
-        element = ss.graph.elements[owner]
-        which = "e" if symbol == ss.bond_symbols[element.bond][0] else "f"
-        written = _CallsKept(ss, element)
-        law = written.law(element, which)
-        functions += [name for name in written.called if name not in functions]
-        where.append(Equation(equation_markup(names.get(symbol, symbol), show(law)), f"{element.kind} {owner}"))
-    for name, symbol in ss.eliminated.items():
-        where.append(Equation(equation_markup(names.get(symbol, symbol), show(symbol)),
-                              f"{name} (derivative causality)"))
-    for number, block in enumerate(ss.algebraic_blocks, start=1):
-        for residual in block.residuals:
-            where.append(Equation(equation_markup(sympy.Integer(0), show(residual)), f"algebraic loop {number}"))
-    index = 0
-    while index < len(functions):      # functions called by functions follow the ones that call them
-        written = _CallsKept(ss)
-        head, body = written.function(ss.graph.functions[functions[index]])
-        functions += [name for name in written.called if name not in functions]
-        where.append(Equation(equation_markup(head, body.xreplace(names)), f"fn {functions[index]}"))
-        index += 1
-
-    table = None
-    if ss.states:
-        initial = ss.initial_values()
-        with_units = any(s.unit_text for s in ss.states)
-        rows = []
-        for s in ss.states:
-            row = {"state": s.name}
-            if with_units:
-                row["unit"] = s.unit_text or ""
-            row["initial value (SI)"] = initial[s.name]
-            row["description"] = s.description or _state_description(ss.graph, s)
-            rows.append(row)
-        table = Table.from_dicts("States and their initial values", rows)
-    return equations, where, table
-
-
-def _state_description(graph: BondGraph, state) -> str:
-    if state.element is None or state.element not in graph.elements:
-        return ""
-    element = graph.elements[state.element]
-    own = next((s for s in element.states if s.qualified == state.name), None)
-    default = own is not None and own.rate is None          # q of a C, p of an I (not a custom state)
-    what = {"q": "generalised displacement", "p": "generalised momentum"}.get(own.name, "state") if default else "state"
-    return f"{what} of {element.kind} {element.name}"
-
-
-# -- plots of the outputs
-
-def output_groups(graph: BondGraph, result, experiment: ExperimentDef | None) -> list[list[str]]:
-    """The outputs to plot, grouped: the experiment's ``outputs`` first, then the rest in declaration order.
-
-    Outputs that share a unit go in one plot (up to :data:`MAX_SERIES_PER_PLOT`)
-    unless their peak magnitudes differ by more than :data:`MAX_MAGNITUDE_RATIO`.
-    A model without outputs plots its states instead.
-    """
-    names = [n for n in (experiment.outputs if experiment is not None else ()) if n in result.outputs]
-    names += [n for n in result.outputs if n not in names]
-    if not names:
-        return [[name] for name in result.states]
-    groups: list[list[str]] = []
-    keys: list[tuple] = []
-
-    def peak(name):
-        values = np.asarray(result.outputs[name], dtype=float)
-        finite = values[np.isfinite(values)]
-        return float(np.max(np.abs(finite))) if finite.size else 0.0
-
-    for name in names:
-        unit = graph.outputs[name].unit_text if name in graph.outputs else None
-        placed = False
-        for group, key in zip(groups, keys):
-            if unit is None or key != (unit,) or len(group) >= MAX_SERIES_PER_PLOT:
-                continue
-            peaks = [peak(n) for n in group] + [peak(name)]
-            nonzero = [p for p in peaks if p > 0]
-            if nonzero and max(nonzero) / min(nonzero) > MAX_MAGNITUDE_RATIO:
-                continue
-            group.append(name)
-            placed = True
-            break
-        if not placed:
-            groups.append([name])
-            keys.append((unit,))
-    return groups
-
-
-def plot_unit(text: str | None) -> str:
-    """A unit as written, for an axis label: ``N*m/s^2`` -> ``N·m/s²``.
-
-    >>> plot_unit("kg*m^2/s^-1")
-    'kg·m²/s⁻¹'
-    """
-    if not text:
-        return ""
-    superscripts = str.maketrans("0123456789-.", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻·")
-    text = re.sub(r"\^\(?([-0-9.]+)\)?", lambda m: m.group(1).translate(superscripts), text)
-    return text.replace("*", "·")
-
-
-def time_axis(t) -> tuple[np.ndarray, str]:
-    """Times for a plot's axis and its label: seconds, or milliseconds for a run shorter than 0.1 s.
-
-    >>> time_axis([0.0, 0.02])[1], time_axis([0.0, 4.2])[1]
-    ('t [ms]', 't [s]')
-    """
-    t = np.asarray(t, dtype=float)
-    span = float(t[-1] - t[0]) if t.size else 0.0
-    if 0 < span < 0.1:
-        return t * 1e3, "t [ms]"
-    return t, "t [s]"
-
-
-def _time_plot(t, series, title, ylabel, *, half=False, styles=None) -> Markup:
-    times, xlabel = time_axis(t)
-    return plot_svg(times, series, title, ylabel, xlabel=xlabel, size=HALF_SIZE if half else FULL_SIZE,
-                    styles=styles)
-
-
-def _names(names: Sequence[str]) -> str:
-    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-
-
-def _sentence(text: str) -> str:
-    return text[:1].upper() + text[1:] if text else text
-
-
-def output_plots(graph: BondGraph, result, experiment: ExperimentDef | None) -> list[Plot]:
-    """One plot per group of :func:`output_groups`, in the outputs' display units."""
-    plots = []
-    featured = set(experiment.outputs if experiment is not None else ())
-    for number, group in enumerate(output_groups(graph, result, experiment)):
-        # the experiment's outputs (else the first plot) full width, the others two to a row
-        half = not (featured & set(group) or (not featured and number == 0))
-        series, notes = {}, []
-        unit = None
-        kind = "output"
-        for name in group:
-            if name in result.outputs:
-                definition = graph.outputs[name]
-                unit = definition.unit_text
-                series[name] = np.asarray(result.outputs[name], dtype=float) / definition.display_factor
-                description = definition.description
-            else:
-                kind = "state"
-                state = next(s for s in graph.states if s.qualified == name)
-                unit = state.unit_text
-                series[name] = np.asarray(result.states[name], dtype=float)
-                description = state.description
-            if description:
-                notes.append(f"{name}: {description}" if len(group) > 1 else _sentence(description))
-        title = f"{_sentence(kind)}{'s' if len(group) > 1 else ''} {_names(group)}"
-        label = group[0] if len(group) == 1 else ""
-        if unit:
-            label += f" [{plot_unit(unit)}]"
-        plots.append(Plot(title, _time_plot(result.t, series, title, label.strip(), half=half), "; ".join(notes),
-                          half))
-    return plots
-
-
-# -- power and energy
-
-#: Plots of power: (title, roles, sign, caption). ``sign`` turns "power into the element" into what is shown.
-POWER_PLOTS = (
-    ("Power delivered by the sources", ("source",), -1.0, "Positive: the source delivers power to the system"),
-    ("Power into the storage elements", ("storage",), 1.0, "Positive: the element stores energy"),
-    ("Power dissipated in the resistors", ("dissipator",), 1.0, ""),
-)
-
-
-def element_power(graph: BondGraph, result) -> dict[str, np.ndarray]:
-    """Power into every one-port element [W] over the run: e*f when its bond points at it, else -e*f."""
-    power = {}
-    for element in graph.elements.values():
-        if KINDS[element.kind].ports != 1:
-            continue
-        bond = graph.bond(element.bond)
-        effort, flow = result.bonds.get(f"{bond.name}.e"), result.bonds.get(f"{bond.name}.f")
-        if effort is None or flow is None:
-            continue
-        product = np.asarray(effort, dtype=float) * np.asarray(flow, dtype=float)
-        power[element.name] = product if bond.head == element.name else -product
-    return power
-
-
-def _role(kind: str) -> str:
-    from bondc.analysis.energy import ROLES
-
-    return ROLES[kind]
-
-
-def power_plots(graph: BondGraph, result) -> list[Plot]:
-    """Power of the sources, storage elements and resistors against time, one plot per role."""
-    power = element_power(graph, result)
-    plots = []
-    for title, roles, sign, caption in POWER_PLOTS:
-        series = {name: sign * values for name, values in power.items()
-                  if _role(graph.elements[name].kind) in roles}
-        if series:
-            half = roles != ("source",)
-            plots.append(Plot(title, _time_plot(result.t, series, title, "power [W]", half=half), caption, half))
-    return plots
-
+# -- energy
 
 ENERGY_COLUMNS = ("supplied", "returned", "dissipated", "stored_change", "net_work_in")
 ENERGY_HEADINGS = ("supplied [J]", "returned [J]", "dissipated [J]", "Δ stored [J]", "net work in [J]")
@@ -1110,270 +577,15 @@ def _energy_sections(run: PipelineRun) -> tuple[list[Plot], list[Table], list, l
     return plots, energy_tables(account), summary, [_warning_text(d) for d in account.diagnostics]
 
 
-# -- motors
-
-#: The signals the motor analysis reads: the motor torque and the motor speed (an output or an input).
-MOTOR_TORQUE, MOTOR_SPEED = "torque", "omega"
-
-
-def _answer(selection) -> Answer | None:
-    """The design answer the report leads with, from the catalogue's :class:`~bondc.analysis.motors.Selection`:
-    the verdict, the chosen motor's rule margins, the cycle's torque over time against its continuous and
-    peak limits, the torque-speed points on its envelope (zoomed to the operating region) and every motor
-    in a compact table. When no motor qualifies, the largest (the one the verdict names) is shown.
-    None for an empty catalogue."""
-    from bondc.analysis.motors import RULES
-
-    by_size = sorted(selection, key=lambda candidate: candidate.motor.size)
-    if not by_size:
-        return None
-    chosen = selection.best
-    shown = chosen if chosen is not None else by_size[-1]
-    need = selection.requirements
-    torque = need.torque
-    if selection.include_rotor_inertia:
-        from bondc.analysis.motors import motor_torque
-
-        torque = motor_torque(shown.motor, need)
-    why = "" if chosen is not None else f". No motor qualifies: {shown.motor.name} is the largest"
-    torque_plot, speed_plot = _answer_plots(selection, shown, need, torque, why)
-    rows = [CandidateRow(c.motor.name, tuple((c.check(rule).margin, c.check(rule).passed) for rule in RULES),
-                         "the choice" if c is chosen else "qualifies" if c.qualifies else "fails", c is chosen)
-            for c in by_size]
-    return Answer(selection.verdict(), chosen.motor.name if chosen is not None else None, shown.motor.name,
-                  _rule_margins(shown), torque_plot, speed_plot, rows)
-
-
-def _rule_margins(candidate) -> list[RuleMargin]:
-    """The rules of one motor as the answer's table shows them, with units (the verdict's figures)."""
-    from bondc.analysis.motors import figure
-
-    rows = []
-    for check in candidate.checks:
-        speed = f" at {figure(check.speed)} rpm" if check.speed is not None and check.speed > 0 else ""
-        if check.rule == "peak_torque":
-            row = ("peak torque", f"{figure(check.required)} N·m{speed}", f"{figure(check.available)} N·m")
-        elif check.rule == "rms_torque":
-            row = ("RMS torque", f"{figure(check.required)} N·m{speed}",
-                   f"{figure(check.available)} N·m")
-        elif check.rule == "speed":
-            row = ("top speed", f"{figure(check.required)} rpm", f"{figure(check.available)} rpm")
-        elif check.rule == "inertia_ratio":
-            needed = (f"load/rotor {figure(check.required)}" if check.required is not None
-                      else "load inertia unknown: not checked")
-            row = ("inertia ratio", needed, f"up to {figure(check.available)}")
-        else:
-            row = ("peak power", f"{figure(check.required or 0.0)} W",
-                   f"{figure(check.available)} W rated")
-        rows.append(RuleMargin(*row, check.margin, check.headroom, check.passed))
-    return rows
-
-
-def _answer_plots(selection, shown, need, torque: np.ndarray, why: str = "") -> tuple[Plot, Plot]:
-    """(the torque over the cycle against the motor's limits, the torque-speed points on its envelope);
-    ``why`` ends both captions (why this motor is shown when none qualifies)."""
-    import hashlib
-    import math
-
-    import matplotlib
-    from matplotlib.figure import Figure
-
-    from bondc.analysis.motors import figure as fig_text
-    from bondc.report.render import (
-        ANSWER_SIZE, LIMIT_COLOR, PLOT_STYLE, POINTS_COLOR, RMS_COLOR, draw_motor_envelope, figure_svg,
-        legend_on_top, scatter_indices,
-    )
-
-    motor = shown.motor
-    rms = shown.check("rms_torque")
-    time = np.asarray(need.time, dtype=float)
-    torque = np.asarray(torque, dtype=float)
-    peak = max(float(motor.peak_torque), float(np.max(np.abs(torque))))
-    limits = [HLine(motor.peak_torque, f"peak ±{fig_text(motor.peak_torque)} N·m",
-                    (("color", LIMIT_COLOR), ("linestyle", "--"), ("linewidth", 1.2)), "limit-peak"),
-              HLine(-motor.peak_torque, "peak", (("color", LIMIT_COLOR), ("linestyle", "--"), ("linewidth", 1.2)),
-                    "limit-peak-negative", legend=False),
-              HLine(motor.rated_torque, f"continuous ±{fig_text(motor.rated_torque)} N·m",
-                    (("color", LIMIT_COLOR), ("linewidth", 1.2)), "limit-continuous"),
-              HLine(-motor.rated_torque, "continuous", (("color", LIMIT_COLOR), ("linewidth", 1.2)),
-                    "limit-continuous-negative", legend=False),
-              HLine(rms.required, f"RMS {fig_text(rms.required)} N·m",
-                    (("color", RMS_COLOR), ("linestyle", ":"), ("linewidth", 1.2)), "rms"),
-              HLine(-rms.required, "RMS", (("color", RMS_COLOR), ("linestyle", ":"), ("linewidth", 1.2)),
-                    "rms-negative", legend=False)]
-    title = f"Torque over the cycle against {motor.name}'s limits"
-    torque_svg = plot_svg(time, {"motor torque": torque}, title, "torque [N·m]", size=ANSWER_SIZE,
-                          styles={"motor torque": {"color": POINTS_COLOR, "linewidth": 1.1}}, hlines=limits,
-                          ylim=(-1.15 * peak, 1.15 * peak), legend_above=True)
-    delivered = (f"The torque at the coupling + {motor.name}'s rotor inertia × dω/dt"
-                 if selection.include_rotor_inertia else "The motor torque")
-    torque_caption = (f"{delivered}, against {motor.name}'s continuous (rated) and peak torque, and the cycle's "
-                      f"RMS torque; drag to zoom{why}")
-    torque_plot = Plot(title, torque_svg, torque_caption)
-
-    rpm = np.abs(np.asarray(need.speed, dtype=float)) / (2 * math.pi / 60)
-    load = np.abs(torque)
-    title = f"Torque against speed on {motor.name}'s envelope"
-    key = hashlib.sha256((title + repr((rpm.tobytes(), load.tobytes()))).encode()).hexdigest()
-    with matplotlib.rc_context({**PLOT_STYLE, "svg.hashsalt": key}):
-        chart = Figure(figsize=ANSWER_SIZE, layout="constrained")
-        axes = chart.add_subplot()
-        draw_motor_envelope(axes, motor, LIMIT_COLOR)
-        kept = scatter_indices(rpm, load)
-        axes.plot(rpm[kept], load[kept], ".", markersize=2.5, color=POINTS_COLOR, label="operating points",
-                  gid="operating-points")
-        axes.plot([rms.speed or 0.0], [rms.required], "D", markersize=5, color=RMS_COLOR,
-                  label="RMS torque at RMS speed", gid="rms-point")
-        top_speed = max(float(np.max(rpm)), float(motor.top_speed))
-        top_torque = max(float(np.max(load)), float(motor.peak_torque))
-        axes.set_xlim(0, 1.3 * top_speed)
-        axes.set_ylim(0, 1.3 * top_torque)
-        axes.set_xlabel("speed |ω| [rpm]")
-        axes.set_ylabel("torque |τ| [N·m]")
-        legend_on_top(axes)
-        speed_svg = figure_svg(chart, title, key)
-    caption = (f"The cycle's operating points (the torque beside) and its RMS torque at the RMS speed, on "
-               f"{motor.name}'s continuous (solid) and peak (dashed) envelope")
-    if kept.size < rpm.size:
-        shown_n, total = (f"{n:,}".replace(",", "\u202f") for n in (kept.size, rpm.size))
-        caption += (f"; {shown_n} of the {total} operating points are drawn, one in each small cell: the cloud "
-                    "of them all")
-    caption += why
-    return torque_plot, Plot(title, speed_svg, caption)
-
-
-def _motor_sections(run: PipelineRun, motors, inertia_ratio: float | None = None
-                    ) -> tuple[Table | None, Table | None, list, str | None, Answer | None]:
-    """Motor requirements when the model has signals ``torque`` and ``omega``; candidates from ``motors``,
-    the verdict (:meth:`bondc.analysis.motors.Selection.verdict`, the same paragraph as
-    ``bondc simulate --motors``) and the answer (:func:`_answer`) that the report leads with.
-
-    Raises UsageError (E927) when a catalogue is given but the signals are missing.
-    """
-    from bondc.analysis.motor_report import (
-        cycle_window, estimate_load_inertia, find_signal, selection_report, size_motors,
-    )
-    from bondc.analysis.motors import requirements
-
-    result, graph = run.steps, run.graph
-    try:
-        torque = find_signal(result, (MOTOR_TORQUE,), "torque")
-        speed = find_signal(result, (MOTOR_SPEED,), "speed")
-    except UsageError:
-        if motors is not None:
-            raise
-        return None, None, [], None, None
-    answer = None
-    if motors is not None:
-        selection = size_motors(result, graph, motors, torque=MOTOR_TORQUE, speed=MOTOR_SPEED,
-                                inertia_limit=inertia_ratio)
-        _, data = selection_report(selection, motors)
-        need, load_inertia = data["requirements"], data["load_inertia"]
-        answer = _answer(selection)
-    else:
-        window = cycle_window(result, graph)
-        need = requirements(result.t, torque[2], speed[2], cycle=window).to_json()
-        load_inertia = estimate_load_inertia(result, graph, window, speed[2])
-        data = None
-    rows = [
-        ("cycle", f"{need['t_start']:g} – {need['t_end']:g}", "s"),
-        ("peak torque |τ|", need["peak_torque"], "N·m"),
-        ("largest positive torque", need["peak_torque_positive"], "N·m"),
-        ("most negative torque", need["peak_torque_negative"], "N·m"),
-        ("RMS torque", need["rms_torque"], "N·m"),
-        ("peak speed", need["peak_speed"], "rad/s"),
-        ("peak speed", need["peak_speed_rpm"], "rpm"),
-        ("RMS speed", need["rms_speed_rpm"], "rpm"),
-        ("peak power |τ·ω|", need["peak_power"], "W"),
-        ("peak motoring power", need["peak_power_motoring"], "W"),
-        ("peak regenerative power", need["peak_power_regenerative"], "W"),
-        ("motoring energy per cycle", need["energy_positive"], "J"),
-        ("regenerative energy per cycle", need["energy_regenerative"], "J"),
-        ("net energy per cycle", need["energy_net"], "J"),
-    ]
-    if load_inertia is not None:
-        rows.append(("load inertia at the motor shaft (estimated from the run)", load_inertia, "kg·m²"))
-    described = []
-    for name, where, _ in (torque, speed):
-        definition = graph.outputs.get(name) if where == "output" else graph.inputs.get(name)
-        text = f"{where} {name}"
-        if definition is not None and definition.description:
-            text += f" ({definition.description})"
-        described.append(text)
-    requirements_table = Table(
-        "What the cycle asks of the motor", ("quantity", "value", "unit"), rows,
-        caption=f"Torque: {described[0]}; speed: {described[1]}",
-        notes=["Energies integrate τ·ω over the cycle, split at its zero crossings (regenerative energy is "
-               "returned by the load to the motor)."])
-    # the load's figures, without a motor's rotor inertia (the answer's are the chosen motor's, with it)
-    summary = [("peak load torque", need["peak_torque"], "N*m"), ("RMS load torque", need["rms_torque"], "N*m"),
-               ("peak load power", need["peak_power"], "W"), ("motor energy per cycle", need["energy_net"], "J")]
-    if data is None:
-        return requirements_table, None, summary, None, None
-    return (requirements_table, _candidates_table(data, motors), summary + _motor_choice(data), data["verdict"],
-            answer)
-
-
-def _motor_choice(data: Mapping) -> list:
-    return [("motor", data.get("best") or "none of the catalogue qualifies", None)]
-
-
-def _candidates_table(data: Mapping, catalogue) -> Table:
-    rows = []
-    for candidate in data["candidates"]:
-        motor, checks = candidate["motor"], candidate["checks"]
-        if candidate["motor"]["name"] == data.get("best"):
-            verdict = "the choice"
-        elif candidate["qualifies"]:
-            verdict = "qualifies"
-        else:
-            verdict = "fails: " + ", ".join(label for key, label in MARGIN_LABELS if checks[key]["passed"] is False)
-        rows.append((motor["name"], motor["rated_power"])
-                    + tuple(_two_decimals(checks[key]["margin"]) for key, _ in MARGIN_LABELS)
-                    + (_two_decimals(candidate.get("inertia_ratio")), _two_decimals(checks["power"]["margin"]),
-                       verdict))
-    limit = data.get("inertia_limit")
-    limit_text = (f"{limit:g} (--inertia-ratio)" if limit is not None
-                  else "the catalogue's max_inertia_ratio for the motor, else 10")
-    notes = ["The rules, each a margin available / required (a motor qualifies when every margin is at least 1): "
-             "peak τ, the peak (intermittent) torque envelope at each instant's speed over |τ| (the worst "
-             "instant); RMS τ, the continuous envelope at the RMS speed over the RMS torque (the thermal check); "
-             "speed, the top speed (max_speed, else the rated speed) over the peak speed; J limit, the "
-             f"inertia-ratio limit ({limit_text}) over the load/rotor inertia ratio. Power, the rated power over "
-             "the peak |τ·ω|, is information, not a rule."]
-    if data.get("include_rotor_inertia"):
-        notes.append("Each motor is judged with its own rotor inertia added to the torque: τ + J_rotor·dω/dt.")
-    if data.get("load_inertia") is not None:
-        notes.append(f"J ratio: the load inertia at the motor shaft ({data['load_inertia']:.4g} kg·m², "
-                     f"{data.get('load_inertia_source') or 'given'}) over the rotor inertia.")
-    else:
-        notes.append(f"The load inertia is unknown ({data.get('load_inertia_unknown_because')}): no inertia-ratio "
-                     "check was made.")
-    best = data.get("best")
-    notes.append(f"Choice: {best}, the smallest motor that passes every rule." if best is not None
-                 else "No motor of the catalogue qualifies.")
-    return Table(f"Motors of {Path(catalogue).name}, qualifying first, smallest first",
-                 ("motor", "rated power [W]") + tuple(label for _, label in MARGIN_LABELS)
-                 + ("J ratio", "power (info)", "verdict"),
-                 rows, caption="The columns peak τ, RMS τ, speed, J limit and power are margins: available / required",
-                 notes=notes)
-
-
-MARGIN_LABELS = (("peak_torque", "peak τ"), ("rms_torque", "RMS τ"), ("speed", "speed"),
-                 ("inertia_ratio", "J limit"))
-
-
-def _two_decimals(value):
-    return None if value is None else round(float(value), 2)
-
-
 # -- statistics
 
 def _result_tables(run: PipelineRun) -> list[Table]:
     """The outputs' minimum, maximum, time average, RMS and final value; the power outputs per cycle."""
+    from bondc.analysis.energy import dense_steps
     from bondc.analysis.stats import output_statistics, power_outputs, power_statistics
 
-    graph, result = run.graph, run.steps
+    # statistics from the solver's steps and between them (dense_steps); the plots show run.result
+    graph, result = run.graph, dense_steps(run.state_space, run.result)
     statistics = output_statistics(result)
     rows = []
     for name, values in statistics.items():
@@ -1424,6 +636,8 @@ def format_unit_text(text: str | None) -> str:
 def _summary(run: PipelineRun) -> list[tuple[str, Any, str | None]]:
     """Key results: the peak of each of the experiment's outputs."""
     result, graph = run.result, run.graph
+    if result is None:
+        return []
     names = [n for n in (run.experiment.outputs if run.experiment is not None else ()) if n in result.outputs]
     items = []
     for name in names[:4]:

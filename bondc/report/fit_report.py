@@ -86,7 +86,7 @@ table.fit th, table.fit td { white-space: nowrap; padding: 0.14rem 0.5rem; }
 
 def render_fit(fit) -> str:
     """The report of a :class:`bondc.analysis.fit.FitResult` as one HTML document."""
-    from bondc.report.build import _time_plot, plot_unit
+    from bondc.report.plots import plot_unit, time_plot
     from bondc.report.render import content_security_policy, environment
 
     figures = []
@@ -98,9 +98,9 @@ def render_fit(fit) -> str:
         styles = {f"{signal.column} (measured)": {"color": "#8c959f", "linewidth": 1.0},
                   "model before the fit": {"color": "#bc4c00", "linewidth": 1.0, "linestyle": "--"},
                   "model after the fit": {"color": "#0550ae", "linewidth": 1.4}}
-        figures.append((title, _time_plot(signal.t, series, title, label, half=True, styles=styles)))
+        figures.append((title, time_plot(signal.t, series, title, label, half=True, styles=styles)))
         title = f"{signal.output} residual after the fit, model − measured"
-        figures.append((title, _time_plot(signal.t, {"residual": signal.after - signal.measured}, title,
+        figures.append((title, time_plot(signal.t, {"residual": signal.after - signal.measured}, title,
                                           "residual" + (f" [{plot_unit(signal.unit)}]" if signal.unit else " (SI)"),
                                           half=True, styles={"residual": {"color": "#a40e26", "linewidth": 1.0}})))
     correlation = [[float(v) for v in row] for row in np.asarray(fit.correlation)]

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field
 from typing import Any, Iterable, Mapping, NamedTuple, Sequence
 
 import numpy as np
+import numpy.typing as npt
 from jinja2 import Environment, PackageLoader, StrictUndefined, select_autoescape
 from markupsafe import Markup, escape
 
@@ -132,9 +133,9 @@ class Table:
 
     title: str
     columns: tuple[str, ...]
-    rows: tuple[tuple[Any, ...], ...]
+    rows: Sequence[tuple[Any, ...]]
     caption: str = ""
-    notes: tuple[str, ...] = ()
+    notes: Sequence[str] = ()
     total_row: bool = False         # the last row sums the others: drawn in bold
 
     @property
@@ -547,7 +548,7 @@ def decimation_indices(t: np.ndarray, series: Sequence[np.ndarray], max_points: 
 MAX_MARKERS = 2500
 
 
-def scatter_indices(x: Sequence[float], y: Sequence[float], max_points: int = MAX_MARKERS,
+def scatter_indices(x: npt.ArrayLike, y: npt.ArrayLike, max_points: int = MAX_MARKERS,
                     cells: tuple[int, int] = (400, 225)) -> np.ndarray:
     """Indices of at most ``max_points`` of the points (x, y) that draw the same cloud: one point per
     occupied cell of a grid over their range (the grid halved until few enough cells are occupied),
@@ -590,7 +591,7 @@ DISPLAY_POINTS = 3000
 ZOOM_POINTS = 16000
 
 
-def plot_svg(t: Sequence[float], series: Mapping[str, Sequence[float]], title: str, ylabel: str,
+def plot_svg(t: npt.ArrayLike, series: Mapping[str, npt.ArrayLike], title: str, ylabel: str,
              xlabel: str = "t [s]", show_title: bool = False, size: tuple[float, float] = FULL_SIZE,
              max_points: int = DISPLAY_POINTS, styles: Mapping[str, Mapping[str, Any]] | None = None,
              zoom_points: int = ZOOM_POINTS, hlines: Sequence[HLine] = (),

@@ -39,7 +39,7 @@ from bondc.analysis.energy import energy_account  # noqa: E402
 from bondc.analysis.motor_report import motor_report  # noqa: E402
 from bondc.causality import assign_causality  # noqa: E402
 from bondc.equations import derive  # noqa: E402
-from bondc.simulate import run  # noqa: E402
+from bondc.pipeline import simulate_file as run  # noqa: E402
 
 MODEL = ROOT / "models" / "electro_pneumatic_hybrid.bg"
 CATALOGUE = ROOT / "models" / "data" / "motors.csv"
