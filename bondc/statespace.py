@@ -76,11 +76,16 @@ Fields (names are stable):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 import sympy
 
 from bondc.symbolic import as_sympy
+
+if TYPE_CHECKING:
+    from bondc.causality import CausalGraph
+    from bondc.errors import Diagnostic
+    from bondc.model import BondGraph
 
 
 @dataclass(frozen=True)
@@ -106,8 +111,8 @@ class AlgebraicBlock:
 
 @dataclass(frozen=True)
 class StateSpace:
-    graph: object
-    causal: object
+    graph: BondGraph
+    causal: CausalGraph
     states: tuple[StateInfo, ...]
     parameters: Mapping[str, tuple[sympy.Symbol, float]]
     inputs: Mapping[str, tuple[sympy.Symbol, sympy.Expr]]
@@ -121,10 +126,10 @@ class StateSpace:
     eliminated: Mapping[str, sympy.Symbol] = field(default_factory=dict)
     symbols: Mapping[str, sympy.Symbol] = field(default_factory=dict)
     bond_symbols: Mapping[int, tuple[sympy.Symbol, sympy.Symbol]] = field(default_factory=dict)
-    diagnostics: tuple = ()
+    diagnostics: tuple[Diagnostic, ...] = ()
     # when clauses: (label, condition, ((state name, new value), ...)); discrete variables are
     # states whose derivative is 0, set only here
-    events: tuple = ()
+    events: tuple[tuple[str, sympy.Expr, tuple[tuple[str, sympy.Expr], ...]], ...] = ()
     # whether a parameter's value decided anything here (which solution of a law to keep): when
     # not, the equations are those of any other values of the parameters
     values_consulted: bool = False
@@ -257,7 +262,7 @@ class NumericModel:
         lines.append(f"    {ident(ss.time)} = _t")
         for index, symbol in enumerate(ss.state_symbols):
             lines.append(f"    {ident(symbol)} = _x[{index}]")
-        blocks = {}
+        blocks: dict[int, list[tuple[int, AlgebraicBlock]]] = {}
         for number, block in enumerate(ss.algebraic_blocks):
             blocks.setdefault(block.index, []).append((number, block))
 

@@ -204,16 +204,16 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
 
     result_windows = []
     for index, (start, end, partial) in enumerate(windows):
-        entries = tuple(per_element[name][index] for name in graph.elements)
-        total = lambda attribute: float(sum(getattr(e, attribute) or 0.0 for e in entries))
-        converters = [e for e in entries if e.role == "converter"]
+        window_entries = tuple(per_element[name][index] for name in graph.elements)
+        total = lambda attribute: float(sum(getattr(e, attribute) or 0.0 for e in window_entries))
+        converters = [e for e in window_entries if e.role == "converter"]
         balance = Balance(
             supplied=total("supplied"), returned=total("returned"), dissipated=total("dissipated"),
             stored_change=total("stored_change"), net_work_in=total("net_work_in"),
             converter_work=float(sum(e.work_in for e in converters)),
-            throughput=float(sum(e.gross for e in entries if e.role != "converter")),
+            throughput=float(sum(e.gross for e in window_entries if e.role != "converter")),
             event_change=total("event_change"))
-        result_windows.append(Window(index, float(start), float(end), partial, entries, balance))
+        result_windows.append(Window(index, float(start), float(end), partial, window_entries, balance))
         for entry in converters:
             if abs(entry.work_in) > 1e-9 * max(entry.gross, 1e-300):
                 diagnostics.append(Diagnostic(
@@ -223,7 +223,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
         relative = balance.relative_residual
         if relative is not None and relative > RESIDUAL_TOLERANCE:
             settings = getattr(result, "settings", {}) or {}
-            units_of = {e.unit for e in entries}        # a pseudo bond graph's own (K*J), as the table says
+            units_of = {e.unit for e in window_entries}        # a pseudo bond graph's own (K*J), as the table says
             unit = " " + units_of.pop() if len(units_of) == 1 else ""
             diagnostics.append(Diagnostic(
                 "warning", "W930",

@@ -87,7 +87,8 @@ class _NodeRows(Mapping):
     its start, the first step's start too), flattened when first read."""
 
     def __init__(self, values: Mapping, names):
-        self._values, self._names, self._made = values, tuple(names), {}
+        self._values, self._names = values, tuple(names)
+        self._made: dict[str, np.ndarray] = {}
 
     def __getitem__(self, name):
         if name not in self._made:

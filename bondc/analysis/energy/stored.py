@@ -7,7 +7,7 @@ recipes, rebuilt without sympy for the compile cache (:func:`energy_from_recipe`
 from __future__ import annotations
 
 import functools
-from typing import Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -141,13 +141,15 @@ def energy_from_recipe(kind: str, state_name: str, recipe) -> _StoredEnergy:
     if kind == "constant":
         return _StoredEnergy("analytic", state_name, function=lambda x, c=float(recipe): c)
     text, names = recipe
-    namespace = {"__builtins__": {}}
+    namespace: dict[str, object] = {"__builtins__": {}}
     for name, (origin, attribute) in names.items():
         namespace[name] = (NUMERIC_FUNCTIONS[attribute] if origin == "bondc"
                            else functools.reduce if origin == "functools"
                            else getattr(np, attribute) if attribute else np)
     exec(compile(text, "<bondc energy function>", "exec"), namespace)  # safe: sympy's printing of an AST-built law, no model text
-    function = next(value for name, value in namespace.items() if name not in names and callable(value))
+    made: list[Callable[..., Any]] = [value for name, value in namespace.items()
+                                      if name not in names and callable(value)]
+    function = made[0]
     if kind == "analytic":
         return _StoredEnergy("analytic", state_name, function=function, recipe=recipe)
     return _StoredEnergy("numeric", state_name, law=lambda x, f=function: float(f(x)), recipe=recipe,
