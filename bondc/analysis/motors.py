@@ -153,11 +153,6 @@ class MotorRequirements:
         ])
 
 
-def _trapezoid(values: np.ndarray, time: np.ndarray) -> float:
-    # Written out: np.trapz is gone in NumPy 2 and np.trapezoid is new in it.
-    return float(np.sum(np.diff(time) * (values[1:] + values[:-1]) / 2))
-
-
 def _trapezoid_split(time: np.ndarray, values: np.ndarray) -> tuple[float, float]:
     """(integral of the positive part, magnitude of the negative part) of the sampled values.
 
@@ -222,6 +217,8 @@ def requirements(t, torque, speed, *, cycle: tuple[float, float] | None = None) 
     non-finite values), E924 (time not strictly increasing), E925 (a window
     outside the record or of zero length).
     """
+    from scipy.integrate import trapezoid
+
     time, diagnostics = _as_profile("time", t, None)
     if time is None:
         raise DataError(diagnostics)
@@ -256,8 +253,8 @@ def requirements(t, torque, speed, *, cycle: tuple[float, float] | None = None) 
     power = torque * speed
     duration = float(time[-1] - time[0])
     energy_positive, energy_regenerative = _trapezoid_split(time, power)
-    rms = math.sqrt(_trapezoid(torque ** 2, time) / duration)
-    rms_speed = math.sqrt(_trapezoid(speed ** 2, time) / duration)
+    rms = math.sqrt(float(trapezoid(torque ** 2, time)) / duration)
+    rms_speed = math.sqrt(float(trapezoid(speed ** 2, time)) / duration)
     return MotorRequirements(
         t_start=float(time[0]), t_end=float(time[-1]),
         peak_torque=float(np.max(np.abs(torque))),
