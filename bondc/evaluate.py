@@ -116,12 +116,20 @@ class Exploded(Exception):
 
 
 class FunctionLike(Protocol):
-    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function`."""
+    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function` (frozen
+    dataclasses both: the members are read-only)."""
 
-    name: str
-    params: tuple[str, ...]
-    body: ast.Expr
-    span: Span
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def params(self) -> tuple[str, ...]: ...
+
+    @property
+    def body(self) -> ast.Expr: ...
+
+    @property
+    def span(self) -> Span: ...
 
 
 class EvaluationError(ModelError):
