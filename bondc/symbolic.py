@@ -276,7 +276,7 @@ class External(sympy.Function):
 
 # --------------------------------------------------- numeric implementations
 
-def as_sympy(value):
+def as_sympy(value: object) -> sympy.Basic:
     """A sympy object for a value that is already sympy or a Python number.
 
     bondc never turns model text into sympy by parsing it: laws are translated
