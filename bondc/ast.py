@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Union
 
-from bondc.source import NO_SPAN, Span
+from bondc.source import NO_SPAN, Source, Span
 
 
 def _span() -> Span:
@@ -387,7 +387,7 @@ class SetValue:
     value: Expr
     unit: Unit | None
     span: Span = _span()
-    source: object = field(default=None, compare=False, repr=False)  # the Source it was parsed from
+    source: Source | None = field(default=None, compare=False, repr=False)  # the Source it was parsed from
 
 
 def walk(expr: Expr):

@@ -42,32 +42,20 @@ from dataclasses import dataclass, field
 from typing import Iterable, Mapping
 
 from bondc import ast
+from bondc.kinds import GYRATOR, KINDS, RESISTOR, SOURCE, STORAGE, TRANSFORMER, WORDS
 from bondc.errors import CausalityError, Diagnostic, Related, sort_key
 from bondc.model import BondGraph, ElementNode, JunctionNode, readable_names
 from bondc.source import Span
 
-# ---------------------------------------------------------------- kinds as data
+# ---------------------------------------------------------------- kinds as data (bondc.kinds)
 
 #: Causal role of each element kind.
-ROLES: Mapping[str, str] = {
-    "Se": "source", "MSe": "source", "Sf": "source", "MSf": "source",
-    "C": "storage", "I": "storage",
-    "R": "resistor",
-    "TF": "transformer", "MTF": "transformer",
-    "GY": "gyrator", "MGY": "gyrator",
-}
+ROLES: Mapping[str, str] = {name: kind.role for name, kind in KINDS.items()}
 
 #: One-port causalities: name -> whether the element sets the effort of its bond,
 #: in order of preference.
 ONE_PORT_CAUSALITIES: Mapping[str, tuple[tuple[str, bool], ...]] = {
-    "Se": (("effort", True),),
-    "MSe": (("effort", True),),
-    "Sf": (("flow", False),),
-    "MSf": (("flow", False),),
-    "C": (("integral", True), ("derivative", False)),
-    "I": (("integral", False), ("derivative", True)),
-    "R": (("resistance", True), ("conductance", False)),
-}
+    name: tuple((c.name, c.sets_effort) for c in kind.causalities) for name, kind in KINDS.items() if kind.causalities}
 
 INTEGRAL, DERIVATIVE = "integral", "derivative"
 RESISTANCE, CONDUCTANCE = "resistance", "conductance"
@@ -133,8 +121,7 @@ class CausalGraph:
         """
         node = self.graph.junctions[junction]
         for bond in node.bonds:
-            sets = self.sets_effort(bond, junction)
-            if (node.kind == "0" and not sets) or (node.kind == "1" and sets):
+            if node.kind_info.strong(self.sets_effort(bond, junction)):
                 return bond
         raise KeyError(f"junction {junction!r} has no strong bond")
 
@@ -212,18 +199,17 @@ def resolve_reference(graph: BondGraph, effort_setter: Mapping[int, str], parts:
         return None
     if head in graph.junctions and len(parts) == 2:
         junction = graph.junctions[head]
-        wanted = "e" if junction.kind == "0" else "f"
+        wanted = junction.kind_info.common
         if parts[1] != wanted:
             return None
         for bond in junction.bonds:
-            sets = effort_setter.get(bond) == head
-            if (junction.kind == "0" and not sets) or (junction.kind == "1" and sets):
+            if junction.kind_info.strong(effort_setter.get(bond) == head):
                 return (wanted, bond)
         return (wanted, junction.bonds[0]) if junction.bonds else None
     if len(parts) == 2 and parts[1] in ("e", "f"):
-        for bond in graph.bonds:
-            if bond.label == head:
-                return (parts[1], bond.number)
+        for labelled in graph.bonds:
+            if labelled.label == head:
+                return (parts[1], labelled.number)
         if head.startswith("b") and head[1:].isdigit() and 1 <= int(head[1:]) <= len(graph.bonds):
             return (parts[1], int(head[1:]))
     return None
@@ -296,7 +282,7 @@ class _Assignment:
             junction = self.graph.junctions[node]
             return self._junction(junction)
         element = self.graph.elements.get(node)
-        if element is not None and ROLES.get(element.kind) in ("transformer", "gyrator"):
+        if element is not None and element.kind_info.two_port:
             return self._two_port(element)
         return []
 
@@ -310,11 +296,11 @@ class _Assignment:
             setter = self.setter.get(bond)
             if setter is None:
                 free.append(bond)
-            elif (setter != name) == (junction.kind == "0"):
+            elif junction.kind_info.strong(setter == name):
                 marked.append(bond)
             else:
                 unmarked.append(bond)
-        variable = "effort" if junction.kind == "0" else "flow"
+        variable = junction.kind_info.common_word
         if len(marked) > 1:
             return _Conflict(name, tuple(marked), variable)
         if len(marked) == 1:
@@ -327,15 +313,16 @@ class _Assignment:
         return []
 
     def _marked_setter(self, junction: JunctionNode, bond: int) -> str:
-        return _other_end(self.graph, bond, junction.name) if junction.kind == "0" else junction.name
+        # the bond bringing the common variable in: a 1-junction sets its effort, a 0-junction does not
+        return _setter_at(self.graph, junction, bond, junction.kind_info.common == "f")
 
     def _unmarked_setter(self, junction: JunctionNode, bond: int) -> str:
-        return junction.name if junction.kind == "0" else _other_end(self.graph, bond, junction.name)
+        return _setter_at(self.graph, junction, bond, junction.kind_info.common == "e")
 
     def _two_port(self, element: ElementNode):
         name = element.name
         first, second = element.bonds
-        gyrator = ROLES[element.kind] == "gyrator"
+        gyrator = element.kind_info.role == GYRATOR
         s1, s2 = self.setter.get(first), self.setter.get(second)
         if s1 is None and s2 is None:
             return []
@@ -355,11 +342,17 @@ def _one_port_options(element: ElementNode, conductance: bool | None = None) -> 
     """The causalities of a one-port, preferred first; ``conductance`` (an R): prefer conductance
     (True) or resistance (False) whatever its laws say (:func:`structural_conflicts`)."""
     options = ONE_PORT_CAUSALITIES[element.kind]
+    # a resistor given only as f = expr(e) prefers the causality its law computes
+    resistor = element.kind_info.role == RESISTOR
     if conductance is None:
-        conductance = element.kind == "R" and "e" not in element.laws and "f" in element.laws
-    if element.kind == "R" and conductance:
+        conductance = resistor and "e" not in element.laws and "f" in element.laws
+    if resistor and conductance:
         options = tuple(reversed(options))
     return options
+
+
+def _setter_at(graph: BondGraph, junction: JunctionNode, bond: int, junction_sets: bool) -> str:
+    return junction.name if junction_sets else _other_end(graph, bond, junction.name)
 
 
 def _setter_for(graph: BondGraph, element: ElementNode, sets_effort: bool) -> str:
@@ -378,14 +371,14 @@ class _Procedure:
         graph = self.graph
         elements = list(graph.elements.values())
         for element in elements:
-            if ROLES.get(element.kind) == "source":
+            if element.kind_info.role == SOURCE:
                 self._decide_element(element)
         for element in elements:
-            if ROLES.get(element.kind) == "storage":
+            if element.kind_info.role == STORAGE:
                 self._decide_element(element)
         self.fixed_errors = len(self.errors)
         for element in elements:
-            if ROLES.get(element.kind) == "resistor":
+            if element.kind_info.role == RESISTOR:
                 self._decide_element(element)
         for bond in graph.bonds:
             if bond.number not in self.state.setter:
@@ -396,14 +389,14 @@ class _Procedure:
     def _decide_element(self, element: ElementNode) -> None:
         if len(element.bonds) != 1:
             return
-        if element.bond in self.state.setter and ROLES.get(element.kind) != "source":
+        if element.bond in self.state.setter and element.kind_info.role != SOURCE:
             return      # forced by an earlier choice: storage in derivative causality, or an R either way
         options = tuple((_setter_for(self.graph, element, sets), element.name)
                         for _, sets in _one_port_options(element, self.conductance.get(element.name)))
         self._decide(element.bond, options, subject=element)
 
     def _decide(self, bond: int, options, subject: ElementNode | None) -> None:
-        first_conflict = None
+        first_conflict: tuple[_Conflict, _Assignment, str] | None = None
         for setter, origin in options:
             # try the option in place; undo it on a conflict (a copy of the whole assignment per
             # decision made causality quadratic in the number of bonds)
@@ -414,6 +407,7 @@ class _Procedure:
             if first_conflict is None:
                 first_conflict = (conflict, self.state.copy(), origin)
             self.state.undo(mark)
+        assert first_conflict is not None, "a decision has at least one option"
         conflict, trial, origin = first_conflict
         self.errors.append(_conflict_diagnostic(self.graph, conflict, trial, origin, subject))
 
@@ -453,9 +447,9 @@ def _at_node(graph: BondGraph, conflict: _Conflict, trial: _Assignment, subject:
         if end in graph.junctions:
             junction = graph.junctions[end]
             marked = [b for b in junction.bonds if b in trial.setter and b != number
-                      and (trial.setter[b] != end) == (junction.kind == "0")]
-            return _Conflict(end, tuple(marked) + (number,), "effort" if junction.kind == "0" else "flow")
-        if end in graph.elements and ROLES.get(graph.elements[end].kind) in ("transformer", "gyrator"):
+                      and junction.kind_info.strong(trial.setter[b] == end)]
+            return _Conflict(end, tuple(marked) + (number,), junction.kind_info.common_word)
+        if end in graph.elements and graph.elements[end].kind_info.two_port:
             return _Conflict(end, graph.elements[end].bonds, "two-port")
     return conflict
 
@@ -473,18 +467,18 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
     culprits = [name for name in origins if name in graph.elements]
     where = conflict.node
     described = join_words([describe_node(graph, name) for name in culprits]) or "the bonds"
-    if where in graph.junctions:
-        kind = graph.junctions[where].kind
+    if where is not None and where in graph.junctions:
+        junction = graph.junctions[where].kind_info
+        kind = junction.name
         if conflict.what == "none":
-            other = "effort" if kind == "1" else "flow"
-            message = (f"causal conflict: every bond of {kind}-junction '{where}' imposes its {other} "
-                       f"({described}), so nothing sets its common {'flow' if kind == '1' else 'effort'}")
+            message = (f"causal conflict: every bond of {kind}-junction '{where}' imposes its {junction.summed_word} "
+                       f"({described}), so nothing sets its common {junction.common_word}")
         else:
             verb = "both set" if len(culprits) == 2 else "all set"
             message = f"causal conflict: {described} {verb} the {conflict.what} of {kind}-junction '{where}'"
-        hint = (f"a {kind}-junction takes its common {'effort' if kind == '0' else 'flow'} from exactly one bond; "
+        hint = (f"a {kind}-junction takes its common {junction.common_word} from exactly one bond; "
                 "remove one of them, or put a resistor or storage element between them")
-    elif where in graph.elements:
+    elif where is not None and where in graph.elements:
         message = (f"causal conflict at {describe_node(graph, where)}: {described} impose incompatible causality "
                    f"on its two ports")
         hint = "a transformer passes an effort through in one direction only; a gyrator turns flow into effort"
@@ -495,7 +489,7 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
             wanted = "effort" if conflict.setter == subject.name else "flow"
         message = f"causal conflict on bond {bond}: {described} both set its {wanted}"
         hint = "one end of a bond sets the effort and the other the flow"
-    if subject is not None and ROLES.get(subject.kind) == "storage":
+    if subject is not None and subject.kind_info.role == STORAGE:
         message += f" (no causality of '{subject.name}' is consistent)"
     primary = element_span(subject) if subject is not None else graph.bond(conflict.bonds[0]).span
     related: list[Related] = []
@@ -503,13 +497,13 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
         if subject is not None and name == subject.name:
             continue
         related.append(Related(element_span(graph.elements[name]), f"{describe_node(graph, name)} is declared here"))
-    if where in graph.junctions:
+    if where is not None and where in graph.junctions:
         related.append(Related(graph.junctions[where].span, f"{describe_node(graph, where)}"))
-    elif where in graph.elements and (subject is None or where != subject.name):
+    elif where is not None and where in graph.elements and (subject is None or where != subject.name):
         related.append(Related(element_span(graph.elements[where]), describe_node(graph, where)))
     for bond in conflict.bonds:
         related.append(Related(graph.bond(bond).span, _bond_text(graph, bond)))
-    if subject is not None and ROLES.get(subject.kind) == "source":
+    if subject is not None and subject.kind_info.role == SOURCE:
         related.append(Related(graph.bond(subject.bond).span, _bond_text(graph, subject.bond)))
     return Diagnostic("error", "E601", message, primary, hint=hint, related=_unique(related))
 
@@ -567,14 +561,14 @@ def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mappi
         return out
 
     for element in graph.elements.values():
-        role = ROLES.get(element.kind)
-        if role in ("source", "storage", "resistor"):
+        role = element.kind_info.role
+        if role in (SOURCE, STORAGE, RESISTOR):
             bond = element.bond
             element_sets = setter[bond] == element.name
             output = f"e{bond}" if element_sets else f"f{bond}"
-            if role == "source":
+            if role == SOURCE:
                 inputs = refs(element, ("e", "f"))
-            elif role == "storage":
+            elif role == STORAGE:
                 if storage.get(element.name) == DERIVATIVE:
                     inputs = []
                 else:
@@ -582,11 +576,11 @@ def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mappi
             else:
                 inputs = [f"f{bond}" if element_sets else f"e{bond}"] + refs(element, ("e", "f"))
             relations.append((element.name, output, tuple(dict.fromkeys(k for k in inputs if k != output))))
-        elif role in ("transformer", "gyrator"):
+        elif role in (TRANSFORMER, GYRATOR):
             first, second = element.bonds
             modulation = refs(element, ("r",))
             sets_first = setter[first] == element.name
-            if role == "transformer":
+            if role == TRANSFORMER:
                 if sets_first:
                     pairs = ((f"e{first}", f"e{second}"), (f"f{second}", f"f{first}"))
                 else:
@@ -603,19 +597,18 @@ def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mappi
             continue
         strong = None
         for bond in bonds:
-            sets = setter[bond] == junction.name
-            if (junction.kind == "0" and not sets) or (junction.kind == "1" and sets):
+            if junction.kind_info.strong(setter[bond] == junction.name):
                 strong = bond
         if strong is None:
             continue
-        common, summed = ("e", "f") if junction.kind == "0" else ("f", "e")
+        common, summed = junction.kind_info.common, junction.kind_info.summed
         others = [b for b in bonds if b != strong]
         for bond in others:
             relations.append((junction.name, f"{common}{bond}", (f"{common}{strong}",)))
         relations.append((junction.name, f"{summed}{strong}", tuple(f"{summed}{b}" for b in others)))
-    for output in graph.outputs.values():
-        relations.append((output.name, f"o:{output.name}",
-                          tuple(_law_references(graph, setter, output.expr, None))))
+    for declared in graph.outputs.values():
+        relations.append((declared.name, f"o:{declared.name}",
+                          tuple(_law_references(graph, setter, declared.expr, None))))
     return tuple(relations)
 
 
@@ -698,7 +691,7 @@ def _find_loops(graph: BondGraph, relations) -> tuple[AlgebraicLoop, ...]:
         members = {computed_by[k] for k in component}
         ordered = sorted(members, key=positions.__getitem__)
         loops.append(AlgebraicLoop(
-            resistors=tuple(n for n in ordered if n in graph.elements and ROLES.get(graph.elements[n].kind) == "resistor"),
+            resistors=tuple(n for n in ordered if n in graph.elements and graph.elements[n].kind_info.role == RESISTOR),
             junctions=tuple(n for n in ordered if n in graph.junctions),
             nodes=tuple(ordered),
             variables=tuple(_variable_name(graph, k) for k in sorted(component, key=_variable_order)),
@@ -747,7 +740,7 @@ def _dependencies(graph: BondGraph, relations, storage: Mapping[str, str]) -> di
         if causality != DERIVATIVE:
             continue
         element = graph.elements[name]
-        start = f"e{element.bond}" if element.kind == "C" else f"f{element.bond}"
+        start = f"{element.kind_info.law_variable}{element.bond}"
         seen, queue, found = {start}, [start], []
         while queue:
             key = queue.pop(0)
@@ -757,7 +750,7 @@ def _dependencies(graph: BondGraph, relations, storage: Mapping[str, str]) -> di
             if key not in computed:
                 continue
             node, inputs = computed[key]
-            if node in graph.elements and ROLES.get(graph.elements[node].kind) == "source" and node not in found:
+            if node in graph.elements and graph.elements[node].kind_info.role == SOURCE and node not in found:
                 found.append(node)
             for item in inputs:
                 if item not in seen:
@@ -769,7 +762,7 @@ def _dependencies(graph: BondGraph, relations, storage: Mapping[str, str]) -> di
 
 def _derivative_diagnostic(graph: BondGraph, name: str, depends_on: tuple[str, ...]) -> Diagnostic:
     element = graph.elements[name]
-    variable = "effort" if element.kind == "C" else "flow"
+    variable = WORDS[element.kind_info.law_variable or "e"]
     if depends_on:
         by = f"is fixed by {join_words([describe_node(graph, n) for n in depends_on])}"
     else:
@@ -804,12 +797,12 @@ def assign_causality(graph: BondGraph) -> CausalGraph:
     storage: dict[str, str] = {}
     resistors: dict[str, str] = {}
     for element in graph.elements.values():
-        role = ROLES.get(element.kind)
-        if role not in ("storage", "resistor"):
+        role = element.kind_info.role
+        if role not in (STORAGE, RESISTOR):
             continue
         sets = setter[element.bond] == element.name
         names = dict((s, c) for c, s in ONE_PORT_CAUSALITIES[element.kind])
-        if role == "storage":
+        if role == STORAGE:
             storage[element.name] = names[sets]
         else:
             resistors[element.name] = names[sets]
@@ -847,7 +840,7 @@ def structural_conflicts(graph: BondGraph, unknown: Iterable[str] = ()) -> list[
     [('E601', 3)]
     """
     resistors = [name for name in dict.fromkeys(unknown)
-                 if name in graph.elements and ROLES.get(graph.elements[name].kind) == "resistor"]
+                 if name in graph.elements and graph.elements[name].kind_info.role == RESISTOR]
     if len(resistors) > MAX_UNKNOWN_RESISTORS:
         procedure = _Procedure(graph)
         procedure.run()

@@ -327,17 +327,18 @@ d("E840", "no C form",
   "its file, is the common case. The diagnostic points at the law that reads it.",
   "Give the signal as an external input (`input u [V] external`, LANGUAGE.md section 15): the FMU's importer, or "
   "the program that embeds the C code, supplies it.")
-d("E841", "a switch that may slide cannot be exported",
-  "An FMU integrates the model's frozen laws between events and selects the modes at each event with bondc's "
-  "CVODE driver; it does not integrate a Filippov sliding mode, which bondc's Python run loop does (a Coulomb "
-  "friction that sticks, a relay that chatters). `bondc fmu` refuses, before building, a model with a located "
-  "switch whose switching function reads a state whose rate reads that switch's own mode (the two sides' rates "
-  "can then push the state onto the surface and hold it there). The diagnostic points at the first such switch's "
-  "law, with notes at the others. Switches of time only (`step(t, t0)`), switches whose states' rates do not read "
-  "their mode, and kinks (laws continuous across their switch: `abs`, `min`, `max`, a relief valve, an orifice's "
-  "`sign(e)*sqrt(abs(e))`) export.",
-  "Simulate the model with `bondc simulate`. To export it, make the law continuous across its switch (a kink "
-  "needs no mode): a narrow linear band around zero speed instead of `sign(v)`, for instance.")
+d("E841", "a switch that may slide cannot be exported as Model Exchange",
+  "A Model Exchange FMU leaves the integration to the importer, whose integrator steps the model's laws and "
+  "stops at its event indicators; it cannot hold the state on a switching surface (a Filippov sliding mode: a "
+  "Coulomb friction that sticks, a relay that chatters). `bondc fmu --kind me` refuses, before building, a model "
+  "with a located switch whose switching function reads a state whose rate reads that switch's own mode (the two "
+  "sides' rates can then push the state onto the surface and hold it there). The diagnostic points at the first "
+  "such switch's law, with notes at the others. Switches of time only (`step(t, t0)`), switches whose states' "
+  "rates do not read their mode, and kinks (laws continuous across their switch: `abs`, `min`, `max`, a relief "
+  "valve, an orifice's `sign(e)*sqrt(abs(e))`) export. A Co-Simulation FMU (the default) holds sliding modes "
+  "with bondc's own engine inside.",
+  "Export it as Co-Simulation (`--kind cs`, the default). For Model Exchange, make the law continuous across "
+  "its switch (a kink needs no mode): a narrow linear band around zero speed instead of `sign(v)`, for instance.")
 d("E843", "no compiler or no SUNDIALS for an FMU",
   "Building an FMU compiles C (bondc's compiler discovery: `$CC`, then `cc`/`gcc`/`clang`, then zig's from the "
   "ziglang package) and links scikit-sundae's SUNDIALS libraries (Linux x86-64 wheels), which the FMU carries. "
@@ -838,10 +839,10 @@ d("E007", "--set value is not NAME=VALUE",
 
 STAGES = (  # (title, modules), in the order of the page
     ("Syntax", "`bondc/parse.py`"),
-    ("Units", "`bondc/units.py`, `bondc/semantic.py`"),
-    ("Names, expressions, files and experiments", "`bondc/semantic.py`, `bondc/evaluate.py`"),
-    ("Graph structure", "`bondc/semantic.py`"),
-    ("Element laws and states", "`bondc/semantic.py`"),
+    ("Units", "`bondc/units.py`, `bondc/semantic/`"),
+    ("Names, expressions, files and experiments", "`bondc/semantic/`, `bondc/evaluate.py`"),
+    ("Graph structure", "`bondc/semantic/`"),
+    ("Element laws and states", "`bondc/semantic/`"),
     ("Causality", "`bondc/causality.py`, `bondc/equations.py`"),
     ("Equations", "`bondc/equations.py`, `bondc/symbolic.py`"),
     ("Simulation", "`bondc/simulate.py`, `bondc/runtime/`"),

@@ -30,10 +30,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import functools
 from fractions import Fraction
-from typing import Callable, Mapping
+from typing import Callable, Mapping, Union
 
 from bondc import ast
 from bondc.errors import Diagnostic, Related
+from bondc.model import BondGraph
 from bondc.source import Span
 from bondc.units import BASE_DIMENSIONS, SIUnit
 
@@ -41,14 +42,18 @@ _N = len(BASE_DIMENSIONS) - 1          # the angle pseudo-dimension is dropped: 
 FREE, UNKNOWN = "free", "unknown"
 
 
-def _exponent(value):
+#: An exponent of a base dimension: an int when whole (fast), else a Fraction.
+Exponent = Union[int, Fraction]
+
+
+def _exponent(value) -> Exponent:
     """An exponent as an int when it is whole (ints add 50 times faster than Fractions, and compare
     and hash equal to them), else the Fraction."""
     value = Fraction(value)
     return int(value) if value.denominator == 1 else value
 
 
-def _vec(dims) -> tuple:
+def _vec(dims) -> tuple[Exponent, ...]:
     return tuple(_exponent(d) for d in dims[:_N])
 
 
@@ -60,8 +65,8 @@ _SECOND = tuple(1 if name == "s" else 0 for name in BASE_DIMENSIONS[:_N])
 class Form:
     """A dimension: ``const`` plus a combination of unknowns (exponent vectors add: ``a*b`` -> ``a + b``)."""
 
-    const: tuple[Fraction, ...]
-    terms: tuple[tuple[int, Fraction], ...] = ()
+    const: tuple[Exponent, ...]
+    terms: tuple[tuple[int, Exponent], ...] = ()
 
     @staticmethod
     def of(dims) -> "Form":
@@ -124,12 +129,12 @@ class _Equation:
     tier: int
 
 
-@dataclass
+@dataclass(frozen=True)
 class Context:
     """What the checker needs from the semantic stage."""
 
-    graph: object                                        # model.BondGraph
-    unit_of: Callable[[ast.Unit | None], object]         # ast.Unit -> SIUnit | None
+    graph: BondGraph
+    unit_of: Callable[[ast.Unit | None], SIUnit | None]
     params: Mapping[str, ast.Param]
     inputs: Mapping[str, ast.Input]
     outputs: Mapping[str, ast.Output]
@@ -420,18 +425,16 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
             c.equal(Form.var(index), declared, state.span, "state", f"state '{state.qualified}'")
 
     for element in graph.elements.values():
-        kind = element.kind
-        tier = {"Se": 0, "Sf": 0, "MSe": 0, "MSf": 0, "TF": 0, "GY": 0, "MTF": 0, "MGY": 0, "C": 1, "I": 1}.get(kind, 2)
-        c.tier = tier
-        local: dict[str, object] = {}
+        kind, info = element.kind, element.kind_info
+        c.tier = info.tier
+        local: dict[str, Form] = {}
         if len(element.bonds) == 1:
-            bond = element.bond
-            local["e"], local["f"] = Form.var(c.effort[bond]), Form.var(c.flow[bond])
+            local["e"], local["f"] = Form.var(c.effort[element.bond]), Form.var(c.flow[element.bond])
         for state in element.states:
             own = Form.var(c.state[state.qualified])
             local[state.name] = own
-            if state.rate is None:      # default q = integral of f, p = integral of e
-                integral = local["f" if state.name == "q" else "e"].plus(Form(_SECOND))
+            if state.rate is None and info.integrates:    # the default state: q integrates f, p integrates e
+                integral = local[info.integrates].plus(Form(_SECOND))
                 c.equal(own, integral, state.span, "state", f"'{state.qualified}'")
         for target, expr in element.laws.items():
             span = element.law_spans.get(target, element.span) if element.law_spans else element.span
@@ -439,15 +442,12 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
             if target in ("e", "f") and len(element.bonds) == 1:
                 c.equal(local[target], value, span, "law", f"{target} of {kind} '{element.name}'")
             elif target == "r" and len(element.bonds) == 2 and isinstance(value, Form):
-                b1, b2 = element.bonds
-                e1, f1 = Form.var(c.effort[b1]), Form.var(c.flow[b1])
-                e2, f2 = Form.var(c.effort[b2]), Form.var(c.flow[b2])
-                if kind in ("TF", "MTF"):
-                    c.equal(e1, value.plus(e2), span, "ratio", f"p1.e = r*p2.e of {kind} '{element.name}'")
-                    c.equal(f2, value.plus(f1), span, "ratio", f"p2.f = r*p1.f of {kind} '{element.name}'")
-                else:
-                    c.equal(e1, value.plus(f2), span, "ratio", f"p1.e = r*p2.f of {kind} '{element.name}'")
-                    c.equal(e2, value.plus(f1), span, "ratio", f"p2.e = r*p1.f of {kind} '{element.name}'")
+                ports = {}
+                for port, number in zip(("p1", "p2"), element.bonds):
+                    ports[f"{port}.e"], ports[f"{port}.f"] = Form.var(c.effort[number]), Form.var(c.flow[number])
+                for left, right in info.ratios:     # left = r * right
+                    c.equal(ports[left], value.plus(ports[right]), span, "ratio",
+                            f"{left} = r*{right} of {kind} '{element.name}'")
         for state in element.states:
             own = Form.var(c.state[state.qualified])
             if state.rate is not None:
@@ -463,15 +463,16 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
             c.equal(own.plus(Form(_SECOND), -1), c.dim(state.rate, {}), state.span, "rate", f"der({state.name})")
         if state.initial is not None:
             c.equal(own, c.dim(state.initial, {}), state.span, "initial", f"the initial value of '{state.name}'")
-    for name, item in ctx.outputs.items():
-        declared = c.declared(item.unit)
-        value = c.dim(item.value, {})
-        if declared is not None:
-            c.equal(declared, value, item.value.span, "output", f"output '{name}' [{item.unit.text}]")
-    for name, item in ctx.inputs.items():
-        declared = c.declared(item.unit)
-        if declared is not None and item.value is not None:
-            c.equal(declared, c.dim(item.value, {}), item.value.span, "input", f"input '{name}' [{item.unit.text}]")
+    for name, output in ctx.outputs.items():
+        declared = c.declared(output.unit)
+        value = c.dim(output.value, {})
+        if declared is not None and output.unit is not None:
+            c.equal(declared, value, output.value.span, "output", f"output '{name}' [{output.unit.text}]")
+    for name, signal in ctx.inputs.items():
+        declared = c.declared(signal.unit)
+        if declared is not None and signal.unit is not None and signal.value is not None:
+            c.equal(declared, c.dim(signal.value, {}), signal.value.span, "input",
+                    f"input '{name}' [{signal.unit.text}]")
     c.tier = 4          # the statements of when clauses check, last: they decide no dimension
     for when in getattr(graph, "whens", ()):
         c.dim(when.condition, {})
@@ -486,32 +487,32 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
     known = _solve(c.equations, source)
     diagnostics = []
     for equation in c.equations:
-        left = _substitute(equation.left, known)
-        right = _substitute(equation.right, known)
-        if left.terms or right.terms or left.const == right.const:
+        left_side = _substitute(equation.left, known)
+        right_side = _substitute(equation.right, known)
+        if left_side.terms or right_side.terms or left_side.const == right_side.const:
             continue
-        related = []
+        related: list[Related] = []
         for index, _ in equation.left.terms + equation.right.terms:
             origin = source.get(index)
             if origin is not None and origin is not equation and origin.span != equation.span \
                     and all(r.span != origin.span for r in related):
                 related.append(Related(origin.span, f"the {c.names[index]} is {text(known[index])} from "
                                                     f"{origin.what} here"))
-        diagnostics.append(_diagnostic(equation, left.const, right.const, related[:2]))
+        diagnostics.append(_diagnostic(equation, left_side.const, right_side.const, related[:2]))
     found: dict[str, str] = {}
     for qualified, index in c.state.items():
         if index in known:
             found[qualified] = text(known[index])
     for bond in graph.bonds:
         for variable, table in (("e", c.effort), ("f", c.flow)):
-            index = table.get(bond.number)
-            if index in known:
-                found[f"{bond.name}.{variable}"] = text(known[index])
+            unknown = table.get(bond.number)
+            if unknown is not None and unknown in known:
+                found[f"{bond.name}.{variable}"] = text(known[unknown])
     # a pseudo bond graph (temperature and heat flow: e*f in K*W) has its own "energy" unit
-    joule = Form.of(SIUnit(1.0, (2, 1, -2, 0, 0, 0, 0, 0), "J").dims).const
+    joule = Form.of(SIUnit(1.0, tuple(map(Fraction, (2, 1, -2, 0, 0, 0, 0, 0))), "J").dims).const
     for element in graph.elements.values():
-        bond = element.bonds[0] if element.bonds else None
-        e, f = (c.effort.get(bond), c.flow.get(bond)) if bond is not None else (None, None)
+        first = element.bonds[0] if element.bonds else None
+        e, f = (c.effort.get(first), c.flow.get(first)) if first is not None else (None, None)
         if e in known and f in known:
             energy = tuple(a + b + s for a, b, s in zip(known[e], known[f], _SECOND))
             if energy != joule:         # written relative to the joule: K*J, J/m
@@ -520,32 +521,27 @@ def analyse(ctx: Context) -> tuple[list[Diagnostic], dict[str, str]]:
     return diagnostics, found
 
 
+#: What E210 says for each kind of equation: (message, hint), the message formatted with the two
+#: dimensions ``a`` and ``b`` and the equation's ``what``.
+_DECLARED = ("{what} is {a}, but its expression is {b}",
+             "declare the unit of what the expression computes, or fix the expression")
+_MESSAGES: Mapping[str, tuple[str, str]] = {
+    "sum": ("cannot add or subtract {a} and {b}",
+            "both terms of a sum must measure the same quantity; check the units of the names involved"),
+    "compare": ("cannot compare {a} with {b}", "both sides of a comparison must measure the same quantity"),
+    "branch": ("the branches of 'if' differ: {a} and {b}", "both branches must give the same quantity"),
+    "output": _DECLARED,
+    "input": _DECLARED,
+    "law": ("the two sides of the law differ: {what} is {a}, but the expression is {b}",
+            "the bond's domain comes from the elements around it; check the units of the parameters in the law"),
+    "assign": ("{what} sets {a} to {b}",
+               "the new value must measure the same quantity as the variable or state it replaces"),
+    "exponent": ("an exponent must be dimensionless, not {b}", "divide by a reference quantity of the same unit"),
+}
+_OTHER = ("dimensions differ in {what}: {a} and {b}", "check the units of the quantities involved")
+
+
 def _diagnostic(equation: _Equation, left, right, related=()) -> Diagnostic:
-    a, b = text(left), text(right)
-    kind = equation.kind
-    if kind == "sum":
-        message = f"cannot add or subtract {a} and {b}"
-        hint = "both terms of a sum must measure the same quantity; check the units of the names involved"
-    elif kind == "compare":
-        message = f"cannot compare {a} with {b}"
-        hint = "both sides of a comparison must measure the same quantity"
-    elif kind == "branch":
-        message = f"the branches of 'if' differ: {a} and {b}"
-        hint = "both branches must give the same quantity"
-    elif kind == "output" or kind == "input":
-        message = f"{equation.what} is {a}, but its expression is {b}"
-        hint = "declare the unit of what the expression computes, or fix the expression"
-    elif kind == "law":
-        message = f"the two sides of the law differ: {equation.what} is {a}, but the expression is {b}"
-        hint = ("the bond's domain comes from the elements around it; check the units of the parameters in "
-                "the law")
-    elif kind == "assign":
-        message = f"{equation.what} sets {a} to {b}"
-        hint = "the new value must measure the same quantity as the variable or state it replaces"
-    elif kind == "exponent":
-        message = f"an exponent must be dimensionless, not {b}"
-        hint = "divide by a reference quantity of the same unit"
-    else:
-        message = f"dimensions differ in {equation.what}: {a} and {b}"
-        hint = "check the units of the quantities involved"
+    template, hint = _MESSAGES.get(equation.kind, _OTHER)
+    message = template.format(a=text(left), b=text(right), what=equation.what)
     return Diagnostic("error", "E210", message, equation.span, hint, tuple(related))

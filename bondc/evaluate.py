@@ -116,8 +116,8 @@ class Exploded(Exception):
 
 
 class FunctionLike(Protocol):
-    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function` (frozen
-    dataclasses both: the members are read-only)."""
+    """An ``fn`` definition: :class:`bondc.ast.FnDef` or :class:`bondc.model.Function` (read-only:
+    both are frozen)."""
 
     @property
     def name(self) -> str: ...
@@ -383,13 +383,16 @@ class _Evaluator:
         return value
 
     def _table(self, node: ast.Call) -> float:
-        if len(node.args) != 3 or not all(isinstance(a, ast.ListExpr) for a in node.args[1:]):
+        if len(node.args) != 3:
             raise _fail(node, "table() takes a value and two lists")
-        xs = [self(item) for item in node.args[1].items]
-        ys = [self(item) for item in node.args[2].items]
+        value, breakpoints, values = node.args
+        if not isinstance(breakpoints, ast.ListExpr) or not isinstance(values, ast.ListExpr):
+            raise _fail(node, "table() takes a value and two lists")
+        xs = [self(item) for item in breakpoints.items]
+        ys = [self(item) for item in values.items]
         if len(xs) != len(ys) or not xs:
             raise _fail(node, "table() needs two lists of the same, non-zero length")
-        return float(interpolate(self(node.args[0]), xs, ys))
+        return float(interpolate(self(value), xs, ys))
 
 
 class _Expansion:

@@ -56,7 +56,7 @@ from typing import Iterable, Mapping, Sequence
 
 from bondc import ast
 from bondc.errors import Diagnostic, Hint, Related
-from bondc.model import JUNCTION_KINDS, KINDS
+from bondc.kinds import JUNCTION_KINDS, KINDS
 from bondc.source import Span
 
 _BOND_NUMBER = re.compile(r"b([0-9]+)")
@@ -237,13 +237,14 @@ class _Flattener:
         own = [m for m in (home.models if home is not None else ()) if m.name == kind]
         if own:
             return own[0]
-        found = [(f, m) for f in self.files for m in f.models if m.name == kind]
-        if len({id(f) for f, _ in found}) > 1:
-            names = [library_name(f) for f, _ in found]
-            self.report(_error("E331", f"'{kind}' is defined by two imports: {' and '.join(f.path for f, _ in found)}",
+        defined = [(f, m) for f in self.files for m in f.models if m.name == kind]
+        if len({id(f) for f, _ in defined}) > 1:
+            names = [library_name(f) for f, _ in defined]
+            files = " and ".join(f.path for f, _ in defined)
+            self.report(_error("E331", f"'{kind}' is defined by two imports: {files}",
                                span, hint=f"qualify it with its library, e.g. '{names[0]}.{kind}'"))
             return None
-        return found[0][1] if found else None
+        return defined[0][1] if defined else None
 
     # -- one model at one prefix
 
@@ -288,7 +289,7 @@ class _Flattener:
         # Instances first, so that references into them resolve.
         for statement in model.body:
             sub = kinds.get(id(statement))
-            if sub is None:
+            if sub is None or not isinstance(statement, ast.Element):
                 continue
             path = prefix + statement.name
             if any(sub is seen for seen, _ in stack):
@@ -328,9 +329,10 @@ class _Flattener:
             else:
                 x.statements.append(renamer.statement(statement))
         for statement in model.body:
-            sub = x.instances.get(statement.name) if id(statement) in kinds else None
-            if sub is not None:
-                self.unbonded_ports(x, sub, statement)
+            if isinstance(statement, ast.Element) and id(statement) in kinds:
+                expansion = x.instances.get(statement.name)
+                if expansion is not None:
+                    self.unbonded_ports(x, expansion, statement)
         for port in x.ports.values():
             if port.end is None:
                 self.report(_error("E333", f"port '{port.name}' is not bonded inside model '{model.name}'",
@@ -413,8 +415,11 @@ class _Flattener:
                         for i, s in enumerate(sub.statements):
                             if isinstance(s, ast.Input) and (s.name in named or s.value is not None and any(
                                     isinstance(n, ast.Name) and n.name in named for n in ast.walk(s.value))):
-                                sub.statements[i] = ast.Output(s.name, s.unit, value if s.name == flat_name
-                                                               else s.value, s.description, s.span, s.name_span)
+                                expr = value if s.name == flat_name else s.value
+                                if expr is None:        # (a second input of the same name: E302)
+                                    continue
+                                sub.statements[i] = ast.Output(s.name, s.unit, expr, s.description, s.span,
+                                                               s.name_span)
                                 named.add(s.name)
                                 changed = True
             else:
@@ -611,6 +616,7 @@ class _Renamer:
             return dataclasses.replace(node, parts=(sub.prefix + head,) + rest)
         if head in sub.values and not rest:
             return ast.Name(sub.prefix + head, node.span)
+        hint: str | None
         if head in sub.ports:
             message = f"'{written}.{head}' is a port of '{sub.model.name}'; a port has no variables"
             hint = "use a variable of the element or junction the port is bonded to inside"
@@ -630,7 +636,7 @@ class _Renamer:
     def laws(self, laws: tuple, exempt: frozenset[str]) -> tuple:
         saved, self.exempt = self.exempt, exempt
         try:
-            out = []
+            out: list[ast.Law] = []
             for law in laws:
                 if isinstance(law, ast.LawAssign):
                     out.append(dataclasses.replace(law, value=self.expr(law.value)))

@@ -32,7 +32,7 @@ from pathlib import Path
 
 from bondc import ast
 from bondc.io import read_source
-from bondc.model import KINDS
+from bondc.kinds import KINDS
 from bondc.parse import parse_source, parse_text
 from bondc.source import Source, Span
 

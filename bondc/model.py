@@ -2,7 +2,7 @@
 
 A :class:`BondGraph` is one model of a file with every name resolved, every
 bond numbered and oriented, every two-port's ports assigned, parameters in SI,
-and element kinds described by data (:data:`KINDS`). Laws, inputs and outputs
+and element kinds described by data (:data:`bondc.kinds.KINDS`). Laws, inputs and outputs
 stay AST expressions (``bondc.ast``); the equations stage turns them into sympy
 by walking the AST, never by evaluating text.
 
@@ -17,46 +17,17 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Mapping
 
 from bondc import ast
+from bondc.kinds import JUNCTION_KINDS, JUNCTIONS, KINDS, RESISTOR, STORAGE, JunctionKind, Kind
+from bondc.scope import Scope
 from bondc.source import NO_SPAN, Source, Span
 
-
-@dataclass(frozen=True)
-class Kind:
-    """What an element kind is: ports, laws it may/must have, its storage state."""
-
-    name: str
-    ports: int                      # 1 for one-ports, 2 for TF/GY
-    laws: frozenset[str]            # law targets allowed: "e", "f", "r"
-    required: tuple[frozenset[str], ...]  # each set: at least one of these laws must be given
-    state: str | None = None        # default energy state of a storage element: "q" or "p"
-    storage: str | None = None      # "C" or "I" for storage elements
-    source: str | None = None       # "effort" or "flow" for sources
-    modulated: bool = False
-    description: str = ""
+if TYPE_CHECKING:       # (flatten builds the instances; the graph only carries them)
+    from bondc.flatten import Instance
 
 
-def _kind(name, ports, laws, required=(), **extra) -> Kind:
-    return Kind(name, ports, frozenset(laws), tuple(frozenset(r) for r in required), **extra)
-
-
-KINDS: Mapping[str, Kind] = {
-    "Se": _kind("Se", 1, "e", ["e"], source="effort", description="effort source"),
-    "MSe": _kind("MSe", 1, "e", ["e"], source="effort", modulated=True, description="modulated effort source"),
-    "Sf": _kind("Sf", 1, "f", ["f"], source="flow", description="flow source"),
-    "MSf": _kind("MSf", 1, "f", ["f"], source="flow", modulated=True, description="modulated flow source"),
-    "R": _kind("R", 1, "ef", ["ef"], description="resistor"),
-    "C": _kind("C", 1, "e", ["e"], state="q", storage="C", description="capacitor (effort store)"),
-    "I": _kind("I", 1, "f", ["f"], state="p", storage="I", description="inertia (flow store)"),
-    "TF": _kind("TF", 2, "r", ["r"], description="transformer"),
-    "MTF": _kind("MTF", 2, "r", ["r"], modulated=True, description="modulated transformer"),
-    "GY": _kind("GY", 2, "r", ["r"], description="gyrator"),
-    "MGY": _kind("MGY", 2, "r", ["r"], modulated=True, description="modulated gyrator"),
-}
-
-JUNCTION_KINDS = ("0", "1")
 PORT_NAMES = ("p1", "p2")
 
 
@@ -172,6 +143,10 @@ class JunctionNode:
     bonds: tuple[int, ...]
     span: Span = NO_SPAN
 
+    @property
+    def kind_info(self) -> JunctionKind:
+        return JUNCTIONS[self.kind]
+
 
 @dataclass(frozen=True)
 class ExperimentDef:
@@ -196,7 +171,7 @@ class WhenDef:
     ``"assign"`` (a discrete variable, by name) or ``"reinit"`` (a state: a Name or a Ref)."""
 
     condition: ast.Expr
-    actions: tuple
+    actions: tuple[tuple[str, ast.Expr, ast.Expr], ...]
     text: str
     span: Span = NO_SPAN
 
@@ -222,12 +197,12 @@ class BondGraph:
     whens: tuple[WhenDef, ...] = ()
     # the SI unit (as dimensions: "kg*m/s") of each state and bond variable whose dimension is known
     si_units: Mapping[str, str] = field(default_factory=dict, compare=False)
-    # submodel instances (flatten.Instance: path, model, description, ports), outermost first
-    instances: tuple = field(default=(), compare=False)
-    # every declaration and use of a name, with its span (bondc.scope.Scope)
-    scope: object = field(default=None, compare=False)
+    # submodel instances (path, model, description, ports), outermost first
+    instances: tuple[Instance, ...] = field(default=(), compare=False)
+    # every declaration and use of a name, with its span
+    scope: Scope | None = field(default=None, compare=False)
     # every division by parameters alone, as (divisor expression, parameter names): E311 for bound values
-    divisors: tuple = field(default=(), compare=False)
+    divisors: tuple[tuple[ast.Expr, tuple[str, ...]], ...] = field(default=(), compare=False)
 
     def bond(self, number: int) -> Bond:
         return self.bonds[number - 1]
@@ -240,7 +215,7 @@ class BondGraph:
 
     @property
     def storage_elements(self) -> tuple[ElementNode, ...]:
-        return tuple(e for e in self.elements.values() if KINDS[e.kind].storage)
+        return tuple(e for e in self.elements.values() if KINDS[e.kind].stores)
 
     def summary(self) -> dict:
         return {
@@ -372,7 +347,7 @@ def law_span(graph, variable: str | None):
                 if which in element.law_spans:
                     return element.law_spans[which]
             for element in ends:        # else a storage or resistor law written the other way round
-                if element.kind in ("C", "I", "R") and element.law_spans:
+                if element.kind_info.role in (STORAGE, RESISTOR) and element.law_spans:
                     return next(iter(element.law_spans.values()))
             for end in (bond.head, bond.tail):
                 if end in graph.elements:

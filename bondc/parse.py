@@ -231,7 +231,8 @@ class _ToAst(Transformer):
 
     # spans -----------------------------------------------------------------
     def _tok(self, token: Token) -> Span:
-        return self.source.span(token.start_pos, token.end_pos)
+        # (lark types positions as optional; a token the parser produced has both)
+        return self.source.span(token.start_pos or 0, token.end_pos or 0)
 
     def _meta(self, meta) -> Span:
         if getattr(meta, "empty", True):
@@ -657,7 +658,7 @@ def _blank(text: str, start: int, end: int, replacement: str = "") -> str:
 def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnostic, int]:
     """A diagnostic for one lark error, and the offset it is at."""
     if isinstance(error, UnexpectedCharacters):
-        offset = error.pos_in_stream
+        offset = error.pos_in_stream or 0      # (set for every unexpected character)
         char = source.text[offset] if offset < len(source.text) else ""
         span = source.span(offset, offset + 1)
         if char == '"':
@@ -722,17 +723,18 @@ def parse_source(source: Source) -> ast.File:
             unclosed = _unclosed_when(text, offset)
             if unclosed is not None and diagnostic.code in ("E100", "E104"):
                 # a forgotten 'end': one error, at the statement the block ran into; the block goes
-                header, statement = unclosed
-                where = source.span(header, header + 4)
+                opened, statement = unclosed
+                where = source.span(opened, opened + 4)
                 word = re.match(r"\w+|->|\S", text[statement:])
+                width = len(word.group()) if word else 1
                 diagnostics.append(replace(
-                    diagnostic, code="E100", span=source.span(statement, statement + len(word.group())),
+                    diagnostic, code="E100", span=source.span(statement, statement + width),
                     message=f"the 'when' block of line {where.line} is not closed before this statement",
                     hint="close it with 'end': on a line of its own after its statements, or at the end of a "
                          "one-line block (when c then d = 1 end)",
                     related=(Related(where, "the block opened here"),)))
                 line_start = text.rfind("\n", 0, offset) + 1
-                text = _blank(text, header, line_start)
+                text = _blank(text, opened, line_start)
                 continue
             explained = _unclosed(diagnostic, source, offset)
             diagnostics.append(explained)
@@ -745,13 +747,13 @@ def parse_source(source: Source) -> ast.File:
             for keyword in ("model", "experiment"):
                 if header.startswith(keyword + " ") or header == keyword:
                     replacement = keyword + " _"
-            code = header.split("#", 1)[0].rstrip()
-            if header.startswith("when ") and not code.endswith(" end"):
+            written = header.split("#", 1)[0].rstrip()
+            if header.startswith("when ") and not written.endswith(" end"):
                 replacement = "when _ then"     # a when block's header: its statements and 'end' follow
             elif _inside_when_block(text, start):
                 replacement = "_ = 0"           # a when block's statements: the block keeps one
             text = _blank(text, start, end, replacement)
-    if diagnostics:
+    if diagnostics or tree is None or comments is None:
         raise ParseError(diagnostics, {source.name: source})
     try:
         items = _ToAst(source).transform(tree)

@@ -377,11 +377,11 @@ class _Verdict:
 
     def _storage(self, element, add) -> None:
         bond = element.bond
-        is_c = element.kind_info.storage == "C"
+        computed = element.kind_info.law_variable      # what its law computes: e (C) or f (I)
         for state in element.states:
             if state.rate is not None:
                 self.refs(state.rate, element)
-        add(("e" if is_c else "f", bond), self.law(element, "e" if is_c else "f"))
+        add((computed, bond), self.law(element, computed))
 
     def _resistor(self, element, add) -> None:
         bond = element.bond
@@ -428,7 +428,7 @@ class _Verdict:
         if not junction.bonds:
             return
         strong = self.causal.strong_bond(junction.name)
-        common, summed = ("e", "f") if junction.kind == "0" else ("f", "e")
+        common, summed = junction.kind_info.common, junction.kind_info.summed
         for bond in junction.bonds:
             if bond != strong:
                 add((common, bond), {(common, strong)})

@@ -17,6 +17,7 @@ editor tools find definitions and references in it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Protocol
 
 from bondc import ast
 from bondc.source import Span
@@ -32,16 +33,29 @@ class Declaration:
     span: Span           # the name as written
 
 
+class Declared(Protocol):
+    """What :func:`build_scope` reads of a declaration (semantic's ``_Decl``)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def category(self) -> str: ...
+
+    @property
+    def span(self) -> Span: ...
+
+
 @dataclass(frozen=True)
 class Use:
     name: str            # the declaration it names (a dotted reference: its element, junction or bond)
     span: Span           # the name (or the whole dotted reference) as written
 
 
-@dataclass
+@dataclass(frozen=True)
 class Scope:
-    declarations: dict[str, Declaration] = field(default_factory=dict)
-    uses: list[Use] = field(default_factory=list)
+    declarations: Mapping[str, Declaration] = field(default_factory=dict)
+    uses: tuple[Use, ...] = ()
 
     def category(self, name: str) -> str | None:
         declaration = self.declarations.get(name)
@@ -64,21 +78,21 @@ class Scope:
         return None
 
 
-def build_scope(model: ast.Model, declarations) -> Scope:
+def build_scope(model: ast.Model, declarations: Iterable[Declared]) -> Scope:
     """The scope of a (flattened) model from its declarations (semantic's ``_Decl`` list)."""
-    scope = Scope()
+    known: dict[str, Declaration] = {}
+    uses: list[Use] = []
     for decl in declarations:
-        scope.declarations.setdefault(decl.name, Declaration(decl.name, decl.category, decl.span))
-    known = scope.declarations
+        known.setdefault(decl.name, Declaration(decl.name, decl.category, decl.span))
 
     def walk(expr, local=frozenset()):
         for node in ast.walk(expr):
             if isinstance(node, ast.Name) and node.name not in local and node.name in known:
-                scope.uses.append(Use(node.name, node.span))
+                uses.append(Use(node.name, node.span))
             elif isinstance(node, ast.Ref) and node.parts[0] in known and node.parts[0] not in local:
-                scope.uses.append(Use(node.parts[0], node.span))
+                uses.append(Use(node.parts[0], node.span))
             elif isinstance(node, ast.Call) and node.func in known:
-                scope.uses.append(Use(node.func, node.func_span))
+                uses.append(Use(node.func, node.func_span))
 
     for statement in model.body:
         if isinstance(statement, (ast.Param, ast.Input, ast.Output, ast.Discrete)):
@@ -89,21 +103,23 @@ def build_scope(model: ast.Model, declarations) -> Scope:
             if isinstance(statement, ast.Element):
                 own |= {"q", "p"}
             for law in statement.laws:
-                for expr in (getattr(law, "value", None), getattr(law, "arg", None)):
-                    if expr is not None:
-                        walk(expr, own)
+                if isinstance(law, ast.LawAssign):
+                    walk(law.value, own)
+                elif isinstance(law, ast.LawCall):
+                    walk(law.value, own)
+                    walk(law.arg, own)
         elif isinstance(statement, ast.FnDef):
             walk(statement.body, frozenset(statement.params))
         elif isinstance(statement, ast.BondChain):
             for end in statement.endpoints:
                 if end.name in known:
-                    scope.uses.append(Use(end.name, end.span))
+                    uses.append(Use(end.name, end.span))
         elif isinstance(statement, ast.When):
             walk(statement.condition)
             for action in statement.actions:
                 if isinstance(action, ast.WhenAssign):
                     if action.name in known:
-                        scope.uses.append(Use(action.name, action.name_span))
+                        uses.append(Use(action.name, action.name_span))
                     walk(action.value)
                 else:
                     for argument in action.args:
@@ -112,8 +128,8 @@ def build_scope(model: ast.Model, declarations) -> Scope:
             for item in statement.body:
                 if isinstance(item, (ast.Param, ast.Input)):
                     if item.name in known:
-                        scope.uses.append(Use(item.name, item.name_span))
+                        uses.append(Use(item.name, item.name_span))
                     walk(item.value)
                 elif isinstance(item, ast.Setting):
                     walk(item.value)
-    return scope
+    return Scope(known, tuple(uses))

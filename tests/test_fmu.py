@@ -19,6 +19,7 @@ from bondc.runtime import _sundials_link, find_compiler
 
 fmpy = pytest.importorskip("fmpy")
 from fmpy import simulate_fmu  # noqa: E402
+from scipy.optimize import brentq  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -48,6 +49,8 @@ BUILDS = {
     "external": (EXTERNAL, []),
     "external_me": (EXTERNAL, ["--kind", "me"]),
     "relay": (ROOT / "tests" / "fixtures" / "external" / "relay_external.bg", []),
+    "flagship": (MODELS / "electro_pneumatic_hybrid.bg", []),
+    "flagship_components": (MODELS / "electro_pneumatic_hybrid_components.bg", []),
 }
 
 
@@ -111,6 +114,10 @@ def _compare(result, sim, names=None):
     ("motor_fmi3", "dc_motor_gear.bg", {}),
     ("msd", "mass_spring_damper.bg", {"k": 1600.0, "m": 3.0}),
     ("motor", "dc_motor_gear.bg", {"J_L": 0.02, "t_on": 0.02}),
+    # the friction sticks and breaks away (Filippov sliding modes held by the engine inside)
+    ("flagship", "electro_pneumatic_hybrid.bg", {}),
+    ("flagship", "electro_pneumatic_hybrid.bg", {"M": 45.0}),
+    ("flagship_components", "electro_pneumatic_hybrid_components.bg", {}),
 ))
 def test_co_simulation_matches_bondc_simulate(fmus, name, model, overrides):
     """FMPy's run of the Co-Simulation FMU (start_values for the parameter changes, in SI) against
@@ -118,7 +125,7 @@ def test_co_simulation_matches_bondc_simulate(fmus, name, model, overrides):
     grid."""
     result = simulate_fmu(str(fmus[name]), start_values=dict(overrides))
     t = result["time"]
-    units = {"t_on": "s", "J_L": "kg*m^2", "k": "N/m", "m": "kg"}
+    units = {"t_on": "s", "J_L": "kg*m^2", "k": "N/m", "m": "kg", "M": "kg"}
     given = {key: (value, units[key]) for key, value in overrides.items()}
     sim = bondc.simulate(MODELS / model, overrides=given or None, dt=float(t[1] - t[0]))
     if name in ("ball", "thermostat"):      # when clauses fired: impacts, the relay switching
@@ -246,26 +253,62 @@ def test_an_fmu_runs_where_bondc_cannot_be_imported(fmus, tmp_path):
 
 
 @pytest.mark.parametrize("model", ["electro_pneumatic_hybrid.bg", "electro_pneumatic_hybrid_components.bg"])
-def test_the_flagship_is_refused_at_a_switch_that_may_slide(tmp_path, capsys, model):
-    """The flagship's friction sticks (and its valve's switches cannot be shown not to slide): the
-    FMU build stops before compiling, at the valve's law, with notes at the others (the friction's)."""
+def test_the_flagship_as_model_exchange_is_refused_at_a_switch_that_may_slide(tmp_path, capsys, model):
+    """The flagship's friction sticks (and its valve's switches cannot be shown not to slide): an
+    importer's integrator cannot hold it there, so the Model Exchange build stops before compiling,
+    at the valve's law, with notes at the others (the friction's)."""
     output = tmp_path / "flagship.fmu"
-    assert main(["fmu", str(MODELS / model), "-o", str(output)]) == 1
+    assert main(["fmu", str(MODELS / model), "--kind", "me", "-o", str(output)]) == 1
     err = capsys.readouterr().err
     assert "error[E841]" in err and "more switches like it" in err and "may slide too: sign(friction.f)" in err
+    assert "--kind cs" in err
     # at a law: the model's (the flagship), or the library component's it instantiates (std:pneumatics)
     assert re.match(r"\S+:\d+:\d+: error\[E841\]", err.splitlines()[0])
     assert not output.exists()
 
 
-def test_a_coulomb_friction_is_refused_at_its_law(tmp_path, capsys):
+SLIDE = ("model Slide\n  param M = 1 [kg]\n  param F_c = 2 [N]\n  param A = 3 [N]\n"
+         "  Se push : e = A*sin(6.283185307179586*t)\n"
+         "  I block : f = p/M\n  R friction : e = F_c*sign(f)\n  1 j\n  push -> j\n  j -> block\n"
+         "  j -> friction\n  output v [m/s] = block.f\n  output F [N] = friction.e\n"
+         "  experiment run\n    t_end = 2 [s]\n  end\nend\n")
+
+
+def test_a_coulomb_friction_is_refused_at_its_law_in_model_exchange(tmp_path, capsys):
     model = tmp_path / "slide.bg"
-    model.write_text("model Slide\n  param M = 1 [kg]\n  param F_c = 2 [N]\n  Se push : e = 1\n"
-                     "  I block : f = p/M\n  R friction : e = F_c*sign(f)\n  1 j\n  push -> j\n  j -> block\n"
-                     "  j -> friction\n  output v [m/s] = block.f\nend\n")
-    assert main(["fmu", str(model), "--json"]) == 1
+    model.write_text(SLIDE)
+    assert main(["fmu", str(model), "--kind", "me", "--json"]) == 1
     err = capsys.readouterr().err
-    assert "error[E841]" in err and "slide.bg:6:" in err
+    assert "error[E841]" in err and "slide.bg:7:" in err
+
+
+def test_a_block_that_sticks_and_slips_in_co_simulation_holds_against_the_closed_form(tmp_path):
+    """A 1 kg block pushed by 3 sin(2 pi t) N against a 2 N dry friction: it sticks while
+    |push| <= 2 N (the friction force equals the push there: Filippov), slides from
+    t1 = asin(2/3)/(2 pi) with dv/dt = 3 sin(2 pi t) - 2 until v returns to 0, then sticks again.
+    The FMU's run (FMPy) against that closed form: the velocity, and the force while it sticks."""
+    model = tmp_path / "slide.bg"
+    model.write_text(SLIDE)
+    fmu = tmp_path / "slide.fmu"
+    assert main(["fmu", str(model), "-o", str(fmu), "-q"]) == 0
+    result = simulate_fmu(str(fmu), stop_time=1.0, output_interval=1e-3)
+    t, v, force = result["time"], result["v"], result["F"]
+    w = 2 * np.pi
+    t1 = np.arcsin(2 / 3) / w
+
+    def velocity(tt):      # the slide from t1: v = (3/w)(cos(w t1) - cos(w t)) - 2 (t - t1)
+        return (3 / w) * (np.cos(w * t1) - np.cos(w * tt)) - 2 * (tt - t1)
+
+    t2 = brentq(velocity, 0.3, 0.9)
+    assert t2 < t1 + 0.5        # it sticks again before the push passes -2 N: the next half mirrors it
+    first = (t > t1) & (t < t2)
+    second = (t > t1 + 0.5) & (t < t2 + 0.5)
+    expected = np.where(first, velocity(np.clip(t, t1, t2)),
+                        np.where(second, -velocity(np.clip(t - 0.5, t1, t2)), 0.0))
+    assert np.max(np.abs(v - expected)) < 1e-4 * np.ptp(expected)
+    stuck = ~((t > t1 - 1e-3) & (t < t2 + 1e-3)) & ~((t > t1 + 0.5 - 1e-3) & (t < t2 + 0.5 + 1e-3))
+    assert stuck.sum() > 100
+    assert np.max(np.abs(force[stuck] - 3 * np.sin(w * t[stuck]))) < 1e-6
 
 
 def test_a_tunable_parameter_changed_during_the_run_takes_effect_from_there(fmus):

@@ -1014,8 +1014,12 @@ def test_a_sliding_mode_the_driver_hands_over_goes_on_in_the_step_loop(monkeypat
     loop = _driver_run(path, monkeypatch, sliding_in_c=False)
     assert len(handovers) >= 2 and set(handovers) <= set(handed.t.tolist())
     assert handed.complete and handed.stats["driver_sliding_segments"] == handed.stats["sliding_segments"]
-    assert [label for _, label in handed.events] == [label for _, label in loop.events]
-    np.testing.assert_allclose([t for t, _ in handed.events], [t for t, _ in loop.events], rtol=0, atol=1e-5)
+    # the regulator's change of direction ('if P1 >= chamber.P in valve.f') is left out, as in the
+    # test above: crossed while the chamber sits at the supply pressure, an ill-conditioned instant
+    # that two runs place apart, or not at all
+    events = lambda run: [(t, label) for t, label in run.events if "in valve.f" not in label]
+    assert [label for _, label in events(handed)] == [label for _, label in events(loop)]
+    np.testing.assert_allclose([t for t, _ in events(handed)], [t for t, _ in events(loop)], rtol=0, atol=1e-5)
     for name, values in loop.states.items():
         scale = max(float(np.ptp(values)), 1e-12)
         difference = np.abs(np.interp(loop.t, handed.t, handed.states[name]) - values)
@@ -1097,6 +1101,9 @@ def test_a_large_models_functions_are_compiled_as_units_of_their_own_and_compute
     namespace = compile_model(derived.state_space)
     source = namespace["NATIVE_SOURCE"]
     assert len(runtime._native_units(source)) == 1
+    # the whole library one unit (the model's text and the driver's together pass the size from
+    # which it is split by default)
+    monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", float("inf"))
     runtime._NATIVE_LIBRARIES.clear()
     whole_ffi, whole = runtime.load_native(source)
     monkeypatch.setattr(runtime.native, "_NATIVE_SPLIT_FROM", 0)
@@ -1309,18 +1316,27 @@ def test_the_engines_sources_are_files_of_the_package_and_are_built_with_their_h
     a build inlines their ``#include "..."`` headers, so the compiled text (what the cache key
     hashes) holds every file, and cffi's cdef reads driver.h as it is."""
     assert sorted(p.name for p in NATIVE.iterdir() if p.suffix in (".c", ".h", ".cpp")) == [
-        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "model.h", "sundials.h"]
+        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "filippov.c", "filippov.h", "locate.c", "locate.h", "model.h",
+        "policy.c", "sundials.h"]
     for name in ("driver.c", "erk.cpp"):
         built = runtime.native_build_text(name)
         assert not [line for line in built.splitlines() if line.startswith('#include "')], name
         assert built.count("typedef struct {\n    int version;") == 1, name     # erk_api.h's table, once
     driver = runtime.native_build_text("driver.c")
-    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h"):
+    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.h", "locate.h"):
         assert runtime.native_file(header) in driver, header
-    assert "bondc_driver_new" in runtime.native_file("driver.h")
-    assert "#" not in runtime.native_file("driver.h")        # no preprocessor line: cffi's cdef reads it
     import cffi
 
+    # the run loop's functions are built into the driver, and alone (policy.c) for the Python run
+    # loop: the same texts
+    for source in ("filippov.c", "locate.c"):
+        assert runtime.native_build_text(source) in driver
+        assert runtime.native_build_text(source) in runtime.native_build_text("policy.c")
+    for header in ("filippov.h", "locate.h"):
+        assert "#" not in runtime.native_file(header)
+        cffi.FFI().cdef(runtime.native_file(header))
+    assert "bondc_driver_new" in runtime.native_file("driver.h")
+    assert "#" not in runtime.native_file("driver.h")        # no preprocessor line: cffi's cdef reads it
     cffi.FFI().cdef(runtime.native_file("driver.h"))
     # model.h declares the model's functions the driver calls, as the code generation defines them
     assert runtime.native_file("model.h").count("void bondc_") == len(runtime._NATIVE_FUNCTIONS)

@@ -71,6 +71,7 @@ class CModel:
     located: list                   # 1 where the switch's mode can change (an event or a known time)
     switch_owners: list             # the variable whose law has each switch
     whens: list = field(default_factory=list)      # [(label, [state index])]
+    vertices: list = field(default_factory=list)   # each switch's mode on its plus side (2: coulomb)
     when_native: bool = True
     experiment: dict = field(default_factory=dict)  # t_end, rtol, atol, max_step
     plan: object = None
@@ -280,7 +281,7 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
                 settings[key] = float(value)
     model = CModel(model_name, source_name, "", "", header_name, parameters, states, inputs, outputs,
                    pattern, labels, floors, located, owners, whens=whens, when_native=when_native,
-                   experiment=settings, plan=plan)
+                   experiment=settings, plan=plan, vertices=[float(s.vertex) for s in plan.switches])
     model.header = _header(model)
     tables = _tables(model)
     prelude = PRELUDE + (LOOP_PRELUDE if plan.blocks else "")
@@ -325,6 +326,7 @@ def _tables(model: CModel) -> str:
         _array("char *const", "bondc_switch_labels", [c_string(text) for text in model.switch_labels]),
         _array("int", "bondc_switch_floor", [str(v) for v in model.floors]),
         _array("int", "bondc_switch_located", [str(v) for v in model.located]),
+        _array("double", "bondc_switch_vertices", [repr(float(v)) for v in model.vertices]),
         _array("int", "bondc_when_target_start", [str(v) for v in starts]),
         _array("int", "bondc_when_targets", [str(v) for v in targets]),
         "const double bondc_experiment[4] = {" + ", ".join(
@@ -396,6 +398,8 @@ def _header(model: CModel) -> str:
         "extern const int bondc_jacobian_rows[], bondc_jacobian_cols[];",
         "extern const char *const bondc_switch_labels[];",
         "extern const int bondc_switch_floor[], bondc_switch_located[];",
+        "/* each switch's mode on its plus side where a sliding mode holds it: 1 (sign, if), 2 (coulomb) */",
+        "extern const double bondc_switch_vertices[];",
         "extern const int bondc_when_target_start[], bondc_when_targets[];",
         "/* the experiment's t_end [s], rtol, atol and max_step [s] (0: none) */",
         "extern const double bondc_experiment[4];",

@@ -9,11 +9,12 @@ scikit-sundae's SUNDIALS libraries, which the FMU carries beside it (found throu
 ``$ORIGIN``): it runs where neither bondc, Python nor a C compiler is installed.
 
 Co-Simulation (the default): ``doStep`` integrates with CVODE, locates every crossing of a
-switching function and selects the modes after it. Model Exchange: the importer integrates the
-derivatives; the event indicators are the located switches' switching functions, the modes are
-selected again at each event. Neither integrates a Filippov sliding mode (a friction that
-sticks, a relay that chatters): a model whose switch may hold its state on its surface is refused
-before building (E841), at that switch's law.
+switching function and selects the modes after it; where switches sit on their surfaces (a
+friction that sticks, a relay that chatters) it holds them in a Filippov sliding mode with the
+engine's own sliding set (``bondc/native/filippov.c``, as ``bondc simulate``). Model Exchange: the
+importer integrates the derivatives; the event indicators are the located switches' switching
+functions, the modes are selected again at each event; it cannot hold a state on a surface, so a
+model whose switch may slide is refused before building (E841), at that switch's law.
 
 Everything written is deterministic: the GUID is a hash of the content, the zip's entries have
 fixed dates and permissions, so the same model gives the same FMU (with the same compiler).
@@ -41,7 +42,8 @@ NATIVE = Path(__file__).resolve().parent.parent / "native"
 FMI_SOURCES = NATIVE / "fmi"
 PLATFORM = "linux64"
 #: The driver's own sources the FMU's library is compiled from (bondc/native)
-DRIVER_FILES = ("driver.c", "driver.h", "model.h", "sundials.h", "erk_api.h")
+DRIVER_FILES = ("driver.c", "driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.c", "filippov.h", "locate.c",
+                "locate.h")
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
@@ -106,10 +108,11 @@ def sliding_switches(plan) -> list:
 
 
 def check_exportable(model: CModel, graph, kind: str) -> None:
-    """The errors that stop an FMU before any build: a switch that may slide (E841), when
-    clauses without C code (E840)."""
+    """The errors that stop an FMU before any build: a switch that may slide in a Model Exchange
+    FMU (E841; Co-Simulation integrates sliding modes with bondc's engine), when clauses without
+    C code (E840)."""
     plan = model.plan
-    sliding = sliding_switches(plan)
+    sliding = sliding_switches(plan) if kind == "me" else []
     if sliding:
         first, rest = sliding[0], sliding[1:]
         label = model.switch_labels[first.index]
@@ -117,13 +120,14 @@ def check_exportable(model: CModel, graph, kind: str) -> None:
                         for s in rest if _span(graph, s.owner).line)
         raise ExportError(Diagnostic(
             "error", "E841",
-            f"cannot export as an FMU: the switch {label} may hold the state on its surface (a Filippov "
-            "sliding mode: a friction that sticks, a relay that chatters), which bondc's engine integrates "
-            "in its Python run loop but an FMU cannot"
+            f"cannot export as a Model Exchange FMU: the switch {label} may hold the state on its surface (a "
+            "Filippov sliding mode: a friction that sticks, a relay that chatters), which the importer's "
+            "integrator cannot do"
             + (f" ({len(rest)} more switch{'es' if len(rest) > 1 else ''} like it)" if rest else ""),
             _span(graph, first.owner),
-            hint="simulate it with bondc simulate; to export it, make the law continuous across its switch "
-                 "(a kink, e.g. a small linear band around zero velocity), which needs no mode",
+            hint="export it as Co-Simulation (the default, --kind cs: bondc's engine inside holds sliding "
+                 "modes), or make the law continuous across its switch (a kink, e.g. a small linear band "
+                 "around zero velocity), which needs no mode",
             related=related))
     if model.whens and not model.when_native:
         span = None

@@ -13,7 +13,7 @@ from bondc import ast
 from bondc.builtins import BUILTINS
 from bondc.lsp.analysis import Analysis
 from bondc.lsp.index import Symbol, at, members, resolve
-from bondc.model import KINDS
+from bondc.kinds import KINDS
 
 KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment", "import", "if", "then",
             "else", "and", "or", "not", "port", "defaults", "discrete", "when", "external")

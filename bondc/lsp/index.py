@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from bondc import ast
-from bondc.model import KINDS
+from bondc.kinds import JUNCTIONS, KINDS
 from bondc.lsp.positions import contains
 
 @dataclass
@@ -221,7 +221,7 @@ def resolve(index: Index, use: Use, part: int = 0) -> Symbol | None:
 
 
 def element_members(statement: ast.Element) -> list[str]:
-    """The variables ``NAME.x`` an element has, as semantic.py resolves them: a two-port's
+    """The variables ``NAME.x`` an element has, as bondc.semantic resolves them: a two-port's
     ``p1.e`` ... ``p2.f``; a one-port's ``e``, ``f`` and its states (the ones its laws declare,
     else its kind's own: ``q`` of a C, ``p`` of an I)."""
     kind = KINDS[statement.kind]
@@ -265,7 +265,8 @@ def members(index: Index, parts: list[str], model: str | None, bond: bool) -> li
         return [(name, "state" if name not in ("e", "f") and "." not in name else
                  "effort" if name.endswith("e") else "flow") for name in element_members(symbol.statement)]
     if symbol.category == "junction":
-        return [("e", "common effort") if symbol.statement.kind == "0" else ("f", "common flow")]
+        junction = JUNCTIONS.get(symbol.statement.kind)
+        return [(junction.common, f"common {junction.common_word}")] if junction else [("f", "common flow")]
     if symbol.category == "bond label":
         return [("e", "effort"), ("f", "flow")]
     return []

@@ -13,9 +13,12 @@
 #include "model.h"      /* the model's functions this driver calls */
 #include "erk_api.h"    /* the table of functions of bondc's explicit stepper (erk.cpp, a library of its own) */
 #include "driver.h"     /* this driver's functions, as Python calls them (through cffi) */
+#include "filippov.c"   /* Filippov sliding: the sliding set, the corners' weights, the deadbands */
+#include "locate.c"     /* where values that stay positive first fail to: exits, dips */
 
 struct bondc_driver {
     void *cvode;
+    bondc_law law;      /* the model's laws as filippov.c calls them */
     /* the explicit stepper that integrates instead of CVODE (bondc_driver_explicit), or NULL */
     const bondc_erk_api *erk;
     void *erk_memory;
@@ -351,6 +354,8 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
     if (!d) return NULL;
     d->n = n; d->switches = switches; d->entries = entries; d->rows = rows; d->cols = cols;
     d->banded = banded; d->lower = lower; d->upper = upper; d->p = p;
+    d->law.n = n; d->law.switches = switches; d->law.p = p;
+    d->law.rhs = bondc_rhs; d->law.switching = bondc_switches; d->law.vertices = NULL;
     d->m = (double *)calloc(switches + 1, sizeof(double));
     d->g = (double *)calloc(switches + 1, sizeof(double));
     d->values = (double *)calloc(entries + 1, sizeof(double));
@@ -441,20 +446,6 @@ int bondc_driver_start(bondc_driver *d, double t0, const double *y0, const doubl
 static int report_step(bondc_driver *d, double t, const double *y, const double *t_eval, int n_eval,
                        int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 
-/* As _may_dip, for one value positive while nothing happens (a sliding mode's exit, a switch's
-   m*g + band) at the start, the middle and the end of a step: 1 where it is past 0 in the middle,
-   or the parabola through the three comes within its own curvature of 0 inside the step. */
-static int may_dip(double left, double mid, double right)
-{
-    if ((left > 0 && mid <= 0) || (left >= 0 && mid < 0)) return 1;
-    double curve = 2 * left + 2 * right - 4 * mid, slope = 4 * mid - 3 * left - right;
-    double lowest = fmin(left, right);
-    if (curve > 0) {
-        double vertex = -slope / (2 * curve);
-        if (vertex > 0 && vertex < 1) lowest = left + slope * vertex + curve * vertex * vertex;
-    }
-    return left > 0 && right > 0 && lowest - 0.5 * fabs(curve) < 0;
-}
 
 /* Whether a watched switch in mode +-1 may cross twice inside the step just taken (to t), where it is
    on its side at both ends (g_old, d->g): its value at the step's middle (CVODE's interpolant) is
@@ -468,7 +459,7 @@ static int switch_dips(bondc_driver *d, double t, int watched, const int *watch,
     if (driver_interpolate(d, t - 0.5 * h) != 0) return 0;
     bondc_switches(t - 0.5 * h, N_VGetArrayPointer(d->work), d->p, d->m, d->gmid);
     for (int j = 0; j < watched; j++)
-        if (signs[j] != 0 && may_dip(signs[j] * g_old[j] + band[j], signs[j] * d->gmid[watch[j]] + band[j],
+        if (signs[j] != 0 && bondc_may_dip(signs[j] * g_old[j] + band[j], signs[j] * d->gmid[watch[j]] + band[j],
                                      signs[j] * d->g[watch[j]] + band[j])) return 1;
     return 0;
 }
@@ -780,6 +771,30 @@ static double slide_exits(bondc_driver *d, double t, const double *y, double *ex
     return alpha;
 }
 
+/* The sliding mode's exits at t inside the last step, on CVODE's interpolant (locate.h's values) */
+static int driver_slide_values(void *context, double t, double *out)
+{
+    bondc_driver *d = (bondc_driver *)context;
+    if (driver_interpolate(d, t) != 0) {
+        int watched = 2 * (d->held > 1 ? d->held : 1) + d->exits;
+        for (int j = 0; j < watched; j++) out[j] = NAN;
+        return -1;
+    }
+    slide_exits(d, t, N_VGetArrayPointer(d->work), out);
+    return 0;
+}
+
+/* After bondc_driver_slide_advance returned 1 (a possible end in its last step (t_old, t_new], the
+   exits `old` before it and `now` at its end): the end of the sliding mode in that step
+   (bondc_first_end on the interpolant), into *t_end (0), or 1 where the mode goes on past t_new;
+   the exits are tested every `longest` (0: only at the ends). -1 where memory ran out. */
+int bondc_driver_slide_end(bondc_driver *d, double t_old, double t_new, const double *old, const double *now,
+                           double longest, double *t_end)
+{
+    int watched = 2 * (d->held > 1 ? d->held : 1) + d->exits;
+    return bondc_first_end(driver_slide_values, d, watched, t_old, t_new, old, now, longest, t_end);
+}
+
 /* The exits of the sliding mode (see bondc_driver_slide) at (t, y), into out (2 + count values). */
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out)
 {
@@ -830,7 +845,7 @@ static int slide_dips(bondc_driver *d, double middle, const double *left, const 
     int dip = 0;
     if (driver_interpolate(d, middle) == 0) {
         slide_exits(d, middle, N_VGetArrayPointer(d->work), mid);
-        for (int j = 0; j < watched && !dip; j++) dip = may_dip(left[j], mid[j], right[j]);
+        for (int j = 0; j < watched && !dip; j++) dip = bondc_may_dip(left[j], mid[j], right[j]);
     }
     d->alpha = alpha;
     for (int i = 0; i < held; i++) d->alphas[i] = d->kept[i];
@@ -939,20 +954,12 @@ double bondc_driver_switch(bondc_driver *d, double t, double t_old, double t_new
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out)
 {
-    double *base = (double *)calloc(d->switches + 1, sizeof(double));
-    if (!base) return -1;
-    bondc_switches(t, y, d->p, m, base);
-    for (int j = 0; j < count; j++) out[j] = 0.0;
-    for (int i = 0; i < d->n; i++) {
-        for (int q = 0; q < d->n; q++) d->shifted[q] = y[q];
-        d->shifted[i] += atol + rtol * fabs(y[i]);
-        bondc_switches(t, d->shifted, d->p, m, d->g);
-        for (int j = 0; j < count; j++) out[j] += fabs(d->g[index[j]] - base[index[j]]);
-    }
-    for (int j = 0; j < count; j++)
-        if (!isfinite(out[j])) out[j] = 0.0;
-    free(base);
-    return 0;
+    double *scale = (double *)calloc(d->n + 1, sizeof(double));
+    if (!scale) return -1;
+    for (int i = 0; i < d->n; i++) scale[i] = atol + rtol * fabs(y[i]);
+    int code = bondc_law_deadbands(&d->law, t, y, m, scale, count, index, out);
+    free(scale);
+    return code;
 }
 
 /* y(t) (k = 0) or its derivative (k = 1) inside the last step. */
@@ -1011,16 +1018,18 @@ static int same_values(const double *a, const double *b, int count)
    their law, until they agree (0), or until they repeat (1: switches that chatter, a sliding mode
    this function does not resolve; out holds the last modes). -1 when out of memory. */
 int bondc_driver_select(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
-                        double probe, double *out)
+                        double probe, double *out, int *flips)
 {
     enum { ROUNDS = 8 };
     int switches = d->switches, n = d->n;
+    if (flips)
+        for (int k = 0; k < switches; k++) flips[k] = 0;
     if (switches == 0) return 0;
     if (bondc_driver_restart(d, t, y, guess, floors, probe, 0, out) == 1) return 0;
     double *seen = (double *)calloc((size_t)(ROUNDS + 2) * switches, sizeof(double));
     double *ahead = (double *)calloc((size_t)switches, sizeof(double));
     double *shifted = (double *)calloc((size_t)n + 1, sizeof(double));
-    int code = 1, rounds = 1;
+    int code = 1, rounds = 1, first = 0;
     if (!seen || !ahead || !shifted) code = -1;
     else memcpy(seen, out, sizeof(double) * switches);
     for (int round = 0; code == 1 && round < ROUNDS; round++) {
@@ -1029,13 +1038,19 @@ int bondc_driver_select(bondc_driver *d, double t, const double *y, const double
         for (int i = 0; i < n; i++) shifted[i] = y[i] + probe * d->fp[i];
         driver_modes_at(d, t + probe, shifted, out, floors, ahead);
         if (same_values(ahead, out, switches)) { code = 0; break; }
-        for (int r = 0; r < rounds; r++)
-            if (same_values(ahead, seen + (long)r * switches, switches)) code = 2;
+        for (int r = rounds - 1; r >= 0; r--)
+            if (same_values(ahead, seen + (long)r * switches, switches)) { code = 2; first = r; }
         memcpy(out, ahead, sizeof(double) * switches);
         if (code == 2) { code = 1; break; }
         memcpy(seen + (long)rounds * switches, ahead, sizeof(double) * switches);
         rounds++;
     }
+    /* the switches that flip within the cycle (from its first repeated row; all rows where none
+       repeated), as _Run.restart_modes names them */
+    if (code == 1 && flips)
+        for (int r = first + 1; r < rounds; r++)
+            for (int k = 0; k < switches; k++)
+                if (seen[(long)r * switches + k] != seen[(long)first * switches + k]) flips[k] = 1;
     free(seen); free(ahead); free(shifted);
     return code;
 }

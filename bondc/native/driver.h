@@ -27,6 +27,8 @@ int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, doubl
                                double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
                                int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);
 void bondc_driver_exits(bondc_driver *d, double t, const double *y, double *out);
+int bondc_driver_slide_end(bondc_driver *d, double t_old, double t_new, const double *old, const double *now,
+                           double longest, double *t_end);
 int bondc_driver_unfrozen_advance(bondc_driver *d, int capacity, const int *floors, double *ts, double *ys,
                                   double *ms, int *count, const double *t_eval, int n_eval, int *eval_next,
                                   int eval_capacity, double *et, double *ey, int *eval_count);
@@ -41,7 +43,7 @@ void bondc_driver_free(bondc_driver *d);
 int bondc_driver_explicit(bondc_driver *d, const void *api);
 int bondc_when_native(void);
 int bondc_driver_select(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
-                        double probe, double *out);
+                        double probe, double *out, int *flips);
 int bondc_driver_crossing(bondc_driver *d, int watched, const int *watch, const double *signs, const double *band,
                           const double *g_old, const int *floors, const double *m, double t_old, double t_new,
                           const double *y_new, double *g_new, double *t_event);

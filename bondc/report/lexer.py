@@ -42,14 +42,14 @@ from pygments.token import (
 )
 
 from bondc.builtins import BUILTINS as LANGUAGE_BUILTINS
+from bondc.kinds import JUNCTION_KINDS, NAMES_LONGEST_FIRST
 
 __all__ = ["BgLexer", "BgStyle", "UNIT", "highlight_bg", "lexer_css", "CSS_SCOPE"]
 
 KEYWORDS = ("model", "end", "param", "input", "output", "state", "fn", "experiment",
             "import", "if", "then", "else", "port", "defaults", "discrete", "when")
 WORD_OPERATORS = ("and", "or", "not")
-ELEMENT_KINDS = ("MSe", "MSf", "MTF", "MGY", "Se", "Sf", "TF", "GY", "R", "C", "I")
-JUNCTION_KINDS = ("0", "1")
+ELEMENT_KINDS = NAMES_LONGEST_FIRST
 # longest first, so that atan2 is not read as atan
 BUILTINS = tuple(sorted(LANGUAGE_BUILTINS, key=lambda name: (-len(name), name))) + ("der",)
 

@@ -11,7 +11,8 @@ The modules, one job each, in the order each imports only earlier ones (``MODULE
 - ``signals``: ``table``, ``step``, measured csv signals (the one data-file reader), external inputs.
 - ``loops``: nonlinear algebraic loops (hybr, then Newton from the guesses).
 - ``adapter``: the model adapter (:class:`_Model`), parameters, the modes of the unfrozen law,
-  Filippov's weights (``filippov_alpha``, ``corner_weights``), :func:`evaluate`.
+  :func:`evaluate`; filippov: Filippov's weights (``filippov_alpha``, ``corner_weights``) and the
+  sliding set, in C (bondc/native/filippov.c).
 - ``results``: :class:`Result`, :class:`LazyRows`, the one writer of result files (:func:`result_bytes`:
   csv, npz, parquet, each with its columns' units; :func:`write_result`), the result's size limits,
   the typed failure of a run (:class:`RunFailure`, carried by ``_Stop``), the result builder
@@ -73,8 +74,12 @@ from bondc.runtime.loops import (  # noqa: F401
     newton_search, solve_block, solve_loop
 )
 from bondc.runtime.adapter import (  # noqa: F401
-    _MEMOS, _MODEL_NAMES, _Model, _PATTERNS, _columns_by_mode, _model_memo, corner_weights, evaluate,
-    filippov_alpha, mode_values, modes_at, param_array, pattern_arrays
+    _MEMOS, _MODEL_NAMES, _Model, _PATTERNS, _columns_by_mode, _model_memo, evaluate, mode_values, modes_at,
+    param_array, pattern_arrays
+)
+from bondc.runtime.filippov import (  # noqa: F401
+    SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, _located, _values_callback, corner_weights,
+    filippov_alpha, first_dip, first_end
 )
 from bondc.runtime.results import (  # noqa: F401
     DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
@@ -85,15 +90,15 @@ from bondc.runtime.native import (  # noqa: F401
     Compiler, UNIT_MARK, _COMPILERS, _COMPILER_PROBES, _ERK_FLAGS, _ERK_LOADED, _NATIVE_AT_FUNCTIONS,
     _NATIVE_BY_TEXT, _NATIVE_FILES, _NATIVE_FLAGS, _NATIVE_FUNCTIONS, _NATIVE_LIBRARIES, _NATIVE_NOTES,
     _NATIVE_OPTIMIZE, _NATIVE_PENDING, _NATIVE_POINT_FUNCTIONS, _NATIVE_READ, _NATIVE_SPLIT_FROM, _NativeBuild,
-    _SUNDIALS_PARTS, _SYSTEM_COMPILERS, _ZIG_FLAGS, _build_erk, _build_native, _choose_compiler, _discard_pending,
+    _SUNDIALS_PARTS, _SYSTEM_COMPILERS, _ZIG_FLAGS, _POLICY_FLAGS, _POLICY_LOADED, NativeUnavailable, _build_erk, _build_native, _engine_library, _choose_compiler, _discard_pending,
     _link_flags, _native_plan, _native_units, _native_variants, _probe_compiler, _sundials_link, _zig,
-    attach_native, cache_dir, compiler_label, find_compiler, load_erk, load_native, native_build_text, native_file,
+    attach_native, cache_dir, compiler_label, find_compiler, load_erk, load_native, load_policy, native_build_text, native_file,
     native_text, native_turned_off, start_native
 )
 from bondc.runtime.solvers import (  # noqa: F401
     CVODE, CVODE_Adams, CvodeSolver, DEFAULT_SOLVER, DOPRI5, IDA, SOLVER_NAMES, _CREEP, _CREEP_STEPS,
     _CVODE_METHODS, _FiniteJacobian, _IMPLICIT, _METHODS, _NotFinite, _SUNDIALS_FOUND, _SolverChoice,
-    _UNFROZEN_STEPS, _all_finite, _creeping, _may_dip, difference_jacobian, solver_class, stiff_solver,
+    _UNFROZEN_STEPS, _all_finite, _creeping, difference_jacobian, solver_class, stiff_solver,
     sundials_available
 )
 from bondc.runtime.steppers import (  # noqa: F401
@@ -116,4 +121,4 @@ from bondc.runtime.run import (  # noqa: F401
 
 
 #: The modules in the order a standalone module carries them (each imports only earlier ones).
-MODULES = ('kernels', 'signals', 'loops', 'adapter', 'results', 'native', 'solvers', 'steppers', 'driver', 'events', 'sliding', 'run')
+MODULES = ('kernels', 'signals', 'loops', 'adapter', 'results', 'native', 'filippov', 'solvers', 'steppers', 'driver', 'events', 'sliding', 'run')

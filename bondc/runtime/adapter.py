@@ -1,8 +1,6 @@
 """The model adapter: a generated module's namespace as a :class:`_Model`, its parameters, the
-modes of the unfrozen law (:func:`modes_at`), Filippov's weights (:func:`filippov_alpha`,
-:func:`corner_weights`) and :func:`evaluate` of its functions at given points."""
+modes of the unfrozen law (:func:`modes_at`) and :func:`evaluate` of its functions at given points."""
 
-import math
 
 import numpy as np
 
@@ -111,52 +109,6 @@ def mode_values(values, floors=None):
         modes[floors] = np.floor(values[floors])
     modes[np.isnan(modes)] = 0.0
     return modes
-
-
-def corner_weights(alpha, sides):
-    """Weights of the corners. Multilinear (2**k corners): prod_i alpha_i (side +) or
-    1 - alpha_i (side -). Affine (k + 1 corners): 1 - sum(alpha) for the all-minus corner and
-    alpha_i for the corner with switch i alone on its plus side (the same combination where the
-    right-hand side is affine in each switch's weight, as a friction force is)."""
-    if sides.shape[0] != 2 ** sides.shape[1]:
-        return np.concatenate(([1.0 - np.sum(alpha)], alpha))
-    factors = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
-    return np.prod(factors, axis=1)
-
-
-def filippov_alpha(rates, sides, guess=None):
-    """The weights alpha (one per sliding switch) that make every sliding switch's rate zero.
-
-    The rate is multilinear in alpha (exactly the Filippov / equivalent-control combination;
-    linear in the affine one); Newton's method with least squares, so a switch whose rate does not depend on its own
-    weight (a free clutch) keeps its guess. The result is not clipped: a weight outside
-    [0, 1] means that switch cannot be held on its surface.
-    """
-    count = sides.shape[1]
-    alpha = np.full(count, 0.5) if guess is None else np.clip(np.array(guess, dtype=float), 0.0, 1.0)
-    affine = sides.shape[0] != 2 ** count      # the rate is linear in alpha: Newton converges at once
-    if count == 1:      # one switch: the rate is linear in alpha, alpha*r+ + (1 - alpha)*r- = 0
-        plus, minus = rates[sides[:, 0] > 0, 0][0], rates[sides[:, 0] < 0, 0][0]
-        if not (math.isfinite(plus) and math.isfinite(minus)):
-            return np.full(1, np.nan)
-        return alpha if minus == plus else np.array([minus / (minus - plus)])
-    for _ in range(3 if affine else 20):
-        residual = corner_weights(alpha, sides) @ rates
-        if affine:
-            jacobian = (rates[1:] - rates[0]).T
-        else:
-            jacobian = np.empty((count, count))
-            for j in range(count):
-                others = np.where(sides > 0, alpha[None, :], 1.0 - alpha[None, :])
-                others[:, j] = sides[:, j]          # d/d alpha_j of alpha_j or 1 - alpha_j
-                jacobian[:, j] = np.prod(others, axis=1) @ rates
-        if not (np.all(np.isfinite(jacobian)) and np.all(np.isfinite(residual))):
-            return np.full(count, np.nan)
-        delta = np.linalg.lstsq(jacobian, -residual, rcond=1e-12)[0]
-        alpha = alpha + delta
-        if np.max(np.abs(delta)) <= 1e-13:
-            break
-    return alpha
 
 
 def modes_at(model, t, x, p, guess=None):

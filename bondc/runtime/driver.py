@@ -161,6 +161,19 @@ class _NativeDriver:
             y, dtype=float)), self.ffi.from_buffer("double[]", out))
         return out
 
+    def slide_end(self, t_old, t_new, old, new, longest):
+        """The end of the sliding mode inside its last step (t_old, t_new] on the driver's
+        interpolant, or None (``bondc_driver_slide_end``, as :meth:`_Run.sliding_end_within`)."""
+        buffer = self.ffi.from_buffer
+        t_end = self.ffi.new("double *")
+        code = self.lib.bondc_driver_slide_end(self.handle, float(t_old), float(t_new),
+                                               buffer("double[]", np.ascontiguousarray(old, dtype=float)),
+                                               buffer("double[]", np.ascontiguousarray(new, dtype=float)),
+                                               float(longest) if np.isfinite(longest) else 0.0, t_end)
+        if code < 0:
+            raise MemoryError("the native driver ran out of memory")
+        return float(t_end[0]) if code == 0 else None
+
     def slide_advance(self, old):
         """One batch of a sliding mode: (code, times, states, alphas) — see ``bondc_driver_slide_advance``;
         ``old`` (the exits before the batch) is updated in place, the first half of ``self.exits``
@@ -679,7 +692,7 @@ class _DriverSegments:
                 self.stats["steps"] += 1
                 dense = _DriverStep(driver, t_prev, t_new, y_new).dense_output()
                 new = driver.exits[:driver.exits.size // 2].copy()
-                hit = self.sliding_end_within(old, new, lambda tt: driver.exits_at(tt, dense(tt)), t_prev, t_new)
+                hit = driver.slide_end(t_prev, t_new, old, new, self.sliding_check())
                 end = t_new if hit is None else hit
                 y_end = y_new if hit is None else dense(hit)
                 self.record_sliding(t_prev, end, y_end, dense, corner_ids, weights_at)

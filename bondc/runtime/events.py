@@ -9,6 +9,7 @@ import numpy as np
 from bondc.runtime.kernels import _EPS, brentq
 from bondc.runtime.loops import _BLOCK_SOLUTIONS, _ModeReader, _ReadingModes
 from bondc.runtime.adapter import mode_values
+from bondc.runtime.filippov import first_dip
 from bondc.runtime.results import RunFailure, _Stop
 
 
@@ -576,7 +577,7 @@ class _EventLocation:
         (``before``, ``after``: ``m*g + deadband``), as (time, switch index), or None: the sign test
         at the step's ends sees nothing where a hump of a state passes a threshold and returns
         within one step. Its values at the step's middle, and where their parabola comes within its
-        curvature of the band, the halves in turn (:meth:`sliding_dip`), as for a sliding mode's
+        curvature of the band, the halves in turn (``bondc_first_dip``), as for a sliding mode's
         exits."""
         t_old, t_new = solver.t_old, solver.t
         if not t_old < t_new:
@@ -588,8 +589,7 @@ class _EventLocation:
             dense = solver.dense_output()
             values = lambda tt: signs * self.model.switches(tt, dense(tt), self.p, modes)[index] + deadband
         with np.errstate(all="ignore"):
-            hit = self.sliding_dip(np.asarray(before, dtype=float), np.asarray(after, dtype=float), values,
-                                   t_old, t_new)
+            hit = first_dip(values, t_old, t_new, before, after)
         if hit is None:
             return None
         self._dense = None if fused is not None else dense

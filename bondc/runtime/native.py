@@ -298,23 +298,35 @@ def _build_erk():
         import boost_headers
     except ImportError:
         return None, None, "the Boost headers (the package boost-headers) are not installed"
+    include = str(boost_headers.get_include())
+    ffi, lib, why = _engine_library("erk.cpp", "c++", _ERK_FLAGS, ("-I", include),
+                                    getattr(boost_headers, "__version__", ""), "const void *bondc_erk_table(void);",
+                                    "bondc's explicit stepper")
+    if ffi is None:
+        return None, None, why
+    return ffi, lib, int(ffi.cast("uintptr_t", lib.bondc_erk_table()))
+
+
+def _engine_library(name, language, flags, extra, version, cdef, what):
+    """(ffi, lib, "") of one of bondc's own native sources (``bondc/native/<name>``) as a library of
+    its own, or (None, None, why not): built once per machine into ``cache_dir()/native`` (in a
+    private folder, then renamed into place), keyed by its text, flags and compiler."""
     import hashlib
 
     try:
         import cffi
     except ImportError:
         return None, None, "cffi is not installed"
-    include = str(boost_headers.get_include())
-    compiler, why = find_compiler("c++")
+    compiler, why = find_compiler(language)
     if compiler is None:
         return None, None, why
     try:
-        text = native_build_text("erk.cpp")
+        text = native_build_text(name)
     except (OSError, KeyError) as error:
-        return None, None, f"bondc's explicit stepper's source is missing ({error})"
-    digest = hashlib.sha256("\n".join((*_ERK_FLAGS, compiler.identity, getattr(boost_headers, "__version__", ""),
-                                       text)).encode("utf-8")).hexdigest()[:40]
-    path = os.path.join(cache_dir(), "native", f"erk_{digest}.so")
+        return None, None, f"{what}'s source is missing ({error})"
+    stem, suffix = os.path.splitext(name)
+    digest = hashlib.sha256("\n".join((*flags, compiler.identity, version, text)).encode("utf-8")).hexdigest()[:40]
+    path = os.path.join(cache_dir(), "native", f"{stem}_{digest}.so")
     if not os.path.exists(path):
         import shutil
         import subprocess
@@ -324,29 +336,56 @@ def _build_erk():
         try:
             os.makedirs(os.path.dirname(path), exist_ok=True)
             work = tempfile.mkdtemp(dir=os.path.dirname(path), prefix="build-")
-            source = os.path.join(work, "erk.cpp")
+            source = os.path.join(work, name)
             with open(source, "w", encoding="utf-8") as stream:
                 stream.write(text)
-            library = os.path.join(work, "erk.so")
-            done = subprocess.run([*compiler.command, *_ERK_FLAGS, "-I", include, "-o", library, source],
+            library = os.path.join(work, f"{stem}.so")
+            done = subprocess.run([*compiler.command, *flags, *extra, "-o", library, source],
                                   capture_output=True, text=True, timeout=900)
             if done.returncode != 0:
                 lines = done.stderr.strip().splitlines() or ["no message"]
                 first = next((line for line in lines if "error" in line), lines[0])
-                return None, None, f"the C++ compiler failed on bondc's explicit stepper ({first})"
+                return None, None, f"the {language.upper()} compiler failed on {what} ({first})"
             os.replace(library, path)
         except (OSError, subprocess.SubprocessError) as error:
-            return None, None, f"the C++ compiler could not run ({error})"
+            return None, None, f"the {language.upper()} compiler could not run ({error})"
         finally:
             if work is not None:
                 shutil.rmtree(work, ignore_errors=True)
     ffi = cffi.FFI()
-    ffi.cdef("const void *bondc_erk_table(void);")
+    ffi.cdef(cdef)
     try:
         lib = ffi.dlopen(path)
     except OSError as error:
-        return None, None, f"bondc's explicit stepper could not be loaded ({error})"
-    return ffi, lib, int(ffi.cast("uintptr_t", lib.bondc_erk_table()))
+        return None, None, f"{what} could not be loaded ({error})"
+    return ffi, lib, ""
+
+
+_POLICY_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
+_POLICY_LOADED: dict = {}       # (cache folder, $CC, $PATH) -> (ffi, lib, why not)
+
+
+def load_policy():
+    """``(ffi, lib)`` of bondc's run-loop functions (``bondc/native/policy.c``: Filippov sliding,
+    ``filippov.h``, and the location of ends and dips, ``locate.h``) as a library of their own,
+    built once per machine and loaded once per process: the one implementation the Python run
+    loop calls, whatever computes the model's laws (the CVODE driver and an FMU include the same
+    files). Raises :class:`NativeUnavailable` where no C compiler builds it (bondc installs one,
+    zig, with its dependencies). ``BONDC_NATIVE=0`` does not turn it off: it is the engine's code,
+    not the model's."""
+    key = (cache_dir(), os.environ.get("CC", ""), os.environ.get("PATH", ""))
+    known = _POLICY_LOADED.get(key)
+    if known is None:
+        known = _POLICY_LOADED[key] = _engine_library(
+            "policy.c", "c", _POLICY_FLAGS, ("-lm",), "", native_file("filippov.h") + native_file("locate.h"),
+            "bondc's run-loop functions")
+    if known[0] is None:
+        raise NativeUnavailable(known[2])
+    return known[0], known[1]
+
+
+class NativeUnavailable(RuntimeError):
+    """bondc's own C code (the engine's, not a model's) cannot be built or loaded here."""
 
 
 _SUNDIALS_PARTS = ("core", "cvode", "nvecserial", "sunmatrixdense", "sunmatrixband", "sunlinsoldense",

@@ -89,8 +89,8 @@ across a switch blindly:
    ``+-2`` for a ``coulomb`` friction, whose frozen law gives its static limit
    there), with weights ``alpha`` solved by Newton's method so that every
    sliding ``g`` stays put (rates by central differences). From three
-   switches on, where the right-hand side is affine in the weights (checked:
-   ``affine_holds``), the affine blend of k + 1 corners instead of 2**k; the
+   switches on, where the right-hand side is affine in the weights (checked
+   on pairs of switches), the affine blend of k + 1 corners instead of 2**k; the
    multilinear one takes at most ``_MAX_SLIDING`` switches. A switch whose
    sides give the same right-hand side (a free clutch) is not held. A switch
    whose weight leaves [0, 1] cannot be held (the force needed exceeds its
@@ -222,7 +222,7 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice):
         self.sliding_now = []          # the switches of the last sliding segment
         self.vertex_override = {}      # coulomb switches held between their sliding forces
         self.affine_sets = set()       # sets of switches held in the affine combination ...
-        self.affine_checked = set()    # ... and those whose every pair of corners was checked once
+        self.sliding_law = None        # the model's laws as bondc/native/filippov.c calls them (made once)
         self.floors_c = np.ascontiguousarray(model.floor_switches, dtype=np.intc)   # for the native driver
         # the when clauses' targets (offsets, indices) where C runs their statements (attach_native)
         offsets = model.when_offsets if getattr(model, "native_library", None) is not None else None

@@ -2,14 +2,11 @@
 their surfaces, the corners and weights of the combination, affine holds, sliding segments and
 their ends, holding at a stall."""
 
-import math
-
 import numpy as np
 
-from bondc.runtime.kernels import _EPS, brentq
-from bondc.runtime.adapter import corner_weights, filippov_alpha
+from bondc.runtime.filippov import SlidingLaw, TooManyHeld, corner_weights, filippov_alpha, first_end
 from bondc.runtime.results import RunFailure, _Stop
-from bondc.runtime.solvers import CvodeSolver, IDA, _may_dip, difference_jacobian
+from bondc.runtime.solvers import CvodeSolver, IDA, difference_jacobian
 
 
 _MAX_SLIDING = 8         # switches sliding at once in the multilinear combination (2**8 corners) ...
@@ -198,7 +195,7 @@ class _Sliding:
         ``coulomb`` friction (its frozen law gives the static limit there). Either all 2**k corners
         (the multilinear combination) or the k + 1 corners of the affine one: every switch on its
         minus side, then each one alone on its plus side. ``affine`` None: the affine one where
-        :meth:`affine_holds` found that the laws combine so (the first corner, all minus, is the
+        :meth:`sliding_set` found that the laws combine so (the first corner, all minus, is the
         same in both).
         """
         vertices = self.model.SWITCH_VERTICES
@@ -218,55 +215,7 @@ class _Sliding:
             corners[:, k] = sides[:, i] * vertices[k]
         return corners, sides
 
-    def held_corners(self, t, y, modes, sliding):
-        """The corners of the sliding set at (t, y) (:meth:`sliding_corners`), the right-hand side
-        and the sliding switches' rates at each: the affine combination for three switches or more
-        where the laws combine linearly (k + 1 corners instead of 2**k), else the multilinear one,
-        which holds at most ``_MAX_SLIDING`` switches."""
-        if len(sliding) > 2:
-            corners, sides = self.sliding_corners(modes, sliding, affine=True)
-            values, rates = self.sliding_rates(t, y, corners, sliding)
-            if self.affine_holds(t, y, corners, sides, values, sliding):
-                return corners, sides, values, rates
-            if len(sliding) > _MAX_SLIDING:
-                raise _Stop(self.too_many_held(t, sliding, "their laws do not combine linearly"))
-        corners, sides = self.sliding_corners(modes, sliding, affine=False)
-        values, rates = self.sliding_rates(t, y, corners, sliding)
-        return corners, sides, values, rates
-
     corner_weights = staticmethod(corner_weights)
-
-    def affine_holds(self, t, y, corners, sides, values, sliding):
-        """Whether the right-hand side at (t, y) is affine in the sliding switches' weights, as the
-        affine combination of :meth:`sliding_corners` takes it: the corners with every pair of
-        switches (at most 512 pairs, spread over all) and with every switch on its plus side give
-        what the k + 1 corners predict, to rounding. A friction force that only enters sums of
-        forces is affine; one that feeds a nonlinear law (a normal force, a product) is not. Once
-        a set of switches and the others' modes passed, only the all-plus corner is tested again.
-        Records the set in ``affine_sets`` (for :meth:`sliding_corners`) when it holds."""
-        count = sides.shape[1]
-        checked = self.affine_checked
-        base, delta = values[0], values[1:] - values[0]
-        key = (corners[0].tobytes(), tuple(sliding))
-        tests = [list(range(count))]
-        self.affine_sets.discard(key)
-        if key not in checked:
-            pairs = [(i, j) for i in range(count) for j in range(i + 1, count)]
-            if len(pairs) > 512:
-                pairs = pairs[:: -(-len(pairs) // 512)]
-            tests = [list(pair) for pair in pairs] + tests
-        scale = np.max(np.abs(values), axis=0) + np.max(np.abs(delta), axis=0) * count
-        for plus in tests:
-            corner = corners[0].copy()
-            corner[[sliding[i] for i in plus]] = corners[[i + 1 for i in plus], [sliding[i] for i in plus]]
-            predicted = base + delta[plus].sum(axis=0)
-            actual = self.rhs(t, y, corner)
-            if not np.all(np.abs(actual - predicted) <= 1e-9 * scale + 1e-300):
-                checked.discard(key)
-                return False
-        checked.add(key)
-        self.affine_sets.add(key)
-        return True
 
     def sliding_rates(self, t, y, corners, sliding):
         """Right-hand side at each corner and the rate of each sliding switch's g along it."""
@@ -278,76 +227,34 @@ class _Sliding:
     solve_alpha = staticmethod(filippov_alpha)
 
     def sliding_set(self, t, y, modes, candidates):
-        """Which of ``candidates`` slide at (t, y) (complementarity by active set) and the modes of
-        the others: a switch whose weight leaves [0, 1] cannot be held and takes that side.
+        """Which of ``candidates`` slide at (t, y) and the modes of the others: ``bondc_sliding_set``
+        (bondc/native/filippov.c, complementarity by an active set), the engine's one
+        implementation. A coulomb switch held between its sliding forces is noted in
+        ``vertex_override``, an affine combination in ``affine_sets`` (for :meth:`sliding_corners`).
 
         Returns (sliding switches, modes, alpha).
         """
-        modes = np.array(modes, dtype=float)
-        sliding = list(candidates)
-        tolerance = 1e-9
-        self.vertex_override = {}
-        while sliding:
-            corners, sides, values, rates = self.held_corners(t, y, modes, sliding)
-            if len(sliding) > 1:
-                # a switch whose sides give the same right-hand side (a free clutch: both its limits
-                # 0) holds nothing; among others it would only bend their weights' least squares
-                affine = sides.shape[0] != 2 ** sides.shape[1]
-                free = [i for i in range(len(sliding))
-                        if (np.array_equal(values[1 + i], values[0]) if affine else
-                            all(np.array_equal(values[c], values[c | (1 << i)])
-                                for c in range(len(values)) if not (c >> i) & 1))]
-                if free:
-                    k = sliding[free[0]]
-                    g = self.model.switches(t, y, self.p, modes)[k]
-                    modes[k] = 1.0 if g >= 0 else -1.0
-                    del sliding[free[0]]
-                    continue
-            alpha = self.solve_alpha(rates, sides)
-            if not np.all(np.isfinite(alpha)):
-                return [], modes, None
-            if np.any(np.minimum(alpha, 1.0 - alpha) < 1e-6):
-                # at the edge (a holding force at its limit, as at the instant a sliding segment ended):
-                # decide by where the weights go just after t
-                h = self.probe
-                slope = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ values
-                _, rates_ahead = self.sliding_rates(t + h, y + h * slope, corners, sliding)
-                ahead = self.solve_alpha(rates_ahead, sides, alpha)
-                if np.all(np.isfinite(ahead)):
-                    alpha = np.where(np.minimum(alpha, 1.0 - alpha) < 1e-6, ahead, alpha)
-            residual = self.corner_weights(np.clip(alpha, 0.0, 1.0), sides) @ rates
-            scale = np.max(np.abs(rates), axis=0)
-            # a rate that would move g by less than its deadband over a millionth of the run is nil
-            # (a surface whose own rate is a state held at zero by the others: second-order sliding)
-            nil = self.deadbands(t, y, modes, np.asarray(sliding, dtype=int)) / (1e-6 * self.span)
-            unheld = np.flatnonzero(np.abs(residual) > np.maximum(1e-8 * scale, np.maximum(nil, 1e-300)))
-            if unheld.size:
-                # no weight stops it (its own law does not act on it: a free clutch): it moves on
-                worst = int(unheld[np.argmax(np.abs(residual[unheld]) / scale[unheld])])
-                if self.relax_static_limit(sliding[worst]):
-                    continue
-                modes[sliding[worst]] = 1.0 if residual[worst] > 0 else -1.0
-                del sliding[worst]
-                continue
-            violation = np.maximum(alpha - 1.0, -alpha)
-            worst = int(np.argmax(violation))
-            if violation[worst] <= tolerance:
-                return sliding, modes, np.clip(alpha, 0.0, 1.0)
-            # the force needed to hold it exceeds its limit: it leaves towards that side
-            if self.relax_static_limit(sliding[worst]):
-                continue
-            modes[sliding[worst]] = 1.0 if alpha[worst] > 1.0 else -1.0
-            del sliding[worst]
-        return [], modes, None
-
-    def relax_static_limit(self, k):
-        """A ``coulomb`` friction that its static limit cannot hold may still be held between its
-        sliding forces (a static limit below the sliding force: each side's sliding law pushes
-        back across v = 0, which is a Filippov sliding mode): try those as the corners."""
-        if self.model.SWITCH_VERTICES[k] != 1.0 and self.vertex_override.get(k) is None:
-            self.vertex_override[k] = 1.0
-            return True
-        return False
+        law = self.sliding_law
+        if law is None:
+            law = self.sliding_law = SlidingLaw(self.model, self.p)
+        scale = self.options["atol"] + self.options["rtol"] * np.abs(np.asarray(y, dtype=float))
+        try:
+            held, modes, alpha, vertices, affine = law.sliding_set(t, y, modes, candidates, self.probe, self.span,
+                                                                  scale)
+        except TooManyHeld:
+            raise _Stop(self.too_many_held(t, list(candidates), "their laws do not combine linearly")) from None
+        given = self.model.SWITCH_VERTICES
+        self.vertex_override = {k: float(vertices[k]) for k in range(self.switch_count) if vertices[k] != given[k]}
+        if held:
+            base = np.array(modes, dtype=float)
+            for k in held:
+                base[k] = -vertices[k]
+            key = (base.tobytes(), tuple(held))
+            if affine:
+                self.affine_sets.add(key)
+            else:
+                self.affine_sets.discard(key)
+        return held, modes, alpha
 
     def consistent_sliding_set(self, t, y, modes, candidates):
         """:meth:`sliding_set`, with the modes of the other switches chosen just after (t, y) along the
@@ -490,75 +397,17 @@ class _Sliding:
             old = new
 
     def sliding_end_within(self, old, new, exits_at, t_old, t_new):
-        """:meth:`sliding_end` of a step, its exits also tested inside it every
-        :meth:`sliding_check`: a mode whose states stand still (a mass held at rest or at a speed)
-        gives the solver nothing to limit its steps by, while the force that holds it follows an input
-        that may pass the holding limit and come back within one step. Between two tests, an exit
-        that dips below 0 and comes back is looked for too (:meth:`sliding_dip`): a step whose
-        states move is as long as their motion allows, which may be longer than the push is past
-        the limit."""
-        longest = self.sliding_check()
-        count = int(min(math.ceil((t_new - t_old) / longest), 1e6)) if longest > 0 else 1
-        times = np.linspace(t_old, t_new, max(count, 1) + 1)
-        before = old
-        for a, b in zip(times[:-1], times[1:]):
-            after = new if b == t_new else np.asarray(exits_at(b), dtype=float)
-            hit = self.sliding_end(before, after, exits_at, a, b)
-            if hit is None:
-                hit = self.sliding_dip(before, after, exits_at, a, b)
-            if hit is not None:
-                return hit
-            before = after
-        return None
-
-    def sliding_dip(self, left, right, exits_at, a, b, budget=None):
-        """The end of a sliding mode inside (a, b) where its exits are positive at both ends, or None:
-        an exit that dips below 0 and comes back between them (a push passing a static limit for less
-        than the spacing of the tests). Each exit's parabola through a, the middle and b is looked at
-        (:func:`_may_dip`): where it comes within its own curvature of 0 inside, the halves are
-        searched in turn, at most 60 evaluations in all."""
-        budget = [60] if budget is None else budget
-        middle_t = 0.5 * (a + b)
-        if budget[0] <= 0 or not a < middle_t < b:
-            return None
-        budget[0] -= 1
-        middle = np.asarray(exits_at(middle_t), dtype=float)
-        hit = self.sliding_end(left, middle, exits_at, a, middle_t)
-        if hit is not None:
-            return hit
-        hit = self.sliding_end(middle, right, exits_at, middle_t, b)
-        if hit is not None:
-            return hit
-        if not _may_dip(left, middle, right):
-            return None
-        hit = self.sliding_dip(left, middle, exits_at, a, middle_t, budget)
-        if hit is not None:
-            return hit
-        return self.sliding_dip(middle, right, exits_at, middle_t, b, budget)
+        """The end of a sliding mode inside the step (t_old, t_new] (``bondc_first_end``, the
+        engine's one implementation): its exits tested at the step's ends, every
+        :meth:`sliding_check` inside it (a mode whose states stand still gives the solver nothing to
+        limit its steps by, while the force that holds it may pass the limit and come back within
+        one step), and for a dip between two tests; or None."""
+        return first_end(exits_at, t_old, t_new, old, new, self.sliding_check())
 
     def sliding_check(self) -> float:
         """The longest stretch of a sliding mode whose exits are tested only at its ends: the run's
         span over SLIDING_CHECKS, or its max_step where that is shorter."""
         return min(self.span / SLIDING_CHECKS, float(self.options.get("max_step", np.inf)))
-
-    @staticmethod
-    def sliding_end(old, new, exits_at, t_old, t_new):
-        """The earliest end of a sliding mode in the step (t_old, t_new], or None: where an exit (an
-        entry of ``exits_at(tt)``, positive while the mode lasts) went from > 0 to <= 0 or from >= 0
-        to < 0 (``old``, ``new``: the exits at the step's ends), located by brentq."""
-        hit = None
-        for j in range(new.size):
-            if not (old[j] > 0 >= new[j] or old[j] >= 0 > new[j]):
-                continue
-            if old[j] <= 0:
-                root = t_old
-            else:
-                try:
-                    root = brentq(lambda tt, j=j: exits_at(tt)[j], t_old, t_new, 4 * _EPS, 4 * _EPS)
-                except ValueError:
-                    root = t_new
-            hit = root if hit is None else min(hit, root)
-        return hit
 
     def record_sliding(self, t_old, t_new, y_new, dense, corner_ids, weights_at):
         if self.t_eval is None:

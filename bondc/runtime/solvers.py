@@ -385,23 +385,6 @@ class _FiniteJacobian:
             return difference_jacobian(self.fun, t, y, np.asarray(self.fun(t, y), dtype=float))
 
 
-def _may_dip(left, middle, right) -> bool:
-    """Whether an exit sampled at the ends and the middle of an interval, positive at all three,
-    may dip below 0 between them: the parabola through the three comes within its own curvature
-    (the second difference, the size of what the parabola leaves out where the interval is long
-    against the exit's time scale) of 0 inside the interval. A 40 ms peak of a push past a static
-    limit, every 0.9 s, between tests 0.3 s apart: the parabola's lowest point is 0.5 N above 0,
-    its second difference 1.1 N, and the halves are searched until the peak is found."""
-    with np.errstate(all="ignore"):
-        curve = 2 * left + 2 * right - 4 * middle      # p(u) = left + slope*u + curve*u^2, u in [0, 1]
-        slope = 4 * middle - 3 * left - right
-        vertex = np.where(curve > 0, -slope / (2 * curve), 0.0)
-        inside = (vertex > 0) & (vertex < 1)
-        lowest = np.where(inside, left + slope * vertex + curve * vertex * vertex, np.minimum(left, right))
-        # an exit at 0 at an end (where the mode began) leaves through the sign test, not here
-        return bool(np.any((left > 0) & (right > 0) & (lowest - 0.5 * np.abs(curve) < 0)))
-
-
 def stiff_solver() -> str:
     """The solver ``auto`` takes for a stiff model: CVODE, LSODA where scikit-sundae is missing."""
     return "CVODE" if sundials_available() else "LSODA"

@@ -5,9 +5,12 @@
    the earliest crossing in the last step on its interpolant (bondc_driver_crossing, as the Python
    runtime's _Run.crossing does) and selects the modes after it (bondc_driver_select: the modes
    there and a probe ahead along their law, as _Run.restart_modes); this file fires the when
-   clauses whose condition became true (as bondc_driver_pieces does). A restart whose modes cycle
-   (switches that chatter: a sliding mode) is an error: bondc fmu refuses, before building, a model
-   whose switches may slide (see bondc.export.fmu). */
+   clauses whose condition became true (as bondc_driver_pieces does). Where switches sit on their
+   surfaces (modes that cycle, a coulomb friction at rest), Co-Simulation chooses the sliding set
+   with the engine's bondc_sliding_set (filippov.c, as bondc simulate does) and integrates the
+   Filippov combination with the driver (bondc_driver_slide, bondc_driver_slide_many) until its end
+   (bondc_driver_slide_end). Model Exchange cannot hold a state on a surface: bondc fmu --kind me
+   refuses, before building, a model whose switches may slide (see bondc.export.fmu). */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -15,6 +18,7 @@
 
 #include "bondc_model.h"
 #include "driver.h"
+#include "filippov.h"
 #include "engine.h"
 
 #define NS (BONDC_N_SWITCHES > 0 ? BONDC_N_SWITCHES : 1)
@@ -24,6 +28,9 @@
 #define MAX_STEPS 100000L     /* CVODE's steps between two restarts */
 #define EVENT_ROUNDS 10       /* rounds of when clauses at one instant (as the runtime's _EVENT_ROUNDS) */
 #define STALL_EVENTS 100000   /* events in one call without time advancing: the run is stalled */
+#define SLIDING_CHECKS 1000   /* a sliding mode's exits are tested at least this often over the span */
+#define MAX_HELD 8            /* switches a sliding mode holds at once, here (2^8 corners) */
+#define MAX_CORNERS (1 << (BONDC_N_SWITCHES < MAX_HELD ? BONDC_N_SWITCHES : MAX_HELD))
 
 static const double EPS = 2.220446049250313e-16;
 
@@ -51,9 +58,28 @@ bondc_fmu *bondc_fmu_new(void)
     c->values = (double *)zeros(BONDC_N_WHEN_TARGETS, sizeof(double));
     c->ts = (double *)zeros(CAPACITY, sizeof(double));
     c->ys = (double *)zeros((size_t)CAPACITY * NX, sizeof(double));
+    c->slid = (int *)zeros(NS, sizeof(int));
+    c->flips = (int *)zeros(NS, sizeof(int));
+    c->cm = (double *)zeros((size_t)MAX_CORNERS * NS, sizeof(double));
+    c->weights = (double *)zeros(MAX_CORNERS, sizeof(double));
+    c->law = (bondc_law *)zeros(1, sizeof(bondc_law));
+    c->candidates = (int *)zeros(NS, sizeof(int));
+    c->held = (int *)zeros(NS, sizeof(int));
+    c->others = (int *)zeros(NS, sizeof(int));
+    c->scale = (double *)zeros(NX, sizeof(double));
+    c->vertices = (double *)zeros(NS, sizeof(double));
+    c->alpha = (double *)zeros(NS, sizeof(double));
+    c->alphas = (double *)zeros((size_t)CAPACITY * NS, sizeof(double));
+    c->exits = (double *)zeros(4 * (size_t)NS, sizeof(double));
+    c->exits_old = (double *)zeros(2 * (size_t)NS, sizeof(double));
+    c->drift = (double *)zeros(NS, sizeof(double));
+    c->corner = (double *)zeros(NS, sizeof(double));
+    c->out = (double *)zeros(BONDC_N_OUTPUTS, sizeof(double));
     if (!c->p || !c->x || !c->m || !c->watch || !c->signs || !c->band || !c->g_old || !c->g
         || !c->old || !c->f || !c->conditions || !c->after || !c->values || !c->ts
-        || !c->ys) {
+        || !c->ys || !c->slid || !c->flips || !c->cm || !c->weights || !c->law || !c->candidates || !c->held || !c->others
+        || !c->scale || !c->vertices || !c->alpha || !c->alphas || !c->exits || !c->exits_old || !c->drift
+        || !c->corner || !c->out) {
         bondc_fmu_free(c);
         return NULL;
     }
@@ -67,6 +93,8 @@ bondc_fmu *bondc_fmu_new(void)
     }
     for (int k = 0; k < BONDC_N_SWITCHES; k++)
         if (bondc_switch_located[k]) c->watch[c->watched++] = k;
+    c->law->n = BONDC_N_STATES; c->law->switches = BONDC_N_SWITCHES; c->law->p = c->p;
+    c->law->rhs = bondc_rhs; c->law->switching = bondc_switches; c->law->vertices = bondc_switch_vertices;
     bondc_fmu_reset(c);
     bondc_fmu_setup(c, bondc_experiment[1], 0.0, bondc_experiment[0]);
     return c;
@@ -79,6 +107,9 @@ void bondc_fmu_free(bondc_fmu *c)
     free(c->p); free(c->x); free(c->m); free(c->watch); free(c->signs); free(c->band); free(c->g_old);
     free(c->g); free(c->old); free(c->f); free(c->conditions);
     free(c->after); free(c->values); free(c->ts); free(c->ys);
+    free(c->slid); free(c->flips); free(c->cm); free(c->weights); free(c->law); free(c->candidates); free(c->held);
+    free(c->others); free(c->scale); free(c->vertices); free(c->alpha); free(c->alphas); free(c->exits);
+    free(c->exits_old); free(c->drift); free(c->corner); free(c->out);
     free(c);
 }
 
@@ -93,6 +124,9 @@ void bondc_fmu_reset(bondc_fmu *c)
     c->events = 0;
     c->states_set = 0;
     c->message[0] = 0;
+    c->holding = 0;
+    c->chattering = 0;
+    for (int k = 0; k < BONDC_N_SWITCHES; k++) c->slid[k] = 0;
     bondc_x0(c->p, c->x);
     c->selected = 0;
 }
@@ -144,7 +178,7 @@ static int same_modes(const double *a, const double *b)
    1 where they cycle (switches that chatter: a sliding mode), -1 where memory ran out. */
 static int select_modes(bondc_fmu *c, double t, const double *x)
 {
-    return bondc_driver_select(c->d, t, x, c->old, bondc_switch_floor, c->probe, c->m);
+    return bondc_driver_select(c->d, t, x, c->old, bondc_switch_floor, c->probe, c->m, c->flips);
 }
 
 static int chattering(bondc_fmu *c, double t)
@@ -166,9 +200,10 @@ int bondc_fmu_event(bondc_fmu *c, int *changed)
     if (c->selected) return 0;
     if (!finite_all(c->x, BONDC_N_STATES)) return fail(c, "the state is not finite", c->t);
     memcpy(c->old, c->m, sizeof(double) * NS);
+    c->holding = 0;
     int code = select_modes(c, c->t, c->x);
     if (code < 0) return fail(c, "out of memory", c->t);
-    if (code > 0) return chattering(c, c->t);
+    c->chattering = code > 0;
     if (!same_modes(c->old, c->m)) c->events++;
     /* the when clauses whose condition became true here: their statements from the values just
        before, then the modes after them (as bondc_driver_pieces and _Run.fire_when_clauses) */
@@ -190,7 +225,7 @@ int bondc_fmu_event(bondc_fmu *c, int *changed)
         memcpy(c->old, c->m, sizeof(double) * NS);
         code = select_modes(c, c->t, c->x);
         if (code < 0) return fail(c, "out of memory", c->t);
-        if (code > 0) return chattering(c, c->t);
+        c->chattering = code > 0;
     }
     c->selected = 1;
     return 0;
@@ -216,6 +251,123 @@ static int start_segment(bondc_fmu *c, double t_end)
     return 0;
 }
 
+/* A Filippov sliding mode from (t, x), as bondc simulate's run loop makes it: the candidates (the
+   switches that chatter, and those on their surfaces that are coulomb frictions or slid until now),
+   the set that holds (bondc_sliding_set, which also chooses the other candidates' sides), then the
+   combination integrated by the driver until it ends (a weight reaches 0 or 1, another switch
+   crosses: bondc_driver_slide_end) or t_end. 0: nothing is held (c->m chosen), 1: the mode was
+   integrated (c->t advanced), -1: failed. */
+static int slide(bondc_fmu *c, double t_end)
+{
+    int count = 0, n = BONDC_N_STATES;
+    bondc_switches(c->t, c->x, c->p, c->m, c->g);
+    for (int i = 0; i < n; i++) c->scale[i] = c->atol + c->rtol * fabs(c->x[i]);
+    for (int j = 0; j < c->watched; j++) {
+        int k = c->watch[j];
+        if (bondc_switch_floor[k]) continue;
+        if (c->chattering && c->flips[k]) { c->candidates[count++] = k; continue; }
+        if (bondc_switch_vertices[k] == 1.0 && !c->slid[k]) continue;
+        double band;
+        if (bondc_law_deadbands(c->law, c->t, c->x, c->m, c->scale, 1, &k, &band) != 0)
+            return fail(c, "out of memory", c->t);
+        if (fabs(c->g[k]) <= band) c->candidates[count++] = k;
+    }
+    for (int k = 0; k < BONDC_N_SWITCHES; k++) c->slid[k] = 0;
+    if (!count) return 0;
+    int affine = 0;
+    int held = bondc_sliding_set(c->law, c->t, c->x, c->m, c->candidates, count, c->probe, c->span, c->scale,
+                                 c->vertices, c->held, c->alpha, &affine);
+    if (held == -1) return fail(c, "out of memory", c->t);
+    if (held == -2 || held > MAX_HELD) {
+        char text[400];
+        snprintf(text, sizeof text, "%d switches are on their surfaces at once (%s, ...) and their laws do not "
+                 "combine linearly: the FMU holds at most %d", count, bondc_switch_labels[c->candidates[0]], MAX_HELD);
+        return fail(c, text, c->t);
+    }
+    c->chattering = 0;
+    if (held == 0) return 0;
+    /* the corners: each held switch on its side at its vertex (filippov.h's order) */
+    int corners = affine ? held + 1 : 1 << held;
+    for (int q = 0; q < corners; q++) {
+        double *row = c->cm + (long)q * NS;
+        memcpy(row, c->m, sizeof(double) * NS);
+        for (int i = 0; i < held; i++) {
+            int plus = affine ? q == 1 + i : (q >> i) & 1;
+            row[c->held[i]] = (plus ? 1.0 : -1.0) * c->vertices[c->held[i]];
+        }
+    }
+    /* the other located switches end the mode where they cross, from where they start */
+    int others = 0;
+    for (int j = 0; j < c->watched; j++) {
+        int k = c->watch[j], inside = 0;
+        for (int i = 0; i < held; i++) inside |= c->held[i] == k;
+        if (inside || c->m[k] == 0) continue;
+        double drift = -c->m[k] * c->g[k];
+        c->drift[others] = bondc_switch_floor[k] ? 0.0 : (drift > 0 ? drift : 0.0);
+        c->others[others++] = k;
+    }
+    if (bondc_driver_start(c->d, c->t, c->x, c->m, t_end, c->rtol, c->atol, c->max_step, 0.0, MAX_STEPS) != 0)
+        return fail(c, "CVODE could not start", c->t);
+    if (held == 1) {
+        bondc_driver_slide(c->d, c->held[0], c->cm + NS, c->cm, c->alpha[0], c->probe, others, c->others, c->drift);
+    } else if (bondc_driver_slide_many(c->d, held, c->held, corners, affine, c->cm, c->alpha, c->probe, others,
+                                       c->others, c->drift) != 0) {
+        return fail(c, "out of memory", c->t);
+    }
+    double longest = c->span / SLIDING_CHECKS;
+    if (c->max_step > 0 && c->max_step < longest) longest = c->max_step;
+    bondc_driver_check(c->d, longest);
+    int watched = 2 * held + others;
+    bondc_driver_exits(c->d, c->t, c->x, c->exits_old);
+    for (int j = 0; j < watched; j++)       /* at the edge of the sliding region: leaving counts from here */
+        if (c->exits_old[j] < 0) c->exits_old[j] = 0.0;
+    c->holding = held;
+    c->corners = corners;
+    for (int i = 0; i < held; i++) c->slid[c->held[i]] = 1;
+    bondc_corner_weights(held, affine, c->alpha, c->weights);
+    for (;;) {
+        int steps = 0;
+        double t_prev = c->t;
+        int code = bondc_driver_slide_advance(c->d, CAPACITY, c->exits_old, c->exits, c->ts, c->ys, c->alphas,
+                                              &steps, NULL, 0, NULL, 0, NULL, NULL, NULL);
+        if (code == 3) return fail(c, "a law is not finite at a trial point of CVODE", c->t);
+        if (code == 4) return fail(c, "the state is not finite", c->t);
+        if (code < 0) {
+            char text[120];
+            snprintf(text, sizeof text, "CVODE failed in a sliding mode (flag %d)", code);
+            return fail(c, text, c->t);
+        }
+        int kept = code == 1 ? steps - 1 : steps;
+        if (kept > 0) {
+            t_prev = c->t = c->ts[kept - 1];
+            memcpy(c->x, c->ys + (long)(kept - 1) * n, sizeof(double) * n);
+            double *a = c->alphas + (long)(kept - 1) * held;
+            for (int i = 0; i < held; i++) c->alpha[i] = a[i] < 0 ? 0.0 : (a[i] > 1 ? 1.0 : a[i]);
+            bondc_corner_weights(held, affine, c->alpha, c->weights);
+        }
+        if (code == 2) return 1;
+        if (code == 0) continue;
+        /* a possible end in the last step (t_prev, t_new]: located as bondc simulate does */
+        double t_new = c->ts[steps - 1], t_hit;
+        const double *y_new = c->ys + (long)(steps - 1) * n;
+        int ended = bondc_driver_slide_end(c->d, t_prev, t_new, c->exits_old, c->exits, longest, &t_hit);
+        if (ended < 0) return fail(c, "out of memory", c->t);
+        if (ended == 0) {
+            if (t_hit == t_new) memcpy(c->x, y_new, sizeof(double) * n);
+            else if (bondc_driver_dky(c->d, t_hit, 0, c->x) != 0)
+                return fail(c, "CVODE could not interpolate to the end of a sliding mode", t_hit);
+            c->t = t_hit;
+            c->holding = 0;
+            c->selected = 0;        /* the modes after it, at the next round */
+            return 1;
+        }
+        c->t = t_new;
+        memcpy(c->x, y_new, sizeof(double) * n);
+        memcpy(c->exits_old, c->exits, sizeof(double) * watched);
+        if (t_new >= t_end) return 1;
+    }
+}
+
 int bondc_fmu_advance(bondc_fmu *c, double t_end)
 {
     long stalled = 0;
@@ -229,6 +381,17 @@ int bondc_fmu_advance(bondc_fmu *c, double t_end)
     while (c->t < t_end) {
         int changed;
         if (bondc_fmu_event(c, &changed) != 0) return -1;
+        if (c->watched && t_end - c->t > 16 * EPS * fmax(fmax(fabs(c->t), fabs(t_end)), 1.0)) {
+            int slid = slide(c, t_end);
+            if (slid < 0) return -1;
+            if (slid > 0) {
+                c->selected = c->t >= t_end ? c->selected : 0;
+                if (c->t > t_last) { t_last = c->t; stalled = 0; }
+                else if (++stalled > STALL_EVENTS) return fail(c, "the run stalled: events without time advancing", c->t);
+                continue;
+            }
+        }
+        if (c->chattering) return chattering(c, c->t);
         if (t_end - c->t <= 16 * EPS * fmax(fmax(fabs(c->t), fabs(t_end)), 1.0)) {
             /* a sliver too short for CVODE: one Euler step (as the runtime) */
             bondc_rhs(c->t, c->x, c->p, c->m, c->f);
@@ -294,7 +457,17 @@ void bondc_fmu_derivatives(bondc_fmu *c, double *out)
 
 void bondc_fmu_outputs(bondc_fmu *c, double *out)
 {
-    bondc_outputs(c->t, c->x, c->p, c->m, out);
+    if (!c->holding) {
+        bondc_outputs(c->t, c->x, c->p, c->m, out);
+        return;
+    }
+    /* in a sliding mode: the corners' outputs in its combination (the forces that hold) */
+    for (int i = 0; i < BONDC_N_OUTPUTS; i++) out[i] = 0.0;
+    for (int q = 0; q < c->corners; q++) {
+        if (c->weights[q] == 0) continue;
+        bondc_outputs(c->t, c->x, c->p, c->cm + (long)q * NS, c->out);
+        for (int i = 0; i < BONDC_N_OUTPUTS; i++) out[i] += c->weights[q] * c->out[i];
+    }
 }
 
 int bondc_fmu_indicator_count(void)
@@ -339,6 +512,7 @@ int bondc_fmu_get_derivatives(bondc_fmu *c, double *out, size_t n)
     int changed;
     if (n != BONDC_N_STATES) return -2;
     if (bondc_fmu_event(c, &changed) != 0) return -1;
+    if (c->chattering) return chattering(c, c->t);
     bondc_fmu_derivatives(c, out);
     return 0;
 }

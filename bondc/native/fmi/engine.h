@@ -19,8 +19,17 @@ struct bondc_fmu {
     int failed;
     long events;            /* mode changes and when clauses fired so far */
     char message[600];      /* why the last call failed */
+    /* a Filippov sliding mode the state stands in (Co-Simulation): `holding` switches, the corners'
+       mode vectors and weights, for the outputs (their combination); `slid` the switches the last
+       sliding mode held; `chattering`: the modes selected last cycle (the switches slide) */
+    int holding, corners, chattering;
+    int *slid, *flips;
+    double *cm, *weights;
     /* work space */
     struct bondc_driver *d;
+    struct bondc_law *law;
+    int *candidates, *held, *others;
+    double *scale, *vertices, *alpha, *alphas, *exits, *exits_old, *drift, *corner, *out;
     int watched;
     int *watch;
     double *signs, *band, *g_old, *g, *f, *old, *conditions, *after, *values;

@@ -452,7 +452,7 @@ _SLIDE = """model Slide "a block pushed against Coulomb friction"
 end
 """
 live("E840", Cli("bondc compile rc.bg --target c -o rc_c", {"rc.bg": _RC_CSV, "drive.csv": "t [s],u [V]\n0,0\n1,5\n"}))
-live("E841", Cli("bondc fmu slide.bg", {"slide.bg": _SLIDE}))
+live("E841", Cli("bondc fmu slide.bg --kind me", {"slide.bg": _SLIDE}))
 live("E003", Cli("bondc simulate spin.bg -o results/spin.csv", {"spin.bg": SPIN}))
 live("E003", Cli("bondc compile spin.bg -o spin.bg", {"spin.bg": SPIN}))
 live("E007", Cli("bondc check spin.bg --set b=", {"spin.bg": SPIN}))

@@ -1,0 +1,53 @@
+/* Filippov sliding in bondc's engine (filippov.c): the weights of a sliding mode's corners and the
+   choice of the switches that a sliding mode holds. One implementation, built three ways: into a
+   model's library with the CVODE driver (driver.c includes it), into an FMU's binary, and alone once
+   per machine (bondc.runtime.native.load_filippov) for runs whose laws are numpy functions, which
+   it calls back. cffi's cdef reads this text: declarations and comments only, no preprocessor lines.
+
+   The corners of a sliding mode on k switches: multilinear, 2^k of them, corner c with switch i on
+   its plus side where bit i of c is set; affine, k + 1 of them, corner 0 with every switch on its
+   minus side and corner 1 + i with switch i alone on its plus side (where the laws are affine in
+   each switch's weight, as a friction force added to sums of forces is). */
+
+/* A law to evaluate at time t and state x with the parameters p and the modes m frozen, into out */
+typedef void (*bondc_law_function)(double t, const double *x, const double *p, const double *m, double *out);
+
+/* The model's laws as the sliding functions call them: n states, `switches` switching functions */
+typedef struct bondc_law {
+    int n, switches;
+    const double *p;
+    bondc_law_function rhs;         /* the right-hand side, n values */
+    bondc_law_function switching;   /* the switching functions, `switches` values */
+    const double *vertices;         /* each switch's mode on its plus side: 1 (sign, if) or 2 (coulomb) */
+} bondc_law;
+
+/* The corners' weights w for the sliding weights alpha (k of them): affine, 1 - sum(alpha) and each
+   alpha_i; multilinear, the product over i of alpha_i (plus side) or 1 - alpha_i (minus side). */
+void bondc_corner_weights(int k, int affine, const double *alpha, double *w);
+
+/* The weights alpha (k, not clipped) that make each sliding switch's rate zero, from the rates
+   (corners x k: corner c's rate of switch j at c * k + j) and a guess (NULL: 1/2 each; clipped to
+   [0, 1]): for one switch the root of the linear rate; else Newton's method (3 rounds affine, 20
+   multilinear) with the minimum-norm least-squares step (singular values below 1e-12 of the largest
+   dropped), so a switch whose rate does not depend on its own weight keeps its guess. 0, or -1
+   where a rate or the Newton matrix is not finite (alpha then NaN). */
+int bondc_filippov_alpha(int k, int affine, const double *rates, const double *guess, double *alpha);
+
+/* How far each switching function of `index` (count of them) moves when each state moves by its
+   error tolerance scale[i] (atol + rtol*|y_i|), summed over the states: crossings shallower than
+   that are integration noise. Not finite values give 0. 0, or -1 where memory ran out. */
+int bondc_law_deadbands(const bondc_law *law, double t, const double *y, const double *m, const double *scale,
+                        int count, const int *index, double *out);
+
+/* Which of the `count` switches `candidates` a sliding mode holds at (t, y) (complementarity by an
+   active set): a switch whose weight leaves [0, 1] cannot be held and takes that side in `modes`
+   (updated in place); one whose own weight cannot stop its rate (a free clutch) moves on; a coulomb
+   switch that its static limit cannot hold is tried between its sliding forces (its vertex 1 in
+   `vertices`, which starts as law->vertices and is updated in place). `probe` is the time step of
+   the rates' central differences, `span` the run's, `scale` each state's error tolerance. Returns
+   the number of held switches (into `held`, their weights clipped into `alpha`, whether they
+   combine affinely into *affine), -1 where memory ran out, -2 where more than 8 switches would be
+   held whose laws do not combine affinely. */
+int bondc_sliding_set(const bondc_law *law, double t, const double *y, double *modes, const int *candidates,
+                      int count, double probe, double span, const double *scale, double *vertices, int *held,
+                      double *alpha, int *affine);

@@ -1,0 +1,191 @@
+"""Filippov sliding's one implementation (``bondc/native/filippov.c``) as the Python run loop calls
+it: the corners' weights (:func:`corner_weights`), the weights that hold the sliding switches on
+their surfaces (:func:`filippov_alpha`) and the choice of the switches a sliding mode holds
+(:class:`SlidingLaw`), and where values that stay positive first fail to (:func:`first_end`,
+:func:`first_dip`: a sliding mode's end, a switch's hump inside a step). The C library is built once
+per machine (:func:`load_policy`); the
+model's laws reach it as C callbacks of whatever evaluates them (its compiled C functions or its
+numpy ones), so every solver and both kinds of model use the same code as the CVODE driver and an
+FMU's engine."""
+
+import numpy as np
+
+from bondc.runtime.native import load_policy
+
+_LAW_SIGNATURE = "void(double, const double *, const double *, const double *, double *)"
+
+
+def _is_affine(sides) -> bool:
+    """Whether the corners ``sides`` (corners x switches of +-1) are the affine combination's k + 1."""
+    return sides.shape[0] != 2 ** sides.shape[1]
+
+
+def _doubles(ffi, array):
+    return ffi.from_buffer("double[]", array)
+
+
+def corner_weights(alpha, sides):
+    """Weights of the corners. Multilinear (2**k corners): prod_i alpha_i (side +) or
+    1 - alpha_i (side -). Affine (k + 1 corners): 1 - sum(alpha) for the all-minus corner and
+    alpha_i for the corner with switch i alone on its plus side (the same combination where the
+    right-hand side is affine in each switch's weight, as a friction force is).
+
+    >>> corner_weights(np.array([0.25]), np.array([[-1.0], [1.0]])).tolist()
+    [0.75, 0.25]
+    """
+    ffi, lib = load_policy()
+    alpha = np.ascontiguousarray(alpha, dtype=float)
+    out = np.empty(sides.shape[0])
+    lib.bondc_corner_weights(alpha.size, int(_is_affine(sides)), _doubles(ffi, alpha), _doubles(ffi, out))
+    return out
+
+
+def filippov_alpha(rates, sides, guess=None):
+    """The weights alpha (one per sliding switch) that make every sliding switch's rate zero.
+
+    The rate is multilinear in alpha (exactly the Filippov / equivalent-control combination;
+    linear in the affine one); Newton's method with the minimum-norm least-squares step, so a
+    switch whose rate does not depend on its own weight (a free clutch) keeps its guess. The
+    result is not clipped: a weight outside [0, 1] means that switch cannot be held on its surface.
+
+    >>> filippov_alpha(np.array([[-3.0], [1.0]]), np.array([[-1.0], [1.0]])).tolist()
+    [0.75]
+    """
+    ffi, lib = load_policy()
+    count = sides.shape[1]
+    rates = np.ascontiguousarray(rates, dtype=float)
+    alpha = np.empty(count)
+    given = ffi.NULL if guess is None else _doubles(ffi, np.ascontiguousarray(guess, dtype=float))
+    lib.bondc_filippov_alpha(count, int(_is_affine(sides)), _doubles(ffi, rates), given, _doubles(ffi, alpha))
+    return alpha
+
+
+class SlidingLaw:
+    """A model's laws at the parameters ``p`` as filippov.c calls them (``bondc_law``): its
+    right-hand side and switching functions as C callbacks of ``model.rhs`` and
+    ``model.switches``."""
+
+    def __init__(self, model, p):
+        ffi, lib = load_policy()
+        self.ffi, self.lib, self.model = ffi, lib, model
+        n, count = len(model.STATE_NAMES), len(model.SWITCHES)
+        self.n, self.count = n, count
+        self.p = np.ascontiguousarray(p, dtype=float)
+        self.vertices = np.ascontiguousarray(model.SWITCH_VERTICES, dtype=float)
+        self.failure = None         # an exception a callback met (raised again after the call)
+
+        def callback(function, size):
+            def evaluate(t, x, p, m, out):
+                try:
+                    state = np.frombuffer(ffi.buffer(x, 8 * n), dtype=float).copy()
+                    modes = np.frombuffer(ffi.buffer(m, 8 * count), dtype=float).copy() if count else np.zeros(0)
+                    with np.errstate(all="ignore"):
+                        values = np.asarray(function(float(t), state, self.p, modes), dtype=float).reshape(-1)
+                    ffi.buffer(out, 8 * size)[:] = values.tobytes()
+                except Exception as error:      # C cannot take an exception: NaN, and raised after
+                    self.failure = self.failure or error
+                    ffi.buffer(out, 8 * size)[:] = np.full(size, np.nan).tobytes()
+            return ffi.callback(_LAW_SIGNATURE, evaluate)
+
+        self._callbacks = (callback(model.rhs, n), callback(model.switches, count))
+        self.law = ffi.new("bondc_law *")
+        self.law.n, self.law.switches = n, count
+        self.law.p = _doubles(ffi, self.p)
+        self.law.rhs, self.law.switching = self._callbacks
+        self.law.vertices = _doubles(ffi, self.vertices)
+
+    def _raise_failure(self):
+        failure, self.failure = self.failure, None
+        if failure is not None:
+            raise failure
+
+    def sliding_set(self, t, y, modes, candidates, probe, span, scale):
+        """``bondc_sliding_set`` at (t, y): (the held switches, the modes of the others, the held
+        switches' weights or None, each switch's vertex, whether the held ones combine affinely).
+        Raises :class:`TooManyHeld` where more than 8 switches would be held whose laws do not
+        combine affinely."""
+        ffi = self.ffi
+        y = np.ascontiguousarray(y, dtype=float)
+        modes = np.array(modes, dtype=float)
+        chosen = np.ascontiguousarray(candidates, dtype=np.intc)
+        scale = np.ascontiguousarray(np.broadcast_to(scale, y.shape), dtype=float)
+        vertices = np.empty(max(self.count, 1))
+        held = np.empty(max(chosen.size, 1), dtype=np.intc)
+        alpha = np.empty(max(chosen.size, 1))
+        affine = ffi.new("int *")
+        code = self.lib.bondc_sliding_set(
+            self.law, float(t), _doubles(ffi, y), _doubles(ffi, modes),
+            ffi.from_buffer("int[]", chosen), int(chosen.size), float(probe), float(span), _doubles(ffi, scale),
+            _doubles(ffi, vertices), ffi.from_buffer("int[]", held), _doubles(ffi, alpha), affine)
+        self._raise_failure()
+        if code == -1:
+            raise MemoryError("bondc's sliding set ran out of memory")
+        if code == -2:
+            raise TooManyHeld()
+        if code == 0:
+            return [], modes, None, vertices[:self.count], False
+        return [int(k) for k in held[:code]], modes, alpha[:code].copy(), vertices[:self.count], bool(affine[0])
+
+
+def _values_callback(ffi, values_at, count):
+    """``values_at(t)`` (count values) as locate.h's ``bondc_values_at``, and a list that keeps the
+    first exception it met (raised again after the call)."""
+    failures = []
+
+    def values(_context, t, out):
+        try:
+            with np.errstate(all="ignore"):
+                got = np.asarray(values_at(float(t)), dtype=float).reshape(-1)
+            ffi.buffer(out, 8 * count)[:] = got.tobytes()
+            return 0
+        except Exception as error:      # C cannot take an exception: NaN, and raised after
+            failures.append(error)
+            ffi.buffer(out, 8 * count)[:] = np.full(count, np.nan).tobytes()
+            return -1
+    return ffi.callback("int(void *, double, double *)", values), failures
+
+
+def _located(code, t_end, failures):
+    if failures:
+        raise failures[0]
+    if code < 0:
+        raise MemoryError("bondc's location of an end ran out of memory")
+    return float(t_end[0]) if code == 0 else None
+
+
+def first_end(values_at, t_old, t_new, old, new, longest):
+    """The earliest end inside the step (t_old, t_new] of values (``values_at(t)``, positive while
+    nothing happens; ``old``, ``new`` at the step's ends): where one went from > 0 to <= 0 or from
+    >= 0 to < 0, tested every ``longest`` (inf or 0: at the ends only) and for dips between the
+    tests (``bondc_first_end``), or None.
+
+    >>> first_end(lambda t: [1.0 - t], 0.0, 2.0, [1.0], [-1.0], 0.0)
+    1.0
+    """
+    ffi, lib = load_policy()
+    old, new = (np.ascontiguousarray(v, dtype=float) for v in (old, new))
+    callback, failures = _values_callback(ffi, values_at, old.size)
+    t_end = ffi.new("double *")
+    code = lib.bondc_first_end(callback, ffi.NULL, old.size, float(t_old), float(t_new), _doubles(ffi, old),
+                               _doubles(ffi, new), float(longest) if np.isfinite(longest) else 0.0, t_end)
+    return _located(code, t_end, failures)
+
+
+def first_dip(values_at, a, b, left, right):
+    """Where one of the values, positive at both ends of (a, b), dips below 0 inside it
+    (``bondc_first_dip``), or None.
+
+    >>> round(first_dip(lambda t: [abs(t - 0.3) - 0.01], 0.0, 1.0, [0.29], [0.69]), 6)
+    0.29
+    """
+    ffi, lib = load_policy()
+    left, right = (np.ascontiguousarray(v, dtype=float) for v in (left, right))
+    callback, failures = _values_callback(ffi, values_at, left.size)
+    t_end = ffi.new("double *")
+    code = lib.bondc_first_dip(callback, ffi.NULL, left.size, float(a), float(b), _doubles(ffi, left),
+                               _doubles(ffi, right), t_end)
+    return _located(code, t_end, failures)
+
+
+class TooManyHeld(Exception):
+    """More than 8 switches would be held whose laws do not combine affinely."""
