@@ -418,7 +418,8 @@ class _Deriver:
         """Assignments in causal order; loops torn and solved (see module docstring)."""
         equations = self.equations
         self.by_target = by_target = {eq.target: eq for eq in equations}
-        self.deps = deps = {}
+        self.deps: dict[sympy.Symbol, list[sympy.Symbol]] = {}
+        deps = self.deps
         for eq in equations:
             deps[eq.target] = sorted((s for s in eq.rhs.free_symbols if s in by_target),
                                      key=lambda s: by_target[s].index)
@@ -450,8 +451,8 @@ class _Deriver:
         for index, component in enumerate(components):
             for node in component:
                 owner[node] = index
-        needs = {i: set() for i in range(len(components))}
-        users = {i: set() for i in range(len(components))}
+        needs: dict[int, set[int]] = {i: set() for i in range(len(components))}
+        users: dict[int, set[int]] = {i: set() for i in range(len(components))}
         for index, component in enumerate(components):
             for node in component:
                 for dep in deps.get(node, ()):
@@ -739,7 +740,7 @@ class _Deriver:
         return tuple(events)
 
     def _energy(self) -> dict:
-        energy = {}
+        energy: dict[str, sympy.Expr | None] = {}
         integrals: dict = {}
         parameters = set(self.parameters.values())
         for element in self.graph.storage_elements:
@@ -804,7 +805,8 @@ def _latex_symbol(name: str) -> str:
     (``Iz`` -> ``\mathit{Iz}``, not I times z), the part after ``_`` a subscript."""
     base, _, sub = name.partition("_")
     shown = sympy.latex(sympy.Symbol(base)) if base else ""
-    letters = re.match(r"[A-Za-z]*", base).group(0)
+    leading = re.match(r"[A-Za-z]*", base)
+    letters = leading.group(0) if leading else ""
     if len(letters) > 1 and not shown.startswith("\\"):       # (t1 stays t_1, as sympy writes it)
         shown = r"\mathit{%s}" % base
     return shown + (r"_{\mathrm{%s}}" % sub.replace("_", r"\_") if sub else "")

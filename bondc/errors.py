@@ -165,6 +165,8 @@ class AnalysisError(BondcError):
 
 class DataError(BondcError):
     stage = "data"
+    #: a file that cannot be read at all (the command exits 2), not an error of its data (1)
+    io = False
 
 
 def sort_key(diagnostic: Diagnostic) -> tuple:

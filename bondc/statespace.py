@@ -76,11 +76,18 @@ Fields (names are stable):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 
 import sympy
 
 from bondc.symbolic import as_sympy
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from bondc.causality import CausalGraph
+    from bondc.errors import Diagnostic
+    from bondc.model import BondGraph
 
 
 @dataclass(frozen=True)
@@ -106,8 +113,8 @@ class AlgebraicBlock:
 
 @dataclass(frozen=True)
 class StateSpace:
-    graph: object
-    causal: object
+    graph: BondGraph
+    causal: CausalGraph
     states: tuple[StateInfo, ...]
     parameters: Mapping[str, tuple[sympy.Symbol, float]]
     inputs: Mapping[str, tuple[sympy.Symbol, sympy.Expr]]
@@ -121,10 +128,10 @@ class StateSpace:
     eliminated: Mapping[str, sympy.Symbol] = field(default_factory=dict)
     symbols: Mapping[str, sympy.Symbol] = field(default_factory=dict)
     bond_symbols: Mapping[int, tuple[sympy.Symbol, sympy.Symbol]] = field(default_factory=dict)
-    diagnostics: tuple = ()
+    diagnostics: tuple[Diagnostic, ...] = ()
     # when clauses: (label, condition, ((state name, new value), ...)); discrete variables are
     # states whose derivative is 0, set only here
-    events: tuple = ()
+    events: tuple[tuple[str, sympy.Expr, tuple[tuple[str, sympy.Expr], ...]], ...] = ()
     # whether a parameter's value decided anything here (which solution of a law to keep): when
     # not, the equations are those of any other values of the parameters
     values_consulted: bool = False
@@ -170,21 +177,21 @@ class StateSpace:
 
     # -- expansion (linearisation and tests only: the runtime evaluates the assignments)
 
-    def substitution(self, keep=()) -> dict:
+    def substitution(self, keep: Iterable[sympy.Symbol] = ()) -> dict[sympy.Symbol, sympy.Expr]:
         """Assigned symbol -> its expression in states, parameters, ``t`` (and kept symbols).
 
         Symbols in ``keep`` (e.g. the input symbols, for linearisation) are not
         expanded. Unknowns of algebraic blocks stay symbols.
         """
-        keep = frozenset(keep)
-        mapping: dict = {}
+        kept = frozenset(keep)
+        mapping: dict[sympy.Symbol, sympy.Expr] = {}
         for symbol, rhs in self.assignments:
-            if symbol in keep:
+            if symbol in kept:
                 continue
             mapping[symbol] = rhs.xreplace(mapping)
         return mapping
 
-    def substituted(self, expr, keep=()) -> sympy.Expr:
+    def substituted(self, expr: object, keep: Iterable[sympy.Symbol] = ()) -> sympy.Expr:
         """``expr`` with every assignment expanded (see :meth:`substitution`)."""
         return as_sympy(expr).xreplace(self.substitution(keep))
 
@@ -214,9 +221,9 @@ class NumericModel:
         values = ss.parameter_values(parameters)
         self.parameter_values = values
         numbers = {symbol: sympy.Float(value) for symbol, value in values.items()}
-        names: dict = {}        # symbol -> its variable in the code: _v0, _v1, ... and _p0, _p1, ...
+        names: dict[sympy.Symbol, str] = {}     # symbol -> its variable in the code: _v0, _v1, ... and _p0, _p1, ...
 
-        def ident(symbol):
+        def ident(symbol: sympy.Symbol) -> str:
             if symbol not in names:
                 names[symbol] = f"_v{len(names)}"
             return names[symbol]
@@ -236,10 +243,10 @@ class NumericModel:
         names.update((symbol, name) for symbol, name in parameter_names.items() if symbol not in names)
 
         class _Printer(NumPyPrinter):
-            def _print_Symbol(self, symbol):
+            def _print_Symbol(self, symbol: sympy.Symbol) -> str:
                 return names[symbol]
 
-            def _print_Integer(self, expr):
+            def _print_Integer(self, expr: sympy.Integer) -> str:
                 # beyond a double's exact integers, numpy would take Python's int as an object
                 return str(int(expr)) if abs(int(expr)) < 2 ** 53 else repr(float(expr))
 
@@ -248,23 +255,23 @@ class NumericModel:
         # sums in sympy's own argument order: this code is only run, and sorting every sum is slow
         printer = _Printer({"allow_unknown_functions": True, "fully_qualified_modules": True, "order": "none"})
 
-        def code(expr):
-            expr = as_sympy(expr)
+        def code(value: object) -> str:
+            expr = as_sympy(value)
             free = [s for s in expr.free_symbols if s not in names]
             if free:
                 raise ValueError(f"unbound symbols {sorted(str(s) for s in free)} in {expr}")
-            return printer.doprint(expr)
+            return str(printer.doprint(expr))
 
         inputs = {symbol: index for index, (symbol, _) in enumerate(ss.inputs.values())}
         lines = ["def _run(_t, _x, _fixed):"]
         lines.append(f"    {ident(ss.time)} = _t")
         for index, symbol in enumerate(ss.state_symbols):
             lines.append(f"    {ident(symbol)} = _x[{index}]")
-        blocks = {}
+        blocks: dict[int, list[tuple[int, AlgebraicBlock]]] = {}
         for number, block in enumerate(ss.algebraic_blocks):
             blocks.setdefault(block.index, []).append((number, block))
 
-        def emit_blocks(position):
+        def emit_blocks(position: int) -> None:
             for number, block in blocks.get(position, ()):
                 unknowns = ", ".join(ident(u) for u in block.unknowns) + ","
                 lines.append(f"    def _residual{number}(_z):")
@@ -291,16 +298,16 @@ class NumericModel:
         self._guesses = {n: numpy.array([float(as_sympy(g).xreplace(numbers)) for g in b.guesses], dtype=float)
                          for n, b in enumerate(ss.algebraic_blocks)}
         self._first_guesses = {n: guess.copy() for n, guess in self._guesses.items()}
-        namespace = {"numpy": numpy, "functools": __import__("functools"), "_solve": self._solve_block}
+        namespace: dict[str, Any] = {"numpy": numpy, "functools": __import__("functools"), "_solve": self._solve_block}
         namespace.update(NUMERIC_FUNCTIONS)
         namespace.update({name: numpy.float64(values[symbol]) for symbol, name in parameter_names.items()})
         exec(compile(self.source, "<bondc numeric model>", "exec"), namespace)  # safe: generated from sympy, not model text
-        self._run = namespace["_run"]
+        self._run: Callable[[float, list[float], tuple[float | None, ...]], tuple[Any, Any, Any]] = namespace["_run"]
         self._assigned_names = [symbol.name for symbol, _ in ss.assignments] + [
             u.name for block in ss.algebraic_blocks for u in block.unknowns]
         self._input_names = list(ss.inputs)
 
-    def _solve_block(self, number, residual):
+    def _solve_block(self, number: int, residual: Callable[[np.ndarray], Sequence[float]]) -> tuple[float, ...]:
         import numpy
 
         from bondc.runtime import solve_loop
@@ -320,7 +327,7 @@ class NumericModel:
         self._guesses[number] = x
         return tuple(float(v) for v in x)
 
-    def _call(self, t, x, inputs):
+    def _call(self, t: float, x: Sequence[float] | np.ndarray, inputs: Mapping[str, float] | None) -> tuple[Any, Any, Any]:
         import numpy
 
         from bondc.errors import AnalysisError, DataError, Diagnostic
@@ -339,29 +346,29 @@ class NumericModel:
                     hint="linearise at another point (another initial value, or --at equilibrium), or check the "
                          "parameters a law divides by")) from None
 
-    def _fixed(self, inputs):
-        inputs = inputs or {}
-        unknown = set(inputs) - set(self._input_names)
+    def _fixed(self, inputs: Mapping[str, float] | None) -> tuple[float | None, ...]:
+        given = inputs or {}
+        unknown = set(given) - set(self._input_names)
         if unknown:
             raise KeyError(f"unknown input(s): {', '.join(sorted(unknown))}")
-        return tuple(None if name not in inputs else float(inputs[name]) for name in self._input_names)
+        return tuple(None if name not in given else float(given[name]) for name in self._input_names)
 
-    def initial_state(self):
+    def initial_state(self) -> np.ndarray:
         import numpy
 
         overrides = {name: self.parameter_values[symbol] for name, (symbol, _) in self.ss.parameters.items()}
         return numpy.array(list(self.ss.initial_values(overrides).values()), dtype=float)
 
-    def derivatives(self, t, x, inputs=None):
+    def derivatives(self, t: float, x: Sequence[float] | np.ndarray, inputs: Mapping[str, float] | None = None) -> np.ndarray:
         import numpy
 
         return numpy.array([float(v) for v in self._call(t, x, inputs)[1]], dtype=float)
 
-    def outputs(self, t, x, inputs=None) -> dict:
+    def outputs(self, t: float, x: Sequence[float] | np.ndarray, inputs: Mapping[str, float] | None = None) -> dict[str, float]:
         out = self._call(t, x, inputs)[2]
         return {name: float(v) for name, v in zip(self.ss.outputs, out)}
 
-    def values(self, t, x, inputs=None) -> dict:
+    def values(self, t: float, x: Sequence[float] | np.ndarray, inputs: Mapping[str, float] | None = None) -> dict[str, float]:
         """Every assigned symbol (by name), ``der(state)`` and output at one point."""
         assigned, der, out = self._call(t, x, inputs)
         result = {name: float(v) for name, v in zip(self._assigned_names, assigned)}

@@ -276,7 +276,7 @@ class External(sympy.Function):
 
 # --------------------------------------------------- numeric implementations
 
-def as_sympy(value):
+def as_sympy(value: object) -> sympy.Basic:
     """A sympy object for a value that is already sympy or a Python number.
 
     bondc never turns model text into sympy by parsing it: laws are translated
@@ -525,7 +525,7 @@ class Translator:
         bound = {param: self(arg) for param, arg in zip(function.params, node.args)}
         # a function's value depends on its arguments only: translated once per distinct arguments,
         # so functions that call earlier ones twice (f1(x) = f0(x) + f0(x), ...) stay linear in size
-        key = (function.name, tuple(bound.values()))
+        key: tuple | None = (function.name, tuple(bound.values()))
         try:
             known = self._applied.get(key)
         except TypeError:       # an argument that cannot be a key: translate as it is
@@ -607,9 +607,9 @@ class Translator:
         return sympy.ceiling(self(node.args[0]))
 
     def _call_csv(self, node: ast.Call):
-        if len(node.args) != 2 or not all(isinstance(arg, ast.Str) for arg in node.args):
+        file_arg, column = node.args if len(node.args) == 2 else (None, None)
+        if not (isinstance(file_arg, ast.Str) and isinstance(column, ast.Str)):
             raise _fail(node, 'csv() takes 2 strings: csv("file.csv", "column")')
-        file_arg, column = node.args
         path = self._resolve_path(file_arg)
         try:
             scales = csv_scales(path, column.value)

@@ -47,11 +47,14 @@ import dataclasses
 import difflib
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import TYPE_CHECKING, Mapping, Sequence
 
 import numpy as np
 
 from bondc.errors import AnalysisError, Diagnostic, UsageError
+
+if TYPE_CHECKING:
+    from bondc.analysis.linearize import Linearization
 
 #: Models with up to this many states are solved densely (balanced); larger ones as sparse.
 DENSE_STATES = 64
@@ -161,7 +164,7 @@ class Response:
 class Bode:
     """What ``bondc bode`` computes: the linearisation it used and one response per pair."""
 
-    linearization: object           # Linearization
+    linearization: Linearization
     responses: tuple[Response, ...]
     warnings: tuple[Diagnostic, ...] = ()
     notes: tuple[str, ...] = field(default_factory=tuple)
@@ -300,6 +303,7 @@ def parse_frequency(text, option: str) -> float:
     """A frequency given on the command line in Hz: a number (Hz), or a number with a unit of
     frequency (``"10 [rad/s]"``, ``"3 [kHz]"``, ``"600 [rpm]"``), read as ``--set`` reads its
     values (E944 for anything else)."""
+    from bondc.ast import Num, Unary
     from bondc.errors import BondcError
     from bondc.parse import parse_set_value
     from bondc.units import resolve
@@ -313,10 +317,10 @@ def parse_frequency(text, option: str) -> float:
         except BondcError:
             raise _usage("E944", f"{option} '{text}' is not a frequency", hint=hint) from None
         node, sign = parsed.value, 1.0
-        while type(node).__name__ == "Unary" and node.op in "+-":
+        while isinstance(node, Unary) and node.op in "+-":
             sign = -sign if node.op == "-" else sign
             node = node.operand
-        if type(node).__name__ != "Num":
+        if not isinstance(node, Num):
             raise _usage("E944", f"{option} '{text}' is not a number with a unit", hint=hint)
         value = sign * float(node.value)
         if parsed.unit is not None:
@@ -360,9 +364,9 @@ def frequency_grid(eigenvalues, low=None, high=None, points: int = DEFAULT_POINT
     """The frequencies (Hz, log-spaced) and notes on how the range was chosen. ``low``/``high``:
     given ends (Hz) or None for the default range's; E944 for an empty range."""
     notes = []
-    chosen = default_range(eigenvalues)
-    if chosen is None and (low is None or high is None):
-        chosen = FALLBACK_RANGE_HZ
+    found = default_range(eigenvalues)
+    chosen = FALLBACK_RANGE_HZ if found is None else found      # (read only where an end is not given)
+    if found is None and (low is None or high is None):
         notes.append(f"the model has no mode with a non-zero frequency to choose the range from: "
                      f"{chosen[0]:g} .. {chosen[1]:g} Hz unless --from and --to say otherwise")
     if low is None and high is None:
@@ -650,6 +654,7 @@ def default_amplitude(u0: float) -> float:
 def parse_amplitude(text, unit_text: str | None, name: str) -> float:
     """``--amplitude``: a positive number in the input's declared unit, or with a unit of its
     dimension (E946); SI."""
+    from bondc.ast import Num
     from bondc.errors import BondcError
     from bondc.units import unit_of
     from bondc.parse import parse_set_value
@@ -660,7 +665,7 @@ def parse_amplitude(text, unit_text: str | None, name: str) -> float:
         parsed = parse_set_value(f"a = {text}", "--amplitude")
     except BondcError:
         raise _usage("E946", f"--amplitude '{text}' is not a number", hint=hint) from None
-    if type(parsed.value).__name__ != "Num":
+    if not isinstance(parsed.value, Num):
         raise _usage("E946", f"--amplitude '{text}' is not a positive number", hint=hint)
     value = float(parsed.value.value)
     declared = unit_of(unit_text) if unit_text else None

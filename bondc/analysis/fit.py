@@ -69,11 +69,15 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
 from bondc.errors import BondcError, DataError, Diagnostic, UsageError
+from bondc.source import NO_SPAN, Span
+
+if TYPE_CHECKING:
+    from bondc.pipeline import Derived
 
 __all__ = ["FitCompare", "Estimate", "DataSet", "FitResult", "parse_compare", "parse_estimate", "parse_groups",
            "run_fit", "prepare_fit", "FitProblem", "FIT_RTOL", "FIT_ATOL", "RELATIVE_STEP", "CORRELATION_LIMIT"]
@@ -256,7 +260,7 @@ class _Signal:
 @dataclass
 class _Group:
     dataset: DataSet
-    derived: object                 # pipeline.Derived of its experiment
+    derived: Derived                # of its experiment
     times: np.ndarray
     signals: list[_Signal]
 
@@ -269,7 +273,7 @@ class _Parameter:
     initial: float                  # SI
     low: float                      # SI (-inf: open)
     high: float                     # SI (inf: open)
-    span: object = None
+    span: Span = NO_SPAN
 
 
 @dataclass
@@ -352,8 +356,8 @@ class FitResult:
         state = "converged" if self.converged else "NOT converged"
         lines = [f"{self.model}: fit {state} after {self.evaluations} evaluations ({self.runs} runs), "
                  f"{self.residuals} residuals; cost {self.cost_initial:.6g} -> {self.cost:.6g}", ""]
-        header = ("parameter", "unit", "initial", "estimate", "std. error", "95% interval")
-        rows = [(p.name, p.unit or "1", f"{p.initial:.6g}", f"{p.value:.6g}", f"{p.stderr:.3g}",
+        header: tuple[str, ...] = ("parameter", "unit", "initial", "estimate", "std. error", "95% interval")
+        rows: list[tuple[str, ...]] = [(p.name, p.unit or "1", f"{p.initial:.6g}", f"{p.value:.6g}", f"{p.stderr:.3g}",
                  f"[{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]") for p in self.parameters]
         lines += _table(header, rows, numeric={2, 3, 4})
         if len(self.parameters) > 1:
@@ -652,7 +656,7 @@ class FitProblem:
 
     path: str
     datasets: list[DataSet]
-    first: object                   # the Derived of the first data set's experiment
+    first: Derived                  # of the first data set's experiment
     parameters: list[_Parameter]
     groups: list[_Group]
     evaluator: _Evaluator
@@ -695,8 +699,8 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
     """Everything a fit checks and builds before it starts (E880-E892 for a bad request): the models
     derived and compiled once per experiment, the estimates resolved and checked to be late-bound,
     the measured data read, a first run of every data set at the start values."""
-    estimates = [e if isinstance(e, Estimate) else parse_estimate(e) for e in estimates]
-    if not estimates:
+    wanted = [e if isinstance(e, Estimate) else parse_estimate(e) for e in estimates]
+    if not wanted:
         raise _usage("E889", "bondc fit needs at least one --estimate NAME[=LOW:HIGH]",
                      hint="name the parameters to estimate: --estimate b=5:30")
     datasets = [d if all(isinstance(c, FitCompare) for c in d.compare)
@@ -717,10 +721,10 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
     # the estimates and the data sets are checked independently: one run reports the problems of both
     problems: list[BondcError] = []
     try:
-        parameters = _resolve_estimates(estimates, first, sets)
+        parameters = _resolve_estimates(wanted, first, sets)
         for experiment_name, derived in derived_of.items():
-            others = _resolve_estimates(estimates, derived, sets) if derived is not first else parameters
-            _check_late(others, estimates, derived, path, model, experiment_name, sets)
+            others = _resolve_estimates(wanted, derived, sets) if derived is not first else parameters
+            _check_late(others, wanted, derived, path, model, experiment_name, sets)
         if write is not None:
             from bondc.analysis.fit_write import check_writable
 
@@ -735,9 +739,9 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
             problems.append(error)
     if problems:
         sources: dict = {}
-        for error in problems:
-            sources.update(error.sources)
-        raise type(problems[0])([d for error in problems for d in error.diagnostics], sources)
+        for failure in problems:
+            sources.update(failure.sources)
+        raise type(problems[0])([d for failure in problems for d in failure.diagnostics], sources)
     names = [p.name for p in parameters]
     diagnostics: list[Diagnostic] = []
     for derived in derived_of.values():
@@ -844,7 +848,7 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
     x = solution.x * scale
     r = fun(solution.x)
     result = _summarise(problem, x, r, jac(solution.x), solution, evaluations[0], failed[0])
-    if output is not None:
+    if output is not None and report is not None:       # (an output without report: TypeError above)
         report(result, output)
         result.written.append(str(output))
     if write is not None:
@@ -876,7 +880,7 @@ def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed
     cov = cov_z * np.outer(scale, scale)
     stderr = np.sqrt(np.maximum(np.diag(cov), 0.0))
     undetermined = set()
-    for k in np.nonzero(tiny)[0]:
+    for k in np.nonzero(tiny)[0].tolist():
         direction = Vt[k]
         involved = [i for i in range(n) if abs(direction[i]) > 0.1]
         undetermined.update(involved)

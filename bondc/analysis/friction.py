@@ -209,8 +209,8 @@ _HEADER = re.compile(r"^\s*(.*?)\s*(?:[\[(]\s*(.*?)\s*[\])])?\s*$")
 
 def split_header(text: str) -> tuple[str, str | None]:
     """``"Velocity [m/s]"`` -> ``("velocity", "m/s")``; the name is lower-cased."""
-    match = _HEADER.match(text)
-    name, unit_text = match.group(1), match.group(2)
+    match = _HEADER.match(text)         # (every text matches: both parts are optional)
+    name, unit_text = (match.group(1), match.group(2)) if match else (text, None)
     return name.strip().lower(), (unit_text or None)
 
 
@@ -236,7 +236,10 @@ def _unit_scale(quantity: Quantity, unit_text: str | None, span: Span) -> tuple[
         hints = [d.hint for d in problems if d.hint]
         return 1.0, [Diagnostic("error", "E906", f"unknown unit '{unit_text}' in the {quantity.name} column",
                                 span, hint=hints[0] if hints else f"write it like '{quantity.si_unit}'")]
-    expected, _ = units.resolve(parse_unit_text(quantity.si_unit))
+    si_unit = parse_unit_text(quantity.si_unit)
+    expected = units.resolve(si_unit)[0] if si_unit is not None else None
+    if expected is None:
+        raise ValueError(f"a quantity's SI unit that bondc cannot read: '{quantity.si_unit}'")
     if not units.compatible(si, expected):
         return 1.0, [Diagnostic("error", "E906",
                                 f"the {quantity.name} column is in '{unit_text}' ({si.dimension_text()}), "
@@ -394,7 +397,7 @@ def _rows_to_data(header: Sequence[Cell], rows: Sequence[Sequence[Any]], labels:
     columns, diagnostics = resolve_columns(header, QUANTITIES, where)
     if diagnostics:
         raise DataError(diagnostics)
-    values = {quantity.name: [] for quantity in QUANTITIES}
+    values: dict[str, list[float]] = {quantity.name: [] for quantity in QUANTITIES}
     for row, label, span in zip(rows, labels, row_spans):
         if len(row) != len(header):
             diagnostics.append(Diagnostic("error", "E904",
@@ -406,7 +409,7 @@ def _rows_to_data(header: Sequence[Cell], rows: Sequence[Sequence[Any]], labels:
             value, problem = parse_number(row[index], header[index].text, label)
             if problem is not None:
                 diagnostics.append(problem)
-            else:
+            elif value is not None:         # (parse_number gives a value or a problem)
                 values[quantity.name].append(value * scale)
     if diagnostics:
         raise DataError(cap_diagnostics(diagnostics))

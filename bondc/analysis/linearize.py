@@ -38,7 +38,8 @@ note names them with their factor).
 The Jacobians are computed in forward mode over the assignment sequence: each
 assignment's symbolic partial derivatives (sympy), evaluated numerically at
 the operating point and chained, so sizes stay linear in the model; algebraic
-blocks are differentiated implicitly. Dirac impulses of derivatives of
+blocks are differentiated implicitly (the chain rule of :mod:`bondc.jacobian`, which the
+generated module's analytic Jacobian uses too). Dirac impulses of derivatives of
 ``sign``/``step`` are dropped (a kink's derivative is taken from one side).
 
 >>> from bondc.causality import assign_causality
@@ -65,6 +66,7 @@ import numpy as np
 import sympy
 
 from bondc.errors import AnalysisError, Diagnostic
+from bondc.jacobian import NUMERIC, Sensitivities
 from bondc.statespace import StateSpace
 from bondc.symbolic import as_sympy, partial_derivative, strip_impulses
 
@@ -216,28 +218,20 @@ class _Jacobian:
         gradients of a few entries each, where dense rows would take N^2 memory."""
         ss = self.ss
         n, m = len(self.state_symbols), len(self.input_symbols)
-        gradient: dict = {}
-        for i, symbol in enumerate(self.state_symbols):
-            gradient[symbol] = {i: 1.0}
-        for j, symbol in enumerate(self.input_symbols):
-            gradient[symbol] = {n + j: 1.0}
+        seeds = {symbol: i for i, symbol in enumerate(self.state_symbols)}
+        seeds.update({symbol: n + j for j, symbol in enumerate(self.input_symbols)})
+        sensitivities = Sensitivities(seeds, NUMERIC)
+        gradient = sensitivities.rows
         numeric = {s: sympy.Float(v) for s, v in values.items()}
 
         def value(partial, constant):
             return constant if constant is not None else self._value(partial, numeric)
 
         def chain(partials):
-            total: dict = {}
-            for symbol, partial, constant in partials:
-                g = gradient.get(symbol)
-                if not g:
-                    continue
-                factor = value(partial, constant)
-                for column, entry in g.items():
-                    total[column] = total.get(column, 0.0) + factor * entry
-            return total
+            return sensitivities.chain((symbol, lambda partial=partial, constant=constant: value(partial, constant))
+                                       for symbol, partial, constant in partials)
 
-        blocks = {}
+        blocks: dict[int, list[int]] = {}
         for number, block in enumerate(ss.algebraic_blocks):
             blocks.setdefault(block.index, []).append(number)
 
@@ -248,13 +242,17 @@ class _Jacobian:
                 jac_u = np.zeros((len(unknowns), len(unknowns)))
                 rhs = np.zeros((len(unknowns), n + m))
                 for row, partials in enumerate(self.block_partials[number]):
-                    for symbol, partial, constant in partials:
-                        if symbol in unknowns:
-                            jac_u[row, unknowns.index(symbol)] = value(partial, constant)
-                        elif gradient.get(symbol):
-                            factor = value(partial, constant)
-                            for column, entry in gradient[symbol].items():
-                                rhs[row, column] -= factor * entry
+                    def others(partials=partials, row=row):
+                        """The partials by the block's other symbols; dR/dz into jac_u on the way (in
+                        the partials' order: the first that cannot be evaluated is the one reported)."""
+                        for symbol, partial, constant in partials:
+                            if symbol in unknowns:
+                                jac_u[row, unknowns.index(symbol)] = value(partial, constant)
+                            else:
+                                yield symbol, partial, constant
+
+                    for column, entry in chain(others()).items():
+                        rhs[row, column] = 0.0 - entry      # (0.0 -: no -0.0, as 0.0 - a - b gave)
                 solution = np.linalg.solve(jac_u, rhs)
                 for k, unknown in enumerate(unknowns):
                     gradient[unknown] = {int(c): float(solution[k, c]) for c in np.flatnonzero(solution[k])}

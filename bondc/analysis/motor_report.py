@@ -159,11 +159,12 @@ def size_motors(result, graph, catalogue, *, load_inertia: float | None = None,
     speed_name, speed_where, speed_values = find_signal(result, (speed,) if speed else SPEED_NAMES, "speed")
     window = cycle_window(result, graph)
     need = requirements(result.t, torque_values, speed_values, cycle=window)
-    source, why = ("given", None) if load_inertia is not None else (None, None)
+    source: str | None = "given" if load_inertia is not None else None
+    why: str | None = None
     if load_inertia is None:
         load_inertia, why = load_inertia_of(result, graph, window, speed_values)
         source = "estimated" if load_inertia is not None else None
-    name = None
+    name: str | None = None
     if not isinstance(catalogue, (list, tuple)):
         name = Path(catalogue).name
         catalogue = load_catalogue(catalogue)

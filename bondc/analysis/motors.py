@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
@@ -104,9 +104,9 @@ class MotorRequirements:
     energy_regenerative: float
     energy_net: float
     rms_speed: float = 0.0
-    time: np.ndarray = field(repr=False, default=None)
-    torque: np.ndarray = field(repr=False, default=None)
-    speed: np.ndarray = field(repr=False, default=None)
+    time: np.ndarray | None = field(repr=False, default=None)
+    torque: np.ndarray | None = field(repr=False, default=None)
+    speed: np.ndarray | None = field(repr=False, default=None)
 
     @property
     def duration(self) -> float:
@@ -151,11 +151,6 @@ class MotorRequirements:
             f"  energy per cycle {self.energy_net:10.4g} J     net (positive {self.energy_positive:.4g}, "
             f"regenerative {self.energy_regenerative:.4g})",
         ])
-
-
-def _trapezoid(values: np.ndarray, time: np.ndarray) -> float:
-    # Written out: np.trapz is gone in NumPy 2 and np.trapezoid is new in it.
-    return float(np.sum(np.diff(time) * (values[1:] + values[:-1]) / 2))
 
 
 def _trapezoid_split(time: np.ndarray, values: np.ndarray) -> tuple[float, float]:
@@ -222,6 +217,8 @@ def requirements(t, torque, speed, *, cycle: tuple[float, float] | None = None) 
     non-finite values), E924 (time not strictly increasing), E925 (a window
     outside the record or of zero length).
     """
+    from scipy.integrate import trapezoid
+
     time, diagnostics = _as_profile("time", t, None)
     if time is None:
         raise DataError(diagnostics)
@@ -256,8 +253,8 @@ def requirements(t, torque, speed, *, cycle: tuple[float, float] | None = None) 
     power = torque * speed
     duration = float(time[-1] - time[0])
     energy_positive, energy_regenerative = _trapezoid_split(time, power)
-    rms = math.sqrt(_trapezoid(torque ** 2, time) / duration)
-    rms_speed = math.sqrt(_trapezoid(speed ** 2, time) / duration)
+    rms = math.sqrt(float(trapezoid(torque ** 2, time)) / duration)
+    rms_speed = math.sqrt(float(trapezoid(speed ** 2, time)) / duration)
     return MotorRequirements(
         t_start=float(time[0]), t_end=float(time[-1]),
         peak_torque=float(np.max(np.abs(torque))),
@@ -404,11 +401,11 @@ def load_catalogue(path: str | Path) -> list[Motor]:
         for column, cell in zip(names[1:], cells[1:]):
             if column in OPTIONAL_COLUMNS and not cell.text.strip():
                 continue                    # no value for this motor
-            value, problem = parse_number(cell, column, label)
-            if problem is not None:
-                diagnostics.append(problem)
+            value, bad_number = parse_number(cell, column, label)
+            if bad_number is not None:
+                diagnostics.append(bad_number)
                 row_ok = False
-            elif value <= 0:
+            elif value is None or value <= 0:
                 diagnostics.append(Diagnostic("error", "E921",
                                               f"{label}, column '{column}': {cell.text} must be positive "
                                               f"({_CATALOGUE_UNITS[column]})", cell.span))
@@ -544,12 +541,15 @@ def _ratio_text(value: float | None) -> str:
     return "   -  " if value is None else f"{value:6.2f}"
 
 
-def figure(value: float) -> str:
-    """A number as the verdict shows it: three significant digits, whole numbers from 100 up.
+def figure(value: float | None) -> str:
+    """A number as the verdict shows it: three significant digits, whole numbers from 100 up
+    ("n/a" for a figure a rule that was not applied has not).
 
-    >>> figure(0.40129), figure(11.93), figure(2999.6), figure(1.0)
-    ('0.401', '11.9', '3000', '1')
+    >>> figure(0.40129), figure(11.93), figure(2999.6), figure(1.0), figure(None)
+    ('0.401', '11.9', '3000', '1', 'n/a')
     """
+    if value is None:
+        return "n/a"
     if value == 0 or not math.isfinite(value):
         return f"{value:g}"
     if abs(value) >= 100:
@@ -599,7 +599,7 @@ def _peak_torque_check(motor: Motor, need: MotorRequirements) -> Check:
     With a flat envelope (every speed at or below the rated speed) that instant is the peak
     torque's. Without a profile, the peak torque at the peak speed.
     """
-    if need.time is None:
+    if need.time is None or need.torque is None or need.speed is None:        # (the three come together)
         torque, speed = np.array([need.peak_torque]), np.array([need.peak_speed_rpm])
     else:
         torque, speed = np.abs(need.torque), np.abs(need.speed) / RPM
@@ -621,7 +621,7 @@ def motor_torque(motor: Motor, need: MotorRequirements) -> np.ndarray:
 
     Raises DataError E923 when ``need`` carries no profile.
     """
-    if need.time is None:
+    if need.time is None or need.torque is None or need.speed is None:        # (the three come together)
         raise DataError(Diagnostic("error", "E923", "these requirements carry no profile to add rotor inertia to",
                                    hint="make them with requirements(t, torque, speed)"))
     return need.torque + motor.rotor_inertia * np.gradient(need.speed, need.time)
@@ -650,14 +650,12 @@ def judge(motor: Motor, need: MotorRequirements, *, load_inertia: float | None =
     """
     if include_rotor_inertia:
         need = requirements(need.time, motor_torque(motor, need), need.speed)
+    continuous = float(motor.continuous_torque_at(need.rms_speed_rpm))
     checks = [
         _peak_torque_check(motor, need),
-        Check("rms_torque", need.rms_torque, float(motor.continuous_torque_at(need.rms_speed_rpm)), "N*m",
-              None, need.rms_speed_rpm),
-        Check("speed", need.peak_speed_rpm, motor.top_speed, "rpm", None),
+        Check("rms_torque", need.rms_torque, continuous, "N*m", continuous >= need.rms_torque, need.rms_speed_rpm),
+        Check("speed", need.peak_speed_rpm, motor.top_speed, "rpm", motor.top_speed >= need.peak_speed_rpm),
     ]
-    checks[1] = replace(checks[1], passed=checks[1].available >= checks[1].required)
-    checks[2] = replace(checks[2], passed=checks[2].available >= checks[2].required)
     limit = inertia_limit if inertia_limit is not None else (motor.max_inertia_ratio or MAX_INERTIA_RATIO)
     ratio = None
     if load_inertia is not None:
@@ -707,6 +705,11 @@ class Selection(list):
         self.inertia_limit = inertia_limit
         self.unknown_inertia = unknown_inertia if load_inertia is None else None
         self.catalogue_name = catalogue_name
+        # of a selection for a run (bondc.analysis.motor_report): (name, where) of the torque and of
+        # the speed, the cycle's (t_start, t_end), and "given" or "estimated" for the load inertia
+        self.signals: tuple[tuple[str, str], tuple[str, str]] | None = None
+        self.cycle: tuple[float, float] | None = None
+        self.load_inertia_source: str | None = None
 
     @property
     def qualified(self) -> list[Candidate]:

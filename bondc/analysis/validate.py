@@ -400,7 +400,7 @@ def compare(sim_t: npt.ArrayLike, sim_values: Mapping[str, npt.ArrayLike],
     Raises :class:`DataError`: E953/E954 for unknown names, E956 when fewer
     than two simulated points fall in the common time range.
     """
-    sim_t = np.asarray(sim_t, dtype=float)
+    times = np.asarray(sim_t, dtype=float)
     if TIME_KEY not in measured:
         raise _error("E953", "the measured data has no time column 't'")
     meas_t = np.asarray(measured[TIME_KEY], dtype=float)
@@ -413,18 +413,18 @@ def compare(sim_t: npt.ArrayLike, sim_values: Mapping[str, npt.ArrayLike],
             raise _error("E953", f"the measured data has no column '{spec.column}' (comparison '{spec}')",
                          hint=_did_you_mean(spec.column, [c for c in measured if c != TIME_KEY]))
         simulated = np.asarray(sim_values[spec.output], dtype=float)
-        if simulated.shape != sim_t.shape:
-            raise ValueError(f"signal '{spec.output}' has {simulated.size} values for {sim_t.size} time points")
-        low, high = max(sim_t[0], meas_t[0]), min(sim_t[-1], meas_t[-1])
-        inside = (sim_t >= low) & (sim_t <= high)
+        if simulated.shape != times.shape:
+            raise ValueError(f"signal '{spec.output}' has {simulated.size} values for {times.size} time points")
+        low, high = max(times[0], meas_t[0]), min(times[-1], meas_t[-1])
+        inside = (times >= low) & (times <= high)
         if high < low or np.count_nonzero(inside) < 2:
             raise _error(
                 "E956",
-                f"comparison '{spec}': the simulation covers t = {sim_t[0]:g} .. {sim_t[-1]:g} s and the "
+                f"comparison '{spec}': the simulation covers t = {times[0]:g} .. {times[-1]:g} s and the "
                 f"measurement t = {meas_t[0]:g} .. {meas_t[-1]:g} s; they share "
                 f"{'no time' if high < low else 'fewer than two simulated samples'}",
                 hint="check the experiment's t_end and the time column (seconds) of the data")
-        t = sim_t[inside]
+        t = times[inside]
         sim = simulated[inside]
         meas = np.interp(t, meas_t, np.asarray(measured[spec.column], dtype=float))
         values = metrics(sim, meas)
