@@ -1026,7 +1026,7 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.set_defaults(run=_cmd_sweep)
 
     fit_ = commands.add_parser("fit", help="estimate parameters from measured data (least squares), with "
-                                            "standard errors, 95 % intervals and correlations")
+                                            "standard errors, 95 %% intervals and correlations")
     _add_model_args(fit_)
     fit_.add_argument("--data", action=_FitGroup, metavar="FILE",
                       help="measured CSV (header units honoured, as validate); each --data starts a data set, "

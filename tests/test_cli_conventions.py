@@ -235,3 +235,20 @@ def test_report_json_says_what_it_wrote(capsys, tmp_path):
     summary = json.loads(out)
     assert status == 0 and summary["written"] == [str(target)] and target.is_file()
     assert summary["complete"] and summary["signals"] == [] and summary["failing"] == []
+
+
+def test_help_of_bondc_and_of_every_command_prints_usage(capsys):
+    """``bondc --help`` and ``bondc COMMAND --help`` print their usage and exit 0 (a help text with a
+    bare '%' made argparse's formatting fail, as an internal error)."""
+    from bondc.cli import build_parser, main
+
+    commands = next(action for action in build_parser()._actions if hasattr(action, "_choices_actions"))
+    for arguments in [["--help"]] + [[name, "--help"] for name in commands.choices]:
+        try:
+            code = main(arguments)
+        except SystemExit as stop:
+            code = stop.code
+        assert code == 0, arguments
+        captured = capsys.readouterr()
+        assert captured.out.startswith("usage: bondc"), arguments
+        assert "internal error" not in captured.err
