@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence, Union
 import numpy as np
 
 from bondc.errors import BondcError, Diagnostic, UsageError
+from bondc import codes
 
 if TYPE_CHECKING:
     import pandas
@@ -42,7 +43,7 @@ __all__ = ["load", "check", "equations", "linearize", "bode", "compile", "simula
 
 def _usage(message: str, hint: str | None = None) -> UsageError:
     """A misused argument of the API: a bondc error naming it (E001), not Python's own."""
-    return UsageError(Diagnostic("error", "E001", message, hint=hint))
+    return UsageError(Diagnostic("error", codes.E001, message, hint=hint))
 
 
 def _is_number(value) -> bool:

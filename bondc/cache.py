@@ -50,6 +50,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from bondc.io import cache_dir  # noqa: F401  (bondc's cache folder: bondc.cache.cache_dir as before)
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.pipeline import Derived
@@ -383,7 +384,7 @@ class LightStateSpace:
             if derived is None:
                 from bondc.errors import Diagnostic, UsageError
 
-                raise UsageError(Diagnostic("error", "E803", "cannot simulate: the compile cache entry of "
+                raise UsageError(Diagnostic("error", codes.E803, "cannot simulate: the compile cache entry of "
                                                              "this model was removed during the run",
                                             hint="run the command again"))
             self._full = derived.state_space

@@ -46,6 +46,7 @@ from bondc.kinds import GYRATOR, KINDS, RESISTOR, SOURCE, STORAGE, TRANSFORMER, 
 from bondc.errors import CausalityError, Diagnostic, Related, sort_key
 from bondc.model import BondGraph, ElementNode, JunctionNode, readable_names
 from bondc.source import Span
+from bondc import codes
 
 # ---------------------------------------------------------------- kinds as data (bondc.kinds)
 
@@ -505,7 +506,7 @@ def _conflict_diagnostic(graph: BondGraph, conflict: _Conflict, trial: _Assignme
         related.append(Related(graph.bond(bond).span, _bond_text(graph, bond)))
     if subject is not None and subject.kind_info.role == SOURCE:
         related.append(Related(graph.bond(subject.bond).span, _bond_text(graph, subject.bond)))
-    return Diagnostic("error", "E601", message, primary, hint=hint, related=_unique(related))
+    return Diagnostic("error", codes.E601, message, primary, hint=hint, related=_unique(related))
 
 
 def _unique(related: Iterable[Related]) -> tuple[Related, ...]:
@@ -721,7 +722,7 @@ def _loop_diagnostic(graph: BondGraph, loop: AlgebraicLoop, element_names: Mappi
         elif name in graph.junctions:
             related.append(Related(graph.junctions[name].span, f"{describe_node(graph, name)} is on the loop"))
     return Diagnostic(
-        "info", "I603",
+        "info", codes.I603,
         f"algebraic loop through {join_words(parts)}: "
         f"{', '.join(element_names.get(v, v) for v in loop.variables)} depend on each other "
         "with no storage element in between; the equations stage solves the loop",
@@ -771,7 +772,7 @@ def _derivative_diagnostic(graph: BondGraph, name: str, depends_on: tuple[str, .
                f"so its state is not independent and is eliminated from the state equations")
     related = tuple(Related(element_span(graph.elements[n]), f"{describe_node(graph, n)} fixes it")
                     for n in depends_on)
-    return Diagnostic("warning", "W602", message, element_span(element), related=related,
+    return Diagnostic("warning", codes.W602, message, element_span(element), related=related,
                       hint="intended for rigidly coupled parts; otherwise put a compliance (C) or "
                            "inertia (I) between the storage elements")
 

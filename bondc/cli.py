@@ -20,6 +20,7 @@ from pathlib import Path
 from bondc.version import __version__
 from bondc.errors import BondcError, Diagnostic, UsageError, render_all
 from bondc.io import json_safe
+from bondc import codes
 
 EXIT_OK, EXIT_ERRORS, EXIT_USAGE = 0, 1, 2
 #: A reader closed the pipe while output went to it through a channel the guard does not cover (a
@@ -75,7 +76,7 @@ class _ArgumentParser(argparse.ArgumentParser):
     """argparse that raises UsageError instead of exiting, so main() owns exit codes."""
 
     def error(self, message):  # noqa: D401 - argparse API
-        raise UsageError(Diagnostic("error", "E001", f"{self.prog}: {message}",
+        raise UsageError(Diagnostic("error", codes.E001, f"{self.prog}: {message}",
                                     hint=f"see '{self.prog} --help'"))
 
 
@@ -351,7 +352,7 @@ def _cmd_fmt(args) -> int:
     """``bondc fmt FILE...``: print one file formatted, or ``--check``/``--write`` each of several;
     the exit status is the worst of them (1: a file would be reformatted, or does not parse)."""
     if len(args.file) > 1 and not (args.check or args.write):
-        raise UsageError(Diagnostic("error", "E001", "bondc fmt: several files need --check or --write",
+        raise UsageError(Diagnostic("error", codes.E001, "bondc fmt: several files need --check or --write",
                                     hint="give one file to print it formatted"))
     return _each_file(args, _fmt_file)
 
@@ -599,7 +600,7 @@ def _compile_c(args) -> int:
     model = c_model(derived.state_space, derived.experiment)
     folder = Path(args.output) if args.output else Path(args.file).with_name(f"{model.name}_c")
     if folder.exists() and not folder.is_dir():
-        raise UsageError(Diagnostic("error", "E001", f"--target c writes a folder: {folder} is a file",
+        raise UsageError(Diagnostic("error", codes.E001, f"--target c writes a folder: {folder} is a file",
                                     hint="give -o a folder (made if missing)"))
     check_output(folder / f"{model.name}.c", "the C code", make_folder=True)
     written = write_c(model, folder)
@@ -655,7 +656,7 @@ def _cmd_report(args) -> int:
             print(f"wrote {target}")
         return EXIT_OK
     if not args.file:
-        raise UsageError(Diagnostic("error", "E001", "bondc report: give a model file, or --sweep STUDY.csv",
+        raise UsageError(Diagnostic("error", codes.E001, "bondc report: give a model file, or --sweep STUDY.csv",
                                     hint="see 'bondc report --help'"))
     summary = report_summary(Path(args.file), model=args.model, experiment=args.experiment,
                              sets=_parse_sets(args.set), data=args.data, compare=args.compare or (),
@@ -773,12 +774,12 @@ def _cmd_cache(args) -> int:
     from bondc import cache
 
     if args.action is None:
-        raise UsageError(Diagnostic("error", "E001", "bondc cache: say what to do: info or clear",
+        raise UsageError(Diagnostic("error", codes.E001, "bondc cache: say what to do: info or clear",
                                     hint="bondc cache info [--json], bondc cache clear [--json]"))
     try:
         cache.max_bytes()
     except ValueError as error:
-        raise UsageError(Diagnostic("error", "E001", str(error),
+        raise UsageError(Diagnostic("error", codes.E001, str(error),
                                     hint="e.g. BONDC_CACHE_MAX_MB=500 (megabytes); 0 for no cap")) from None
     if args.action == "clear":
         removed = cache.clear()
@@ -1188,7 +1189,7 @@ def _refuse_inputs_as_outputs(args) -> None:
         for path, what in inputs:
             if _same_file(output, path):
                 raise UsageError(Diagnostic(
-                    "error", "E003", f"cannot write the output '{output}' ({option}): it is {what} the command reads",
+                    "error", codes.E003, f"cannot write the output '{output}' ({option}): it is {what} the command reads",
                     hint="give another path for the output; bondc never writes over its inputs"))
 
 
@@ -1201,7 +1202,7 @@ def _main(argv: list[str], debug: bool) -> int:
             parser.print_help(sys.stderr)
             return EXIT_USAGE
         if args.quiet and args.verbose:
-            raise UsageError(Diagnostic("error", "E001", "bondc: -q and -v cannot be given together",
+            raise UsageError(Diagnostic("error", codes.E001, "bondc: -q and -v cannot be given together",
                                         hint="-q prints only errors, -v notes too"))
         _VERBOSITY[0] = -1 if args.quiet else 1 if args.verbose else 0
         _refuse_inputs_as_outputs(args)         # before any work
@@ -1234,7 +1235,7 @@ def _main(argv: list[str], debug: bool) -> int:
         return int(exit_.code or 0)
     except RecursionError:
         _print_diagnostics([Diagnostic(
-            "error", "E005", "an expression is nested too deeply for bondc (a single sum, product or call "
+            "error", codes.E005, "an expression is nested too deeply for bondc (a single sum, product or call "
                              "chain of many thousands of terms)",
             hint="split it: give parts of it names with param, or as fn definitions")])
         return EXIT_ERRORS

@@ -837,6 +837,18 @@ d("E007", "--set value is not NAME=VALUE",
 
 # ================================================================== stages
 
+# Each code is also a name of this module (``codes.E201 == "E201"``): raise sites write
+# ``codes.E201``, so a code that is not registered here fails where the module is read
+# (tests/test_codes.py checks every ``codes.X`` in the package), never as a typo in a string.
+globals().update({_code: _code for _code in CODES})
+
+
+def __getattr__(name: str) -> str:
+    """A code that is not registered: an AttributeError that says so (and tells mypy that
+    ``codes.E201`` is a ``str``)."""
+    raise AttributeError(f"bondc.codes has no code {name!r}: register it with d(...)")
+
+
 STAGES = (  # (title, modules), in the order of the page
     ("Syntax", "`bondc/parse.py`"),
     ("Units", "`bondc/units.py`, `bondc/semantic/`"),

@@ -37,6 +37,7 @@ from bondc.errors import Diagnostic, Related
 from bondc.model import BondGraph
 from bondc.source import Span
 from bondc.units import BASE_DIMENSIONS, SIUnit
+from bondc import codes
 
 _N = len(BASE_DIMENSIONS) - 1          # the angle pseudo-dimension is dropped: angles are dimensionless
 FREE, UNKNOWN = "free", "unknown"
@@ -544,4 +545,4 @@ _OTHER = ("dimensions differ in {what}: {a} and {b}", "check the units of the qu
 def _diagnostic(equation: _Equation, left, right, related=()) -> Diagnostic:
     template, hint = _MESSAGES.get(equation.kind, _OTHER)
     message = template.format(a=text(left), b=text(right), what=equation.what)
-    return Diagnostic("error", "E210", message, equation.span, hint, tuple(related))
+    return Diagnostic("error", codes.E210, message, equation.span, hint, tuple(related))

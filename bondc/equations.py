@@ -60,6 +60,7 @@ from bondc.source import NO_SPAN
 from bondc.statespace import AlgebraicBlock, StateInfo, StateSpace
 from bondc.symbolic import (TRANSLATION_IN_ALL, Csv, External, Step, Table, Translator, discontinuities, strip_impulses,
                             as_sympy)
+from bondc import codes
 
 _OPAQUE = (sympy.Piecewise, sympy.Abs, sympy.sign, sympy.Min, sympy.Max, sympy.Heaviside, Table, Step, Csv, External)
 _ENERGY_VARIABLE = sympy.Dummy("s", real=True)      # the integration variable of stored-energy functions
@@ -118,7 +119,7 @@ class _Deriver:
 
     def _new_symbol(self, name: str) -> sympy.Symbol:
         if name in self.symbols:
-            raise _error("E701", f"the name '{name}' is used for two different quantities",
+            raise _error(codes.E701, f"the name '{name}' is used for two different quantities",
                          hint="rename the parameter, input, output or state")
         symbol = _real(name)
         self.symbols[name] = symbol
@@ -169,12 +170,12 @@ class _Deriver:
                     return self.state_symbols[state.qualified]
             if name == "pi":
                 return sympy.pi
-            raise _error("E701", f"unknown name '{name}'", node.span)
+            raise _error(codes.E701, f"unknown name '{name}'", node.span)
 
         def resolve_ref(node):
             target = self.causal.reference(node.parts, owner.name if owner is not None else None)
             if target is None:
-                raise _error("E701", f"'{node.dotted}' names no variable of the graph", node.span)
+                raise _error(codes.E701, f"'{node.dotted}' names no variable of the graph", node.span)
             kind, what = target
             if kind == "state":
                 return self.state_symbols[what]
@@ -212,7 +213,7 @@ class _Deriver:
             else:
                 hint = ("the causality needs the state as a function of the port variable; "
                         "give an invertible law, or add compliance/inertia to avoid derivative causality")
-            raise _error("E605",
+            raise _error(codes.E605,
                          f"the law `{law} = ...` of {describe_node(self.graph, element.name)} must be solved for "
                          f"{wanted} ({'conductance' if wanted == 'f' else 'the causality'} needs it) and "
                          "bondc cannot invert it",
@@ -297,7 +298,7 @@ class _Deriver:
         # Derivative causality: the port input (e for a C) is fixed by the rest of the
         # graph; the state follows from the law, its rate from the others' states.
         if len(element.states) != 1:
-            raise _error("E703", f"{describe_node(self.graph, element.name)} is in derivative causality and has "
+            raise _error(codes.E703, f"{describe_node(self.graph, element.name)} is in derivative causality and has "
                                  f"{len(element.states)} states; bondc can eliminate only a single-state element",
                          element_span(element),
                          hint="add compliance or inertia so that it gets integral causality")
@@ -312,7 +313,7 @@ class _Deriver:
         self.dependents.append(_Dependent(element, symbol, rates[state.qualified], port_in))
         if state.initial is not None and not self._zero_initial(state.initial):
             self.diagnostics.append(Diagnostic(
-                "warning", "W704",
+                "warning", codes.W704,
                 f"the initial value of '{state.qualified}' is ignored: {describe_node(self.graph, element.name)} is "
                 "in derivative causality, so its state follows from the other states",
                 state.initial.span if getattr(state.initial, "span", NO_SPAN).line > 0 else element_span(element)))
@@ -359,7 +360,7 @@ class _Deriver:
         if r.is_zero:
             kind, law = (("transformer", "p2.e = p1.e/r") if element.kind in ("TF", "MTF")
                          else ("gyrator", "p2.f = p1.e/r"))
-            raise _error("E606", f"the ratio r of {kind} '{element.name}' is 0, and its causality (it is given "
+            raise _error(codes.E606, f"the ratio r of {kind} '{element.name}' is 0, and its causality (it is given "
                                  f"port 1's effort) makes its equations divide by r: {law}",
                          element.law_spans.get("r") if element.law_spans else element.span,
                          hint="a ratio of 0 connects nothing: give the ratio it has (r = 1/Ar for a piston of "
@@ -512,7 +513,7 @@ class _Deriver:
         spans = [element_span(graph.elements[n]) if n in graph.elements else graph.junctions[n].span
                  for n in nodes if n in graph.elements or n in graph.junctions]
         self.diagnostics.append(Diagnostic(
-            "warning", "W604",
+            "warning", codes.W604,
             f"nonlinear algebraic loop through {join_words([repr(n) for n in nodes])}: "
             f"{', '.join(self.element_names.get(u.name, u.name) for u in unknowns)} solved numerically at "
             "every evaluation",
@@ -544,7 +545,7 @@ class _Deriver:
             spans = [element_span(graph.elements[n]) if n in graph.elements else graph.junctions[n].span
                      for n in nodes if n in graph.elements or n in graph.junctions]
             names = ", ".join(self.element_names.get(u.name, u.name) for u in unknowns)
-            raise _error("E702", f"the algebraic loop through {join_words([repr(n) for n in nodes])} is singular: "
+            raise _error(codes.E702, f"the algebraic loop through {join_words([repr(n) for n in nodes])} is singular: "
                                  f"its equations do not determine {names}",
                          spans[0] if spans else NO_SPAN,
                          related=[Related(span, "on the loop") for span in spans[1:]],
@@ -567,7 +568,7 @@ class _Deriver:
                 tainted.add(symbol)
         for block in self.blocks:
             if any(r.free_symbols & tainted for r in block.residuals):
-                raise _error("E703", "a storage element in derivative causality feeds a nonlinear algebraic "
+                raise _error(codes.E703, "a storage element in derivative causality feeds a nonlinear algebraic "
                                      f"loop ({join_words([repr(n) for n in block.nodes])}); bondc cannot eliminate it",
                              element_span(self.dependents[0].element),
                              hint="add compliance or inertia so that it gets integral causality")
@@ -583,7 +584,7 @@ class _Deriver:
             value = expanded(dependent.state)
             bad = value.free_symbols & (tainted | {u for b in self.blocks for u in b.unknowns})
             if bad:
-                raise _error("E703", f"the state of {describe_node(self.graph, dependent.element.name)} depends on "
+                raise _error(codes.E703, f"the state of {describe_node(self.graph, dependent.element.name)} depends on "
                                      "another eliminated state's rate; bondc cannot eliminate it",
                              element_span(dependent.element),
                              hint="add compliance or inertia so that it gets integral causality")
@@ -602,7 +603,7 @@ class _Deriver:
                     message=f"{describe_node(self.graph, dependent.element.name)}: {first.message}")) from None
             rate = strip_impulses(rate)
             if rate.has(sympy.Derivative):
-                raise _error("E703", f"the rate of {describe_node(self.graph, dependent.element.name)} needs the "
+                raise _error(codes.E703, f"the rate of {describe_node(self.graph, dependent.element.name)} needs the "
                                      "time derivative of a signal bondc cannot differentiate",
                              element_span(dependent.element))
             residuals.append(dependent.rate.xreplace(partial) - rate)
@@ -704,7 +705,7 @@ class _Deriver:
             left = initial[s.symbol].free_symbols & keys
             if left:
                 declared = next((v.span for v in self.graph.states if v.qualified == s.name), NO_SPAN)
-                raise _error("E701", f"the initial value of '{s.name}' depends on itself through "
+                raise _error(codes.E701, f"the initial value of '{s.name}' depends on itself through "
                                      f"{', '.join(sorted(str(x) for x in left))}", declared,
                              hint="give one of the initial values in this cycle a value that uses "
                                   "parameters and inputs only")
@@ -733,7 +734,7 @@ class _Deriver:
                 else:
                     found = self.causal.reference(target.parts, None)
                     if found is None or found[0] != "state":
-                        raise _error("E701", f"'{target.dotted}' is not a state", target.span)
+                        raise _error(codes.E701, f"'{target.dotted}' is not a state", target.span)
                     name = found[1]
                 actions.append((name, expand(self.translate(value))))
             events.append((when.text, expand(self.translate(when.condition)), tuple(actions)))

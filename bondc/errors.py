@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Iterable, Mapping
 
 from bondc.source import NO_SPAN, Source, Span
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.simulate import SimResult
@@ -110,7 +111,7 @@ class BondcError(Exception):
     def __init__(self, diagnostics: Iterable[Diagnostic] | Diagnostic | str,
                  sources: Mapping[str, Source] | None = None):
         if isinstance(diagnostics, str):
-            diagnostics = [Diagnostic("error", "E000", diagnostics)]
+            diagnostics = [Diagnostic("error", codes.E000, diagnostics)]
         elif isinstance(diagnostics, Diagnostic):
             diagnostics = [diagnostics]
         self.diagnostics: list[Diagnostic] = list(diagnostics)

@@ -34,10 +34,11 @@ from typing import Callable, Mapping, Protocol, Sequence
 from bondc import ast
 from bondc.errors import Diagnostic, ModelError, Related
 from bondc.source import Span
+from bondc import codes
 
-CODE = "E311"
+CODE = codes.E311
 #: The code of an expansion of ``fn`` calls beyond :class:`ExpansionBudget`'s limits.
-EXPANSION_CODE = "E319"
+EXPANSION_CODE = codes.E319
 
 # Deeper nesting of function calls than this is a runaway (recursion is
 # reported by the semantic stage; this only keeps the evaluator safe).

@@ -58,10 +58,11 @@ from bondc import ast
 from bondc.errors import Diagnostic, Hint, Related
 from bondc.kinds import JUNCTION_KINDS, KINDS
 from bondc.source import Span
+from bondc import codes
 
 _BOND_NUMBER = re.compile(r"b([0-9]+)")
 #: The codes of an instance's kind that names no model (E330) or two (E331): no E303 for it after them.
-KIND_CODES = ("E330", "E331")
+KIND_CODES = (codes.E330, codes.E331)
 _ELEMENT_LOCALS = frozenset({"e", "f"})   # an element's own variables inside its laws (and its states)
 #: The statements a model may expand to through its instances (E319 beyond), or twenty per
 #: statement written in its files where that is more: components that instantiate two of the
@@ -226,10 +227,10 @@ class _Flattener:
                                   if close else None,
                                   f"'{library}' has: {', '.join(models[:12])}"
                                   + (", ..." if len(models) > 12 else ""))
-                    self.report(_error("E330", f"no model '{name}' in the imported library '{library}'", span,
+                    self.report(_error(codes.E330, f"no model '{name}' in the imported library '{library}'", span,
                                        hint=hint))
                 else:
-                    self.report(_error("E330", f"no model '{name}' in an imported library '{library}'", span,
+                    self.report(_error(codes.E330, f"no model '{name}' in an imported library '{library}'", span,
                                        hint=f"imported libraries: {', '.join(known) or 'none'}; import the file "
                                             f"or 'std:{library}' at file level"))
             return found[0] if found else None
@@ -241,7 +242,7 @@ class _Flattener:
         if len({id(f) for f, _ in defined}) > 1:
             names = [library_name(f) for f, _ in defined]
             files = " and ".join(f.path for f, _ in defined)
-            self.report(_error("E331", f"'{kind}' is defined by two imports: {files}",
+            self.report(_error(codes.E331, f"'{kind}' is defined by two imports: {files}",
                                span, hint=f"qualify it with its library, e.g. '{names[0]}.{kind}'"))
             return None
         return defined[0][1] if defined else None
@@ -283,7 +284,7 @@ class _Flattener:
         for port in x.ports.values():
             if port.name in x.values | x.nodes | x.functions or any(
                     isinstance(s, ast.Element) and s.name == port.name for s in model.body):
-                self.report(_error("E302", f"'{port.name}' is defined twice: as a port and as another name "
+                self.report(_error(codes.E302, f"'{port.name}' is defined twice: as a port and as another name "
                                            f"of model '{model.name}'", port.span,
                                    hint="ports share the model's namespace; rename the port or the other name"))
         # Instances first, so that references into them resolve.
@@ -294,7 +295,7 @@ class _Flattener:
             path = prefix + statement.name
             if any(sub is seen for seen, _ in stack):
                 cycle = " -> ".join([name for _, name in stack] + [sub.name])
-                self.report(_error("E332", f"model '{sub.name}' instantiates itself: {cycle}", statement.kind_span,
+                self.report(_error(codes.E332, f"model '{sub.name}' instantiates itself: {cycle}", statement.kind_span,
                                    hint="a component cannot contain itself, directly or through others"))
                 continue
             relocated = _relocate(sub, path)
@@ -304,7 +305,7 @@ class _Flattener:
                 if prefix:
                     raise
                 # reported at the instance in the model itself, with the component it starts from
-                self.report(_error("E319", f"instance '{statement.name}' of '{sub.name}' expands to more than "
+                self.report(_error(codes.E319, f"instance '{statement.name}' of '{sub.name}' expands to more than "
                                            f"{self.limit} statements (its components instantiate others at "
                                            f"every level)", statement.kind_span.to(statement.name_span),
                                    hint="instantiate fewer components in each other, or write the repeated "
@@ -335,13 +336,13 @@ class _Flattener:
                     self.unbonded_ports(x, expansion, statement)
         for port in x.ports.values():
             if port.end is None:
-                self.report(_error("E333", f"port '{port.name}' is not bonded inside model '{model.name}'",
+                self.report(_error(codes.E333, f"port '{port.name}' is not bonded inside model '{model.name}'",
                                    port.span, hint="bond each port exactly once inside its model, e.g. "
                                                    f"'{port.name} -> j'"))
         if not prefix:
             for name, item in x.inputs.items():
                 if item.value is None and not item.external and not self.standalone:
-                    self.report(_error("E334", f"input '{name}' has no value", item.name_span,
+                    self.report(_error(codes.E334, f"input '{name}' has no value", item.name_span,
                                        hint=f"give it one ('input {name} = ...') or use model '{model.name}' as "
                                             f"a component whose instances bind it"))
         return x
@@ -354,7 +355,7 @@ class _Flattener:
         for port in sub.ports.values():
             if port.used is not None or port.end is None:
                 continue
-            self.report(_error("E343", f"port '{port.name}' of instance '{path}' is not bonded",
+            self.report(_error(codes.E343, f"port '{port.name}' of instance '{path}' is not bonded",
                                statement.name_span,
                                hint=f"bond it once outside, e.g. '{path}.{port.name} -> j' or 'j -> "
                                     f"{path}.{port.name}' (every port of a component carries one bond)"))
@@ -380,13 +381,13 @@ class _Flattener:
         for law in statement.laws:
             if not isinstance(law, ast.LawAssign):
                 written = law.func if isinstance(law, ast.LawCall) else "state"
-                self.report(_error("E335", f"an instance takes bindings 'NAME = value', not '{written} ...'",
+                self.report(_error(codes.E335, f"an instance takes bindings 'NAME = value', not '{written} ...'",
                                    law.span, hint=f"bind a parameter or input of '{sub.model.name}', e.g. "
                                                   f"'{next(iter(sorted(sub.params)), 'k')} = 2'"))
                 continue
             name = law.target
             if name in bound:
-                self.report(_error("E302", f"'{name}' is bound twice in instance '{path}'", law.target_span,
+                self.report(_error(codes.E302, f"'{name}' is bound twice in instance '{path}'", law.target_span,
                                    related=[Related(bound[name], "first bound here")]))
                 continue
             bound[name] = law.target_span
@@ -396,7 +397,7 @@ class _Flattener:
                                                   f"instance '{path}'"))
             elif name in sub.inputs:
                 if law.unit is not None:
-                    self.report(_error("E336", f"input '{name}' is bound to a signal, which takes no unit",
+                    self.report(_error(codes.E336, f"input '{name}' is bound to a signal, which takes no unit",
                                        law.unit.span, hint="inputs are computed in SI: write the expression "
                                                            "in SI units"))
                 flat_name = sub.prefix + name
@@ -424,14 +425,14 @@ class _Flattener:
                                 changed = True
             else:
                 kinds = sorted(sub.params | set(sub.inputs))
-                self.report(_error("E337", f"model '{sub.model.name}' has no parameter or input '{name}'",
+                self.report(_error(codes.E337, f"model '{sub.model.name}' has no parameter or input '{name}'",
                                    law.target_span,
                                    hint=_hints(_did_you_mean(name, kinds),
                                                f"it can bind: {', '.join(kinds)}" if kinds else
                                                "it has no parameters or inputs")))
         for name, item in sub.inputs.items():
             if item.value is None and not item.external and name not in bound:
-                self.report(_error("E334", f"instance '{path}' must bind input '{name}' of '{sub.model.name}' "
+                self.report(_error(codes.E334, f"instance '{path}' must bind input '{name}' of '{sub.model.name}' "
                                            f"(it has no default)", statement.name_span,
                                    hint=f"add '{name} = ...' to the instance's bindings",
                                    related=[Related(item.name_span, "declared here")]))
@@ -456,13 +457,13 @@ class _Flattener:
             own = [(end, side) for end, side in ((tail, "tail"), (head, "head")) if end[0] == "port"]
             if own:
                 if len(own) == 2:
-                    self.report(_error("E338", "a bond cannot join two ports of the same model", span,
+                    self.report(_error(codes.E338, "a bond cannot join two ports of the same model", span,
                                        hint="put a junction between them: 'a -> j -> b'"))
                     continue
                 (kind, port), side = own[0]
                 other = head if side == "tail" else tail
                 if port.end is not None:
-                    self.report(_error("E339", f"port '{port.name}' is bonded twice inside its model", span,
+                    self.report(_error(codes.E339, f"port '{port.name}' is bonded twice inside its model", span,
                                        hint="a port is one bond through the boundary; join more bonds at a "
                                             "junction inside",
                                        related=[Related(port.bond_span, "first bonded here")]))
@@ -512,19 +513,19 @@ class _Flattener:
         sub, port_name, written = what
         if port_name is None:
             ports = list(sub.ports)
-            self.report(_error("E340", f"'{written.name}' is an instance of '{sub.model.name}': bond one of its "
+            self.report(_error(codes.E340, f"'{written.name}' is an instance of '{sub.model.name}': bond one of its "
                                        f"ports", written.span,
                                hint=f"write {' or '.join(f'{written.name}.{p}' for p in ports[:3]) or 'a port'}"
                                if ports else f"model '{sub.model.name}' declares no ports"))
             return None
         port = sub.ports.get(port_name)
         if port is None:
-            self.report(_error("E341", f"model '{sub.model.name}' has no port '{port_name}'", written.span,
+            self.report(_error(codes.E341, f"model '{sub.model.name}' has no port '{port_name}'", written.span,
                                hint=_hints(_did_you_mean(port_name, sub.ports),
                                            f"its ports: {', '.join(sub.ports) or 'none'}")))
             return None
         if port.used is not None:
-            self.report(_error("E339", f"port '{written.name}.{port_name}' is bonded twice", written.span,
+            self.report(_error(codes.E339, f"port '{written.name}.{port_name}' is bonded twice", written.span,
                                hint="a port is one bond through the boundary; join more bonds at a junction "
                                     "outside",
                                related=[Related(port.used, "first bonded here")]))
@@ -535,7 +536,7 @@ class _Flattener:
         if into != port.inward:
             outside = "into" if into else "out of"
             inside = "from the port inward" if port.inward else "toward the port"
-            self.report(_error("E342", f"the bonds at port '{written.name}.{port_name}' disagree on the power "
+            self.report(_error(codes.E342, f"the bonds at port '{written.name}.{port_name}' disagree on the power "
                                        f"direction: outside it points {outside} the component, inside it points "
                                        f"{inside}", bond_span,
                                hint="reverse one of the two bonds (a port's power goes in on both sides or out "
@@ -628,7 +629,7 @@ class _Renamer:
             message = f"instance '{written}' of '{sub.model.name}' has no '{head}'"
             hint = _hints(_did_you_mean(head, members), f"it has: {', '.join(members[:12])}"
                           + (", ..." if len(members) > 12 else ""))
-        self.flattener.report(_error("E312", message, node.span, hint=hint))
+        self.flattener.report(_error(codes.E312, message, node.span, hint=hint))
         return ast.Num(0.0, "0", node.span)
 
     # -- statements

@@ -20,6 +20,7 @@ import stat
 import tempfile
 from pathlib import Path
 from typing import BinaryIO, Callable
+from bondc import codes
 
 
 _KINDS = ((stat.S_ISDIR, "a folder"), (stat.S_ISLNK, "a symbolic link"), (stat.S_ISFIFO, "a named pipe"),
@@ -43,7 +44,7 @@ def check_output(path: str | os.PathLike, what: str = "the output", make_folder:
     parent = path.parent if str(path.parent) else Path(".")
 
     def refuse(reason, hint):
-        raise UsageError(Diagnostic("error", "E003", f"cannot write {what} '{path}': {reason}", hint=hint))
+        raise UsageError(Diagnostic("error", codes.E003, f"cannot write {what} '{path}': {reason}", hint=hint))
 
     try:
         info = os.lstat(path)
@@ -103,7 +104,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[BinaryIO], None]) -> 
         except Exception:       # noqa: BLE001  (nowhere to keep it: say so)
             kept = None
         where = f"; the content is kept in '{kept}'" if kept else ""
-        raise UsageError(Diagnostic("error", "E004", f"cannot write '{path}': {error.strerror or error}{where}",
+        raise UsageError(Diagnostic("error", codes.E004, f"cannot write '{path}': {error.strerror or error}{where}",
                                     hint="free some space or choose another folder, then copy the kept file "
                                          "there" if kept else "free some space or choose another folder")) from None
     finally:
@@ -196,7 +197,7 @@ def read_source(path, name: str | None = None):
         reason, hint = "it is not UTF-8 text", "save the model as UTF-8"
     except OSError as error:
         reason = error.strerror or str(error)
-    raise UsageError(Diagnostic("error", "E002", f"cannot read '{name}': {reason}", hint=hint))
+    raise UsageError(Diagnostic("error", codes.E002, f"cannot read '{name}': {reason}", hint=hint))
 
 
 def cache_dir() -> Path:

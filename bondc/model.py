@@ -23,6 +23,7 @@ from bondc import ast
 from bondc.kinds import JUNCTION_KINDS, JUNCTIONS, KINDS, RESISTOR, STORAGE, JunctionKind, Kind
 from bondc.scope import Scope
 from bondc.source import NO_SPAN, Source, Span
+from bondc import codes
 
 if TYPE_CHECKING:       # (flatten builds the instances; the graph only carries them)
     from bondc.flatten import Instance
@@ -293,7 +294,7 @@ def external_input_notes(graph, supplied=()) -> list:
             continue
         value = getattr(signal, "default", None)
         shown = "" if value is None else f" {value:g}" + (f" {signal.unit_text}" if signal.unit_text else "")
-        notes.append(Diagnostic("info", "I346", f"input {name} is external: nothing supplies it, so its default"
+        notes.append(Diagnostic("info", codes.I346, f"input {name} is external: nothing supplies it, so its default"
                                                 f"{shown} is used",
                                 signal.name_span if signal.name_span != NO_SPAN else signal.span,
                                 hint=f"supply it: bondc simulate --input {name}=FILE.csv[:COLUMN], or "

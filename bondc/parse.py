@@ -31,6 +31,7 @@ from lark.exceptions import GrammarError, UnexpectedCharacters, UnexpectedEOF, U
 from bondc import ast
 from bondc.errors import Diagnostic, ParseError, Related
 from bondc.source import Source, Span
+from bondc import codes
 
 #: Python's default of 1000 nested calls is reached by a sum of a few hundred terms: the parser,
 #: the syntax tree and the translation to sympy follow an operator chain one call per term.
@@ -664,9 +665,9 @@ def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnost
         if char == '"':
             end = source.text.find("\n", offset)
             end = len(source.text) if end < 0 else end
-            return Diagnostic("error", "E102", "unterminated string", source.span(offset, end),
+            return Diagnostic("error", codes.E102, "unterminated string", source.span(offset, end),
                               hint='close the string with " on the same line'), offset
-        return Diagnostic("error", "E101", f"unexpected character {char!r}", span,
+        return Diagnostic("error", codes.E101, f"unexpected character {char!r}", span,
                           hint="names are letters, digits and '_'; comments start with '#'"), offset
     token = getattr(error, "token", None)
     expected = getattr(error, "expected", None) or getattr(error, "accepts", None) or set()
@@ -674,16 +675,16 @@ def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnost
         offset = len(source.text)
         span = source.span(max(offset - 1, 0), offset)
         hint = "every 'model' and 'experiment' block is closed by 'end'" if "END" in expected else None
-        return Diagnostic("error", "E103", f"unexpected end of file; expected {_describe_expected(expected)}",
+        return Diagnostic("error", codes.E103, f"unexpected end of file; expected {_describe_expected(expected)}",
                           span, hint=hint), offset
     offset = token.start_pos if token.start_pos is not None else 0
     end = token.end_pos if token.end_pos is not None and token.type != "_NL" else offset + 1
     span = source.span(offset, end)
     if str(token) in ("if", "not") and "LPAR" in expected:  # an operand, not a name, was meant
-        return Diagnostic("error", "E100", f"unexpected '{token}' here; an operand of an operator cannot start with it",
+        return Diagnostic("error", codes.E100, f"unexpected '{token}' here; an operand of an operator cannot start with it",
                           span, hint=f"put the '{token}' expression in parentheses, e.g. 2*({token} ...)"), offset
     if str(token) in KEYWORDS and "NAME" in expected:
-        return Diagnostic("error", "E104", f"'{token}' is a keyword and cannot be used as a name", span,
+        return Diagnostic("error", codes.E104, f"'{token}' is a keyword and cannot be used as a name", span,
                           hint=f"choose another name, e.g. '{token}_'"), offset
     hint = None
     line_start = source.text.rfind("\n", 0, offset) + 1
@@ -695,7 +696,7 @@ def _syntax_diagnostic(error: UnexpectedInput, source: Source) -> tuple[Diagnost
     elif token.type == "EQUAL" and statement.startswith(("when ", "if ")) or " if " in statement and \
             token.type == "EQUAL":
         hint = "a comparison is written '==' ('=' assigns)"
-    return Diagnostic("error", "E100", f"unexpected {_token_text(token)}; expected {_describe_expected(expected)}",
+    return Diagnostic("error", codes.E100, f"unexpected {_token_text(token)}; expected {_describe_expected(expected)}",
                       span, hint=hint), offset
 
 
@@ -721,14 +722,14 @@ def parse_source(source: Source) -> ast.File:
                     diagnostics[-1].span.line == diagnostic.span.line and diagnostics[-1].message == diagnostic.message)):
                 break  # no progress: stop rather than report the same place (or line) twice
             unclosed = _unclosed_when(text, offset)
-            if unclosed is not None and diagnostic.code in ("E100", "E104"):
+            if unclosed is not None and diagnostic.code in (codes.E100, codes.E104):
                 # a forgotten 'end': one error, at the statement the block ran into; the block goes
                 opened, statement = unclosed
                 where = source.span(opened, opened + 4)
                 word = re.match(r"\w+|->|\S", text[statement:])
                 width = len(word.group()) if word else 1
                 diagnostics.append(replace(
-                    diagnostic, code="E100", span=source.span(statement, statement + width),
+                    diagnostic, code=codes.E100, span=source.span(statement, statement + width),
                     message=f"the 'when' block of line {where.line} is not closed before this statement",
                     hint="close it with 'end': on a line of its own after its statements, or at the end of a "
                          "one-line block (when c then d = 1 end)",
@@ -738,7 +739,7 @@ def parse_source(source: Source) -> ast.File:
                 continue
             explained = _unclosed(diagnostic, source, offset)
             diagnostics.append(explained)
-            if diagnostic.code == "E103" or len(diagnostics) >= MAX_SYNTAX_ERRORS or explained is not diagnostic:
+            if diagnostic.code == codes.E103 or len(diagnostics) >= MAX_SYNTAX_ERRORS or explained is not diagnostic:
                 break   # (past an unclosed bracket the rest of the file is one statement: no more to say)
             start, end = _statement_extent(text, offset)
             header = text[start:end].lstrip()
@@ -758,7 +759,7 @@ def parse_source(source: Source) -> ast.File:
     try:
         items = _ToAst(source).transform(tree)
     except VisitError as error:  # a bug in a transformer method, not in the model
-        raise ParseError(Diagnostic("error", "E199", f"internal error while reading the model: {error.orig_exc}",
+        raise ParseError(Diagnostic("error", codes.E199, f"internal error while reading the model: {error.orig_exc}",
                                     source.span(0, 0))) from error
     # Trailing blanks (and the \r of a CRLF file) are layout, not part of a comment.
     file_comments = tuple(ast.Comment(str(tok).rstrip(), source.span(tok.start_pos, tok.end_pos)) for tok in comments)

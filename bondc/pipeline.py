@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any, Iterator, Mapping, Sequence
 
 from bondc import ast
 from bondc.errors import Diagnostic
+from bondc import codes
 
 if TYPE_CHECKING:
     import os
@@ -88,7 +89,7 @@ def parse_sets(sets: Sequence[SetText] | None) -> list[ast.SetValue]:
         except ParseError as error:
             first = error.diagnostics[0]
             detail = first.message[:1].lower() + first.message[1:]
-            raise UsageError(Diagnostic("error", "E007", f"--set {item!r} is not NAME=VALUE [unit]: {detail}",
+            raise UsageError(Diagnostic("error", codes.E007, f"--set {item!r} is not NAME=VALUE [unit]: {detail}",
                                         first.span, hint=SET_HINT), error.sources) from None
     return parsed
 

@@ -81,6 +81,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Mapping, Sequence
 import sympy
 
 from bondc.symbolic import as_sympy
+from bondc import codes
 
 if TYPE_CHECKING:
     import numpy as np
@@ -320,7 +321,7 @@ class NumericModel:
             block = self.ss.algebraic_blocks[number]
             through = ", ".join(block.nodes) or ", ".join(u.name for u in block.unknowns)
             raise AnalysisError(Diagnostic(
-                "error", "E941", f"cannot evaluate the state equations at the operating point: the algebraic loop "
+                "error", codes.E941, f"cannot evaluate the state equations at the operating point: the algebraic loop "
                                  f"through {through} has no solution found there",
                 hint="linearise at another point (another initial value, or --at equilibrium), or break the loop "
                      "with a small storage element"))
@@ -338,10 +339,10 @@ class NumericModel:
             try:
                 return self._run(float(t), list(x), self._fixed(inputs))
             except CsvError as error:           # as a simulation says it (E804)
-                raise DataError(Diagnostic("error", "E804", f"cannot read a measured signal: {error}")) from None
+                raise DataError(Diagnostic("error", codes.E804, f"cannot read a measured signal: {error}")) from None
             except (ArithmeticError, ValueError, TypeError) as error:   # a division by zero, a domain error
                 raise AnalysisError(Diagnostic(
-                    "error", "E941", f"cannot evaluate the state equations at the operating point (t = {float(t):g}): "
+                    "error", codes.E941, f"cannot evaluate the state equations at the operating point (t = {float(t):g}): "
                                      f"{error}",
                     hint="linearise at another point (another initial value, or --at equilibrium), or check the "
                          "parameters a law divides by")) from None

@@ -41,6 +41,7 @@ from sympy.core.symbol import Str as _SymStr
 from bondc import ast
 from bondc.errors import Diagnostic, EquationError
 from bondc.evaluate import ExpansionBudget, Exploded
+from bondc import codes
 
 # ------------------------------------------------------------ signal functions
 
@@ -196,7 +197,7 @@ class Csv(sympy.Function):
 
     def fdiff(self, argindex=1):
         raise EquationError(Diagnostic(
-            "error", "E703",
+            "error", codes.E703,
             f"the time derivative of the measured signal csv(\"{Path(self.path).name}\", \"{self.column}\") "
             "is needed (derivative causality) but a measured signal cannot be differentiated"))
 
@@ -248,7 +249,7 @@ class External(sympy.Function):
 
     def fdiff(self, argindex=1):
         raise EquationError(Diagnostic(
-            "error", "E703",
+            "error", codes.E703,
             f"the time derivative of the external input '{self.name}' is needed (derivative causality) but "
             "a signal the host supplies cannot be differentiated"))
 
@@ -365,7 +366,7 @@ TRANSLATION_IN_ALL = 50_000
 
 
 def _fail(node, message: str, hint: str | None = None) -> EquationError:
-    return EquationError(Diagnostic("error", "E701", message, getattr(node, "span", None) or _no_span(), hint=hint))
+    return EquationError(Diagnostic("error", codes.E701, message, getattr(node, "span", None) or _no_span(), hint=hint))
 
 
 def _no_span():

@@ -32,6 +32,7 @@ from typing import Union
 
 from bondc import ast
 from bondc.errors import Diagnostic
+from bondc import codes
 
 # Storage order of SIUnit.dims. "rad" is the angle pseudo-dimension.
 BASE_DIMENSIONS = ("m", "kg", "s", "A", "K", "mol", "cd", "rad")
@@ -385,7 +386,7 @@ def resolve(unit: ast.Unit) -> tuple[SIUnit | None, list[Diagnostic]]:
         if entry is None:
             found = _suggestions(factor.name)
             diagnostics.append(Diagnostic(
-                "error", "E201", f"unknown unit '{factor.name}'", factor.span,
+                "error", codes.E201, f"unknown unit '{factor.name}'", factor.span,
                 hint=_hint(factor.name, found),
                 suggestions=() if factor.name.lower() in _OFFSET_SCALES else tuple(found)))
             continue

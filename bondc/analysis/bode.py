@@ -52,6 +52,7 @@ from typing import TYPE_CHECKING, Mapping, Sequence
 import numpy as np
 
 from bondc.errors import AnalysisError, Diagnostic, UsageError
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.analysis.linearize import Linearization
@@ -315,24 +316,24 @@ def parse_frequency(text, option: str) -> float:
         try:
             parsed = parse_set_value(f"f = {text}", option)
         except BondcError:
-            raise _usage("E944", f"{option} '{text}' is not a frequency", hint=hint) from None
+            raise _usage(codes.E944, f"{option} '{text}' is not a frequency", hint=hint) from None
         node, sign = parsed.value, 1.0
         while isinstance(node, Unary) and node.op in "+-":
             sign = -sign if node.op == "-" else sign
             node = node.operand
         if not isinstance(node, Num):
-            raise _usage("E944", f"{option} '{text}' is not a number with a unit", hint=hint)
+            raise _usage(codes.E944, f"{option} '{text}' is not a number with a unit", hint=hint)
         value = sign * float(node.value)
         if parsed.unit is not None:
             unit, _ = resolve(parsed.unit)
             s, rad = unit.dims[2] if unit else None, unit.dims[7] if unit else None
             others = [d for i, d in enumerate(unit.dims) if i not in (2, 7)] if unit else [1]
             if unit is None or s != -1 or rad not in (0, 1) or any(others):
-                raise _usage("E944", f"{option} '{text}': [{parsed.unit.text}] is not a unit of frequency",
+                raise _usage(codes.E944, f"{option} '{text}': [{parsed.unit.text}] is not a unit of frequency",
                              hint="give Hz (the default), kHz, rad/s, rpm or 1/s")
             value = value * float(unit.factor) / (2.0 * math.pi if rad == 1 else 1.0)
     if not math.isfinite(value) or value <= 0:
-        raise _usage("E944", f"{option} must be a positive frequency, not {value:g} Hz",
+        raise _usage(codes.E944, f"{option} must be a positive frequency, not {value:g} Hz",
                      hint="frequencies are in Hz and the plot is logarithmic: give a value above 0")
     return value
 
@@ -343,10 +344,10 @@ def parse_points(value) -> int:
     try:
         number = int(text)
     except ValueError:
-        raise _usage("E945", f"--points '{text}' is not a whole number",
+        raise _usage(codes.E945, f"--points '{text}' is not a whole number",
                      hint=f"e.g. --points {DEFAULT_POINTS}") from None
     if not 2 <= number <= MAX_POINTS:
-        raise _usage("E945", f"--points must be from 2 to {MAX_POINTS}, not {number}",
+        raise _usage(codes.E945, f"--points must be from 2 to {MAX_POINTS}, not {number}",
                      hint=f"the default is {DEFAULT_POINTS}, spaced logarithmically")
     return number
 
@@ -376,7 +377,7 @@ def frequency_grid(eigenvalues, low=None, high=None, points: int = DEFAULT_POINT
     elif high is None:
         high = max(chosen[1], low * 100.0)
     if not low < high:
-        raise _usage("E944", f"the frequency range is empty: --from {low:g} Hz is not below --to {high:g} Hz",
+        raise _usage(codes.E944, f"the frequency range is empty: --from {low:g} Hz is not below --to {high:g} Hz",
                      hint="give --from below --to (both in Hz unless a unit is given)")
     return np.geomspace(low, high, points), notes
 
@@ -403,14 +404,14 @@ def chosen_names(ss, names: Sequence[str] | None, what: str) -> list[str]:
     option = f"--{what}"
     known = list(ss.inputs if what == "input" else ss.outputs)
     if not known:
-        raise _usage("E942", f"the model has no {what}s",
+        raise _usage(codes.E942, f"the model has no {what}s",
                      hint=(f"declare the signal to excite as 'input U [UNIT] = ...' (a source's law "
                            f"'e = U')" if what == "input" else
                            "declare what to measure as 'output Y [UNIT] = ...'"))
     if not names:
         if len(known) == 1:
             return known
-        raise _usage("E942", f"the model has {len(known)} {what}s: say which with {option}",
+        raise _usage(codes.E942, f"the model has {len(known)} {what}s: say which with {option}",
                      hint=f"its {what}s: {', '.join(known)}")
     chosen = []
     for name in names:
@@ -420,14 +421,14 @@ def chosen_names(ss, names: Sequence[str] | None, what: str) -> list[str]:
             continue
         kind = _kind_of(ss, name)
         if kind is not None:
-            raise _usage("E943", f"{option} '{name}' is {kind}, not an {what}",
+            raise _usage(codes.E943, f"{option} '{name}' is {kind}, not an {what}",
                          hint=(f"the model's {what}s: {', '.join(known)}"
                                + ("; to excite a parameter, make it an input ('input U [UNIT] = value') and use it "
                                   "in the law" if what == "input" and kind == "a parameter" else "")
                                + ("; to see a state, declare 'output Y = STATE'" if what == "output" and kind == "a state"
                                   else "")))
         close = difflib.get_close_matches(name, known, n=1)
-        raise _usage("E942", f"the model has no {what} '{name}'",
+        raise _usage(codes.E942, f"the model has no {what} '{name}'",
                      hint=(f"did you mean '{close[0]}'? " if close else "") + f"its {what}s: {', '.join(known)}")
     return chosen
 
@@ -494,7 +495,7 @@ def switches_at_point(ss, lin) -> list[Diagnostic]:
             span = next((span for span in spans if span is not None), NO_SPAN)
             text = readable(readable_names(graph), str(g)) if graph is not None else str(g)
             found.append(Diagnostic(
-                "warning", "W942",
+                "warning", codes.W942,
                 f"the operating point sits on a switch of the model: {text} = 0 there, where the law has a kink or a "
                 f"jump (a stuck friction, a valve at its opening, a backlash at its edge); the linear model "
                 f"takes the slope of one side, and the response holds only for motion to that side",
@@ -566,7 +567,7 @@ def verify(ss, lin, pairs: Sequence[tuple[str, str]], frequencies_hz, amplitudes
 
     if not _at_rest(ss, lin):
         raise AnalysisError(Diagnostic(
-            "error", "E946", f"--verify needs an operating point at rest, and the model is moving at the {lin.at} point "
+            "error", codes.E946, f"--verify needs an operating point at rest, and the model is moving at the {lin.at} point "
                              f"(t = {lin.time:g} s): the linear model describes small motions around a trajectory there, "
                              "which a sine on the input cannot be compared with",
             hint="verify at an equilibrium: --at equilibrium"))
@@ -574,7 +575,7 @@ def verify(ss, lin, pairs: Sequence[tuple[str, str]], frequencies_hz, amplitudes
     scale = max(float(np.max(np.abs(lin.eigenvalues))) if lin.eigenvalues.size else 1.0, 1e-300)
     if np.any(real > 1e-9 * scale):
         raise AnalysisError(Diagnostic(
-            "error", "E946", "--verify cannot measure a steady response: the linear model has a growing mode "
+            "error", codes.E946, "--verify cannot measure a steady response: the linear model has a growing mode "
                              f"(eigenvalue {lin.eigenvalues[int(np.argmax(real))]:.4g}), so the simulated model drifts "
                              "away from the operating point",
             hint="verify a stable operating point (an equilibrium that is stable), or close the loop in the model"))
@@ -617,7 +618,7 @@ def verify(ss, lin, pairs: Sequence[tuple[str, str]], frequencies_hz, amplitudes
                 pred_db, pred_deg = 20.0 * math.log10(abs(predicted)), math.degrees(np.angle(predicted))
                 if not result.complete:
                     message = result.message or "the run stopped early"
-                    warnings.append(Diagnostic("warning", "W944", f"--verify: the run at {f:.4g} Hz did not complete "
+                    warnings.append(Diagnostic("warning", codes.W944, f"--verify: the run at {f:.4g} Hz did not complete "
                                                                   f"({message})",
                                                hint="a smaller --amplitude, or a model that runs at this input"))
                     checks[(input_name, output)].append(Check(float(f), pred_db, pred_deg, None, None, None, None,
@@ -633,7 +634,7 @@ def verify(ss, lin, pairs: Sequence[tuple[str, str]], frequencies_hz, amplitudes
                                                           sim_deg, error_db, error_deg))
                 if abs(error_db) > VERIFY_DB or abs(error_deg) > VERIFY_DEG:
                     warnings.append(Diagnostic(
-                        "warning", "W943",
+                        "warning", codes.W943,
                         f"--verify: at {f:.4g} Hz the model's {output}/{input_name} differs from the linear prediction by "
                         f"{error_db:+.3g} dB and {error_deg:+.3g} deg",
                         hint="the model is not linear over the sine's amplitude there (a smaller --amplitude), or the "
@@ -664,21 +665,21 @@ def parse_amplitude(text, unit_text: str | None, name: str) -> float:
     try:
         parsed = parse_set_value(f"a = {text}", "--amplitude")
     except BondcError:
-        raise _usage("E946", f"--amplitude '{text}' is not a number", hint=hint) from None
+        raise _usage(codes.E946, f"--amplitude '{text}' is not a number", hint=hint) from None
     if not isinstance(parsed.value, Num):
-        raise _usage("E946", f"--amplitude '{text}' is not a positive number", hint=hint)
+        raise _usage(codes.E946, f"--amplitude '{text}' is not a positive number", hint=hint)
     value = float(parsed.value.value)
     declared = unit_of(unit_text) if unit_text else None
     if parsed.unit is not None:
         unit, _ = resolve(parsed.unit)
         if unit is None or (declared is not None and tuple(unit.dims) != tuple(declared.dims)):
-            raise _usage("E946", f"--amplitude '{text}': [{parsed.unit.text}] is not a unit of input '{name}'"
+            raise _usage(codes.E946, f"--amplitude '{text}': [{parsed.unit.text}] is not a unit of input '{name}'"
                                  + (f" [{unit_text}]" if unit_text else ""), hint=hint)
         value *= float(unit.factor)
     elif declared is not None:
         value *= float(declared.factor)
     if not math.isfinite(value) or value <= 0:
-        raise _usage("E946", f"--amplitude must be positive, not {value:g}", hint=hint)
+        raise _usage(codes.E946, f"--amplitude must be positive, not {value:g}", hint=hint)
     return value
 
 

@@ -75,6 +75,7 @@ import numpy as np
 
 from bondc.errors import BondcError, DataError, Diagnostic, UsageError
 from bondc.source import NO_SPAN, Span
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.pipeline import Derived
@@ -129,19 +130,19 @@ def parse_compare(text: str) -> FitCompare:
     output, equals, column = head.partition("=")
     output, column = output.strip(), column.strip()
     if not equals or not _SIGNAL.fullmatch(output) or not column or "=" in column:
-        raise _usage("E880", f"--compare '{text}' is not OUT=COLUMN[:weight=W]", hint=_COMPARE_HINT)
+        raise _usage(codes.E880, f"--compare '{text}' is not OUT=COLUMN[:weight=W]", hint=_COMPARE_HINT)
     weight = 1.0
     if colon:
         key, eq, value = tail.partition("=")
         if key.strip().lower() != "weight" or not eq:
-            raise _usage("E880", f"--compare '{text}': '{tail.strip()}' is not weight=W",
+            raise _usage(codes.E880, f"--compare '{text}': '{tail.strip()}' is not weight=W",
                          hint=_COMPARE_HINT + " (a fit takes no tolerances; bondc validate does)")
         try:
             weight = float(value)
         except ValueError:
             weight = math.nan
         if not (math.isfinite(weight) and weight > 0):
-            raise _usage("E880", f"--compare '{text}': the weight '{value.strip()}' is not a positive number",
+            raise _usage(codes.E880, f"--compare '{text}': the weight '{value.strip()}' is not a positive number",
                          hint=_COMPARE_HINT)
     return FitCompare(output, column, weight, text.strip())
 
@@ -173,7 +174,7 @@ def _bound(text: str, spec: str) -> float | None:
     except ValueError:
         value = math.nan
     if not math.isfinite(value):
-        raise _usage("E881", f"--estimate '{spec}': the bound '{text}' is not a finite number", hint=_ESTIMATE_HINT)
+        raise _usage(codes.E881, f"--estimate '{spec}': the bound '{text}' is not a finite number", hint=_ESTIMATE_HINT)
     return value
 
 
@@ -181,22 +182,22 @@ def parse_estimate(text: str) -> Estimate:
     """``NAME[=LOW:HIGH] [unit]`` -> :class:`Estimate` (E881 syntax, E884 LOW >= HIGH)."""
     match = _ESTIMATE.match(text)
     if match is None or not _SIGNAL.fullmatch(match["name"] or ""):
-        raise _usage("E881", f"--estimate '{text}' is not NAME[=LOW:HIGH] [unit]", hint=_ESTIMATE_HINT)
+        raise _usage(codes.E881, f"--estimate '{text}' is not NAME[=LOW:HIGH] [unit]", hint=_ESTIMATE_HINT)
     unit = match["unit"].strip() if match["unit"] is not None else None
     if unit == "":
-        raise _usage("E881", f"--estimate '{text}': the unit between [ ] is empty", hint=_ESTIMATE_HINT)
+        raise _usage(codes.E881, f"--estimate '{text}': the unit between [ ] is empty", hint=_ESTIMATE_HINT)
     low = high = None
     if match["bounds"] is not None:
         parts = match["bounds"].split(":")
         if len(parts) != 2:
-            raise _usage("E881", f"--estimate '{text}': the bounds '{match['bounds']}' are not LOW:HIGH",
+            raise _usage(codes.E881, f"--estimate '{text}': the bounds '{match['bounds']}' are not LOW:HIGH",
                          hint=_ESTIMATE_HINT)
         low, high = _bound(parts[0], text), _bound(parts[1], text)
         if low is not None and high is not None and not low < high:
-            raise _usage("E884", f"--estimate '{text}': the lower bound {low:g} is not below the upper bound "
+            raise _usage(codes.E884, f"--estimate '{text}': the lower bound {low:g} is not below the upper bound "
                                  f"{high:g}", hint="give LOW:HIGH with LOW < HIGH")
     elif unit is not None:
-        raise _usage("E881", f"--estimate '{text}': a unit without bounds", hint=_ESTIMATE_HINT)
+        raise _usage(codes.E881, f"--estimate '{text}': a unit without bounds", hint=_ESTIMATE_HINT)
     return Estimate(match["name"], low, high, unit, text.strip())
 
 
@@ -222,25 +223,25 @@ def parse_groups(items: Sequence[tuple[str, str]], experiment: str | None = None
             groups.append({"data": value, "compare": [], "experiment": None})
         elif not groups:
             if kind == "compare":
-                raise _usage("E889", f"--compare '{value}' comes before any --data",
+                raise _usage(codes.E889, f"--compare '{value}' comes before any --data",
                              hint="each --data starts a data set; give its --compare (and --experiment) after it")
             if experiment is not None and experiment != value:
-                raise _usage("E889", "two --experiment before the first --data",
+                raise _usage(codes.E889, "two --experiment before the first --data",
                              hint="give one default --experiment, or one after each --data")
             experiment = value
         elif kind == "compare":
             groups[-1]["compare"].append(parse_compare(value) if isinstance(value, str) else value)
         else:
             if groups[-1]["experiment"] is not None:
-                raise _usage("E889", f"data set '{groups[-1]['data']}' has two --experiment",
+                raise _usage(codes.E889, f"data set '{groups[-1]['data']}' has two --experiment",
                              hint="one experiment per --data: repeat --data for another experiment")
             groups[-1]["experiment"] = value
     if not groups:
-        raise _usage("E889", "bondc fit needs measured data: --data FILE --compare OUT=COLUMN",
+        raise _usage(codes.E889, "bondc fit needs measured data: --data FILE --compare OUT=COLUMN",
                      hint="e.g. bondc fit m.bg --data measured.csv --compare x=x_meas --estimate b")
     for group in groups:
         if not group["compare"]:
-            raise _usage("E889", f"data set '{group['data']}' has no --compare",
+            raise _usage(codes.E889, f"data set '{group['data']}' has no --compare",
                          hint="say which simulated signal each measured column is: --data FILE --compare OUT=COLUMN")
     return [DataSet(g["data"], tuple(g["compare"]), g["experiment"] if g["experiment"] is not None else experiment)
             for g in groups]
@@ -406,10 +407,10 @@ def _resolve_estimates(estimates: Sequence[Estimate], derived, sets) -> list[_Pa
     found = []
     for estimate in estimates:
         if estimate.name not in graph.parameters:
-            raise _usage("E882", f"--estimate '{estimate.text}': '{estimate.name}' is not a parameter of {graph.name}",
+            raise _usage(codes.E882, f"--estimate '{estimate.text}': '{estimate.name}' is not a parameter of {graph.name}",
                          hint=_did_you_mean(estimate.name, graph.parameters, "parameters"))
         if estimate.name in seen:
-            raise _usage("E888", f"'{estimate.name}' is estimated twice", hint="give it once, with its bounds")
+            raise _usage(codes.E888, f"'{estimate.name}' is estimated twice", hint="give it once, with its bounds")
         seen.add(estimate.name)
         parameter = graph.parameters[estimate.name]
         unit, factor = _declared_unit(parameter)
@@ -418,7 +419,7 @@ def _resolve_estimates(estimates: Sequence[Estimate], derived, sets) -> list[_Pa
             declared = _resolve_unit(unit) if unit else None
             if declared is not None and converter.dims != declared.dims or declared is None and \
                     not converter.is_dimensionless:
-                raise _usage("E881", f"--estimate '{estimate.text}': [{estimate.unit}] does not measure the same "
+                raise _usage(codes.E881, f"--estimate '{estimate.text}': [{estimate.unit}] does not measure the same "
                                      f"quantity as [{unit or '1'}], the unit of '{estimate.name}'",
                              hint=f"give the bounds in [{unit or '1'}] or a unit of the same kind")
             to_si = converter.to_si
@@ -431,7 +432,7 @@ def _resolve_estimates(estimates: Sequence[Estimate], derived, sets) -> list[_Pa
         initial = float(state_space.parameters[estimate.name][1])
         if not low <= initial <= high:
             shown = initial / factor
-            raise _usage("E885", f"--estimate '{estimate.text}': the start value {shown:.6g}"
+            raise _usage(codes.E885, f"--estimate '{estimate.text}': the start value {shown:.6g}"
                                  f"{' ' + unit if unit else ''} of '{estimate.name}' is outside its bounds",
                          hint=f"widen the bounds, or start inside them: --set \"{estimate.name}=VALUE\" gives the "
                               "start value")
@@ -444,7 +445,7 @@ def _not_late(estimate: Estimate, graph, why: str, span=None) -> UsageError:
 
     parameter = graph.parameters.get(estimate.name)
     return UsageError(Diagnostic(
-        "error", "E883", f"'{estimate.name}' cannot be estimated: {why}",
+        "error", codes.E883, f"'{estimate.name}' cannot be estimated: {why}",
         span if span is not None else (parameter.span if parameter is not None else NO_SPAN),
         hint="a fit gives the compiled model new values of its parameters at each evaluation; estimate a "
              "parameter that only enters the model's equations, and fix this one with --set"))
@@ -485,7 +486,7 @@ def _check_late(parameters: list[_Parameter], estimates, derived, path, model, e
                 first = error.diagnostics[0] if error.diagnostics else None
                 detail = f"{first.code}: {first.message}" if first is not None else str(error)
                 raise UsageError(Diagnostic(
-                    "error", "E892", f"--estimate '{by_name[parameter.name].text}': the model does not accept "
+                    "error", codes.E892, f"--estimate '{by_name[parameter.name].text}': the model does not accept "
                                      f"{parameter.name} = {value / parameter.factor:.6g}"
                                      f"{' ' + parameter.unit if parameter.unit else ''} ({detail})",
                     parameter.span, hint="give bounds inside the values the model accepts")) from None
@@ -513,18 +514,18 @@ def _load_group(dataset: DataSet, derived) -> _Group:
     experiment = derived.experiment
     t_end = getattr(experiment, "t_end", None)
     if t_end is None:
-        raise _usage("E801", "no end time for the simulation", hint="set t_end in the experiment")
+        raise _usage(codes.E801, "no end time for the simulation", hint="set t_end in the experiment")
     times = np.asarray(measured[TIME_KEY], dtype=float)
     inside = (times >= 0.0) & (times <= t_end)
     if np.count_nonzero(inside) < 2:
         raise DataError(Diagnostic(
-            "error", "E889", f"the measured data '{dataset.data}' (t = {times[0]:g} .. {times[-1]:g} s) and the "
+            "error", codes.E889, f"the measured data '{dataset.data}' (t = {times[0]:g} .. {times[-1]:g} s) and the "
                              f"run (t = 0 .. {t_end:g} s) share fewer than two samples",
             hint="check the experiment's t_end and the time column (seconds) of the data"))
     signals = []
     for spec in dataset.compare:
         if spec.column not in measured or spec.column == TIME_KEY:
-            raise DataError(Diagnostic("error", "E886", f"--compare '{spec.text}': the measured data "
+            raise DataError(Diagnostic("error", codes.E886, f"--compare '{spec.text}': the measured data "
                                                         f"'{dataset.data}' has no column '{spec.column}'",
                                        hint=_did_you_mean(spec.column, columns, "its columns")))
         check_quantity(graph, CompareSpec(spec.output, spec.column, text=spec.text),
@@ -701,13 +702,13 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
     the measured data read, a first run of every data set at the start values."""
     wanted = [e if isinstance(e, Estimate) else parse_estimate(e) for e in estimates]
     if not wanted:
-        raise _usage("E889", "bondc fit needs at least one --estimate NAME[=LOW:HIGH]",
+        raise _usage(codes.E889, "bondc fit needs at least one --estimate NAME[=LOW:HIGH]",
                      hint="name the parameters to estimate: --estimate b=5:30")
     datasets = [d if all(isinstance(c, FitCompare) for c in d.compare)
                 else DataSet(d.data, tuple(c if isinstance(c, FitCompare) else parse_compare(c) for c in d.compare),
                              d.experiment) for d in datasets]
     if not datasets:
-        raise _usage("E889", "bondc fit needs measured data: --data FILE --compare OUT=COLUMN")
+        raise _usage(codes.E889, "bondc fit needs measured data: --data FILE --compare OUT=COLUMN")
     # one derived (and compiled) model per experiment
     derived_of: dict = {}
     for dataset in datasets:
@@ -716,7 +717,7 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
     first = derived_of[datasets[0].experiment]
     for derived in derived_of.values():
         if derived.experiment is None:
-            raise _usage("E801", f"{derived.graph.name} has no experiment to run",
+            raise _usage(codes.E801, f"{derived.graph.name} has no experiment to run",
                          hint="add an experiment with t_end to the model")
     # the estimates and the data sets are checked independently: one run reports the problems of both
     problems: list[BondcError] = []
@@ -756,23 +757,23 @@ def prepare_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | 
                 outputs = list(group.derived.graph.outputs)
                 close = difflib.get_close_matches(signal.spec.output, list(signals), n=1)
                 raise DataError(Diagnostic(
-                    "error", "E887", f"--compare '{signal.spec.text}': '{signal.spec.output}' is not a signal of "
+                    "error", codes.E887, f"--compare '{signal.spec.text}': '{signal.spec.output}' is not a signal of "
                                      f"{group.derived.graph.name}",
                     hint=(f"did you mean '{close[0]}'? " if close else "") + "outputs: " + ", ".join(outputs)
                          + " (states and bond variables such as b3.e too)"))
         if not result.complete:
             cause = result.diagnostics[0] if result.diagnostics else None
             raise DataError(Diagnostic(
-                "error", "E891", f"the run of '{group.dataset.data}' fails at the start values: "
+                "error", codes.E891, f"the run of '{group.dataset.data}' fails at the start values: "
                                  + (f"{cause.code}: {cause.message}" if cause else result.message),
                 cause.span if cause is not None else _no_span(),
                 hint="start from values with which the model runs (bondc simulate), e.g. with --set"))
     r0 = evaluator.residuals(x0)
     if r0 is None:
-        raise DataError(Diagnostic("error", "E891", "the model gives no finite values at the start values",
+        raise DataError(Diagnostic("error", codes.E891, "the model gives no finite values at the start values",
                                    hint="start from values with which the model runs (bondc simulate)"))
     if r0.size <= len(names):
-        raise DataError(Diagnostic("error", "E889", f"{r0.size} measured samples cannot determine {len(names)} "
+        raise DataError(Diagnostic("error", codes.E889, f"{r0.size} measured samples cannot determine {len(names)} "
                                                     "parameters",
                                    hint="give more samples or estimate fewer parameters"))
     return FitProblem(str(path), list(datasets), first, parameters, groups, evaluator, diagnostics, r0)
@@ -795,7 +796,7 @@ def run_fit(path, *, datasets: Sequence[DataSet], estimates: Sequence[str | Esti
     from bondc.io import check_output
 
     if max_evaluations is not None and max_evaluations < 1:
-        raise _usage("E889", f"--max-evaluations must be at least 1, not {max_evaluations}")
+        raise _usage(codes.E889, f"--max-evaluations must be at least 1, not {max_evaluations}")
     if output is not None:
         if report is None:
             raise TypeError("run_fit: an output needs report, the function that writes it")
@@ -885,7 +886,7 @@ def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed
         involved = [i for i in range(n) if abs(direction[i]) > 0.1]
         undetermined.update(involved)
         diagnostics.append(Diagnostic(
-            "warning", "W881", "the Jacobian is singular: " + _names([names[i] for i in involved])
+            "warning", codes.W881, "the Jacobian is singular: " + _names([names[i] for i in involved])
                                + " cannot be determined from this data (changing "
                                + ("them together" if len(involved) > 1 else "it") + " along "
                                + ", ".join(f"{direction[i]:+.2f} {names[i]}" for i in involved)
@@ -907,7 +908,7 @@ def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed
         for j in range(i + 1, n):
             if abs(correlation[i, j]) > CORRELATION_LIMIT:
                 diagnostics.append(Diagnostic(
-                    "warning", "W880", f"'{names[i]}' and '{names[j]}' cannot be told apart: their estimates "
+                    "warning", codes.W880, f"'{names[i]}' and '{names[j]}' cannot be told apart: their estimates "
                                        f"correlate at {correlation[i, j]:+.4f}",
                     hint="the data determines only a combination of them: fix one with --set, or add data "
                          "(another signal, another experiment) that separates them"))
@@ -920,7 +921,7 @@ def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed
                    (math.isfinite(p.high) and abs(x[i] - p.high) <= 1e-9 * max(abs(p.high), scale[i]))
         if at_bound or solution.active_mask[i] != 0:
             diagnostics.append(Diagnostic(
-                "warning", "W882", f"the estimate of '{p.name}' is on its bound ({value:.6g}"
+                "warning", codes.W882, f"the estimate of '{p.name}' is on its bound ({value:.6g}"
                                    f"{' ' + p.unit if p.unit else ''}): its interval is not meaningful",
                 hint="widen the bounds, or check the model and the data"))
         fitted.append(ParameterFit(p.name, p.unit, p.initial / p.factor, float(value), float(err),
@@ -929,12 +930,12 @@ def _summarise(problem: FitProblem, x, r, Jz, solution, evaluations: int, failed
                                    None if not math.isfinite(p.high) else p.high / p.factor))
     if failed:
         diagnostics.append(Diagnostic(
-            "warning", "W884", f"the model failed to run at {failed} trial point"
+            "warning", codes.W884, f"the model failed to run at {failed} trial point"
                                f"{'s' if failed != 1 else ''} of the fit; the optimiser stepped back",
             hint="bounds that keep the parameters where the model runs make the fit faster"))
     if not converged:
         diagnostics.append(Diagnostic(
-            "warning", "W883", f"the fit did not converge after {evaluations} evaluations: {solution.message}",
+            "warning", codes.W883, f"the fit did not converge after {evaluations} evaluations: {solution.message}",
             hint="the values reached are reported; raise --max-evaluations, or start nearer (--set)"))
 
     signals = []

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Sequence
 
 from bondc.errors import Diagnostic, UsageError
+from bondc import codes
 
 #: The first line of every file ``bondc fit --write`` writes.
 MARKER = "# bondc fit: fitted values written by bondc fit"
@@ -34,7 +35,7 @@ MARKER = "# bondc fit: fitted values written by bondc fit"
 def _refuse(message: str, hint: str, span=None) -> UsageError:
     from bondc.source import NO_SPAN
 
-    return UsageError(Diagnostic("error", "E890", message, span or NO_SPAN, hint=hint))
+    return UsageError(Diagnostic("error", codes.E890, message, span or NO_SPAN, hint=hint))
 
 
 def _same(a, b) -> bool:

@@ -56,6 +56,7 @@ import numpy as np
 from bondc import ast, units
 from bondc.errors import DataError, Diagnostic, render_all
 from bondc.source import NO_SPAN, Source, Span
+from bondc import codes
 
 # The flagship's Table 3 values: the defaults of `bondc fit-friction`.
 DEFAULT_LEAD = 5.0e-3  # m per revolution
@@ -142,11 +143,11 @@ def read_csv_table(path: str | Path) -> Table:
         with open_data(path, encoding="utf-8-sig") as handle:
             text = handle.read()
     except CsvError as error:
-        raise DataError(Diagnostic("error", "E905", f"cannot read '{path}': "
+        raise DataError(Diagnostic("error", codes.E905, f"cannot read '{path}': "
                                                     f"{str(error).rpartition(': ')[2]}")) from None
     except (OSError, UnicodeDecodeError) as error:
         reason = error.strerror if isinstance(error, OSError) and error.strerror else str(error)
-        raise DataError(Diagnostic("error", "E905", f"cannot read '{path}': {reason}")) from None
+        raise DataError(Diagnostic("error", codes.E905, f"cannot read '{path}': {reason}")) from None
     source = Source(str(path), text, path)
     header: tuple[Cell, ...] = ()
     header_span = NO_SPAN
@@ -168,11 +169,11 @@ def read_csv_table(path: str | Path) -> Table:
             rows.append(cells)
             row_spans.append(span)
     if not header:
-        raise DataError(Diagnostic("error", "E901", "the file is empty: no header row and no data",
+        raise DataError(Diagnostic("error", codes.E901, "the file is empty: no header row and no data",
                                    Span(str(path), 0, 0, 0, 0),
                                    hint="the first line that is not a '#' comment names the columns"))
     if not rows:
-        raise DataError(Diagnostic("error", "E901", "the file has a header but no data rows", header_span))
+        raise DataError(Diagnostic("error", codes.E901, "the file has a header but no data rows", header_span))
     return Table(source, header, tuple(rows), header_span, tuple(row_spans))
 
 
@@ -229,19 +230,19 @@ def _unit_scale(quantity: Quantity, unit_text: str | None, span: Span) -> tuple[
         return 1.0, []
     unit = parse_unit_text(unit_text)
     if unit is None:
-        return 1.0, [Diagnostic("error", "E906", f"cannot read the unit '{unit_text}' of the {quantity.name} column",
+        return 1.0, [Diagnostic("error", codes.E906, f"cannot read the unit '{unit_text}' of the {quantity.name} column",
                                 span, hint=f"write it like '{quantity.si_unit}'")]
     si, problems = units.resolve(unit)
     if si is None:
         hints = [d.hint for d in problems if d.hint]
-        return 1.0, [Diagnostic("error", "E906", f"unknown unit '{unit_text}' in the {quantity.name} column",
+        return 1.0, [Diagnostic("error", codes.E906, f"unknown unit '{unit_text}' in the {quantity.name} column",
                                 span, hint=hints[0] if hints else f"write it like '{quantity.si_unit}'")]
     si_unit = parse_unit_text(quantity.si_unit)
     expected = units.resolve(si_unit)[0] if si_unit is not None else None
     if expected is None:
         raise ValueError(f"a quantity's SI unit that bondc cannot read: '{quantity.si_unit}'")
     if not units.compatible(si, expected):
-        return 1.0, [Diagnostic("error", "E906",
+        return 1.0, [Diagnostic("error", codes.E906,
                                 f"the {quantity.name} column is in '{unit_text}' ({si.dimension_text()}), "
                                 f"which is not a {quantity.name}", span,
                                 hint=f"expected a unit like '{quantity.si_unit}' ({expected.dimension_text()})")]
@@ -281,7 +282,7 @@ def resolve_columns(header: Sequence[Cell], quantities: Sequence[Quantity], wher
         if len(matches) > 1:
             shown = " and ".join(f"'{header[i].text}'" for i in matches)
             diagnostics.append(Diagnostic(
-                "error", "E902", f"two columns hold the {quantity.name}: {shown}", header[matches[1]].span,
+                "error", codes.E902, f"two columns hold the {quantity.name}: {shown}", header[matches[1]].span,
                 hint="keep one of them, or rename the other"))
             continue
         if matches:
@@ -306,7 +307,7 @@ def resolve_columns(header: Sequence[Cell], quantities: Sequence[Quantity], wher
         elif guess is not None:
             cell = header[free[guess[0]]]
             span, hint = cell.span, f"did you mean '{guess[1]}' for '{cell.text}'? {rule}"
-        diagnostics.append(Diagnostic("error", "E902",
+        diagnostics.append(Diagnostic("error", codes.E902,
                                       f"no {quantity.name} column; the header has {present}", span, hint=hint))
     return found, diagnostics
 
@@ -316,15 +317,15 @@ def parse_number(cell: Cell | Any, column: str, row_label: str) -> tuple[float |
     text = cell.text if isinstance(cell, Cell) else cell
     span = cell.span if isinstance(cell, Cell) else NO_SPAN
     if text is None or (isinstance(text, str) and not text.strip()):
-        return None, Diagnostic("error", "E903", f"{row_label}, column '{column}': empty cell", span,
+        return None, Diagnostic("error", codes.E903, f"{row_label}, column '{column}': empty cell", span,
                                 hint="every row needs a number in every column it uses")
     try:
         value = float(text)
     except (TypeError, ValueError):
-        return None, Diagnostic("error", "E903", f"{row_label}, column '{column}': '{text}' is not a number",
+        return None, Diagnostic("error", codes.E903, f"{row_label}, column '{column}': '{text}' is not a number",
                                 span, hint="write plain numbers such as 0.05 or 2.24e5; units go in the header")
     if not math.isfinite(value):
-        return None, Diagnostic("error", "E903", f"{row_label}, column '{column}': '{text}' is not a finite number",
+        return None, Diagnostic("error", codes.E903, f"{row_label}, column '{column}': '{text}' is not a finite number",
                                 span)
     return value, None
 
@@ -359,7 +360,7 @@ def check_parameters(**values: float | None) -> list[Diagnostic]:
             number = math.nan
         if not math.isfinite(number) or number < 0 or (positive and number == 0):
             need = "a positive number" if positive else "a number >= 0"
-            diagnostics.append(Diagnostic("error", "E914", f"{name} must be {need}, got {value!r}"))
+            diagnostics.append(Diagnostic("error", codes.E914, f"{name} must be {need}, got {value!r}"))
     return diagnostics
 
 
@@ -400,7 +401,7 @@ def _rows_to_data(header: Sequence[Cell], rows: Sequence[Sequence[Any]], labels:
     values: dict[str, list[float]] = {quantity.name: [] for quantity in QUANTITIES}
     for row, label, span in zip(rows, labels, row_spans):
         if len(row) != len(header):
-            diagnostics.append(Diagnostic("error", "E904",
+            diagnostics.append(Diagnostic("error", codes.E904,
                                           f"{label} has {len(row)} cells; the header has {len(header)}", span,
                                           hint="check for a missing or extra comma"))
             continue
@@ -448,7 +449,7 @@ def as_friction_data(data: Any) -> FrictionData:
         lengths = {len(column) for column in columns}
         if len(lengths) > 1:
             shown = ", ".join(f"'{cell.text}': {len(column)}" for cell, column in zip(header, columns))
-            raise DataError(Diagnostic("error", "E904", f"the columns have different lengths ({shown})"))
+            raise DataError(Diagnostic("error", codes.E904, f"the columns have different lengths ({shown})"))
         count = lengths.pop() if lengths else 0
         rows = [[column[i] for column in columns] for i in range(count)]
     else:
@@ -462,7 +463,7 @@ def as_friction_data(data: Any) -> FrictionData:
             rows = [list(np.atleast_1d(np.asarray(row, object))) for row in data]
         count = len(rows)
     if count == 0:
-        raise DataError(Diagnostic("error", "E901", "no friction test rows were given"))
+        raise DataError(Diagnostic("error", codes.E901, "no friction test rows were given"))
     labels = [f"row {i + 1}" for i in range(count)]
     return _rows_to_data(header, rows, labels, [NO_SPAN] * count, NO_SPAN, None, "<data>")
 
@@ -633,13 +634,13 @@ def fit_friction(data: Any, *, lead: float = DEFAULT_LEAD, area: float = DEFAULT
     zero = np.flatnonzero(rows.velocity == 0)
     for i in zero:
         diagnostics.append(Diagnostic(
-            "error", "E910", f"{rows.labels[i]}: velocity is zero, so C = F/v is undefined", rows.spans[i],
+            "error", codes.E910, f"{rows.labels[i]}: velocity is zero, so C = F/v is undefined", rows.spans[i],
             hint="friction is identified from steady motion; drop standstill rows"))
 
     warnings: list[Diagnostic] = []
     if len(rows) and np.median(rows.pressure) <= patm:
         warnings.append(Diagnostic(
-            "warning", "E915",
+            "warning", codes.E915,
             f"the chamber pressure (median {np.median(rows.pressure):g} Pa) is not above P_atm = {patm:g} Pa",
             hint="bondc reads pressure as absolute and uses (P - P_atm)*A; for gauge data pass --patm 0"))
 
@@ -649,7 +650,7 @@ def fit_friction(data: Any, *, lead: float = DEFAULT_LEAD, area: float = DEFAULT
         sign = "v > 0" if direction == "up" else "v < 0"
         if len(indices) < MIN_ROWS_PER_DIRECTION:
             diagnostics.append(Diagnostic(
-                "error", "E911",
+                "error", codes.E911,
                 f"{len(indices)} row{'s' if len(indices) != 1 else ''} for {direction}ward motion ({sign}); "
                 f"the fit needs at least {MIN_ROWS_PER_DIRECTION}",
                 hint="measure at three or more steady speeds in each direction"))
@@ -659,7 +660,7 @@ def fit_friction(data: Any, *, lead: float = DEFAULT_LEAD, area: float = DEFAULT
         bad = indices[coefficient <= 0]
         for i in bad:
             diagnostics.append(Diagnostic(
-                "error", "E912",
+                "error", codes.E912,
                 f"{rows.labels[i]}: friction coefficient C = F/v = {force[i] / rows.velocity[i]:.4g} N*s/m "
                 f"is not positive (v = {rows.velocity[i]:g} m/s, tau = {rows.torque[i]:g} N*m, "
                 f"P = {rows.pressure[i]:g} Pa give F = {force[i]:.4g} N)", rows.spans[i],
@@ -669,13 +670,13 @@ def fit_friction(data: Any, *, lead: float = DEFAULT_LEAD, area: float = DEFAULT
             continue
         if np.ptp(np.log(speed)) < 1e-12:
             diagnostics.append(Diagnostic(
-                "error", "E913",
+                "error", codes.E913,
                 f"all {direction}ward rows are at the same speed {speed[0]:g} m/s: the exponent b cannot be fitted",
                 hint="measure at two or more different speeds in each direction"))
             continue
         a, b, a_log, b_log, converged = _fit_power_law(speed, coefficient)
         if not converged:
-            diagnostics.append(Diagnostic("error", "E913",
+            diagnostics.append(Diagnostic("error", codes.E913,
                                           f"the {direction}ward power-law fit did not converge"))
             continue
         fitted = a * speed ** b
@@ -703,7 +704,7 @@ def run_fit_friction(path: str | Path, *, lead: float = DEFAULT_LEAD, area: floa
         data = load_friction_csv(path)
         fit = fit_friction(data, lead=lead, area=area, mass=mass, gravity=gravity, patm=patm)
     except DataError as error:
-        status = EXIT_USAGE if any(d.code == "E905" for d in error.diagnostics) else EXIT_ERRORS
+        status = EXIT_USAGE if any(d.code == codes.E905 for d in error.diagnostics) else EXIT_ERRORS
         if json:
             return _json.dumps({"ok": False, "diagnostics": [d.to_json() for d in error.diagnostics]},
                                indent=2), status

@@ -69,6 +69,7 @@ from bondc.errors import AnalysisError, Diagnostic
 from bondc.jacobian import NUMERIC, Sensitivities
 from bondc.statespace import StateSpace
 from bondc.symbolic import as_sympy, partial_derivative, strip_impulses
+from bondc import codes
 
 AT = ("initial", "equilibrium")
 
@@ -205,7 +206,7 @@ class _Jacobian:
             text = str(expr)
             text = text if len(text) <= 160 else text[:150] + " ..."
             value = f" ({number})" if number is not None and len(str(number)) <= 40 else ""
-            raise AnalysisError(Diagnostic("error", "E941", f"cannot evaluate the derivative {text} at the "
+            raise AnalysisError(Diagnostic("error", codes.E941, f"cannot evaluate the derivative {text} at the "
                                                             f"operating point{value}",
                                            hint="linearise at another point (another initial value, or --at "
                                                 "equilibrium), or make the law smooth at the operating "
@@ -369,7 +370,7 @@ def _require_finite(f_rows, f_names, g_rows, g_names, columns, time) -> None:
         if bad.size:
             row, column = (int(i) for i in bad[0])
             raise AnalysisError(Diagnostic(
-                "error", "E941", f"the partial derivative of {names[row]} with respect to {columns[column]} is "
+                "error", codes.E941, f"the partial derivative of {names[row]} with respect to {columns[column]} is "
                                  f"{rows[row, column]} at the operating point (t = {time:g}): a law with an infinite "
                                  "slope there, or a parameter that is zero or tiny",
                 hint="linearise at another point (another initial value, or --at equilibrium), or make the law "
@@ -477,7 +478,7 @@ def _equilibrium(ss, numeric, jacobian, point, x0, time, inputs, fixed=()):
         detail = ": the solver ran away" if runaway else ", ".join(
             f"der({state_names[i]}) stays {rates[i]:.3g}" for i in np.flatnonzero(bad))
         raise AnalysisError(Diagnostic(
-            "error", "E940",
+            "error", codes.E940,
             f"no equilibrium found near the initial state with the inputs held at t = {time:g} s"
             + (detail if runaway else f" ({detail})"),
             hint="the system may have no equilibrium (e.g. a constant force on a free mass); "

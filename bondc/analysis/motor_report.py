@@ -44,6 +44,7 @@ import numpy as np
 
 from bondc.analysis.motors import load_catalogue, requirements, select
 from bondc.errors import Diagnostic, UsageError
+from bondc import codes
 
 TORQUE_NAMES: tuple[str, ...] = ("torque",)
 SPEED_NAMES: tuple[str, ...] = ("omega", "speed")
@@ -62,7 +63,7 @@ def find_signal(result, names: Sequence[str], what: str) -> tuple[str, str, np.n
             return name, "input", np.asarray(result.variables[name], dtype=float)
     shown = ", ".join(f"'{n}'" for n in names)
     raise UsageError(Diagnostic(
-        "error", "E927", f"motor selection needs the motor {what}: the model has no output or input named {shown}",
+        "error", codes.E927, f"motor selection needs the motor {what}: the model has no output or input named {shown}",
         hint=f"add e.g. 'output {names[0]} [...] = ...' to the model (outputs: {', '.join(result.outputs) or 'none'})"))
 
 

@@ -71,6 +71,7 @@ from bondc.analysis.friction import (
     read_csv_table,
 )
 from bondc.errors import DataError, Diagnostic
+from bondc import codes
 
 RPM = 2 * math.pi / 60  # rad/s per rpm
 MAX_INERTIA_RATIO = 10.0
@@ -179,16 +180,16 @@ def _as_profile(name: str, values, length: int | None) -> tuple[np.ndarray | Non
     try:
         array = np.asarray(values, dtype=float)
     except (TypeError, ValueError):
-        return None, [Diagnostic("error", "E923", f"{name} is not an array of numbers")]
+        return None, [Diagnostic("error", codes.E923, f"{name} is not an array of numbers")]
     if array.ndim != 1:
-        return None, [Diagnostic("error", "E923", f"{name} must be one-dimensional, got shape {array.shape}")]
+        return None, [Diagnostic("error", codes.E923, f"{name} must be one-dimensional, got shape {array.shape}")]
     problems = []
     if length is not None and len(array) != length:
-        problems.append(Diagnostic("error", "E923", f"{name} has {len(array)} samples; time has {length}",
+        problems.append(Diagnostic("error", codes.E923, f"{name} has {len(array)} samples; time has {length}",
                                    hint="sample time, torque and speed at the same instants"))
     bad = np.flatnonzero(~np.isfinite(array))
     if len(bad):
-        problems.append(Diagnostic("error", "E923",
+        problems.append(Diagnostic("error", codes.E923,
                                    f"{name} has {len(bad)} non-finite sample{'s' if len(bad) != 1 else ''} "
                                    f"(first at index {bad[0]}: {array[bad[0]]})"))
     return array, problems
@@ -229,11 +230,11 @@ def requirements(t, torque, speed, *, cycle: tuple[float, float] | None = None) 
     if diagnostics:
         raise DataError(diagnostics)
     if len(time) < 2:
-        raise DataError(Diagnostic("error", "E923", f"a cycle needs at least 2 samples, got {len(time)}"))
+        raise DataError(Diagnostic("error", codes.E923, f"a cycle needs at least 2 samples, got {len(time)}"))
     steps = np.diff(time)
     if np.any(steps <= 0):
         index = int(np.flatnonzero(steps <= 0)[0])
-        raise DataError(Diagnostic("error", "E924",
+        raise DataError(Diagnostic("error", codes.E924,
                                    f"time is not strictly increasing: t[{index}] = {time[index]:g} s, "
                                    f"t[{index + 1}] = {time[index + 1]:g} s",
                                    hint="sort the samples and drop repeated instants"))
@@ -241,12 +242,12 @@ def requirements(t, torque, speed, *, cycle: tuple[float, float] | None = None) 
         try:
             start, end = (float(x) for x in cycle)
         except (TypeError, ValueError):
-            raise DataError(Diagnostic("error", "E925", f"cycle must be (t_start, t_end), got {cycle!r}")) from None
+            raise DataError(Diagnostic("error", codes.E925, f"cycle must be (t_start, t_end), got {cycle!r}")) from None
         if not (math.isfinite(start) and math.isfinite(end)) or not start < end:
-            raise DataError(Diagnostic("error", "E925", f"the cycle window {start:g}..{end:g} s is empty",
+            raise DataError(Diagnostic("error", codes.E925, f"the cycle window {start:g}..{end:g} s is empty",
                                        hint="give t_start < t_end"))
         if start < time[0] or end > time[-1]:
-            raise DataError(Diagnostic("error", "E925",
+            raise DataError(Diagnostic("error", codes.E925,
                                        f"the cycle window {start:g}..{end:g} s is outside the record "
                                        f"{time[0]:g}..{time[-1]:g} s"))
         time, torque, speed = _window(time, torque, speed, (start, end))
@@ -378,7 +379,7 @@ def load_catalogue(path: str | Path) -> list[Motor]:
     names = tuple(cell.text for cell in table.header)
     problem = _header_problem(names)
     if problem is not None:
-        raise DataError(Diagnostic("error", "E920", f"the catalogue header is {','.join(names)}: {problem}",
+        raise DataError(Diagnostic("error", codes.E920, f"the catalogue header is {','.join(names)}: {problem}",
                                    table.header_span,
                                    hint="the header must start with " + ",".join(CATALOGUE_COLUMNS)
                                         + "; optional columns after them: " + ", ".join(OPTIONAL_COLUMNS)))
@@ -388,7 +389,7 @@ def load_catalogue(path: str | Path) -> list[Motor]:
     for cells, span in zip(table.rows, table.row_spans):
         label = f"line {span.line}"
         if len(cells) != len(names):
-            diagnostics.append(Diagnostic("error", "E904",
+            diagnostics.append(Diagnostic("error", codes.E904,
                                           f"{label} has {len(cells)} cells; the header has {len(names)}",
                                           span, hint="check for a missing or extra comma"))
             continue
@@ -396,7 +397,7 @@ def load_catalogue(path: str | Path) -> list[Motor]:
         values: dict[str, float] = {}
         row_ok = True
         if not name:
-            diagnostics.append(Diagnostic("error", "E921", f"{label}: the motor has no name", cells[0].span))
+            diagnostics.append(Diagnostic("error", codes.E921, f"{label}: the motor has no name", cells[0].span))
             row_ok = False
         for column, cell in zip(names[1:], cells[1:]):
             if column in OPTIONAL_COLUMNS and not cell.text.strip():
@@ -406,7 +407,7 @@ def load_catalogue(path: str | Path) -> list[Motor]:
                 diagnostics.append(bad_number)
                 row_ok = False
             elif value is None or value <= 0:
-                diagnostics.append(Diagnostic("error", "E921",
+                diagnostics.append(Diagnostic("error", codes.E921,
                                               f"{label}, column '{column}': {cell.text} must be positive "
                                               f"({_CATALOGUE_UNITS[column]})", cell.span))
                 row_ok = False
@@ -414,19 +415,19 @@ def load_catalogue(path: str | Path) -> list[Motor]:
                 values[column] = value
         cell_of = dict(zip(names, cells))
         if "rated_torque" in values and "peak_torque" in values and values["peak_torque"] < values["rated_torque"]:
-            diagnostics.append(Diagnostic("error", "E921",
+            diagnostics.append(Diagnostic("error", codes.E921,
                                           f"{label}: peak torque {values['peak_torque']:g} N*m is below the rated "
                                           f"torque {values['rated_torque']:g} N*m", cell_of["peak_torque"].span,
                                           hint="are the two torque columns swapped?"))
             row_ok = False
         if "rated_speed" in values and "max_speed" in values and values["max_speed"] < values["rated_speed"]:
-            diagnostics.append(Diagnostic("error", "E921",
+            diagnostics.append(Diagnostic("error", codes.E921,
                                           f"{label}: maximum speed {values['max_speed']:g} rpm is below the rated "
                                           f"speed {values['rated_speed']:g} rpm", cell_of["max_speed"].span,
                                           hint="leave the cell empty if the catalogue gives no maximum speed"))
             row_ok = False
         if name and name in seen:
-            diagnostics.append(Diagnostic("error", "E922",
+            diagnostics.append(Diagnostic("error", codes.E922,
                                           f"{label}: motor '{name}' is already listed on line {seen[name]}",
                                           cells[0].span))
             row_ok = False
@@ -622,7 +623,7 @@ def motor_torque(motor: Motor, need: MotorRequirements) -> np.ndarray:
     Raises DataError E923 when ``need`` carries no profile.
     """
     if need.time is None or need.torque is None or need.speed is None:        # (the three come together)
-        raise DataError(Diagnostic("error", "E923", "these requirements carry no profile to add rotor inertia to",
+        raise DataError(Diagnostic("error", codes.E923, "these requirements carry no profile to add rotor inertia to",
                                    hint="make them with requirements(t, torque, speed)"))
     return need.torque + motor.rotor_inertia * np.gradient(need.speed, need.time)
 
@@ -678,7 +679,7 @@ def check_inertia_limit(value, what: str = "--inertia-ratio") -> float | None:
     except (TypeError, ValueError):
         number = math.nan
     if not (math.isfinite(number) and number > 0):
-        raise DataError(Diagnostic("error", "E928", f"{what}: the inertia-ratio limit must be a positive number, "
+        raise DataError(Diagnostic("error", codes.E928, f"{what}: the inertia-ratio limit must be a positive number, "
                                                     f"got {value!r}",
                                    hint="e.g. --inertia-ratio 10 (load inertia up to 10 times the rotor's)"))
     return number

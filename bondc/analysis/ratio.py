@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Sequence
 
 from bondc.errors import Diagnostic, UsageError
+from bondc import codes
 
 #: The sweep metrics a ratio study shows (SI: N*m, N*m, rad/s).
 METRICS = ("motor.peak_torque", "motor.rms_torque", "motor.peak_speed")
@@ -122,7 +123,7 @@ def _json(value: float) -> float | None:
 def check_ratio(ratio: str | None, motors) -> None:
     """``--ratio`` without ``--motors`` is a usage error (E973) before any work."""
     if ratio is not None and not motors:
-        raise UsageError(Diagnostic("error", "E973", f"--ratio '{ratio}' needs a motor catalogue: the study "
+        raise UsageError(Diagnostic("error", codes.E973, f"--ratio '{ratio}' needs a motor catalogue: the study "
                                     "shows how the smallest qualifying motor changes with the ratio",
                                     hint="add --motors CATALOGUE.csv, or vary the parameter with "
                                          "'bondc sweep --vary'"))

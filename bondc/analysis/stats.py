@@ -36,6 +36,7 @@ from typing import Mapping
 import numpy as np
 
 from bondc.errors import AnalysisError, Diagnostic
+from bondc import codes
 
 STATISTICS_KEYS = ("min", "max", "mean", "rms", "final")
 POWER_KEYS = ("cycle", "t_start", "t_end", "peak", "peak_positive", "peak_negative", "rms",
@@ -201,7 +202,7 @@ def power_statistics(result, names, cycle: float | None = None) -> dict[str, lis
     unknown = [name for name in names if name not in result.outputs]
     if unknown:
         raise AnalysisError(Diagnostic(
-            "error", "E933", f"no output named {', '.join(repr(n) for n in unknown)} in the simulation result",
+            "error", codes.E933, f"no output named {', '.join(repr(n) for n in unknown)} in the simulation result",
             hint="outputs: " + (", ".join(result.outputs) or "none")))
     t_all = np.asarray(result.t, dtype=float)
     statistics: dict[str, list[dict]] = {}

@@ -52,6 +52,7 @@ from bondc.io import atomic_write_text
 from bondc.runtime import CsvError, header_cell, open_data
 from bondc.source import NO_SPAN, Span
 from bondc.numeric import unit_scale
+from bondc import codes
 
 
 if TYPE_CHECKING:
@@ -78,7 +79,7 @@ def _error(code: str, message: str, span: Span = NO_SPAN, hint: str | None = Non
 def _io_error(message: str) -> DataError:
     """E950 for a data file that cannot be read at all: an I/O error (the command exits 2, as for a
     model file that cannot be read), where an empty file or a bad cell is an error of the data (1)."""
-    error = _error("E950", message)
+    error = _error(codes.E950, message)
     error.io = True
     return error
 
@@ -145,7 +146,7 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
     lines = [(number, line) for number, line in enumerate(text.splitlines(), start=1)
              if line.strip() and not line.lstrip().startswith("#")]
     if not lines:
-        raise _error("E950", f"measured data file '{name}' is empty",
+        raise _error(codes.E950, f"measured data file '{name}' is empty",
                      hint="expected a header line such as 't,omega' and then rows of numbers")
     header_number, header_line = lines[0]
     header_cells = [header_cell(cell) for cell in next(csv.reader([header_line]))]
@@ -155,19 +156,19 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
         try:
             scales.append(unit_scale(unit))
         except ValueError:
-            raise _error("E957", f"column '{cell}' of '{name}' names an unknown unit [{unit}]",
+            raise _error(codes.E957, f"column '{cell}' of '{name}' names an unknown unit [{unit}]",
                          _cell_span(name, header_number, header_line, index),
                          hint="a header gives a column's unit in brackets, e.g. 'P [bar]'; a column without one "
                               "is SI") from None
     for index, cell in enumerate(header):
         if not cell:
-            raise _error("E957", f"column {index + 1} of the header of '{name}' has no name",
+            raise _error(codes.E957, f"column {index + 1} of the header of '{name}' has no name",
                          _cell_span(name, header_number, header_line, index))
         if cell in header[:index]:
-            raise _error("E957", f"the header of '{name}' names column '{cell}' twice",
+            raise _error(codes.E957, f"the header of '{name}' names column '{cell}' twice",
                          _cell_span(name, header_number, header_line, index))
     if len(lines) == 1:
-        raise _error("E950", f"measured data file '{name}' has a header but no data rows",
+        raise _error(codes.E950, f"measured data file '{name}' has a header but no data rows",
                      Span(name, header_number, 1, header_number, len(header_line) + 1))
 
     time_index = 0
@@ -181,7 +182,7 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
     for row, (number, line) in enumerate(lines[1:]):
         cells = next(csv.reader([line]))
         if len(cells) != len(header):
-            raise _error("E957", f"line {number} of '{name}' has {len(cells)} cells; the header has {len(header)}",
+            raise _error(codes.E957, f"line {number} of '{name}' has {len(cells)} cells; the header has {len(header)}",
                          Span(name, number, 1, number, len(line) + 1))
         for index, cell in enumerate(cells):
             try:
@@ -191,7 +192,7 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
             if not math.isfinite(value):
                 shown = cell.strip()
                 what = f"'{shown}' is not a number" if shown else "the cell is empty"
-                raise _error("E951", f"line {number} of '{name}', column '{header[index]}': {what}",
+                raise _error(codes.E951, f"line {number} of '{name}', column '{header[index]}': {what}",
                              _cell_span(name, number, line, index))
             values[row, index] = value
 
@@ -203,7 +204,7 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
         number, line = lines[1 + row]
         previous = lines[row][0]
         raise _error(
-            "E952",
+            codes.E952,
             f"time must increase strictly: line {number} of '{name}' has {header[time_index]} = "
             f"{time[row]:g}, not after {time[row - 1]:g} on line {previous}",
             _cell_span(name, number, line, time_index),
@@ -218,7 +219,7 @@ def load_measured_csv(path: str | Path, columns: Iterable[str] = ()) -> dict[str
             data.units[cell] = header_cells[index][1]
     for column in columns:
         if column not in data:
-            raise _error("E953", f"measured data file '{name}' has no column '{column}'",
+            raise _error(codes.E953, f"measured data file '{name}' has no column '{column}'",
                          hint=_did_you_mean(column, [c for c in data if c != TIME_KEY]))
     return data
 
@@ -256,38 +257,38 @@ def parse_compare_spec(text: str) -> CompareSpec:
     output, equals, column = head.partition("=")
     output, column = output.strip(), column.strip()
     if not equals or not output or not column:
-        raise _error("E955", f"cannot read the comparison '{raw}'", hint=_SPEC_SYNTAX)
+        raise _error(codes.E955, f"cannot read the comparison '{raw}'", hint=_SPEC_SYNTAX)
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*", output):
-        raise _error("E955", f"'{output}' in the comparison '{raw}' is not a signal name", hint=_SPEC_SYNTAX)
+        raise _error(codes.E955, f"'{output}' in the comparison '{raw}' is not a signal name", hint=_SPEC_SYNTAX)
     if "=" in column:
-        raise _error("E955", f"the comparison '{raw}' has more than one '=' before its tolerances",
+        raise _error(codes.E955, f"the comparison '{raw}' has more than one '=' before its tolerances",
                      hint=_SPEC_SYNTAX)
     tolerances: dict[str, float] = {}
     if colon:
         if not tail.strip():
-            raise _error("E955", f"the comparison '{raw}' has ':' but no tolerances", hint=_SPEC_SYNTAX)
+            raise _error(codes.E955, f"the comparison '{raw}' has ':' but no tolerances", hint=_SPEC_SYNTAX)
         for item in tail.split(","):
             metric, eq, value_text = item.partition("=")
             metric, value_text = metric.strip().lower(), value_text.strip()
             if not eq or not metric or not value_text:
-                raise _error("E955", f"cannot read the tolerance '{item.strip()}' in '{raw}'",
+                raise _error(codes.E955, f"cannot read the tolerance '{item.strip()}' in '{raw}'",
                              hint="a tolerance is METRIC=NUMBER, e.g. nrmse=0.05")
             if metric not in METRICS:
-                raise _error("E955", f"unknown metric '{metric}' in '{raw}'",
+                raise _error(codes.E955, f"unknown metric '{metric}' in '{raw}'",
                              hint=_did_you_mean(metric, METRICS) or "metrics: " + ", ".join(METRICS))
             if metric in tolerances:
-                raise _error("E955", f"the comparison '{raw}' gives '{metric}' twice")
+                raise _error(codes.E955, f"the comparison '{raw}' gives '{metric}' twice")
             try:
                 value = float(value_text)
             except ValueError:
                 value = math.nan
             if not math.isfinite(value):
-                raise _error("E955", f"tolerance {metric}='{value_text}' in '{raw}' is not a number")
+                raise _error(codes.E955, f"tolerance {metric}='{value_text}' in '{raw}' is not a number")
             if METRICS[metric] == "max" and value < 0:
-                raise _error("E955", f"tolerance {metric}={value_text} in '{raw}' is negative",
+                raise _error(codes.E955, f"tolerance {metric}={value_text} in '{raw}' is negative",
                              hint=f"{metric} is an upper bound on an error, so it is >= 0")
             if metric == "r2" and value > 1:
-                raise _error("E955", f"tolerance r2={value_text} in '{raw}' is above 1, which no fit reaches")
+                raise _error(codes.E955, f"tolerance r2={value_text} in '{raw}' is above 1, which no fit reaches")
             tolerances[metric] = value
     return CompareSpec(output, column, tolerances or dict(DEFAULT_TOLERANCES), text)
 
@@ -402,15 +403,15 @@ def compare(sim_t: npt.ArrayLike, sim_values: Mapping[str, npt.ArrayLike],
     """
     times = np.asarray(sim_t, dtype=float)
     if TIME_KEY not in measured:
-        raise _error("E953", "the measured data has no time column 't'")
+        raise _error(codes.E953, "the measured data has no time column 't'")
     meas_t = np.asarray(measured[TIME_KEY], dtype=float)
     results = []
     for spec in specs:
         if spec.output not in sim_values:
-            raise _error("E954", f"'{spec.output}' in the comparison '{spec}' is not a simulated signal",
+            raise _error(codes.E954, f"'{spec.output}' in the comparison '{spec}' is not a simulated signal",
                          hint=_did_you_mean(spec.output, sim_values))
         if spec.column not in measured or spec.column == TIME_KEY:
-            raise _error("E953", f"the measured data has no column '{spec.column}' (comparison '{spec}')",
+            raise _error(codes.E953, f"the measured data has no column '{spec.column}' (comparison '{spec}')",
                          hint=_did_you_mean(spec.column, [c for c in measured if c != TIME_KEY]))
         simulated = np.asarray(sim_values[spec.output], dtype=float)
         if simulated.shape != times.shape:
@@ -419,7 +420,7 @@ def compare(sim_t: npt.ArrayLike, sim_values: Mapping[str, npt.ArrayLike],
         inside = (times >= low) & (times <= high)
         if high < low or np.count_nonzero(inside) < 2:
             raise _error(
-                "E956",
+                codes.E956,
                 f"comparison '{spec}': the simulation covers t = {times[0]:g} .. {times[-1]:g} s and the "
                 f"measurement t = {meas_t[0]:g} .. {meas_t[-1]:g} s; they share "
                 f"{'no time' if high < low else 'fewer than two simulated samples'}",
@@ -509,7 +510,7 @@ def check_quantity(graph, spec: CompareSpec, unit: str | None) -> None:
     if measured is None or simulated is None or compatible(measured, simulated):
         return
     raise DataError(Diagnostic(
-        "error", "E958", f"comparison '{spec}': column '{spec.column}' is in [{unit}] and '{spec.output}' in "
+        "error", codes.E958, f"comparison '{spec}': column '{spec.column}' is in [{unit}] and '{spec.output}' in "
                          f"[{declared}]: they measure different quantities ({measured.dimension_text()} and "
                          f"{simulated.dimension_text()})",
         hint="compare the signal with the column that measures it, or fix the unit in the column's header"))
@@ -538,10 +539,10 @@ def signal_json(result: SignalResult, unit: str | None = None) -> dict:
 def measured_data(data, compare_specs) -> tuple[list[CompareSpec], dict[str, np.ndarray] | None]:
     specs = [spec if isinstance(spec, CompareSpec) else parse_compare_spec(spec) for spec in compare_specs or ()]
     if data is None and specs:
-        raise UsageError(Diagnostic("error", "E001", "--compare needs measured data",
+        raise UsageError(Diagnostic("error", codes.E001, "--compare needs measured data",
                                     hint="give the measured CSV with --data FILE"))
     if data is not None and not specs:
-        raise UsageError(Diagnostic("error", "E001", "--data needs at least one comparison",
+        raise UsageError(Diagnostic("error", codes.E001, "--data needs at least one comparison",
                                     hint="say which simulated signal each measured column is: --compare OUT=COLUMN"))
     if data is None:
         return [], None
@@ -559,7 +560,7 @@ def unit_warnings(run: PipelineRun, measured, specs: Iterable[CompareSpec]) -> l
             continue
         if abs((output.display_factor or 1.0) - 1.0) > 1e-12:
             found.append(Diagnostic(
-                "warning", "W954", f"measured column '{spec.column}' has no unit: it is taken as SI, while output "
+                "warning", codes.W954, f"measured column '{spec.column}' has no unit: it is taken as SI, while output "
                                    f"'{spec.output}' is declared in [{output.unit_text}]",
                 hint=f"if the data is in {output.unit_text}, write the header as '{spec.column} "
                      f"[{output.unit_text}]'"))
@@ -574,7 +575,7 @@ def compare_run(run: PipelineRun, measured: Mapping[str, np.ndarray],
     the JUnit file and the report show them (NRMSE and R² do not depend on the unit). The
     comparison is at the measured samples the run covers (:func:`_at_measured_times`)."""
     if run.result is None:
-        raise UsageError(Diagnostic("error", "E801", "no end time for the simulation",
+        raise UsageError(Diagnostic("error", codes.E801, "no end time for the simulation",
                                     hint="give --t-end, or set t_end in the experiment"))
     t, signals = _at_measured_times(run, measured)
     results = []

@@ -24,6 +24,7 @@ from bondc.errors import BondcError, Diagnostic
 from bondc.codegen.cprinter import c_double
 from bondc.source import NO_SPAN
 from bondc.symbolic import as_sympy
+from bondc import codes
 
 #: The C functions of an exported model (each ``void f(double t, const double *x, const double *p,
 #: const double *m, double *out)``), in the header's order
@@ -209,7 +210,7 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
         ]
     except UnsupportedExpression as error:
         failure = _first_failure(plan, native, graph) or ("", str(error))
-        raise export_error("E840", f"the law of '{failure[0]}' has no C form: {failure[1]}",
+        raise export_error(codes.E840, f"the law of '{failure[0]}' has no C form: {failure[1]}",
                            _span(graph, failure[0]) if failure[0] else NO_SPAN,
                            hint="a measured csv signal is read by bondc's Python runtime; give it as an "
                                 "external input (input u [..] external) the host supplies") from None
@@ -222,7 +223,7 @@ def c_model(ss, experiment=None, *, source_name: str | None = None, header_name:
         initial = [printer.doprint(state.initial) for state in plan.states]
         derived = [(name, printer.doprint(expr)) for name, expr in plan.derived]
     except UnsupportedExpression as error:
-        raise export_error("E840", f"an initial value or a derived parameter has no C form: {error}") from None
+        raise export_error(codes.E840, f"an initial value or a derived parameter has no C form: {error}") from None
     position = {name: i for i, (name, _, _) in enumerate(plan.parameters)}
     x0_lines = ["void bondc_x0(const double *p, double *x)", "{", "    (void)p;"]
     x0_lines += [f"    x[{i}] = {text};" for i, text in enumerate(initial)]

@@ -37,6 +37,7 @@ from xml.sax.saxutils import quoteattr
 from bondc.version import __version__
 from bondc.errors import Diagnostic, Related
 from bondc.export.ccode import CModel, ExportError, _span, c_model, export_error
+from bondc import codes
 
 NATIVE = Path(__file__).resolve().parent.parent / "native"
 FMI_SOURCES = NATIVE / "fmi"
@@ -119,7 +120,7 @@ def check_exportable(model: CModel, graph, kind: str) -> None:
         related = tuple(Related(_span(graph, s.owner), f"may slide too: {model.switch_labels[s.index]}")
                         for s in rest if _span(graph, s.owner).line)
         raise ExportError(Diagnostic(
-            "error", "E841",
+            "error", codes.E841,
             f"cannot export as a Model Exchange FMU: the switch {label} may hold the state on its surface (a "
             "Filippov sliding mode: a friction that sticks, a relay that chatters), which the importer's "
             "integrator cannot do"
@@ -134,7 +135,7 @@ def check_exportable(model: CModel, graph, kind: str) -> None:
         for when in getattr(graph, "whens", ()):
             span = when.span
             break
-        raise export_error("E840", "cannot export as an FMU: a when clause of the model has no C form",
+        raise export_error(codes.E840, "cannot export as an FMU: a when clause of the model has no C form",
                            span, hint="write the when clause's condition and statements with arithmetic and "
                                       "the built-in functions")
 
@@ -370,7 +371,7 @@ def _sundials():
 
     link = _sundials_link()
     if link is None:
-        raise export_error("E843", "cannot build an FMU: scikit-sundae's SUNDIALS libraries (Linux wheels) were "
+        raise export_error(codes.E843, "cannot build an FMU: scikit-sundae's SUNDIALS libraries (Linux wheels) were "
                                    "not found", hint="pip install scikit-sundae (a Linux x86-64 wheel)")
     return link
 
@@ -395,7 +396,7 @@ def _compile(model: CModel, guid: str, fmi: int, kind: str, link, work: Path) ->
 
     compiler, why = find_compiler("c")
     if compiler is None:
-        raise export_error("E843", f"cannot build an FMU: {why}", hint="install a C compiler (gcc, clang) or "
+        raise export_error(codes.E843, f"cannot build an FMU: {why}", hint="install a C compiler (gcc, clang) or "
                                                                          "the ziglang package")
     (work / f"{model.name}_model.c").write_text(model.c_text, encoding="utf-8")
     (work / model.header_name).write_text(model.header, encoding="utf-8")
@@ -421,7 +422,7 @@ def _compile(model: CModel, guid: str, fmi: int, kind: str, link, work: Path) ->
     if done.returncode != 0:
         lines = done.stderr.strip().splitlines() or ["no message"]
         first = next((line for line in lines if "error" in line), lines[0])
-        raise export_error("E844", f"the C compiler failed to build the FMU: {first.strip()}",
+        raise export_error(codes.E844, f"the C compiler failed to build the FMU: {first.strip()}",
                            hint="this is a bug of bondc's FMU export: please report it with the model")
     return binaries
 

@@ -27,6 +27,7 @@ from lsprotocol import types as lsp
 from bondc.errors import BondcError, Diagnostic
 from bondc.lsp.index import Index, build_index
 from bondc.lsp.positions import Lines, Positions, path_of
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.causality import CausalGraph
@@ -194,11 +195,11 @@ def too_large(text: str) -> lsp.Diagnostic | None:
         return None
     return lsp.Diagnostic(
         range=lsp.Range(lsp.Position(0, 0), lsp.Position(0, 0)), severity=lsp.DiagnosticSeverity.Error,
-        code="E006", source="bondc",
+        code=codes.E006, source="bondc",
         message=(f"the document is too large to analyse as you type: {lines} lines, {len(text)} characters "
                  f"(at most {MAX_DOCUMENT_LINES} lines and {MAX_DOCUMENT_CHARS} characters)\n"
                  "run 'bondc check FILE' on it, or split it into files that import each other"),
-        code_description=(lsp.CodeDescription(href=code_link("E006")) if DOCS.exists() else None))
+        code_description=(lsp.CodeDescription(href=code_link(codes.E006)) if DOCS.exists() else None))
 
 
 def analyse(uri: str, text: str, version: int, encoding: str, previous: Analysis | None = None,

@@ -20,6 +20,7 @@ import numpy as np
 from markupsafe import Markup
 
 from bondc.errors import Diagnostic, UsageError
+from bondc import codes
 
 #: Extensions ``bondc bode -o`` writes.
 KINDS = (".csv", ".svg", ".html")
@@ -32,7 +33,7 @@ def check_bode_output(path) -> Path:
 
     path = Path(path)
     if path.suffix.lower() not in KINDS:
-        raise UsageError(Diagnostic("error", "E947", f"bondc bode -o '{path}': cannot write a '{path.suffix or 'file without extension'}' file",
+        raise UsageError(Diagnostic("error", codes.E947, f"bondc bode -o '{path}': cannot write a '{path.suffix or 'file without extension'}' file",
                                     hint="give a .csv (the table), .svg (the plot) or .html (a page with plots and margins)"))
     return check_output(path)
 

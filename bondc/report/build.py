@@ -64,6 +64,7 @@ from bondc.report.render import (
     causality_rows, parameter_rows, render_report,
 )
 from bondc.report.state_equations import state_equations
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.simulate import SimResult
@@ -317,7 +318,7 @@ def validate_summary(path: str | Path, *, data: str | Path, compare: Sequence[st
             check_output(given, what, make_folder=True)
     specs, measured = measured_data(data, compare)
     if not specs:
-        raise UsageError(Diagnostic("error", "E001", "validate needs at least one comparison",
+        raise UsageError(Diagnostic("error", codes.E001, "validate needs at least one comparison",
                                     hint="--compare OUT=COLUMN[:nrmse=0.05]"))
     run = run_pipeline(path, model=model, experiment=experiment, sets=sets, t_end=t_end, progress=progress)
     results = compare_run(run, measured, specs)
@@ -356,7 +357,7 @@ def _failure(result: SimResult) -> Diagnostic:
     """What stopped an incomplete run."""
     if result.diagnostics:
         return result.diagnostics[0]
-    return Diagnostic("error", "E811", f"simulation stopped: {result.message}")
+    return Diagnostic("error", codes.E811, f"simulation stopped: {result.message}")
 
 
 # ---------------------------------------------------------------- the report's contents

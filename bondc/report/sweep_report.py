@@ -38,6 +38,7 @@ from markupsafe import Markup
 from bondc.errors import DataError, Diagnostic
 from bondc.report.render import (PAGE_HEAD, PLOT_STYLE, content_security_policy, draw_motor_envelopes, environment,
                                   figure_svg)
+from bondc import codes
 
 STATISTICS = ("min", "max", "mean", "rms", "final", "cycle_peak", "cycle_rms", "cycle_energy",
               "cycle_energy_positive", "cycle_energy_negative")
@@ -112,11 +113,11 @@ def read_study(path) -> Study:
         with open(path, newline="", encoding="utf-8") as handle:
             rows = list(csv.reader(handle))
     except (OSError, UnicodeDecodeError) as error:
-        raise DataError(Diagnostic("error", "E972", f"cannot read the sweep table '{path}': {error}")) from None
+        raise DataError(Diagnostic("error", codes.E972, f"cannot read the sweep table '{path}': {error}")) from None
     header = [_split(cell) for cell in rows[0]] if rows else []
     names = [name for name, _ in header]
     if not names or names[0] != "index" or "status" not in names:
-        raise DataError(Diagnostic("error", "E972", f"'{path}' is not a table written by bondc sweep",
+        raise DataError(Diagnostic("error", codes.E972, f"'{path}' is not a table written by bondc sweep",
                                    hint="give the .csv that 'bondc sweep -o FILE.csv' wrote"))
     end = min(names.index(n) for n in ENDINGS if n in names)
     middle = header[1:end]
@@ -135,7 +136,7 @@ def read_study(path) -> Study:
                    "metrics": {name: _number(cells[1 + first_metric + i])
                                for i, (name, _) in enumerate(study.metrics)}}
         except ValueError:
-            raise DataError(Diagnostic("error", "E972", f"'{path}' row {line} is not a row bondc sweep writes",
+            raise DataError(Diagnostic("error", codes.E972, f"'{path}' row {line} is not a row bondc sweep writes",
                                        hint="give the .csv that 'bondc sweep -o FILE.csv' wrote")) from None
         study.rows.append(row)
     _apply_record(study, _record(path))

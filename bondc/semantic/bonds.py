@@ -14,6 +14,7 @@ from bondc.kinds import KINDS
 from bondc.model import Bond, PORT_NAMES
 from bondc.source import Span
 from bondc.semantic.context import a_or_an, BondEnd, CheckContext, did_you_mean, error_at
+from bondc import codes
 
 
 def number_bonds(m: CheckContext) -> None:
@@ -41,20 +42,20 @@ def check_bonds(m: CheckContext) -> None:
                 hint = did_you_mean(endpoint.name, nodes)
                 if hint is not None:
                     m.misspelt.add(hint.split("'")[1])
-                m.report(error_at("E404", f"unknown element or junction '{endpoint.name}'", _name_part(endpoint),
+                m.report(error_at(codes.E404, f"unknown element or junction '{endpoint.name}'", _name_part(endpoint),
                                   hint=hint))
             elif decl.category not in ("element", "junction"):
-                m.report(error_at("E404", f"'{endpoint.name}' is {a_or_an(decl.category)}, not an element or junction",
+                m.report(error_at(codes.E404, f"'{endpoint.name}' is {a_or_an(decl.category)}, not an element or junction",
                                   _name_part(endpoint), hint="bonds connect elements and junctions",
                                   related=[Related(decl.span, f"'{endpoint.name}' is defined here")]))
         if chain.label is not None and len(chain.endpoints) > 2:
-            m.report(error_at("E406", f"the label '{chain.label}' is on a chain of {len(chain.endpoints) - 1} bonds",
+            m.report(error_at(codes.E406, f"the label '{chain.label}' is on a chain of {len(chain.endpoints) - 1} bonds",
                               chain.label_span,
                               hint=f"a label names one bond: write '{chain.label}: {chain.endpoints[0].name} -> "
                                    f"{chain.endpoints[1].name}' on its own line"))
     for bond in m.bonds:
         if bond.tail == bond.head:
-            m.report(error_at("E405", f"bond {bond.number} connects '{bond.tail}' to itself", bond.span,
+            m.report(error_at(codes.E405, f"bond {bond.number} connects '{bond.tail}' to itself", bond.span,
                               hint="a bond joins two different elements or junctions"))
 
 
@@ -90,11 +91,11 @@ def check_ports(m: CheckContext) -> None:
             ends = m.ends.get(name, [])
             for end in ends:
                 if end.port is not None:
-                    m.report(error_at("E402", f"junction '{name}' has no port '{end.port}'", end.span,
+                    m.report(error_at(codes.E402, f"junction '{name}' has no port '{end.port}'", end.span,
                                       hint=f"ports belong to two-ports (TF, GY); write just '{name}'"))
             if len(ends) < 2 and not (not ends and name in m.misspelt):
                 count = "no bond" if not ends else "only one bond"
-                m.report(error_at("E403", f"junction '{name}' has {count}", span,
+                m.report(error_at(codes.E403, f"junction '{name}' has {count}", span,
                                   hint="a junction joins two or more bonds; connect it or remove it",
                                   related=_bond_notes(m, ends)))
 
@@ -102,17 +103,17 @@ def check_ports(m: CheckContext) -> None:
 def _check_one_port(m: CheckContext, element: ast.Element, ends: list[BondEnd]) -> None:
     for end in ends:
         if end.port is not None:
-            m.report(error_at("E402", f"'{element.name}' is a one-port {element.kind} and has no port '{end.port}'",
+            m.report(error_at(codes.E402, f"'{element.name}' is a one-port {element.kind} and has no port '{end.port}'",
                               end.span, hint=f"write just '{element.name}'"))
     if len(ends) == 1:
         return
     if not ends:
         if element.name in m.misspelt:
             return  # its bond names it misspelt (E404)
-        m.report(error_at("E401", f"{element.kind} '{element.name}' has no bond", element.name_span,
+        m.report(error_at(codes.E401, f"{element.kind} '{element.name}' has no bond", element.name_span,
                           hint=f"connect it to a junction, e.g. 'j -> {element.name}'"))
         return
-    m.report(error_at("E401", f"{element.kind} '{element.name}' has {len(ends)} bonds; a one-port element has "
+    m.report(error_at(codes.E401, f"{element.kind} '{element.name}' has {len(ends)} bonds; a one-port element has "
                               f"exactly one", element.name_span,
                       hint="join the bonds at a 0- or 1-junction and connect the element to it",
                       related=_bond_notes(m, ends)))
@@ -122,21 +123,21 @@ def _check_two_port(m: CheckContext, element: ast.Element, ends: list[BondEnd]) 
     name = element.name
     if len(ends) != 2:
         count = "no bond" if not ends else f"{len(ends)} bond" + ("s" if len(ends) > 1 else "")
-        m.report(error_at("E402", f"{element.kind} '{name}' has {count}; a two-port has exactly two", element.name_span,
+        m.report(error_at(codes.E402, f"{element.kind} '{name}' has {count}; a two-port has exactly two", element.name_span,
                           hint=f"connect one bond to each port: 'a -> {name}.p1' and '{name}.p2 -> b'",
                           related=_bond_notes(m, ends)))
         return
     problems = False
     for end in ends:
         if end.port is not None and end.port not in PORT_NAMES:
-            m.report(error_at("E402", f"{element.kind} '{name}' has no port '{end.port}'", end.span,
+            m.report(error_at(codes.E402, f"{element.kind} '{name}' has no port '{end.port}'", end.span,
                               hint=f"the ports of a two-port are p1 and p2{_port_suggestion(end.port)}"))
             problems = True
     if problems:
         return
     first, second = ends
     if first.port is not None and first.port == second.port:
-        m.report(error_at("E402", f"port {first.port} of '{name}' is used by two bonds ({first.bond} and "
+        m.report(error_at(codes.E402, f"port {first.port} of '{name}' is used by two bonds ({first.bond} and "
                                   f"{second.bond})",
                           second.span, hint="each port of a two-port takes one bond: use p1 and p2",
                           related=[Related(first.span, f"bond {first.bond} uses {first.port} here")]))
@@ -144,7 +145,7 @@ def _check_two_port(m: CheckContext, element: ast.Element, ends: list[BondEnd]) 
     if first.port is None and second.port is None:
         if first.side == second.side:
             direction = "into" if first.side == "head" else "out of"
-            m.report(error_at("E402", f"both bonds of {element.kind} '{name}' point {direction} it, so its ports "
+            m.report(error_at(codes.E402, f"both bonds of {element.kind} '{name}' point {direction} it, so its ports "
                                       f"must be named", element.name_span,
                               hint=f"write {name}.p1 at one bond and {name}.p2 at the other",
                               related=_bond_notes(m, ends)))

@@ -36,6 +36,7 @@ from bondc.semantic.parameters import (
 )
 from bondc.semantic.rules import check_expressions, check_functions, check_signal_cycles
 from bondc.semantic.unit_checks import check_units, resolve_unit
+from bondc import codes
 
 
 def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Model | None, list[Diagnostic]]:
@@ -49,7 +50,7 @@ def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Mode
         for model in own + every:
             if model.name == name:
                 return model, []
-        return None, [error_at("E309", f"no model '{name}' in '{main.path}'", where,
+        return None, [error_at(codes.E309, f"no model '{name}' in '{main.path}'", where,
                                hint=join_hints(did_you_mean(name, [m.name for m in every]),
                                                 f"available models: {listing}"))]
     candidates = own or every
@@ -59,9 +60,9 @@ def _select_model(files: Sequence[ast.File], name: str | None) -> tuple[ast.Mode
     if len(candidates) == 1:
         return candidates[0], []
     if not candidates:
-        return None, [error_at("E309", f"no model in '{main.path}'", where,
+        return None, [error_at(codes.E309, f"no model in '{main.path}'", where,
                                hint="a file describes a model in a 'model NAME ... end' block")]
-    return None, [error_at("E309", f"'{main.path}' has {len(candidates)} models; choose one with --model", where,
+    return None, [error_at(codes.E309, f"'{main.path}' has {len(candidates)} models; choose one with --model", where,
                            hint=f"available models: {', '.join(model.name for model in candidates)}")]
 
 
@@ -75,7 +76,7 @@ def _select_experiment(m: CheckContext, name: str | None) -> tuple[ast.Experimen
         if experiment.name == name:
             return experiment, []
     listing = ", ".join(e.name for e in experiments) or "none"
-    return None, [error_at("E318", f"model '{m.model.name}' has no experiment '{name}'", file_span(m.file.path),
+    return None, [error_at(codes.E318, f"model '{m.model.name}' has no experiment '{name}'", file_span(m.file.path),
                            hint=join_hints(did_you_mean(name, [e.name for e in experiments]),
                                             f"its experiments: {listing}"))]
 

@@ -19,6 +19,7 @@ from bondc.semantic.expressions import CONSTANT, SIGNAL, check_expr
 from bondc.semantic.parameters import check_override, finite_si, try_evaluate
 from bondc.semantic.rules import CONSTANT_RULE, INPUT_RULE, check_signal_cycles, scope_for
 from bondc.semantic.unit_checks import COMPUTED_WHY, is_constant, require_coherent, resolve_unit
+from bondc import codes
 
 
 @dataclass
@@ -70,7 +71,7 @@ def check_experiments(m: CheckContext) -> list[ExperimentPlan]:
         for item in experiment.body:
             if isinstance(item, ast.Param):
                 if item.name in seen_params:
-                    m.report(error_at("E302", f"{where} sets '{item.name}' twice", item.name_span,
+                    m.report(error_at(codes.E302, f"{where} sets '{item.name}' twice", item.name_span,
                                       related=[Related(seen_params[item.name].name_span, "first set here")]))
                     continue
                 seen_params[item.name] = item
@@ -89,21 +90,21 @@ def _check_input_replacement(m: CheckContext, plan: ExperimentPlan, item: ast.In
     decl = m.decls.get(item.name)
     if decl is None or decl.category != "input":
         what = f"; '{item.name}' is {a_or_an(decl.category)}" if decl is not None else ""
-        m.report(error_at("E301", f"{where} replaces '{item.name}', which is not an input{what}", item.name_span,
+        m.report(error_at(codes.E301, f"{where} replaces '{item.name}', which is not an input{what}", item.name_span,
                           hint=did_you_mean(item.name, m.names("input"))))
         return
     if item.name in plan.inputs:
-        m.report(error_at("E302", f"{where} replaces input '{item.name}' twice", item.name_span,
+        m.report(error_at(codes.E302, f"{where} replaces input '{item.name}' twice", item.name_span,
                           related=[Related(plan.inputs[item.name].name_span, "first replaced here")]))
         return
     m.used.add(item.name)
     if item.external:
-        m.report(error_at("E345", f"{where} declares input '{item.name}' external", item.name_span,
+        m.report(error_at(codes.E345, f"{where} declares input '{item.name}' external", item.name_span,
                           hint=f"'external' belongs on the model's input ('input {item.name} [UNIT] external = ...'); "
                                f"an experiment replaces an input with a signal ('input {item.name} = ...')"))
         return
     if item.value is None:      # (was an internal error)
-        m.report(error_at("E334", f"{where} replaces input '{item.name}' without a value", item.name_span,
+        m.report(error_at(codes.E334, f"{where} replaces input '{item.name}' without a value", item.name_span,
                           hint=f"give it its signal: 'input {item.name} = ...'"))
         return
     require_coherent(m, item.unit, f"input '{item.name}'", "an input is computed in SI")
@@ -114,24 +115,24 @@ def _check_input_replacement(m: CheckContext, plan: ExperimentPlan, item: ast.In
 def _check_setting(m: CheckContext, plan: ExperimentPlan, item: ast.Setting) -> None:
     kind = SETTINGS.get(item.name)
     if kind is None:
-        m.report(error_at("E314", f"unknown experiment setting '{item.name}'", item.name_span,
+        m.report(error_at(codes.E314, f"unknown experiment setting '{item.name}'", item.name_span,
                           hint=join_hints(did_you_mean(item.name, SETTINGS), "settings: " + " ".join(SETTINGS))))
         return
     if item.name in plan.settings:
-        m.report(error_at("E302", f"setting '{item.name}' is given twice", item.name_span,
+        m.report(error_at(codes.E302, f"setting '{item.name}' is given twice", item.name_span,
                           related=[Related(plan.settings[item.name].name_span, "first given here")]))
         return
     if kind == "solver":
         if not isinstance(item.value, ast.Str):
             written = item.value.name if isinstance(item.value, ast.Name) else "Radau"
-            m.report(error_at("E313", "solver must be a string", item.value.span,
+            m.report(error_at(codes.E313, "solver must be a string", item.value.span,
                               hint=f'write solver = "{written}"; solvers: {", ".join(SOLVERS)}'))
             return
         if item.unit is not None:
-            m.report(error_at("E313", "solver takes no unit", item.unit.span))
+            m.report(error_at(codes.E313, "solver takes no unit", item.unit.span))
             return
         if item.value.value not in SOLVERS:
-            m.report(error_at("E317", f"unknown solver '{item.value.value}'", item.value.span,
+            m.report(error_at(codes.E317, f"unknown solver '{item.value.value}'", item.value.span,
                               hint=join_hints(did_you_mean(item.value.value, SOLVERS),
                                                "solvers (auto: chosen for stiffness; SUNDIALS CVODE and IDA; bondc's DOPRI5; scipy.integrate.solve_ivp methods): " + ", ".join(SOLVERS))))
             return
@@ -140,13 +141,13 @@ def _check_setting(m: CheckContext, plan: ExperimentPlan, item: ast.Setting) -> 
             return
     elif kind == "operating point":
         if not isinstance(item.value, ast.Str) or item.value.value not in OPERATING_POINTS or item.unit is not None:
-            m.report(error_at("E313", f"{item.name} is \"initial\" or \"equilibrium\"", item.value.span,
+            m.report(error_at(codes.E313, f"{item.name} is \"initial\" or \"equilibrium\"", item.value.span,
                               hint=f'write {item.name} = "equilibrium" to linearise at the equilibrium found from the '
                                    "initial state"))
             return
     else:
         if isinstance(item.value, (ast.Str, ast.ListExpr)):
-            m.report(error_at("E313", f"{item.name} must be a number", item.value.span))
+            m.report(error_at(codes.E313, f"{item.name} must be a number", item.value.span))
             return
         if not check_expr(m, item.value, scope_for(m, "a setting", CONSTANT, CONSTANT_RULE.format("a setting"))):
             return
@@ -155,7 +156,7 @@ def _check_setting(m: CheckContext, plan: ExperimentPlan, item: ast.Setting) -> 
         else:
             resolved = require_coherent(m, item.unit, f"setting '{item.name}'", COMPUTED_WHY.format("it"))
         if resolved is not None and item.unit is not None and kind == "time" and resolved.dims != _TIME:
-            m.report(error_at("E204", f"{item.name} is a time, but [{item.unit.text}] is not a unit of time",
+            m.report(error_at(codes.E204, f"{item.name} is a time, but [{item.unit.text}] is not a unit of time",
                               item.unit.span, hint="write it in s, ms, min or h"))
             return
         if item.unit is not None and resolved is None:
@@ -181,7 +182,7 @@ def _list_setting_ok(m: CheckContext, item: ast.Setting, kind: str) -> bool:
     ok = True
     for entry in items:
         if not isinstance(entry, node):
-            m.report(error_at("E313", message, entry.span, hint=hint))
+            m.report(error_at(codes.E313, message, entry.span, hint=hint))
             ok = False
         elif isinstance(entry, ast.Name):
             ok = _declared_as(m, entry, "output", f"declare it with 'output {entry.name} = ...'") and ok
@@ -202,7 +203,7 @@ def _declared_as(m: CheckContext, entry: ast.Name, category: str, how: str) -> b
         return True
     decl = m.decls.get(entry.name)
     what = f"'{entry.name}' is {a_or_an(decl.category)}; " if decl is not None else ""
-    m.report(error_at("E301", f"no {category} named '{entry.name}'", entry.span,
+    m.report(error_at(codes.E301, f"no {category} named '{entry.name}'", entry.span,
                       hint=join_hints(did_you_mean(entry.name, m.names(category)), what + how)))
     return False
 
@@ -231,7 +232,7 @@ def _setting_value(m: CheckContext, item: ast.Setting, values: Mapping[str, floa
         if value is None:
             return None
     if value <= 0:
-        m.report(error_at("E317", f"{item.name} must be positive, not {value:g}", item.value.span))
+        m.report(error_at(codes.E317, f"{item.name} must be positive, not {value:g}", item.value.span))
         return None
     return value
 

@@ -22,6 +22,7 @@ from bondc.model import PORT_NAMES
 from bondc.semantic.context import (
     BOND_NUMBER, BUILTINS, SET_HINT, a_or_an, CheckContext, did_you_mean, error_at, join_hints,
 )
+from bondc import codes
 
 
 GENERAL = frozenset({"parameter", "input", "output", "state", "discrete", "graph", "time", "csv"})
@@ -48,7 +49,7 @@ class ExprScope:
     params_before: "ParamsAbove | frozenset[str] | None" = None   # in a parameter declaration: those above it
     current: str | None = None              # the name being defined (a parameter's self-reference)
     constant_locals: bool = False           # locals are constants (function arguments)
-    code: str = "E316"                      # the code of a name this place may not use
+    code: str = codes.E316                      # the code of a name this place may not use
 
     def constant(self, what: str) -> "ExprScope":
         """The scope of a table's breakpoints inside this one: constants only."""
@@ -86,11 +87,11 @@ class _ExpressionChecker:
         pass
 
     def _check_Str(self, node: ast.Str) -> None:
-        self.report(error_at("E313", "a string where a number is expected", node.span,
+        self.report(error_at(codes.E313, "a string where a number is expected", node.span,
                              hint="strings are descriptions, or the file and column of csv(...)"))
 
     def _check_ListExpr(self, node: ast.ListExpr) -> None:
-        self.report(error_at("E313", "a list where a number is expected", node.span,
+        self.report(error_at(codes.E313, "a list where a number is expected", node.span,
                              hint="lists are the breakpoints of table(t, [t0, t1, ...], [v0, v1, ...])"))
 
     def _check_Unary(self, node: ast.Unary) -> None:
@@ -113,7 +114,7 @@ class _ExpressionChecker:
     def _check_Name(self, node: ast.Name) -> None:
         scope, name = self.scope, node.name
         if name in scope.forbidden:
-            self.report(error_at("E506", scope.forbidden[name], node.span, hint=scope.rule))
+            self.report(error_at(codes.E506, scope.forbidden[name], node.span, hint=scope.rule))
             return
         if name in scope.local or name == "pi":
             return
@@ -128,19 +129,19 @@ class _ExpressionChecker:
         self.m.used.add(name)
         if decl.category in ("element", "junction", "bond label"):
             variables = self._variables_of(name)
-            self.report(error_at("E316", f"'{name}' is {a_or_an(decl.category)}, not a value", node.span,
+            self.report(error_at(codes.E316, f"'{name}' is {a_or_an(decl.category)}, not a value", node.span,
                                  hint=f"use one of its variables: {', '.join(variables)}" if variables else None))
         elif isinstance(decl.node, ast.FnDef):
             params = ", ".join(decl.node.params)
-            self.report(error_at("E316", f"'{name}' is a function, not a value", node.span,
+            self.report(error_at(codes.E316, f"'{name}' is a function, not a value", node.span,
                                  hint=f"call it: {name}({params})"))
         elif decl.category not in scope.allowed:
             self._not_allowed(node, f"{_CATEGORY_PHRASE.get(decl.category, decl.category)} '{name}'")
         elif decl.category == "parameter" and scope.params_before is not None:
             if name == scope.current:
-                self.report(error_at("E305", f"parameter '{name}' is defined in terms of itself", node.span))
+                self.report(error_at(codes.E305, f"parameter '{name}' is defined in terms of itself", node.span))
             elif name not in scope.params_before:
-                self.report(error_at("E305", f"parameter '{name}' is used before it is defined", node.span,
+                self.report(error_at(codes.E305, f"parameter '{name}' is used before it is defined", node.span,
                                      hint=f"a parameter may use only parameters defined above it: move "
                                           f"'param {name}' above this line",
                                      related=[Related(decl.span, f"'{name}' is defined here")]))
@@ -162,7 +163,7 @@ class _ExpressionChecker:
         if node.span.file.startswith("--set #"):     # --set k=abc
 
             hint = f"{hint}; {SET_HINT}" if hint else SET_HINT
-        self.report(error_at("E301", f"undefined name '{name}'", node.span, hint=hint))
+        self.report(error_at(codes.E301, f"undefined name '{name}'", node.span, hint=hint))
 
     def _variables_of(self, name: str) -> list[str]:
         """The variables an element, junction or bond exposes, as written in expressions."""
@@ -187,7 +188,7 @@ class _ExpressionChecker:
             return
         head = node.parts[0]
         if head == self.scope.owner and len(node.parts) == 2 and node.parts[1] in self.scope.forbidden:
-            self.report(error_at("E506", self.scope.forbidden[node.parts[1]], node.span, hint=self.scope.rule))
+            self.report(error_at(codes.E506, self.scope.forbidden[node.parts[1]], node.span, hint=self.scope.rule))
         elif "graph" not in self.scope.allowed:
             self._not_allowed(node, f"the graph variable '{node.dotted}'")
 
@@ -200,12 +201,12 @@ class _ExpressionChecker:
         if decl is None:
             match = BOND_NUMBER.fullmatch(head)
             if match is None:
-                self.report(error_at("E301", f"undefined name '{head}' in '{node.dotted}'", node.span,
+                self.report(error_at(codes.E301, f"undefined name '{head}' in '{node.dotted}'", node.span,
                                      hint=did_you_mean(head, self.m.names("element", "junction", "bond label"))))
                 return False
             number = int(match.group(1))
             if not 1 <= number <= len(self.m.bonds):
-                self.report(error_at("E312", f"there is no bond {number}", node.span,
+                self.report(error_at(codes.E312, f"there is no bond {number}", node.span,
                                      hint=f"bonds are numbered 1 to {len(self.m.bonds)} in order of appearance"))
                 return False
             return self._bond_variable(node, rest, f"bond {number}")
@@ -216,14 +217,14 @@ class _ExpressionChecker:
             return self._junction_variable(node, head, rest)
         if decl.category == "element":
             return self._element_variable(node, head, rest)
-        self.report(error_at("E312", f"'{head}' is {a_or_an(decl.category)}; only elements, junctions and bonds have "
+        self.report(error_at(codes.E312, f"'{head}' is {a_or_an(decl.category)}; only elements, junctions and bonds have "
                                      f"variables", node.span, hint=f"write just '{head}'"))
         return False
 
     def _unknown_variable(self, node: ast.Ref, owner: str, variables: list[str], extra: str | None = None) -> bool:
         hint = None if extra else did_you_mean(node.dotted, variables)
         listing = f"its variables: {', '.join(variables)}" if variables else None
-        self.report(error_at("E312", f"{owner} has no variable '{'.'.join(node.parts[1:])}'", node.span,
+        self.report(error_at(codes.E312, f"{owner} has no variable '{'.'.join(node.parts[1:])}'", node.span,
                              hint=join_hints(extra, hint, listing)))
         return False
 
@@ -244,7 +245,7 @@ class _ExpressionChecker:
             bonds = [f"b{end.bond}" if self.m.bonds[end.bond - 1].label is None else self.m.bonds[end.bond - 1].label
                      for end in self.m.ends.get(name, [])]
             example = f", e.g. {bonds[0]}.{rest[0]}" if bonds else ""
-            self.report(error_at("E312", f"'{name}' is a {kind}-junction: it has a common {has} ({name}.{common}) but "
+            self.report(error_at(codes.E312, f"'{name}' is a {kind}-junction: it has a common {has} ({name}.{common}) but "
                                          f"no common {lacks}", node.span,
                                  hint=f"each bond at a {kind}-junction has its own {lacks}: use a bond's variable"
                                       f"{example}"))
@@ -274,7 +275,7 @@ class _ExpressionChecker:
             self.m.used.add(func)
             function = scope.functions[func]
             if len(node.args) != len(function.params):
-                self.report(error_at("E306", f"'{func}' takes {len(function.params)} argument"
+                self.report(error_at(codes.E306, f"'{func}' takes {len(function.params)} argument"
                                              f"{'' if len(function.params) == 1 else 's'} "
                                              f"({', '.join(function.params)}), {len(node.args)} given", node.span,
                                      related=[Related(function.name_span, f"'{func}' is defined here")]))
@@ -286,12 +287,12 @@ class _ExpressionChecker:
             return
         decl = self.m.decls.get(func)
         if decl is not None and decl.category != "function":
-            self.report(error_at("E316", f"'{func}' is {a_or_an(decl.category)}, not a function", node.func_span))
+            self.report(error_at(codes.E316, f"'{func}' is {a_or_an(decl.category)}, not a function", node.func_span))
         else:
             hint = did_you_mean(func, list(BUILTINS) + list(scope.functions))
             if decl is not None:
                 hint = f"'{func}' is defined inside the model; a function outside it cannot call it"
-            self.report(error_at("E301", f"unknown function '{func}'", node.func_span,
+            self.report(error_at(codes.E301, f"unknown function '{func}'", node.func_span,
                                  hint=hint or "built-in functions: " + " ".join(BUILTINS)))
         for arg in node.args:
             self.check(arg)
@@ -307,7 +308,7 @@ class _ExpressionChecker:
             wanted = f"{least} argument{'' if least == 1 else 's'}"
         usage = {"table": "table(t, [t0, t1, ...], [v0, v1, ...])", "step": "step(t, t0)",
                  "csv": 'csv("file.csv", "column")', "atan2": "atan2(y, x)"}.get(node.func)
-        self.report(error_at("E306", f"{node.func}() takes {wanted}, {given} given", node.span,
+        self.report(error_at(codes.E306, f"{node.func}() takes {wanted}, {given} given", node.span,
                              hint=f"write {usage}" if usage else None))
         return False
 
@@ -329,7 +330,7 @@ class _ExpressionChecker:
             if isinstance(arg, ast.ListExpr):
                 lists.append(arg)
             else:
-                self.report(error_at("E306", f"the {position} argument of table() must be a list [...]", arg.span,
+                self.report(error_at(codes.E306, f"the {position} argument of table() must be a list [...]", arg.span,
                                      hint="write table(t, [t0, t1, ...], [v0, v1, ...])"))
         entries = self.scope.constant("a table breakpoint")
         for lst in lists:
@@ -338,11 +339,11 @@ class _ExpressionChecker:
         if len(lists) == 2:
             breakpoints, values = lists
             if len(breakpoints.items) != len(values.items):
-                self.report(error_at("E306", f"table() has {len(breakpoints.items)} breakpoints but "
+                self.report(error_at(codes.E306, f"table() has {len(breakpoints.items)} breakpoints but "
                                              f"{len(values.items)} values", node.span,
                                      hint="give one value per breakpoint"))
             elif len(breakpoints.items) < 2:
-                self.report(error_at("E306", "table() needs at least two points", node.span,
+                self.report(error_at(codes.E306, "table() needs at least two points", node.span,
                                      hint="for a constant, write the value itself"))
 
     def _call_mod(self, node: ast.Call) -> None:
@@ -352,7 +353,7 @@ class _ExpressionChecker:
             while isinstance(divisor, ast.Unary) and divisor.op in "+-":
                 divisor = divisor.operand
             if isinstance(divisor, ast.Num) and divisor.value == 0:
-                self.report(error_at("E306", "mod(x, 0): the divisor is zero", node.args[1].span,
+                self.report(error_at(codes.E306, "mod(x, 0): the divisor is zero", node.args[1].span,
                                      hint="the remainder of a division by zero is undefined; give a non-zero divisor"))
 
     def _call_csv(self, node: ast.Call) -> None:
@@ -366,7 +367,7 @@ class _ExpressionChecker:
             if isinstance(arg, ast.Str):
                 strings.append(arg)
             else:
-                self.report(error_at("E313", f"the {position} of csv() must be a string", arg.span,
+                self.report(error_at(codes.E313, f"the {position} of csv() must be a string", arg.span,
                                      hint='write csv("data/file.csv", "column")'))
         if len(strings) == 2:
             path_arg, column_arg = strings
@@ -417,25 +418,25 @@ def _check_csv(m: CheckContext, node: ast.Call, path_arg: ast.Str, column_arg: a
             m.csv_headers[key] = None
     header = m.csv_headers[key]
     if isinstance(header, str):
-        report(error_at("E310", f"cannot read CSV file '{path_arg.value}': {header}", path_arg.span,
+        report(error_at(codes.E310, f"cannot read CSV file '{path_arg.value}': {header}", path_arg.span,
                         hint="a data file is a regular text file with a header line"))
     elif header is None:
-        report(error_at("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span,
+        report(error_at(codes.E310, f"cannot read CSV file '{path_arg.value}'", path_arg.span,
                         hint=f"the path is relative to the model file: looked for '{shown}'"))
     elif not header or not any(header):
-        report(error_at("E310", f"CSV file '{path_arg.value}' has no header line", path_arg.span,
+        report(error_at(codes.E310, f"CSV file '{path_arg.value}' has no header line", path_arg.span,
                         hint="the first line names the columns, e.g. t,omega"))
     elif column_arg.value not in header and not _is_table(path, header):
         # a model may name any file (/etc/passwd, /proc/self/environ): what is not a table is not quoted
-        report(error_at("E310", f"'{path_arg.value}' is not a CSV table", path_arg.span,
+        report(error_at(codes.E310, f"'{path_arg.value}' is not a CSV table", path_arg.span,
                         hint="a data file is a header line of column names separated by commas (time first), "
                              "then rows of numbers"))
     elif column_arg.value not in header:
         columns = [c for c in header if c]
-        report(error_at("E310", f"CSV file '{path_arg.value}' has no column '{column_arg.value}'", column_arg.span,
+        report(error_at(codes.E310, f"CSV file '{path_arg.value}' has no column '{column_arg.value}'", column_arg.span,
                         hint=join_hints(did_you_mean(column_arg.value, columns), f"its columns: {', '.join(columns)}")))
     elif len(header) < 2:
-        report(error_at("E310", f"CSV file '{path_arg.value}' needs a time column and a value column",
+        report(error_at(codes.E310, f"CSV file '{path_arg.value}' needs a time column and a value column",
                         path_arg.span, hint="the first column (or the column t or time) is time"))
     else:
         from bondc.numeric import csv_scales
@@ -443,7 +444,7 @@ def _check_csv(m: CheckContext, node: ast.Call, path_arg: ast.Str, column_arg: a
         try:
             csv_scales(str(path), column_arg.value)
         except ValueError as problem:
-            report(error_at("E310", f"CSV file '{path_arg.value}': {problem} in its header", column_arg.span,
+            report(error_at(codes.E310, f"CSV file '{path_arg.value}': {problem} in its header", column_arg.span,
                             hint="a header names a column's unit in brackets, e.g. 'omega [rpm]', 't [ms]'; "
                                  "a column without one is SI"))
             return
@@ -452,11 +453,11 @@ def _check_csv(m: CheckContext, node: ast.Call, path_arg: ast.Str, column_arg: a
         try:
             load_csv(path, column_arg.value)        # the data rows, as the simulation reads them
         except CsvError as problem:
-            report(error_at("E310", f"CSV file '{path_arg.value}': {str(problem).partition(': ')[2]}",
+            report(error_at(codes.E310, f"CSV file '{path_arg.value}': {str(problem).partition(': ')[2]}",
                             path_arg.span, hint="rows (after the header, not counting blank lines and # comments) "
                                                 "are numbers, times in increasing order"))
         except (OSError, UnicodeDecodeError, csv.Error):
-            report(error_at("E310", f"cannot read CSV file '{path_arg.value}'", path_arg.span))
+            report(error_at(codes.E310, f"cannot read CSV file '{path_arg.value}'", path_arg.span))
 
 
 def check_expr(m: CheckContext, expr: ast.Expr, scope: ExprScope) -> bool:

@@ -8,6 +8,7 @@ from __future__ import annotations
 from bondc.errors import Related
 from bondc.kinds import KINDS, RESISTOR, STORAGE
 from bondc.semantic.context import CheckContext, warning_at
+from bondc import codes
 
 
 def check_passive_orientation(m: CheckContext) -> None:
@@ -27,7 +28,7 @@ def check_passive_orientation(m: CheckContext) -> None:
         bond = m.bonds[ends[0].bond - 1]
         role = "it stores" if KINDS[element.kind].stores else "it dissipates"
         m.report(warning_at(
-            "W304", f"the bond of {element.kind} '{element.name}' is drawn leaving it, so its e*f is the power "
+            codes.W304, f"the bond of {element.kind} '{element.name}' is drawn leaving it, so its e*f is the power "
                     f"it delivers, not the power {role}", element.name_span,
             related=(Related(bond.span, f"bond {bond.number} points away from '{element.name}'"),),
             hint=f"draw the bond towards it: '{bond.head} -> {element.name}'"))
@@ -43,7 +44,7 @@ def check_label_names(m: CheckContext) -> None:
             continue
         other = m.bonds[number - 1]
         m.report(warning_at(
-            "W305", f"label '{bond.label}' names bond {bond.number}, but '{bond.label}' is also bond {number}'s "
+            codes.W305, f"label '{bond.label}' names bond {bond.number}, but '{bond.label}' is also bond {number}'s "
                     f"default name; bond {number} is called 'bond{number}' in equations and results",
             bond.label_span if hasattr(bond, "label_span") else bond.span,
             related=(Related(other.span, f"bond {number}"),),
@@ -56,9 +57,9 @@ def check_unused(m: CheckContext) -> None:
         if decl.name in m.used:
             continue
         if decl.category == "parameter":
-            m.report(warning_at("W301", f"parameter '{decl.name}' is never used", decl.span,
+            m.report(warning_at(codes.W301, f"parameter '{decl.name}' is never used", decl.span,
                                 hint="remove it, or use it in a law, input or output"))
         elif decl.category == "input":
-            m.report(warning_at("W302", f"input '{decl.name}' is never used", decl.span,
+            m.report(warning_at(codes.W302, f"input '{decl.name}' is never used", decl.span,
                                 hint="remove it, or use it in a law or output (e.g. MSe src : e = "
                                      f"{decl.name})"))

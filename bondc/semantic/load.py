@@ -19,6 +19,7 @@ from bondc.source import Source
 from bondc.std import LIBRARIES as STD_LIBRARIES, path_of as std_path_of
 from bondc.semantic.build import build_files, sorted_unique
 from bondc.semantic.context import did_you_mean, error_at, join_hints
+from bondc import codes
 
 
 def _read(path: Path, name: str) -> Source:
@@ -72,7 +73,7 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
             if item.path.startswith("std:"):
                 target, name = _std_library(item.path[4:]), item.path
                 if target is None:
-                    diagnostics.append(error_at("E307", f"no component library '{item.path}'", item.span,
+                    diagnostics.append(error_at(codes.E307, f"no component library '{item.path}'", item.span,
                                                 hint=join_hints(did_you_mean(item.path[4:], STD_LIBRARIES),
                                                                  "shipped libraries: " + ", ".join(
                                                                      f"std:{n}" for n in STD_LIBRARIES))))
@@ -84,7 +85,7 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
                 problem = _not_a_model_file(target, item.path)
                 if problem is not None:
                     # (a model may name any file: one that is not a model is not read, nor quoted)
-                    diagnostics.append(error_at("E307", problem, item.span,
+                    diagnostics.append(error_at(codes.E307, problem, item.span,
                                                 hint="import names a model file (.bg), relative to the importing "
                                                      "file, or a shipped library (std:NAME)"))
                     continue
@@ -92,21 +93,21 @@ def load_files(path: str | Path, text: str | None = None) -> tuple[list[ast.File
             keys = [k for k, _ in stack]
             if key in keys:
                 cycle = [n for _, n in stack[keys.index(key):]] + [name]
-                diagnostics.append(error_at("E308", f"cyclic import: {' -> '.join(cycle)}", item.span,
+                diagnostics.append(error_at(codes.E308, f"cyclic import: {' -> '.join(cycle)}", item.span,
                                             hint="files cannot import each other; move what both need into a "
                                                  "third file"))
                 continue
             if key in loaded:
                 continue
             if not target.is_file():
-                diagnostics.append(error_at("E307", f"cannot find imported file '{item.path}'", item.span,
+                diagnostics.append(error_at(codes.E307, f"cannot find imported file '{item.path}'", item.span,
                                             hint=f"import paths are relative to the importing file: looked for "
                                                  f"'{name}'"))
                 continue
             try:
                 imported = Source(name, target.read_text(encoding="utf-8"), target)
             except (OSError, UnicodeDecodeError) as error:
-                diagnostics.append(error_at("E307", f"cannot read imported file '{item.path}': "
+                diagnostics.append(error_at(codes.E307, f"cannot read imported file '{item.path}': "
                                                     f"{getattr(error, 'strerror', None) or error}", item.span))
                 continue
             loaded.add(key)

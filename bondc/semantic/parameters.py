@@ -18,6 +18,7 @@ from bondc.semantic.context import a_or_an, CheckContext, Definition, did_you_me
 from bondc.semantic.expressions import CONSTANT, calls_in, check_expr, cycles, names_in
 from bondc.semantic.rules import BINDING_RULE, OVERRIDE_RULE, scope_for
 from bondc.semantic.unit_checks import COMPUTED_WHY, is_constant, require_coherent, resolve_unit
+from bondc import codes
 
 
 def parameter_definitions(m: CheckContext) -> dict[str, Definition]:
@@ -49,7 +50,7 @@ def check_override(m: CheckContext, name: str, name_span: Span, expr: ast.Expr, 
     decl = m.decls.get(name)
     if decl is None or not isinstance(decl.node, ast.Param):
         what = f"; '{name}' is {a_or_an(decl.category)}" if decl is not None else ""
-        m.report(error_at("E301", f"{where} sets '{name}', which is not a parameter{what}", name_span,
+        m.report(error_at(codes.E301, f"{where} sets '{name}', which is not a parameter{what}", name_span,
                           hint=did_you_mean(name, m.names("parameter"))))
         return False
     m.used.add(name)
@@ -67,7 +68,7 @@ def check_override(m: CheckContext, name: str, name_span: Span, expr: ast.Expr, 
     declared = resolve_unit(m, declared_unit)
     if (unit is not None and declared_unit is not None and resolved is not None and declared is not None
             and resolved.dims != declared.dims):
-        m.report(error_at("E204", f"[{unit.text}] does not measure the same quantity as [{declared.text}], the unit "
+        m.report(error_at(codes.E204, f"[{unit.text}] does not measure the same quantity as [{declared.text}], the unit "
                                   f"of '{name}'", unit.span,
                           hint=f"give the value in [{declared.text}] or a unit of the same kind "
                                f"({declared.dimension_text()})",
@@ -89,7 +90,7 @@ def evaluate_parameters(m: CheckContext, definitions: Mapping[str, Definition]) 
             continue  # a cycle of declarations always has a forward reference, reported as such
         culprit = definitions[overridden[0]]
         path = " -> ".join(cycle + [cycle[0]])
-        m.report(error_at("E305", f"parameter dependency cycle: {path}", culprit.span,
+        m.report(error_at(codes.E305, f"parameter dependency cycle: {path}", culprit.span,
                           hint=f"the value from {culprit.origin} makes '{culprit.name}' depend on itself",
                           related=[Related(definitions[n].span, f"'{n}' is defined here") for n in cycle
                                    if n != culprit.name]))
@@ -167,7 +168,7 @@ def finite_si(m: CheckContext, si: float, value: float, unit: ast.Unit, span: Sp
     (``1e308 [kN/m]`` is 1e311 N/m: inf, which no law and no generated module can use)."""
     if math.isfinite(si):
         return si
-    m.report(error_at("E311", f"cannot evaluate: {value:g} [{unit.text}] is {'an infinite' if si == si else 'no'} "
+    m.report(error_at(codes.E311, f"cannot evaluate: {value:g} [{unit.text}] is {'an infinite' if si == si else 'no'} "
                               f"number in SI units (beyond a double's range, about 1.8e308)", span,
                       hint="write the value in a unit closer to SI, or a smaller value"))
     return None
@@ -252,7 +253,7 @@ def zero_divisors(divisors, values: Mapping[str, float]) -> list[Diagnostic]:
             continue
         if value == 0:
             used = ", ".join(f"{name} = {values[name]:g}" for name in names)
-            found.append(error_at("E311", f"a division by zero: the divisor is 0 with {used}", divisor.span,
+            found.append(error_at(codes.E311, f"a division by zero: the divisor is 0 with {used}", divisor.span,
                                   hint="a parameter that divides must not be 0; check its value and the "
                                        "experiment's and --set overrides"))
     return found
@@ -281,7 +282,7 @@ def _check_breakpoints(m: CheckContext, breakpoints: ast.ListExpr, values: Mappi
         points.append((value, item))
     for (previous, _), (value, item) in zip(points, points[1:]):
         if value < previous:
-            m.report(error_at("E306", f"table breakpoints must not decrease: {value:g} comes after {previous:g}",
+            m.report(error_at(codes.E306, f"table breakpoints must not decrease: {value:g} comes after {previous:g}",
                               item.span, hint="list the breakpoints in increasing order"))
             return
 

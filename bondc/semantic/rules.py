@@ -16,6 +16,7 @@ from bondc.semantic.expressions import (
     CONSTANT, DISCRETE_RULE, DISCRETE_START, GENERAL, SIGNAL, calls_in, check_expr, cycles, ExprScope, names_in,
     ParamsAbove,
 )
+from bondc import codes
 
 
 _PARAMETER_RULE = "a parameter is a constant: numbers, parameters defined above it, pi and functions"
@@ -63,7 +64,7 @@ def check_functions(m: CheckContext) -> None:
         path = " -> ".join(cycle + [cycle[0]])
         message = (f"function '{cycle[0]}' calls itself" if len(cycle) == 1
                    else f"functions {quoted(cycle)} call each other")
-        m.report(error_at("E304", f"{message}: {path}", first.name_span,
+        m.report(error_at(codes.E304, f"{message}: {path}", first.name_span,
                           hint="functions cannot be recursive; write the repetition out",
                           related=[Related(m.functions[name].name_span, f"'{name}' is defined here")
                                    for name in cycle[1:]]))
@@ -83,7 +84,7 @@ def check_expressions(m: CheckContext) -> None:
     for signal in m.inputs:
         if signal.external:
             check_expr(m, input_value(signal), scope_for(m, f"the default of external input '{signal.name}'", CONSTANT,
-                                                _EXTERNAL_RULE, code="E344"))
+                                                _EXTERNAL_RULE, code=codes.E344))
         else:
             check_expr(m, input_value(signal), scope_for(m, "an input", SIGNAL, INPUT_RULE))
     for output in m.outputs:
@@ -118,26 +119,26 @@ def _check_when(m: CheckContext, when: ast.When) -> None:
         if isinstance(action, ast.WhenAssign):
             decl = m.decls.get(action.name)
             if decl is None:
-                m.report(error_at("E301", f"undefined name '{action.name}'", action.name_span,
+                m.report(error_at(codes.E301, f"undefined name '{action.name}'", action.name_span,
                                   hint=did_you_mean(action.name, m.names("discrete")) or _WHEN_RULE))
             elif decl.category != "discrete":
-                m.report(error_at("E316", f"a when clause cannot assign {a_or_an(decl.category)} ('{action.name}')",
+                m.report(error_at(codes.E316, f"a when clause cannot assign {a_or_an(decl.category)} ('{action.name}')",
                                   action.name_span, hint=_WHEN_RULE))
             else:
                 m.used.add(action.name)
             check_expr(m, action.value, scope)
             continue
         if action.func != "reinit":
-            m.report(error_at("E301", f"unknown statement '{action.func}(...)' in a when clause", action.func_span,
+            m.report(error_at(codes.E301, f"unknown statement '{action.func}(...)' in a when clause", action.func_span,
                               hint=_WHEN_RULE))
             continue
         if len(action.args) != 2:
-            m.report(error_at("E306", f"reinit() takes 2 arguments, {len(action.args)} given", action.span,
+            m.report(error_at(codes.E306, f"reinit() takes 2 arguments, {len(action.args)} given", action.span,
                               hint="write reinit(STATE, new value)"))
             continue
         target, value = action.args
         if check_expr(m, target, scope) and _reinit_target(m, target) is None:
-            m.report(error_at("E316", "reinit() sets a state: X.q, X.p, a custom state X.NAME or a model state",
+            m.report(error_at(codes.E316, "reinit() sets a state: X.q, X.p, a custom state X.NAME or a model state",
                               target.span, hint=_WHEN_RULE))
         check_expr(m, value, scope)
 
@@ -217,7 +218,7 @@ def check_signal_cycles(m: CheckContext, inputs: Mapping[str, ast.Input] | None 
                  for name, d in defs.items()}
         for cycle in cycles(list(defs), edges):
             path = " -> ".join(cycle + [cycle[0]])
-            m.report(error_at("E305", f"{category}s defined in terms of each other: {path}",
+            m.report(error_at(codes.E305, f"{category}s defined in terms of each other: {path}",
                               defs[cycle[0]].name_span,
                               related=[Related(defs[n].name_span, f"'{n}' is defined here") for n in cycle[1:]],
                               hint=f"an {category} cannot depend on itself, directly or through other {category}s"))

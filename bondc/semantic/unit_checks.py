@@ -11,6 +11,7 @@ from typing import Mapping
 from bondc import ast, units
 from bondc.semantic.context import CheckContext, error_at
 from bondc.semantic.expressions import names_in
+from bondc import codes
 
 
 def resolve_unit(m: CheckContext, unit: ast.Unit | None) -> units.SIUnit | None:
@@ -22,7 +23,7 @@ def resolve_unit(m: CheckContext, unit: ast.Unit | None) -> units.SIUnit | None:
     numbers = [f for f in unit.factors if f.name != "1" and not f.name[:1].isalpha() and f.name[:1] != "_"]
     if numbers:
         bad = numbers[0]
-        m.report(error_at("E203", f"[{unit.text}] is not a unit: '{bad.name}' is a number", bad.span,
+        m.report(error_at(codes.E203, f"[{unit.text}] is not a unit: '{bad.name}' is a number", bad.span,
                           hint="a unit is a product of unit names (and 1); put a scale factor in the value, "
                                f"e.g. {bad.name}*x [{_without(unit, bad)}]"))
         resolved = None
@@ -97,7 +98,7 @@ def require_coherent(m: CheckContext, unit: ast.Unit | None, who: str, why: str)
     """E202 unless ``unit`` (if any) is coherent SI; returns the resolved unit."""
     resolved = resolve_unit(m, unit)
     if unit is not None and resolved is not None and not resolved.is_coherent:
-        m.report(error_at("E202", f"the unit of {who} must be a coherent SI unit, not [{unit.text}]", unit.span,
+        m.report(error_at(codes.E202, f"the unit of {who} must be a coherent SI unit, not [{unit.text}]", unit.span,
                           hint=f"{why}: write [{coherent_suggestion(unit)}]"))
     return resolved
 

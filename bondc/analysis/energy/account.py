@@ -16,6 +16,7 @@ from bondc.analysis.energy.steps import _at_solver_steps, _run_nodes, steps_of
 from bondc.analysis.energy.stored import energy_recipes, stored_energy_functions
 from bondc.analysis.energy.values import Balance, ElementEnergy, EnergyAccount, Window, _error
 from bondc.errors import Diagnostic
+from bondc import codes
 
 #: A residual above this fraction of the throughput gets warning W930.
 RESIDUAL_TOLERANCE = 1e-6
@@ -84,12 +85,12 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     """
     graph = ss.graph
     if set(result.states) != set(ss.state_names):
-        raise _error("E930", "the simulation result is not a run of this model: its states are "
+        raise _error(codes.E930, "the simulation result is not a run of this model: its states are "
                              f"{', '.join(result.states) or 'none'}, the model's {', '.join(ss.state_names)}",
                      hint="pass the StateSpace the result was simulated from")
     t = np.asarray(result.t, dtype=float)
     if t.size < 2 or not t[-1] > t[0]:
-        raise _error("E931", "the simulation result has no time span to account energy over",
+        raise _error(codes.E931, "the simulation result has no time span to account energy over",
                      hint="simulate past the start time")
     if cycle is None:
         cycle = experiment_cycle(ss, result)
@@ -122,7 +123,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
                 if energy.state_name in model.state_names or energy.state_name in values}
     step_start, step_end = trajectory.ta, trajectory.tb
     if not step_start.size:     # (a run again at its steps that stopped before its first step)
-        raise _error("E931", "the simulation result has no solver step to account energy over",
+        raise _error(codes.E931, "the simulation result has no solver step to account energy over",
                      hint="simulate past the start time")
     state_bounds = trajectory.states_at_bounds()
     scale = max(abs(windows[-1][1]), 1.0)
@@ -151,7 +152,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
     diagnostics: list[Diagnostic] = []
     if truncated:
         diagnostics.append(Diagnostic(
-            "warning", "W932",
+            "warning", codes.W932,
             f"the energy account covers t = {float(t[0]):.6g} to {covered:.6g} s of the run's {float(t[0]):.6g} to "
             f"{float(t[-1]):.6g} s: the run at the solver's own steps that it is computed from stopped there "
             f"({getattr(steps, 'message', '') or 'incomplete'})",
@@ -164,7 +165,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
             bad = ~np.isfinite(power)
             if np.any(bad):
                 first = float(np.min(times[bad]))
-                raise _error("E934", f"the power into '{element.name}' is not finite from t={first:.6g} s: "
+                raise _error(codes.E934, f"the power into '{element.name}' is not finite from t={first:.6g} s: "
                                      "no energy account for this run",
                              hint="a law gives inf or nan there (W821 names the variable): a division by a "
                                   "parameter that is zero or tiny, or a state out of its range")
@@ -217,7 +218,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
         for entry in converters:
             if abs(entry.work_in) > 1e-9 * max(entry.gross, 1e-300):
                 diagnostics.append(Diagnostic(
-                    "warning", "W931", f"two-port '{entry.element}' does not conserve power in cycle {index + 1}: "
+                    "warning", codes.W931, f"two-port '{entry.element}' does not conserve power in cycle {index + 1}: "
                                        f"the work in at its ports sums to {entry.work_in:.3e} J",
                     hint="a transformer's or gyrator's port laws must give p1.e*p1.f = p2.e*p2.f"))
         relative = balance.relative_residual
@@ -226,7 +227,7 @@ def energy_account(ss, result, *, cycle: float | None = None) -> EnergyAccount:
             units_of = {e.unit for e in window_entries}        # a pseudo bond graph's own (K*J), as the table says
             unit = " " + units_of.pop() if len(units_of) == 1 else ""
             diagnostics.append(Diagnostic(
-                "warning", "W930",
+                "warning", codes.W930,
                 f"the energy balance of cycle {index + 1} does not close: residual {balance.residual:.3e}{unit}, "
                 f"{relative:.2e} of the throughput {balance.throughput:.6g}{unit}",
                 hint=_residual_hint(result, settings, graph)))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 
 from bondc.analysis.energy.values import _error
+from bondc import codes
 
 #: At most this many cycles are analysed (each is a row of every per-cycle table).
 MAX_CYCLES = 10_000
@@ -26,10 +27,10 @@ def cycle_windows(t_start: float, t_end: float, cycle: float | None) -> list[tup
     if cycle is None:
         return [(t_start, t_end, False)]
     if not (isinstance(cycle, (int, float)) and math.isfinite(cycle) and cycle > 0):
-        raise _error("E932", f"the cycle length must be a positive number of seconds, not {cycle!r}")
+        raise _error(codes.E932, f"the cycle length must be a positive number of seconds, not {cycle!r}")
     count = (t_end - t_start) / cycle
     if count > MAX_CYCLES:      # before a window is made (cycle = 1e-9 s would be billions of them)
-        raise _error("E935", f"the run spans {count:.3g} cycles of {cycle:g} s; at most {MAX_CYCLES} cycles "
+        raise _error(codes.E935, f"the run spans {count:.3g} cycles of {cycle:g} s; at most {MAX_CYCLES} cycles "
                              f"are analysed", hint="check the cycle length (seconds), or analyse a shorter run")
     count = int(math.floor(count * (1 + 1e-9) + 1e-9))
     if count == 0:

@@ -14,6 +14,7 @@ from typing import Callable
 from bondc.analysis.sweep.grid import _usage
 from bondc.analysis.sweep.point import _run_point, _Setup
 from bondc.analysis.sweep.table import STATUSES, SweepPoint
+from bondc import codes
 
 
 #: Without --point-timeout: a point may take 20 times the median time of the points done so far,
@@ -46,7 +47,7 @@ def _run_all(setup: _Setup, tasks: list, jobs: int, report, point_timeout: float
         for count, (index, values) in enumerate(tasks, 1):
             started = time.perf_counter()
             point = _run_point(setup, index, values)
-            if any(d.code == "E813" for d in point.diagnostics):
+            if any(d.code == codes.E813 for d in point.diagnostics):
                 raise KeyboardInterrupt     # Ctrl-C stopped this point's run: stop the sweep, keep the rest
             point = dataclasses.replace(point, wall_time=time.perf_counter() - started)
             on_done(point)
@@ -77,7 +78,7 @@ def _run_dask(setup: _Setup, tasks: list, jobs: int, report, point_timeout: floa
     try:
         from distributed import Client, LocalCluster, wait
     except ImportError:
-        raise _usage("E971", "--executor dask needs dask.distributed, which is not installed",
+        raise _usage(codes.E971, "--executor dask needs dask.distributed, which is not installed",
                      hint='pip install "dask[distributed]"') from None
     cluster = None
     try:
@@ -88,7 +89,7 @@ def _run_dask(setup: _Setup, tasks: list, jobs: int, report, point_timeout: floa
                                    silence_logs=logging.ERROR)
             client = Client(cluster)
     except (OSError, TimeoutError) as error:
-        raise _usage("E971", f"cannot reach the Dask scheduler {scheduler!r}: {error}",
+        raise _usage(codes.E971, f"cannot reach the Dask scheduler {scheduler!r}: {error}",
                      hint="start one with 'dask scheduler' and workers with 'dask worker ADDRESS'") from None
     try:
         slots = max(1, len(client.scheduler_info().get("workers", {})) or jobs)

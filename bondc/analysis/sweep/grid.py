@@ -16,6 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from bondc.errors import BondcError, Diagnostic, UsageError
+from bondc import codes
 
 
 #: The most runs one sweep may ask for (checked before the grid is made).
@@ -46,17 +47,17 @@ def _number(text: str, spec: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise _usage("E962", f"--vary '{spec}': '{text}' is not a number",
+        raise _usage(codes.E962, f"--vary '{spec}': '{text}' is not a number",
                      hint="values are numbers separated by commas, or start:stop:count") from None
     if not math.isfinite(value):
-        raise _usage("E962", f"--vary '{spec}': '{text}' is not a finite number")
+        raise _usage(codes.E962, f"--vary '{spec}': '{text}' is not a finite number")
     return value
 
 
 def _range(item: str, spec: str) -> list[float]:
     parts = [part.strip() for part in item.split(":")]
     if len(parts) != 3:
-        raise _usage("E962", f"--vary '{spec}': '{item}' is not start:stop:count",
+        raise _usage(codes.E962, f"--vary '{spec}': '{item}' is not start:stop:count",
                      hint="e.g. M=20:40:5 gives 20, 25, 30, 35, 40")
     start, stop = _number(parts[0], spec), _number(parts[1], spec)
     try:
@@ -64,10 +65,10 @@ def _range(item: str, spec: str) -> list[float]:
     except ValueError:
         count = 0
     if count < 2 or str(count) != parts[2].lstrip("+"):
-        raise _usage("E962", f"--vary '{spec}': the count in '{item}' must be a whole number >= 2, "
+        raise _usage(codes.E962, f"--vary '{spec}': the count in '{item}' must be a whole number >= 2, "
                              f"got '{parts[2]}'", hint="start:stop:count includes both ends")
     if count > MAX_RUNS:        # before anything is allocated (a count of 10^8 is 800 MB of values)
-        raise _usage("E964", f"--vary '{spec}' asks for {count} values; a sweep has at most {MAX_RUNS} runs",
+        raise _usage(codes.E964, f"--vary '{spec}' asks for {count} values; a sweep has at most {MAX_RUNS} runs",
                      hint="use fewer points (a coarse grid first, then a finer one where it matters)")
     values = np.linspace(start, stop, count)
     values[0], values[-1] = start, stop
@@ -78,24 +79,24 @@ def parse_vary(text: str) -> Axis:
     """``"NAME=v1,v2 [unit]"`` or ``"NAME=start:stop:count [unit]"`` -> :class:`Axis` (E960, E962)."""
     match = _VARY.match(text)
     if match is None or "=" not in text:
-        raise _usage("E960", f"--vary '{text}' is not NAME=VALUES [unit]",
+        raise _usage(codes.E960, f"--vary '{text}' is not NAME=VALUES [unit]",
                      hint='e.g. --vary "k=400,800,1600" or --vary "M=20:40:5 [kg]"')
     name = match["name"]
     if not _NAME.match(name):
-        raise _usage("E960", f"--vary '{text}': '{name}' is not a parameter name",
+        raise _usage(codes.E960, f"--vary '{text}': '{name}' is not a parameter name",
                      hint='e.g. --vary "k=400,800,1600"')
     unit = match["unit"].strip() if match["unit"] is not None else None
     if unit == "":
-        raise _usage("E963", f"--vary '{text}': the unit between [ ] is empty",
+        raise _usage(codes.E963, f"--vary '{text}': the unit between [ ] is empty",
                      hint="leave out [ ] to use the parameter's declared unit")
     items = [item.strip() for item in match["values"].split(",")]
     if not any(items):
-        raise _usage("E960", f"--vary '{text}' gives no values for '{name}'",
+        raise _usage(codes.E960, f"--vary '{text}' gives no values for '{name}'",
                      hint="give values separated by commas, or start:stop:count")
     values: list[float] = []
     for item in items:
         if not item:
-            raise _usage("E960", f"--vary '{text}' has an empty value between commas")
+            raise _usage(codes.E960, f"--vary '{text}' has an empty value between commas")
         values += _range(item, text) if ":" in item else [_number(item, text)]
     return Axis(name, tuple(values), unit, text)
 
@@ -109,12 +110,12 @@ def _resolve_unit(text: str, where: str = ""):
     try:
         unit = parse_set_value(f"_unit = 1 [{text}]").unit
     except BondcError:
-        raise _usage("E963", f"{where}[{text}] is not a unit") from None
+        raise _usage(codes.E963, f"{where}[{text}] is not a unit") from None
     si, diagnostics = units.resolve(unit)
     if si is None:
         hint = next((d.hint for d in diagnostics if d.hint), None)
         message = "; ".join(d.message for d in diagnostics) or f"[{text}] is not a unit"
-        raise _usage("E963", where + message, hint=hint)
+        raise _usage(codes.E963, where + message, hint=hint)
     return si
 
 
@@ -148,12 +149,12 @@ def _check_axes(graph, axes: Sequence[Axis], sets: Sequence) -> tuple[list, list
         if axis.name not in graph.parameters:
             close = difflib.get_close_matches(axis.name, names, n=1)
             hint = f"did you mean '{close[0]}'?" if close else "parameters: " + ", ".join(names)
-            raise _usage("E961", f"--vary '{axis.text}': '{axis.name}' is not a parameter of {graph.name}",
+            raise _usage(codes.E961, f"--vary '{axis.text}': '{axis.name}' is not a parameter of {graph.name}",
                          hint=hint)
         if axis.name in seen:
-            raise _usage("E966", f"'{axis.name}' is varied twice", hint="give all its values in one --vary")
+            raise _usage(codes.E966, f"'{axis.name}' is varied twice", hint="give all its values in one --vary")
         if axis.name in fixed:
-            raise _usage("E966", f"'{axis.name}' is both varied and set with --set", hint="drop one of them")
+            raise _usage(codes.E966, f"'{axis.name}' is both varied and set with --set", hint="drop one of them")
         seen.add(axis.name)
         declared_text = graph.parameters[axis.name].unit_text
         declared = _resolve_unit(declared_text) if declared_text else units.DIMENSIONLESS
@@ -162,7 +163,7 @@ def _check_axes(graph, axes: Sequence[Axis], sets: Sequence) -> tuple[list, list
             converter = _resolve_unit(axis.unit, f"--vary '{axis.text}': ")
             # the same test as --set (semantic's E204): angle counts, rpm is not 1/s
             if converter.dims != declared.dims:
-                raise _usage("E963", f"--vary '{axis.text}': [{axis.unit}] does not measure the same quantity "
+                raise _usage(codes.E963, f"--vary '{axis.text}': [{axis.unit}] does not measure the same quantity "
                                      f"as [{declared_text or '1'}], the unit of '{axis.name}'",
                              hint=f"give the values in [{declared_text or '1'}] or a unit of the same kind "
                                   f"({declared.dimension_text()})")
@@ -181,11 +182,11 @@ def parse_range(text: str) -> Axis:
     """
     match = _VARY.fullmatch(text.strip())
     if match is None or ":" not in match.group("values") or match.group("values").count(":") != 1:
-        raise _usage("E960", f"--range '{text}': write NAME=LOW:HIGH, optionally with a unit: \"M=20:45 [kg]\"")
+        raise _usage(codes.E960, f"--range '{text}': write NAME=LOW:HIGH, optionally with a unit: \"M=20:45 [kg]\"")
     low_text, high_text = match.group("values").split(":")
     low, high = _number(low_text, text), _number(high_text, text)
     if not high > low:
-        raise _usage("E962", f"--range '{text}': the upper bound must be above the lower one")
+        raise _usage(codes.E962, f"--range '{text}': the upper bound must be above the lower one")
     return Axis(match.group("name"), (low, high), match.group("unit"), text)
 
 

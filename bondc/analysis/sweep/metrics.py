@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Sequence
 
 from bondc.analysis.sweep.grid import _si_unit_text, _usage
 from bondc.errors import BondcError, Diagnostic, UsageError
+from bondc import codes
 
 
 if TYPE_CHECKING:
@@ -104,7 +105,7 @@ def select_metrics(graph, metrics: Sequence[str] | None) -> tuple[Metric, ...]:
                 continue
             raise _unknown_metric(text, available, graph, motor)
     if not chosen:
-        raise _usage("E965", "no metrics selected", hint="e.g. --metric x.max --metric energy.residual")
+        raise _usage(codes.E965, "no metrics selected", hint="e.g. --metric x.max --metric energy.residual")
     return tuple(chosen.values())
 
 
@@ -116,7 +117,7 @@ def _default(name: str) -> bool:
 
 def _unknown_metric(text: str, available: dict, graph, motor: bool) -> UsageError:
     if text.startswith("motor.") and not motor:
-        return _usage("E965", f"unknown metric '{text}': motor requirements need an output 'torque' and an "
+        return _usage(codes.E965, f"unknown metric '{text}': motor requirements need an output 'torque' and an "
                               "output or input 'omega' or 'speed'",
                       hint=f"outputs: {', '.join(graph.outputs) or 'none'}")
     head, dot, _ = text.rpartition(".")
@@ -124,10 +125,10 @@ def _unknown_metric(text: str, available: dict, graph, motor: bool) -> UsageErro
                "also energy.residual, energy.relative_residual" + (", motor.*" if motor else ""))
     if dot and head not in graph.outputs and head not in ("energy", "motor"):
         close = difflib.get_close_matches(head, list(graph.outputs), n=1)
-        return _usage("E965", f"unknown metric '{text}': the model has no output '{head}'",
+        return _usage(codes.E965, f"unknown metric '{text}': the model has no output '{head}'",
                       hint=f"did you mean '{close[0]}'?" if close else listing)
     close = difflib.get_close_matches(text, list(available), n=1)
-    return _usage("E965", f"unknown metric '{text}'", hint=f"did you mean '{close[0]}'?" if close else listing)
+    return _usage(codes.E965, f"unknown metric '{text}'", hint=f"did you mean '{close[0]}'?" if close else listing)
 
 
 _CATALOGUES: dict[str, list] = {}

@@ -16,6 +16,7 @@ from bondc.analysis.sweep.metrics import _measure, _qualifying_motors
 from bondc.analysis.sweep.table import SweepPoint
 from bondc.errors import BondcError, Diagnostic
 from bondc.pipeline import Checked, Derived, check_file, derive, file_texts, structure
+from bondc import codes
 
 if TYPE_CHECKING:
     from bondc.ast import SetValue
@@ -115,7 +116,7 @@ def _measure_point(setup: _Setup, index: int, values: tuple[float, ...]) -> Swee
         if file_texts(graph) != file_texts(base.graph):
             return SweepPoint(index, values, "failed", "E968: the model file changed during the sweep",
                               None, parameters, diagnostics=(Diagnostic(
-                                  "error", "E968", "the model file changed during the sweep",
+                                  "error", codes.E968, "the model file changed during the sweep",
                                   hint="run the sweep again"),))
         experiment = checked.experiment
         if not setup.rederive and structure(graph) == structure(base.graph):
@@ -160,7 +161,7 @@ def _finish_point(setup: _Setup, index: int, values, path, parameters, state_spa
     """A point that ran (or stopped early): its status, metrics and motors."""
     warnings = list(result.warnings)
     if not result.complete:
-        diagnostics = tuple(result.diagnostics) or (Diagnostic("error", "E968", result.message),)
+        diagnostics = tuple(result.diagnostics) or (Diagnostic("error", codes.E968, result.message),)
         message = "; ".join(f"{d.code}: {d.message}" for d in diagnostics)
         return SweepPoint(index, values, "failed", message, path, parameters, {}, result.t_reached,
                           diagnostics, tuple(warnings))

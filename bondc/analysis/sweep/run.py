@@ -22,6 +22,7 @@ from bondc.analysis.sweep.study import (
 )
 from bondc.analysis.sweep.table import SweepPoint, SweepResult
 from bondc.pipeline import Checked, check_file, parse_sets
+from bondc import codes
 
 
 def run_sweep(path, *, model: str | None = None, experiment: str | None = None, sets: Sequence = (),
@@ -109,22 +110,22 @@ def _check_request(vary: Sequence[str], samples: int | None, ranges: Sequence[st
                    scheduler: str | None, point_timeout: float | None, output: Any) -> str:
     """E960, E967, E969, E971 for a request that cannot be run; the executor to run it on."""
     if not vary and not samples:
-        raise _usage("E960", "nothing to vary", hint='give --vary, e.g. --vary "k=400,800,1600", or --samples N '
+        raise _usage(codes.E960, "nothing to vary", hint='give --vary, e.g. --vary "k=400,800,1600", or --samples N '
                                                     'with --range NAME=LOW:HIGH')
     if vary and (samples or ranges):
-        raise _usage("E960", "give either --vary (a grid) or --samples with --range (a Latin hypercube)")
+        raise _usage(codes.E960, "give either --vary (a grid) or --samples with --range (a Latin hypercube)")
     if samples is not None and (not isinstance(samples, int) or samples < 1 or not ranges):
-        raise _usage("E960", "--samples needs a whole number >= 1 and at least one --range NAME=LOW:HIGH")
+        raise _usage(codes.E960, "--samples needs a whole number >= 1 and at least one --range NAME=LOW:HIGH")
     if not isinstance(jobs, int) or jobs < 1:
-        raise _usage("E967", f"jobs must be a whole number >= 1, got {jobs!r}")
+        raise _usage(codes.E967, f"jobs must be a whole number >= 1, got {jobs!r}")
     if executor not in ("local", "dask"):
-        raise _usage("E971", f"unknown executor {executor!r}", hint="choose local or dask")
+        raise _usage(codes.E971, f"unknown executor {executor!r}", hint="choose local or dask")
     if scheduler and executor != "dask":
         executor = "dask"           # --scheduler means a Dask cluster
     if point_timeout is not None and not point_timeout >= 0:
-        raise _usage("E967", f"--point-timeout must be a number of seconds >= 0 (0: no limit), got {point_timeout!r}")
+        raise _usage(codes.E967, f"--point-timeout must be a number of seconds >= 0 (0: no limit), got {point_timeout!r}")
     if output is not None and Path(output).suffix.lower() not in (".csv", ".json"):
-        raise _usage("E969", f"cannot write '{output}': give a .csv or .json file")
+        raise _usage(codes.E969, f"cannot write '{output}': give a .csv or .json file")
     if output is not None:
         from bondc.io import check_output
 
@@ -138,7 +139,7 @@ def _axes(vary: Sequence[str], samples: int | None, ranges: Sequence[str]) -> li
     runs = samples if samples else math.prod(len(axis.values) for axis in axes)
     if runs > MAX_RUNS:
         shape = f" ({' x '.join(str(len(axis.values)) for axis in axes)})" if len(axes) > 1 and not samples else ""
-        raise _usage("E964", f"the sweep has {runs} runs{shape}; at most {MAX_RUNS} are allowed",
+        raise _usage(codes.E964, f"the sweep has {runs} runs{shape}; at most {MAX_RUNS} are allowed",
                      hint="use fewer values, or split the sweep")
     return axes
 
@@ -165,7 +166,7 @@ def _plan(checked: Checked, path: Any, *, model: str | None, experiment: str | N
     chosen_metrics = select_metrics(graph, metrics)
     end = t_end if t_end is not None else chosen.t_end if chosen is not None else None
     if end is None:
-        raise _usage("E801", "no end time for the simulation", hint="give --t-end, or set t_end in the experiment")
+        raise _usage(codes.E801, "no end time for the simulation", hint="give --t-end, or set t_end in the experiment")
     if motors is not None:
         from bondc.analysis.motors import load_catalogue
 

@@ -15,6 +15,7 @@ from bondc.analysis.sweep.metrics import MOTOR_RULES
 from bondc.analysis.sweep.table import STATUSES, SweepPoint
 from bondc.errors import UsageError
 from bondc.pipeline import file_texts
+from bondc import codes
 
 
 def _key(parameters: Mapping, names: Sequence[str]) -> tuple:
@@ -23,7 +24,7 @@ def _key(parameters: Mapping, names: Sequence[str]) -> tuple:
 
 
 def _not_resumable(path, why: str) -> UsageError:
-    return _usage("E970", f"cannot resume from '{path}': {why}",
+    return _usage(codes.E970, f"cannot resume from '{path}': {why}",
                   hint="it is not the table of this sweep, and bondc leaves it as it is; write to another file "
                        "(-o), or delete it to start again")
 
@@ -64,7 +65,7 @@ def _previous_points(path, result_header: list[str], axes, metrics, motors: bool
     if not rows:
         return {}
     if rows[0] != result_header:
-        raise _usage("E970", f"'{path}' holds the table of another sweep (other columns)",
+        raise _usage(codes.E970, f"'{path}' holds the table of another sweep (other columns)",
                      hint="bondc leaves it as it is; write to another file (-o), or delete it to start again")
     width = len(result_header)
     columns = {name: number for number, name in enumerate(result_header)}
@@ -106,7 +107,7 @@ def _check_grid(output, previous: dict[tuple, SweepPoint], keys: Sequence[tuple]
             "write to another file (-o), or delete it to start again")
     if samples and seed is None:
         hint += " (a Latin hypercube without --seed draws other points every run: give --seed)"
-    raise _usage("E970", f"'{output}' holds {len(strays)} finished point{'s' if len(strays) != 1 else ''} "
+    raise _usage(codes.E970, f"'{output}' holds {len(strays)} finished point{'s' if len(strays) != 1 else ''} "
                          f"that {'are' if len(strays) != 1 else 'is'} not in this sweep (e.g. {example}): "
                          "running it would drop them", hint=hint)
 
@@ -187,7 +188,7 @@ def _check_study(output, study: dict) -> None:
               "dt": "another dt", "motor catalogue": "another motor catalogue"}
     changed = [labels.get(key, key) for key in study if json.dumps(recorded.get(key)) != json.dumps(study[key])]
     if changed:
-        raise _usage("E970", f"'{output}' holds points of this sweep computed with {', '.join(changed)}: "
+        raise _usage(codes.E970, f"'{output}' holds points of this sweep computed with {', '.join(changed)}: "
                              "resuming would mix them with points of this one",
                      hint="write to another file, or delete it to start again")
 

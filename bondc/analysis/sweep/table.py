@@ -15,6 +15,7 @@ from bondc.analysis.sweep.grid import _usage, Axis
 from bondc.analysis.sweep.metrics import Metric
 from bondc.errors import Diagnostic
 from bondc.io import json_safe
+from bondc import codes
 
 
 STATUSES = ("ok", "failed", "timed out", "incomplete")
@@ -114,7 +115,7 @@ class SweepResult:
                 out += [Diagnostic(d.severity, d.code, where + d.message, d.span, d.hint, d.related)
                         for d in point.diagnostics]
             else:
-                out.append(Diagnostic("error", "E968", where + (point.message or "failed")))
+                out.append(Diagnostic("error", codes.E968, where + (point.message or "failed")))
         return out
 
     def column(self, metric: str) -> list[float]:
@@ -203,7 +204,7 @@ class SweepResult:
         elif suffix == ".csv":
             self.write_csv(path)
         else:
-            raise _usage("E969", f"cannot write '{path}': give a .csv or .json file")
+            raise _usage(codes.E969, f"cannot write '{path}': give a .csv or .json file")
 
     # ---------------------------------------------------------------- text
 

@@ -596,10 +596,11 @@ def _examples(code: str, seen: dict) -> list[str]:
 
 
 def emitted_codes() -> set[str]:
-    """Every code written in bondc's source as a string literal ("E601")."""
+    """Every code written in bondc's source: registered (``d("E601", ...)``) or named (``codes.E601``)."""
     codes = set()
     for path in (ROOT / "bondc").rglob("*.py"):
-        codes |= set(re.findall(r'"([EWI][0-9]{3})"', path.read_text(encoding="utf-8")))
+        text = path.read_text(encoding="utf-8")
+        codes |= set(re.findall(r'"([EWI][0-9]{3})"', text)) | set(re.findall(r"\bcodes\.([EWI][0-9]{3})\b", text))
     return codes
 
 
