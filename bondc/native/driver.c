@@ -365,7 +365,7 @@ bondc_driver *bondc_driver_new(int n, int switches, int entries, const int *rows
     d->fp = (double *)calloc(n + 1, sizeof(double));
     d->fm = (double *)calloc(n + 1, sizeof(double));
     d->shifted = (double *)calloc(n + 1, sizeof(double));
-    d->scratch = (double *)calloc(switches + 1, sizeof(double));
+    d->scratch = (double *)calloc(2 * (size_t)switches + 1, sizeof(double));      /* bondc_modes_at's */
     d->ahead = (double *)calloc(switches + 1, sizeof(double));
     d->gmid = (double *)calloc(switches + 1, sizeof(double));
     d->slide = -1;
@@ -507,40 +507,15 @@ int bondc_driver_advance(bondc_driver *d, int capacity, int watched, const int *
 static int driver_modes_at(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
                            double *out)
 {
-    int finite = 1;
-    for (int k = 0; k < d->switches; k++) out[k] = guess[k];
-    for (int pass = 0; pass <= d->switches; pass++) {
-        bondc_switches(t, y, d->p, out, d->g);
-        if (!driver_finite(d->g, d->switches)) finite = 0;
-        int same = 1;
-        for (int k = 0; k < d->switches; k++) {
-            double g = d->g[k];
-            double m = g != g ? 0.0 : (floors[k] ? floor(g) : (g > 0 ? 1.0 : (g < 0 ? -1.0 : 0.0)));
-            if (m != out[k]) same = 0;
-            d->scratch[k] = m;
-        }
-        if (same) return finite;
-        for (int k = 0; k < d->switches; k++) out[k] = d->scratch[k];
-    }
-    return finite;
+    return bondc_modes_at(&d->law, floors, t, y, guess, out, d->scratch);
 }
 
-/* The runtime's restart_modes at (t, y) from `guess` where the restart is simple: the modes there
-   (driver_modes_at) into out, and the same modes a probe ahead along their law. Returns 1 then (or
-   where that law is not finite, as restart_modes does), 0 where the modes ahead differ (the
-   switches may chatter: the runtime decides), -1 with `strict` where a switching function or the
-   right-hand side is not finite (a model with an algebraic loop: numpy's values are taken there). */
+/* The modes just after a restart at (t, y) from `guess` where it is simple (bondc_restart_modes):
+   1 then, 0 where the modes a probe ahead differ, -1 with `strict` where a value is not finite. */
 int bondc_driver_restart(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
                          double probe, int strict, double *out)
 {
-    if (!driver_modes_at(d, t, y, guess, floors, out) && strict) return -1;
-    bondc_rhs(t, y, d->p, out, d->fp);
-    if (!driver_finite(d->fp, d->n)) return strict ? -1 : 1;
-    for (int q = 0; q < d->n; q++) d->shifted[q] = y[q] + probe * d->fp[q];
-    if (!driver_modes_at(d, t + probe, d->shifted, out, floors, d->ahead) && strict) return -1;
-    for (int k = 0; k < d->switches; k++)
-        if (d->ahead[k] != out[k]) return 0;
-    return 1;
+    return bondc_restart_modes(&d->law, floors, t, y, guess, probe, strict, out);
 }
 
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
@@ -992,52 +967,17 @@ void bondc_driver_free(bondc_driver *d)
 /* ---- the crossing after a possible one, and the modes after it: what an FMU's engine
    (bondc/native/fmi/engine.c) does with bondc_driver_advance's code 1, in C for any caller */
 
-static int same_values(const double *a, const double *b, int count)
-{
-    for (int i = 0; i < count; i++)
-        if (a[i] != b[i]) return 0;
-    return 1;
-}
-
-/* The modes just after (t, y) from `guess` into out, as _Run.restart_modes makes them: those of
-   bondc_driver_restart where the modes a probe ahead agree; else the modes ahead, probed again along
-   their law, until they agree (0), or until they repeat (1: switches that chatter, a sliding mode
-   this function does not resolve; out holds the last modes). -1 when out of memory. */
+/* The modes just after (t, y) from `guess` into out (bondc_select_modes): 0 where they agree a probe
+   ahead, 1 where they cycle (flips marks the switches that flip: a sliding mode), -1 when out of
+   memory. */
 int bondc_driver_select(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
                         double probe, double *out, int *flips)
 {
-    enum { ROUNDS = 8 };
-    int switches = d->switches, n = d->n;
-    if (flips)
-        for (int k = 0; k < switches; k++) flips[k] = 0;
-    if (switches == 0) return 0;
-    if (bondc_driver_restart(d, t, y, guess, floors, probe, 0, out) == 1) return 0;
-    double *seen = (double *)calloc((size_t)(ROUNDS + 2) * switches, sizeof(double));
-    double *ahead = (double *)calloc((size_t)switches, sizeof(double));
-    double *shifted = (double *)calloc((size_t)n + 1, sizeof(double));
-    int code = 1, rounds = 1, first = 0;
-    if (!seen || !ahead || !shifted) code = -1;
-    else memcpy(seen, out, sizeof(double) * switches);
-    for (int round = 0; code == 1 && round < ROUNDS; round++) {
-        bondc_rhs(t, y, d->p, out, d->fp);
-        if (!driver_finite(d->fp, n)) { code = 0; break; }     /* as restart_modes: that law stands */
-        for (int i = 0; i < n; i++) shifted[i] = y[i] + probe * d->fp[i];
-        driver_modes_at(d, t + probe, shifted, out, floors, ahead);
-        if (same_values(ahead, out, switches)) { code = 0; break; }
-        for (int r = rounds - 1; r >= 0; r--)
-            if (same_values(ahead, seen + (long)r * switches, switches)) { code = 2; first = r; }
-        memcpy(out, ahead, sizeof(double) * switches);
-        if (code == 2) { code = 1; break; }
-        memcpy(seen + (long)rounds * switches, ahead, sizeof(double) * switches);
-        rounds++;
-    }
-    /* the switches that flip within the cycle (from its first repeated row; all rows where none
-       repeated), as _Run.restart_modes names them */
-    if (code == 1 && flips)
-        for (int r = first + 1; r < rounds; r++)
-            for (int k = 0; k < switches; k++)
-                if (seen[(long)r * switches + k] != seen[(long)first * switches + k]) flips[k] = 1;
-    free(seen); free(ahead); free(shifted);
+    int rows = 0;
+    double *cycle = (double *)malloc(sizeof(double) * 10 * (size_t)(d->switches + 1));
+    if (!cycle) return -1;
+    int code = bondc_select_modes(&d->law, floors, t, y, guess, probe, out, flips, cycle, &rows);
+    free(cycle);
     return code;
 }
 

@@ -1,8 +1,8 @@
-/* ---- Filippov sliding: the corners' weights and the switches a sliding mode holds (filippov.h) ----
+/* ---- the switches: their modes, and Filippov sliding (filippov.h) ----
 
-   bondc's one implementation of the choice of a sliding set: the Python run loop calls it through
-   cffi (with the model's C functions, or its numpy functions called back), the CVODE driver and an
-   FMU's engine call it directly. */
+   bondc's one implementation of the modes at a restart and of the choice of a sliding set: the
+   Python run loop calls it through cffi (with the model's C functions, or its numpy functions
+   called back), the CVODE driver and an FMU's engine call it directly. */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -448,5 +448,114 @@ done:
     free(sliding); free(s.cm); free(s.values); free(s.rates); free(s.shifted); free(s.g); free(s.g2);
     free(s.corner); free(a); free(ahead); free(clipped); free(w); free(at); free(f); free(rates_ahead);
     free(residual); free(nil);
+    return code;
+}
+
+/* ---- the modes */
+
+static int bondc_same(const double *a, const double *b, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (a[i] != b[i]) return 0;
+    return 1;
+}
+
+static int bondc_all_finite(const double *v, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+int bondc_modes_at(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                   double *out, double *scratch)
+{
+    int count = law->switches, finite = 1;
+    double *g = scratch, *next = scratch + count;
+    for (int k = 0; k < count; k++) out[k] = guess[k];
+    for (int pass = 0; pass <= count; pass++) {
+        law->switching(t, y, law->p, out, g);
+        if (!bondc_all_finite(g, count)) finite = 0;
+        int same = 1;
+        for (int k = 0; k < count; k++) {
+            double value = g[k];
+            double m = value != value ? 0.0 : (floors[k] ? floor(value) : (value > 0 ? 1.0 : (value < 0 ? -1.0 : 0.0)));
+            if (m != out[k]) same = 0;
+            next[k] = m;
+        }
+        if (same) return finite;
+        for (int k = 0; k < count; k++) out[k] = next[k];
+    }
+    return finite;
+}
+
+/* (the work space of the restart: the rate, the state a probe ahead, the modes there, scratch) */
+static int bondc_restart_into(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                              double probe, int strict, double *out, double *work)
+{
+    int n = law->n, count = law->switches;
+    double *rate = work, *shifted = work + n, *ahead = work + 2 * n, *scratch = work + 2 * n + count;
+    if (!bondc_modes_at(law, floors, t, y, guess, out, scratch) && strict) return -1;
+    law->rhs(t, y, law->p, out, rate);
+    if (!bondc_all_finite(rate, n)) return strict ? -1 : 1;
+    for (int i = 0; i < n; i++) shifted[i] = y[i] + probe * rate[i];
+    if (!bondc_modes_at(law, floors, t + probe, shifted, out, ahead, scratch) && strict) return -1;
+    for (int k = 0; k < count; k++)
+        if (ahead[k] != out[k]) return 0;
+    return 1;
+}
+
+int bondc_restart_modes(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                        double probe, int strict, double *out)
+{
+    double *work = (double *)malloc(sizeof(double) * (size_t)(2 * law->n + 3 * law->switches + 1));
+    if (!work) return -1;
+    int code = bondc_restart_into(law, floors, t, y, guess, probe, strict, out, work);
+    free(work);
+    return code;
+}
+
+int bondc_select_modes(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                       double probe, double *out, int *flips, double *rows, int *row_count)
+{
+    enum { ROUNDS = 8 };
+    int count = law->switches, n = law->n;
+    *row_count = 0;
+    for (int k = 0; k < count; k++) flips[k] = 0;
+    if (count == 0) return 0;
+    double *work = (double *)malloc(sizeof(double) * (size_t)(2 * n + 3 * count + 1));
+    double *seen = (double *)malloc(sizeof(double) * (size_t)(ROUNDS + 2) * count);
+    double *ahead = (double *)malloc(sizeof(double) * (size_t)count);
+    int code = 1, rounds = 1, first = 0;
+    if (!work || !seen || !ahead) { code = -1; goto done; }
+    if (bondc_restart_into(law, floors, t, y, guess, probe, 0, out, work) == 1) { code = 0; goto done; }
+    memcpy(seen, out, sizeof(double) * (size_t)count);
+    double *rate = work, *shifted = work + n, *scratch = work + 2 * n + count;
+    for (int round = 0; code == 1 && round < ROUNDS; round++) {
+        law->rhs(t, y, law->p, out, rate);
+        if (!bondc_all_finite(rate, n)) { code = 0; break; }    /* as restart_modes: that law stands */
+        for (int i = 0; i < n; i++) shifted[i] = y[i] + probe * rate[i];
+        bondc_modes_at(law, floors, t + probe, shifted, out, ahead, scratch);
+        if (bondc_same(ahead, out, count)) { code = 0; break; }
+        int repeated = -1;
+        for (int r = 0; r < rounds && repeated < 0; r++)
+            if (bondc_same(ahead, seen + (long)r * count, count)) repeated = r;
+        memcpy(out, ahead, sizeof(double) * (size_t)count);
+        if (repeated >= 0) { first = repeated; break; }
+        memcpy(seen + (long)rounds * count, ahead, sizeof(double) * (size_t)count);
+        rounds++;
+    }
+    if (code == 1) {
+        /* the switches that flip within the cycle, from its first repeated row (all rows where none
+           repeated), as _Run.restart_modes names them */
+        for (int r = first; r < rounds; r++) {
+            memcpy(rows + (long)(r - first) * count, seen + (long)r * count, sizeof(double) * (size_t)count);
+            for (int k = 0; k < count; k++)
+                if (seen[(long)r * count + k] != seen[(long)first * count + k]) flips[k] = 1;
+        }
+        *row_count = rounds - first;
+    }
+done:
+    free(work); free(seen); free(ahead);
     return code;
 }

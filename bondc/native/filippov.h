@@ -1,5 +1,6 @@
-/* Filippov sliding in bondc's engine (filippov.c): the weights of a sliding mode's corners and the
-   choice of the switches that a sliding mode holds. One implementation, built three ways: into a
+/* The switches in bondc's engine (filippov.c): their modes at a point and after a restart, and
+   Filippov sliding (the weights of a sliding mode's corners and the choice of the switches that a
+   sliding mode holds). One implementation, built three ways: into a
    model's library with the CVODE driver (driver.c includes it), into an FMU's binary, and alone once
    per machine (bondc.runtime.native.load_filippov) for runs whose laws are numpy functions, which
    it calls back. cffi's cdef reads this text: declarations and comments only, no preprocessor lines.
@@ -51,3 +52,24 @@ int bondc_law_deadbands(const bondc_law *law, double t, const double *y, const d
 int bondc_sliding_set(const bondc_law *law, double t, const double *y, double *modes, const int *candidates,
                       int count, double probe, double span, const double *scale, double *vertices, int *held,
                       double *alpha, int *affine);
+
+/* The modes of the unfrozen law at (t, y): m = sign(g(t, y, m)) (floor(g) where floors[k]; 0 where g
+   is NaN), iterated from `guess` until it repeats (at most switches + 1 passes: a nested switch's
+   function reads the modes of the switches inside it). `scratch`: 2 * switches values. Returns 1
+   where every switching function was finite, 0 where one was not. */
+int bondc_modes_at(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                   double *out, double *scratch);
+
+/* The modes just after a restart at (t, y), from `guess`, into out, where the restart is simple: the
+   modes there equal those a probe step ahead along their own law. 1 where it is, 0 where it is not
+   (the modes there in out), -1 where `strict` and a switching function or the rate is not finite. */
+int bondc_restart_modes(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                        double probe, int strict, double *out);
+
+/* The modes just after (t, y), as _Run.restart_modes chooses them: bondc_restart_modes, then the modes
+   a probe ahead along the law they select, chosen again until they agree (0) or cycle (1: each law
+   pushes the state back across another's surface, a sliding mode). Where they cycle, flips[k] marks
+   the switches that flip within the cycle and `rows` (at most 10 x switches) holds the cycle's mode
+   vectors, *row_count of them. -1 where memory ran out. */
+int bondc_select_modes(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
+                       double probe, double *out, int *flips, double *rows, int *row_count);

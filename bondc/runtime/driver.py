@@ -143,17 +143,6 @@ class _NativeDriver:
             int(self.others.size), buffer("int[]", self.others) if self.others.size else self.ffi.NULL,
             buffer("double[]", self.drift) if self.others.size else self.ffi.NULL) == 0
 
-    def restart(self, t, y, guess, floors, probe, strict):
-        """``_Run.restart_modes`` in C where the restart is simple (``bondc_driver_restart``): the
-        modes, or None where the runtime decides."""
-        buffer = self.ffi.from_buffer
-        out = np.empty(max(guess.size, 1))
-        code = self.lib.bondc_driver_restart(self.handle, float(t), buffer("double[]", np.ascontiguousarray(y, dtype=float)),
-                                             buffer("double[]", np.ascontiguousarray(guess, dtype=float)),
-                                             buffer("int[]", floors), float(probe), int(bool(strict)),
-                                             buffer("double[]", out))
-        return out[:guess.size] if code == 1 else None
-
     def exits_at(self, t, y):
         """The sliding mode's exits at (t, y), evaluated in C (as ``exits`` of :meth:`_Run.sliding_segment`)."""
         out = np.empty(self.exits.size // 2)

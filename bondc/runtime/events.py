@@ -346,12 +346,14 @@ class _EventLocation:
         return breaks
 
     def restart_modes(self, t, y, guess):
-        """Modes just after (t, y), and the switches that chatter there.
+        """Modes just after (t, y), and the switches that chatter there (``bondc_select_modes``,
+        the engine's one implementation).
 
         The modes are probed a step ``h`` ahead along the law they select and
         re-chosen until they agree with it. When they cycle instead (each law
         pushes the state back across the surface of the other), the switches
-        that flip within the cycle are returned: a sliding mode.
+        that flip within the cycle and matter for one of its laws are returned:
+        a sliding mode.
         """
         if self.switch_count == 0:
             return np.zeros(0), []
@@ -361,29 +363,9 @@ class _EventLocation:
                     and piece.guess.tobytes() == np.asarray(guess, dtype=float).tobytes()
                     and piece.y0.tobytes() == np.asarray(y, dtype=float).tobytes()):
                 return piece.modes.copy(), []
-        driver = self.driver_for(np.zeros(0, dtype=int), np.zeros(0))
-        if driver is not None:      # the same modes from C, where the restart is simple
-            modes = driver.restart(t, y, np.ones(self.switch_count) if guess is None else guess, self.floors_c,
-                                   self.probe, not getattr(self.model, "VECTORIZED", True))
-            if modes is not None:
-                self.stats["restarts_in_c"] = self.stats.get("restarts_in_c", 0) + 1
-                return modes, []
-        modes = self.modes_at(t, y, guess)
-        seen = [tuple(modes)]
-        for _ in range(8):
-            with np.errstate(all="ignore"):
-                slope = np.asarray(self.model.rhs(t, y, self.p, modes), dtype=float)
-                ahead = self.modes_at(t + self.probe, y + self.probe * slope, modes)
-            if np.array_equal(ahead, modes) or not np.all(np.isfinite(slope)):
-                return modes, []
-            if tuple(ahead) in seen:
-                cycle = np.array(seen[seen.index(tuple(ahead)):])
-                flipping = [k for k in range(self.switch_count) if np.any(cycle[:, k] != cycle[0, k])]
-                return ahead, self.only_relevant(t, y, cycle, flipping)
-            seen.append(tuple(ahead))
-            modes = ahead
-        flipping = [k for k in range(self.switch_count) if len({row[k] for row in seen}) > 1]
-        return modes, self.only_relevant(t, y, np.array(seen), flipping)
+        modes, flipping, cycle = self.law().select(t, y, np.ones(self.switch_count) if guess is None else guess,
+                                                   self.floors_c, self.probe)
+        return modes, (self.only_relevant(t, y, cycle, flipping) if flipping else [])
 
     def only_relevant(self, t, y, rows, switches):
         """The switches among ``switches`` that matter for the law of any of the mode vectors ``rows``."""

@@ -362,7 +362,7 @@ def _engine_library(name, language, flags, extra, version, cdef, what):
 
 
 _POLICY_FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off")
-_POLICY_LOADED: dict = {}       # (cache folder, $CC, $PATH) -> (ffi, lib, why not)
+_POLICY_LOADED: dict = {}       # cache folder -> (ffi, lib, "")
 
 
 def load_policy():
@@ -373,14 +373,15 @@ def load_policy():
     files). Raises :class:`NativeUnavailable` where no C compiler builds it (bondc installs one,
     zig, with its dependencies). ``BONDC_NATIVE=0`` does not turn it off: it is the engine's code,
     not the model's."""
-    key = (cache_dir(), os.environ.get("CC", ""), os.environ.get("PATH", ""))
-    known = _POLICY_LOADED.get(key)
+    key = cache_dir()       # (once loaded, whichever compiler built it: the same text; a failure is
+    known = _POLICY_LOADED.get(key)     # not kept, the next call tries again)
     if known is None:
-        known = _POLICY_LOADED[key] = _engine_library(
+        known = _engine_library(
             "policy.c", "c", _POLICY_FLAGS, ("-lm",), "", native_file("filippov.h") + native_file("locate.h"),
             "bondc's run-loop functions")
-    if known[0] is None:
-        raise NativeUnavailable(known[2])
+        if known[0] is None:
+            raise NativeUnavailable(known[2])
+        _POLICY_LOADED[key] = known
     return known[0], known[1]
 
 

@@ -105,6 +105,39 @@ class SlidingLaw:
         if failure is not None:
             raise failure
 
+    def modes_at(self, t, y, guess, floors):
+        """``bondc_modes_at``: the modes of the unfrozen law at (t, y), from ``guess`` (None: all +1)."""
+        ffi = self.ffi
+        count = self.count
+        if count == 0:
+            return np.zeros(0)
+        y = np.ascontiguousarray(y, dtype=float)
+        guess = np.ones(count) if guess is None else np.ascontiguousarray(guess, dtype=float)
+        out, scratch = np.empty(count), np.empty(2 * count)
+        self.lib.bondc_modes_at(self.law, ffi.from_buffer("int[]", floors), float(t), _doubles(ffi, y),
+                                _doubles(ffi, guess), _doubles(ffi, out), _doubles(ffi, scratch))
+        self._raise_failure()
+        return out
+
+    def select(self, t, y, guess, floors, probe):
+        """``bondc_select_modes``: (the modes just after (t, y), the switches that flip where they
+        cycle (a sliding mode; [] where they agree a probe ahead), the cycle's mode vectors)."""
+        ffi = self.ffi
+        count = self.count
+        y = np.ascontiguousarray(y, dtype=float)
+        guess = np.ascontiguousarray(guess, dtype=float)
+        out, rows = np.empty(max(count, 1)), np.empty((10, max(count, 1)))
+        flips = np.zeros(max(count, 1), dtype=np.intc)
+        row_count = ffi.new("int *")
+        code = self.lib.bondc_select_modes(self.law, ffi.from_buffer("int[]", floors), float(t), _doubles(ffi, y),
+                                           _doubles(ffi, guess), float(probe), _doubles(ffi, out),
+                                           ffi.from_buffer("int[]", flips), _doubles(ffi, rows), row_count)
+        self._raise_failure()
+        if code < 0:
+            raise MemoryError("bondc's mode selection ran out of memory")
+        flipping = [int(k) for k in np.flatnonzero(flips[:count])] if code == 1 else []
+        return out[:count], flipping, rows[:row_count[0], :count].copy()
+
     def deadbands(self, t, y, modes, index, scale):
         """``bondc_law_deadbands``: how far each switching function of ``index`` moves when each
         state moves by its tolerance ``scale``, summed over the states (not finite: 0)."""

@@ -77,9 +77,9 @@ across a switch blindly:
 4. At every restart the modes are chosen *just after* the restart point: the
    state is advanced by a probe ``h = 1e-8 * span`` along the frozen law and
    ``m = sign(g)`` is taken there, iterated until the modes agree with the law
-   they select. With the native driver the first round is done in C
-   (``bondc_driver_restart``, the same modes to the bit); the runtime goes on
-   where the modes ahead differ.
+   they select, or until they cycle (a sliding mode): ``bondc_select_modes``
+   (bondc/native/filippov.c), the one implementation the driver, an FMU and
+   this loop share.
 5. Sliding. When modes do not agree with themselves at a restart (each side's
    law pushes the state back across the surface, as friction does when it
    sticks), or a ``coulomb`` friction or a switch that slid until now sits on
@@ -127,11 +127,11 @@ import numpy as np
 from bondc.runtime.kernels import _EPS
 from bondc.runtime.signals import _with_inputs, external_inputs
 from bondc.runtime.loops import _BLOCK_SOLUTIONS
-from bondc.runtime.adapter import _Model, _model_memo, modes_at, param_array
+from bondc.runtime.adapter import _Model, _model_memo, param_array
 from bondc.runtime.results import (
     DIVERGED, MAX_VALUES, RunFailure, _CountedBlocks, _Diagnosis, _ResultBuilder, _Stalled, _Stop, max_points
 )
-from bondc.runtime.native import attach_native, compiler_label
+from bondc.runtime.native import NativeUnavailable, attach_native, compiler_label
 from bondc.runtime.solvers import (
     DEFAULT_SOLVER, IDA, _CREEP, _CREEP_STEPS, _IMPLICIT, _SolverChoice, _UNFROZEN_STEPS, _all_finite, _creeping,
     solver_class, stiff_solver
@@ -330,7 +330,9 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice):
         return np.asarray(self.model.jac(t, x, self.p, modes), dtype=float)
 
     def modes_at(self, t, x, guess=None):
-        return modes_at(self.model, t, x, self.p, guess)
+        if not self.switch_count:
+            return np.zeros(0)
+        return self.law().modes_at(t, x, guess, self.floors_c)
 
     def mode_id(self, modes):
         key = tuple(modes)
@@ -375,6 +377,17 @@ class _Run(_EventLocation, _Sliding, _DriverSegments, _SolverChoice):
         breaks = self.breaks()
         self.break_times = np.array([tb for tb, _ in breaks], dtype=float)
         break_index = 0
+        if self.switch_count:
+            try:        # the engine's C functions locate, select and hold the switches
+                self.law()
+            except NativeUnavailable as why:
+                self.record_start(t, y, self.mode_id(np.ones(self.switch_count)))
+                return self.result(False, RunFailure(
+                    message=f"the model's switches need bondc's engine in C, which cannot be built here: {why}",
+                    time=float(t), kind="solver",
+                    cause="no C compiler works on this machine (bondc installs one with its dependencies: zig, "
+                          "from the ziglang package)",
+                    hint="reinstall bondc with its dependencies (pip install bondc), or set CC to a C compiler"))
         if self.auto:       # before the restart, whose C code would make the stiff solver's driver
             self.choose_solver(t, y, self.modes_at(t, y))
         self.stats["solver"] = self.solver_label()
