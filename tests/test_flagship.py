@@ -293,7 +293,9 @@ def test_steady_cruise_torque_matches_the_hand_calculation(cycle, time, directio
     """
     v = direction * V_MAX
     tau, pressure = cruise_torque(v)
-    assert at(cycle, time, "v") == pytest.approx(v, rel=1e-6)
+    # the speed to 5e-6: the integration's own noise on it over the cruise is +-2e-6 of it (the
+    # mass's momentum is weighted by its absolute tolerance), whichever steps the run takes
+    assert at(cycle, time, "v") == pytest.approx(v, rel=5e-6)
     assert at(cycle, time, "P") == pytest.approx(pressure, abs=1.0)
     assert abs(at(cycle, time + 0.1, "P") - at(cycle, time - 0.1, "P")) < 1e-2
     assert (pressure < P1) == (direction > 0)        # fed going up, relieved going down
