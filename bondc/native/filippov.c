@@ -559,3 +559,76 @@ done:
     free(work); free(seen); free(ahead);
     return code;
 }
+
+/* ---- the sliding set with the other switches' modes along the sliding motion */
+
+int bondc_consistent_sliding_set(const bondc_law *law, const int *floors, const int *located,
+                                 bondc_relevant_at relevant, void *context, double t, const double *y, double *modes,
+                                 const int *candidates, int count, double probe, double span, const double *scale,
+                                 double *vertices, int *held, double *alpha, int *affine)
+{
+    int n = law->n, switches = law->switches, code = 0;
+    size_t ns = (size_t)(switches > 0 ? switches : 1), nn = (size_t)(n > 0 ? n : 1);
+    int *chosen = (int *)malloc(sizeof(int) * ns);
+    int *flipped = (int *)calloc(ns, sizeof(int));
+    int *matters = (int *)malloc(sizeof(int) * ns);
+    int *changed = (int *)malloc(sizeof(int) * ns);
+    double *corner = (double *)malloc(sizeof(double) * ns);
+    double *ahead = (double *)malloc(sizeof(double) * ns);
+    double *scratch = (double *)malloc(sizeof(double) * 2 * ns);
+    size_t most = (size_t)1 << (switches < BONDC_MAX_SLIDING ? switches : BONDC_MAX_SLIDING);
+    double *w = (double *)malloc(sizeof(double) * (most > ns + 1 ? most : ns + 1));     /* the corners' weights */
+    double *f = (double *)malloc(sizeof(double) * nn);
+    double *slope = (double *)calloc(nn, sizeof(double));
+    double *at = (double *)malloc(sizeof(double) * nn);
+    if (!chosen || !flipped || !matters || !changed || !corner || !ahead || !scratch || !w || !f || !slope || !at) {
+        code = -1;
+        goto done;
+    }
+    int k = count;
+    if (count > 0) memcpy(chosen, candidates, sizeof(int) * (size_t)count);
+    for (int round = 0; round < 2 * BONDC_MAX_SLIDING; round++) {
+        code = bondc_sliding_set(law, t, y, modes, chosen, k, probe, span, scale, vertices, held, alpha, affine);
+        if (code <= 0) break;
+        /* the sliding motion's rate: the corners' right-hand sides in its combination */
+        long corners = *affine ? code + 1 : 1L << code;
+        bondc_corner_weights(code, *affine, alpha, w);
+        for (int i = 0; i < n; i++) slope[i] = 0.0;
+        for (long c = 0; c < corners; c++) {
+            if (w[c] == 0) continue;
+            memcpy(corner, modes, sizeof(double) * ns);
+            for (int i = 0; i < code; i++) {
+                int plus = *affine ? c == 1 + i : (int)((c >> i) & 1);
+                corner[held[i]] = (plus ? 1.0 : -1.0) * vertices[held[i]];
+            }
+            law->rhs(t, y, law->p, corner, f);
+            for (int i = 0; i < n; i++) slope[i] += w[c] * f[i];
+        }
+        for (int i = 0; i < n; i++) at[i] = y[i] + probe * slope[i];
+        bondc_modes_at(law, floors, t + probe, at, modes, ahead, scratch);
+        for (int j = 0; j < switches; j++) matters[j] = 1;
+        if (relevant && relevant(context, modes, matters) != 0)
+            for (int j = 0; j < switches; j++) matters[j] = 1;
+        int changes = 0;
+        for (int j = 0; j < switches; j++) {
+            if (!located[j] || !matters[j] || ahead[j] == modes[j]) continue;
+            int candidate = 0;
+            for (int i = 0; i < k && !candidate; i++) candidate = chosen[i] == j;
+            if (!candidate) changed[changes++] = j;
+        }
+        if (!changes) break;
+        for (int i = 0; i < changes; i++) {
+            int j = changed[i];
+            if (flipped[j] && k < switches) {
+                chosen[k++] = j;
+            } else {
+                modes[j] = ahead[j];
+                flipped[j] = 1;
+            }
+        }
+    }
+done:
+    free(chosen); free(flipped); free(matters); free(changed); free(corner); free(ahead); free(scratch); free(w);
+    free(f); free(slope); free(at);
+    return code;
+}

@@ -73,3 +73,17 @@ int bondc_restart_modes(const bondc_law *law, const int *floors, double t, const
    vectors, *row_count of them. -1 where memory ran out. */
 int bondc_select_modes(const bondc_law *law, const int *floors, double t, const double *y, const double *guess,
                        double probe, double *out, int *flips, double *rows, int *row_count);
+
+/* Which switches matter for the law the modes select (out[k] 1 where switch k does): 0, or not 0
+   where it cannot say (then every switch matters) */
+typedef int (*bondc_relevant_at)(void *context, const double *modes, int *out);
+
+/* bondc_sliding_set, with the other switches' modes chosen just after (t, y) along the sliding motion
+   itself (not along either side's law), as _Run.consistent_sliding_set: a located switch (`located`
+   marks them) that matters (`relevant`, NULL: every one) and flips a probe ahead takes its new mode;
+   one that flips back and forth joins the candidates. At most 16 rounds. Returns what
+   bondc_sliding_set returns, for the last round. */
+int bondc_consistent_sliding_set(const bondc_law *law, const int *floors, const int *located,
+                                 bondc_relevant_at relevant, void *context, double t, const double *y, double *modes,
+                                 const int *candidates, int count, double probe, double span, const double *scale,
+                                 double *vertices, int *held, double *alpha, int *affine);

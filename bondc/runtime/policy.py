@@ -155,24 +155,39 @@ class SlidingLaw:
             raise MemoryError("bondc's deadbands ran out of memory")
         return out[:index.size].copy()
 
-    def sliding_set(self, t, y, modes, candidates, probe, span, scale):
-        """``bondc_sliding_set`` at (t, y): (the held switches, the modes of the others, the held
-        switches' weights or None, each switch's vertex, whether the held ones combine affinely).
-        Raises :class:`TooManyHeld` where more than 8 switches would be held whose laws do not
-        combine affinely."""
+    def sliding_set(self, t, y, modes, candidates, probe, span, scale, located, relevant=None, floors=None):
+        """``bondc_consistent_sliding_set`` at (t, y): (the held switches, the modes of the others,
+        the held switches' weights or None, each switch's vertex, whether the held ones combine
+        affinely). ``located`` marks the switches watched as events, ``relevant(modes)`` says which
+        switches matter for a law (None: all). Raises :class:`TooManyHeld` where more than 8
+        switches would be held whose laws do not combine affinely."""
         ffi = self.ffi
         y = np.ascontiguousarray(y, dtype=float)
         modes = np.array(modes, dtype=float)
         chosen = np.ascontiguousarray(candidates, dtype=np.intc)
         scale = np.ascontiguousarray(np.broadcast_to(scale, y.shape), dtype=float)
+        floors = np.zeros(max(self.count, 1), dtype=np.intc) if floors is None else floors
+        located = np.ascontiguousarray(located, dtype=np.intc)
         vertices = np.empty(max(self.count, 1))
-        held = np.empty(max(chosen.size, 1), dtype=np.intc)
-        alpha = np.empty(max(chosen.size, 1))
+        held = np.empty(max(self.count, 1), dtype=np.intc)
+        alpha = np.empty(max(self.count, 1))
         affine = ffi.new("int *")
-        code = self.lib.bondc_sliding_set(
-            self.law, float(t), _doubles(ffi, y), _doubles(ffi, modes),
-            ffi.from_buffer("int[]", chosen), int(chosen.size), float(probe), float(span), _doubles(ffi, scale),
-            _doubles(ffi, vertices), ffi.from_buffer("int[]", held), _doubles(ffi, alpha), affine)
+        callback = ffi.NULL
+        if relevant is not None:
+            def matters(_context, m, out):
+                try:
+                    mask = np.asarray(relevant(np.frombuffer(ffi.buffer(m, 8 * self.count), dtype=float).copy()))
+                    ffi.buffer(out, 4 * self.count)[:] = mask.astype(np.intc).tobytes()
+                    return 0
+                except Exception as error:
+                    self.failure = self.failure or error
+                    return -1
+            callback = ffi.callback("int(void *, const double *, int *)", matters)
+        code = self.lib.bondc_consistent_sliding_set(
+            self.law, ffi.from_buffer("int[]", floors), ffi.from_buffer("int[]", located), callback, ffi.NULL,
+            float(t), _doubles(ffi, y), _doubles(ffi, modes), ffi.from_buffer("int[]", chosen), int(chosen.size),
+            float(probe), float(span), _doubles(ffi, scale), _doubles(ffi, vertices), ffi.from_buffer("int[]", held),
+            _doubles(ffi, alpha), affine)
         self._raise_failure()
         if code == -1:
             raise MemoryError("bondc's sliding set ran out of memory")

@@ -232,19 +232,25 @@ class _Sliding:
 
     solve_alpha = staticmethod(filippov_alpha)
 
-    def sliding_set(self, t, y, modes, candidates):
-        """Which of ``candidates`` slide at (t, y) and the modes of the others: ``bondc_sliding_set``
-        (bondc/native/filippov.c, complementarity by an active set), the engine's one
-        implementation. A coulomb switch held between its sliding forces is noted in
+    def consistent_sliding_set(self, t, y, modes, candidates):
+        """Which of ``candidates`` slide at (t, y) and the modes of the others
+        (``bondc_consistent_sliding_set``, bondc/native/filippov.c, the engine's one implementation):
+        complementarity by an active set (a switch whose weight leaves [0, 1] cannot be held and
+        takes that side), with the other switches' modes chosen just after (t, y) along the sliding
+        motion itself: one that flips there takes its new mode, one that flips back and forth joins
+        the sliding set. A coulomb switch held between its sliding forces is noted in
         ``vertex_override``, an affine combination in ``affine_sets`` (for :meth:`sliding_corners`).
 
         Returns (sliding switches, modes, alpha).
         """
         law = self.law()
         scale = self.options["atol"] + self.options["rtol"] * np.abs(np.asarray(y, dtype=float))
+        located = np.zeros(max(self.switch_count, 1), dtype=np.intc)
+        located[np.asarray(self.event_switches, dtype=int)] = 1
         try:
-            held, modes, alpha, vertices, affine = law.sliding_set(t, y, modes, candidates, self.probe, self.span,
-                                                                  scale)
+            held, modes, alpha, vertices, affine = law.sliding_set(
+                t, y, modes, candidates, self.probe, self.span, scale, located,
+                relevant=lambda m: self.relevant(t, y, m), floors=self.floors_c)
         except TooManyHeld:
             raise _Stop(self.too_many_held(t, list(candidates), "their laws do not combine linearly")) from None
         given = self.model.SWITCH_VERTICES
@@ -258,34 +264,6 @@ class _Sliding:
                 self.affine_sets.add(key)
             else:
                 self.affine_sets.discard(key)
-        return held, modes, alpha
-
-    def consistent_sliding_set(self, t, y, modes, candidates):
-        """:meth:`sliding_set`, with the modes of the other switches chosen just after (t, y) along the
-        sliding motion itself (not along either side's law): a switch that flips there takes its new
-        mode; one that flips back and forth joins the sliding set. A candidate that is not held
-        keeps the side :meth:`sliding_set` found for it (it leaves its surface on that side, even
-        from a state a rounding error on the other)."""
-        candidates, flipped = list(candidates), set()
-        for _ in range(2 * _MAX_SLIDING):
-            held, modes, alpha = self.sliding_set(t, y, modes, candidates)
-            if not held:
-                return held, modes, alpha
-            corners, sides = self.sliding_corners(modes, held)
-            values, _ = self.sliding_rates(t, y, corners, held)
-            slope = self.corner_weights(alpha, sides) @ values
-            ahead = self.modes_at(t + self.probe, y + self.probe * slope, modes)
-            relevant = self.relevant(t, y, modes)
-            changed = [j for j in self.event_switches
-                       if j not in candidates and relevant[j] and ahead[j] != modes[j]]
-            if not changed:
-                return held, modes, alpha
-            for j in changed:
-                if j in flipped and len(candidates) < _MAX_HELD:
-                    candidates.append(j)
-                else:
-                    modes[j] = ahead[j]
-                    flipped.add(j)
         return held, modes, alpha
 
     def sliding_segment(self, t, y, modes, sliding, alpha0, t_stop):

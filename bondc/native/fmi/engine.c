@@ -253,7 +253,8 @@ static int start_segment(bondc_fmu *c, double t_end)
 
 /* A Filippov sliding mode from (t, x), as bondc simulate's run loop makes it: the candidates (the
    switches that chatter, and those on their surfaces that are coulomb frictions or slid until now),
-   the set that holds (bondc_sliding_set, which also chooses the other candidates' sides), then the
+   the set that holds (bondc_consistent_sliding_set, which also chooses the other switches' modes along
+   the sliding motion), then the
    combination integrated by the driver until it ends (a weight reaches 0 or 1, another switch
    crosses: bondc_driver_slide_end) or t_end. 0: nothing is held (c->m chosen), 1: the mode was
    integrated (c->t advanced), -1: failed. */
@@ -275,8 +276,9 @@ static int slide(bondc_fmu *c, double t_end)
     for (int k = 0; k < BONDC_N_SWITCHES; k++) c->slid[k] = 0;
     if (!count) return 0;
     int affine = 0;
-    int held = bondc_sliding_set(c->law, c->t, c->x, c->m, c->candidates, count, c->probe, c->span, c->scale,
-                                 c->vertices, c->held, c->alpha, &affine);
+    int held = bondc_consistent_sliding_set(c->law, bondc_switch_floor, bondc_switch_located, NULL, NULL, c->t, c->x,
+                                            c->m, c->candidates, count, c->probe, c->span, c->scale, c->vertices,
+                                            c->held, c->alpha, &affine);
     if (held == -1) return fail(c, "out of memory", c->t);
     if (held == -2 || held > MAX_HELD) {
         char text[400];
