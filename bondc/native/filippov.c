@@ -632,3 +632,150 @@ done:
     free(f); free(slope); free(at);
     return code;
 }
+
+/* ---- the candidates of a sliding mode */
+
+/* g_k's gradient over the states (each over its tolerance scale), its squared norm, g_k and its
+   deadband at (t, y); 0 where they are not finite or the gradient is nil */
+typedef struct {
+    double *gradient, *g, *moved, *shifted, *plus, *minus, *fp, *fm;
+    double norm, g0, band;
+} bondc_near;
+
+static void near_free(bondc_near *q)
+{
+    free(q->gradient); free(q->g); free(q->moved); free(q->shifted); free(q->plus); free(q->minus); free(q->fp);
+    free(q->fm);
+}
+
+/* 1 where switch k can be looked at near its surface (q filled), 0 where not, -1 (memory) */
+static int near_surface(const bondc_law *law, const int *floors, double vertex, double t, const double *y,
+                        const double *m, int k, const double *scale, bondc_near *q)
+{
+    int n = law->n, count = law->switches;
+    size_t nn = (size_t)(n > 0 ? n : 1), ns = (size_t)(count > 0 ? count : 1);
+    memset(q, 0, sizeof *q);
+    if (vertex != 1.0 || floors[k]) return 0;
+    q->gradient = (double *)malloc(sizeof(double) * nn);
+    q->g = (double *)malloc(sizeof(double) * ns);
+    q->moved = (double *)malloc(sizeof(double) * ns);
+    q->shifted = (double *)malloc(sizeof(double) * nn);
+    q->plus = (double *)malloc(sizeof(double) * ns);
+    q->minus = (double *)malloc(sizeof(double) * ns);
+    q->fp = (double *)malloc(sizeof(double) * nn);
+    q->fm = (double *)malloc(sizeof(double) * nn);
+    if (!q->gradient || !q->g || !q->moved || !q->shifted || !q->plus || !q->minus || !q->fp || !q->fm) return -1;
+    law->switching(t, y, law->p, m, q->g);
+    q->g0 = q->g[k];
+    memcpy(q->shifted, y, sizeof(double) * (size_t)n);
+    double band = 0.0, norm = 0.0;
+    for (int j = 0; j < n; j++) {
+        q->shifted[j] = y[j] + scale[j];
+        law->switching(t, q->shifted, law->p, m, q->moved);
+        q->shifted[j] = y[j];
+        double difference = q->moved[k] - q->g0;
+        band += fabs(difference);
+        q->gradient[j] = difference / scale[j];
+        norm += q->gradient[j] * q->gradient[j];
+    }
+    q->band = isfinite(band) ? band : 0.0;
+    q->norm = norm;
+    if (!(isfinite(norm) && norm > 0 && isfinite(q->g0) && q->band > 0)) return 0;
+    memcpy(q->plus, m, sizeof(double) * (size_t)count);
+    memcpy(q->minus, m, sizeof(double) * (size_t)count);
+    q->plus[k] = 1.0;
+    q->minus[k] = -1.0;
+    return 1;
+}
+
+/* the state moved along g's gradient to where g has the value `level`, into q->shifted */
+static void near_level(const bondc_law *law, const double *y, const bondc_near *q, double level)
+{
+    for (int j = 0; j < law->n; j++) q->shifted[j] = y[j] + (level - q->g0) * q->gradient[j] / q->norm;
+}
+
+static double near_jump(const bondc_law *law, double t, const double *y, const double *scale, bondc_near *q,
+                        double level)
+{
+    near_level(law, y, q, level);
+    law->rhs(t, q->shifted, law->p, q->plus, q->fp);
+    law->rhs(t, q->shifted, law->p, q->minus, q->fm);
+    double largest = 0.0;
+    for (int j = 0; j < law->n; j++) {
+        double jump = fabs(q->fp[j] - q->fm[j]) / scale[j];
+        if (jump != jump) return NAN;
+        largest = fmax(largest, jump);
+    }
+    return largest;
+}
+
+int bondc_continuous_across(const bondc_law *law, const int *floors, double vertex, double t, const double *y,
+                            const double *m, int k, const double *scale)
+{
+    bondc_near q;
+    int code = near_surface(law, floors, vertex, t, y, m, k, scale, &q), continuous = 0;
+    if (code == 1) {
+        double near = near_jump(law, t, y, scale, &q, q.band), far = near_jump(law, t, y, scale, &q, 100.0 * q.band);
+        continuous = isfinite(near) && isfinite(far) && far > 0 && near <= 0.3 * far;
+    }
+    near_free(&q);
+    return code < 0 ? -1 : continuous;
+}
+
+int bondc_keeps_to(const bondc_law *law, const int *floors, double vertex, double t, const double *y,
+                   const double *m, int k, const double *scale, double probe, double span)
+{
+    bondc_near q;
+    int code = near_surface(law, floors, vertex, t, y, m, k, scale, &q), keeps = 0;
+    if (code == 1) {
+        /* on the surface, g's rate along the plus side's law (central difference over the probe) */
+        near_level(law, y, &q, 0.0);
+        double *at = q.gradient;        /* (the gradient is not needed any more) */
+        memcpy(at, q.shifted, sizeof(double) * (size_t)law->n);
+        law->rhs(t, at, law->p, q.plus, q.fp);
+        double h = probe;
+        for (int j = 0; j < law->n; j++) q.shifted[j] = at[j] + h * q.fp[j];
+        law->switching(t + h, q.shifted, law->p, q.plus, q.g);
+        double ahead = q.g[k];
+        for (int j = 0; j < law->n; j++) q.shifted[j] = at[j] - h * q.fp[j];
+        law->switching(t - h, q.shifted, law->p, q.plus, q.g);
+        double rate = (ahead - q.g[k]) / (2 * h);
+        keeps = isfinite(rate) && fabs(rate) * 1e-3 * span <= q.band;
+    }
+    near_free(&q);
+    return code < 0 ? -1 : keeps;
+}
+
+int bondc_sliding_candidates(const bondc_law *law, const int *floors, const int *located, const int *slid,
+                             const int *relevant, const double *vertices, double t, const double *y, const double *m,
+                             const int *chattering, int count, const double *scale, int *out)
+{
+    int switches = law->switches, found = 0;
+    size_t ns = (size_t)(switches > 0 ? switches : 1);
+    int *mark = (int *)calloc(ns, sizeof(int));
+    double *g = (double *)malloc(sizeof(double) * ns);
+    double *band = (double *)malloc(sizeof(double) * ns);
+    int *index = (int *)malloc(sizeof(int) * ns);
+    if (!mark || !g || !band || !index) { found = -1; goto done; }
+    for (int i = 0; i < count; i++)
+        if (!floors[chattering[i]]) mark[chattering[i]] = 1;      /* an integer mode cannot slide */
+    int keep = 0;
+    for (int k = 0; k < switches; k++)
+        if (located[k] && !mark[k] && (law->vertices[k] != 1.0 || slid[k]) && relevant[k]) index[keep++] = k;
+    if (keep) {
+        /* on the surface: |g| within its deadband (the integration noise of the state) */
+        law->switching(t, y, law->p, m, g);
+        if (bondc_law_deadbands(law, t, y, m, scale, keep, index, band) != 0) { found = -1; goto done; }
+        for (int i = 0; i < keep; i++)
+            if (fabs(g[index[i]]) <= band[i]) mark[index[i]] = 1;
+    }
+    for (int k = 0; k < switches; k++) {
+        if (!mark[k]) continue;
+        int continuous = bondc_continuous_across(law, floors, vertices[k], t, y, m, k, scale);
+        if (continuous < 0) { found = -1; goto done; }
+        if (!continuous) out[found++] = k;
+    }
+done:
+    free(mark); free(g); free(band); free(index);
+    return found;
+}

@@ -87,3 +87,24 @@ int bondc_consistent_sliding_set(const bondc_law *law, const int *floors, const 
                                  bondc_relevant_at relevant, void *context, double t, const double *y, double *modes,
                                  const int *candidates, int count, double probe, double span, const double *scale,
                                  double *vertices, int *held, double *alpha, int *affine);
+
+/* Near switch k's surface at (t, y) with the modes m: (1) whether the law is continuous across it,
+   as a turbulent orifice's sign(dp)*sqrt(abs(dp)) is at dp = 0 (crossed, never held): the jump
+   between its two sides' right-hand sides (each state over its tolerance scale), a deadband off the
+   surface and 100 of them off, vanishes towards it (at most 0.3 of the far one); (2) whether the
+   motion keeps to the surface (on it, g moves by less than its deadband over a thousandth of the
+   run's span). The state is moved along g's gradient to the level asked. Neither for a switch of
+   vertex != 1 (a coulomb friction's) or a floor switch, or where g's gradient is nil: 0. */
+int bondc_continuous_across(const bondc_law *law, const int *floors, double vertex, double t, const double *y,
+                            const double *m, int k, const double *scale);
+int bondc_keeps_to(const bondc_law *law, const int *floors, double vertex, double t, const double *y,
+                   const double *m, int k, const double *scale, double probe, double span);
+
+/* The switches that may slide at (t, y) with the modes m, sorted, into out (returns how many): those
+   of `chattering` (count of them) but floor switches, and the located switches that matter
+   (`relevant`) on their surfaces (|g| within its deadband) that are coulomb frictions (vertex != 1)
+   or slid until now (`slid`); but none whose law is continuous across its surface (`vertices`: each
+   switch's vertex now). -1 where memory ran out. */
+int bondc_sliding_candidates(const bondc_law *law, const int *floors, const int *located, const int *slid,
+                             const int *relevant, const double *vertices, double t, const double *y, const double *m,
+                             const int *chattering, int count, const double *scale, int *out);

@@ -138,6 +138,44 @@ class SlidingLaw:
         flipping = [int(k) for k in np.flatnonzero(flips[:count])] if code == 1 else []
         return out[:count], flipping, rows[:row_count[0], :count].copy()
 
+    def candidates(self, t, y, modes, chattering, scale, located, slid, relevant, vertices, floors):
+        """``bondc_sliding_candidates``: the switches that may slide at (t, y), sorted."""
+        ffi = self.ffi
+        y = np.ascontiguousarray(y, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        chattering = np.ascontiguousarray(chattering, dtype=np.intc)
+        scale = np.ascontiguousarray(np.broadcast_to(scale, y.shape), dtype=float)
+        masks = [np.ascontiguousarray(mask, dtype=np.intc) for mask in (located, slid, relevant)]
+        vertices = np.ascontiguousarray(vertices, dtype=float)
+        out = np.empty(max(self.count, 1), dtype=np.intc)
+        found = self.lib.bondc_sliding_candidates(
+            self.law, ffi.from_buffer("int[]", floors), *(ffi.from_buffer("int[]", mask) for mask in masks),
+            _doubles(ffi, vertices), float(t), _doubles(ffi, y), _doubles(ffi, modes),
+            ffi.from_buffer("int[]", chattering), int(chattering.size), _doubles(ffi, scale),
+            ffi.from_buffer("int[]", out))
+        self._raise_failure()
+        if found < 0:
+            raise MemoryError("bondc's sliding candidates ran out of memory")
+        return [int(k) for k in out[:found]]
+
+    def near(self, which, t, y, modes, k, vertex, scale, floors, probe=0.0, span=0.0):
+        """``bondc_continuous_across`` (``which`` "continuous") or ``bondc_keeps_to`` ("keeps") for
+        switch ``k`` near its surface at (t, y)."""
+        ffi = self.ffi
+        y = np.ascontiguousarray(y, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        scale = np.ascontiguousarray(np.broadcast_to(scale, y.shape), dtype=float)
+        arguments = (self.law, ffi.from_buffer("int[]", floors), float(vertex), float(t), _doubles(ffi, y),
+                     _doubles(ffi, modes), int(k), _doubles(ffi, scale))
+        if which == "continuous":
+            code = self.lib.bondc_continuous_across(*arguments)
+        else:
+            code = self.lib.bondc_keeps_to(*arguments, float(probe), float(span))
+        self._raise_failure()
+        if code < 0:
+            raise MemoryError("bondc's look at a switch's surface ran out of memory")
+        return bool(code)
+
     def deadbands(self, t, y, modes, index, scale):
         """``bondc_law_deadbands``: how far each switching function of ``index`` moves when each
         state moves by its tolerance ``scale``, summed over the states (not finite: 0)."""

@@ -113,78 +113,43 @@ class _Sliding:
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that
         either slid until now or are ``coulomb`` frictions (whose static limit can hold them even
-        where each side's sliding law alone would move away)."""
-        floors = self.model.floor_switches
-        candidates = {k for k in chattering if not floors[k]}       # an integer mode cannot slide
-        vertices = self.model.SWITCH_VERTICES
-        keep = [k for k in self.event_switches
-                if k not in candidates and (vertices[k] != 1.0 or k in self.sliding_now)]
-        if keep:
-            relevant = self.relevant(t, y, modes)
-            index = np.array([k for k in keep if relevant[k]], dtype=int)
-            if index.size:
-                # on the surface: |g| within its deadband (the integration noise of the state)
-                on_surface = np.abs(self.switches_at(t, y, modes, index)) <= self.deadbands(t, y, modes, index)
-                candidates.update(int(k) for k in index[on_surface])
-        return sorted(k for k in candidates if not self.continuous_across(t, y, modes, k))
+        where each side's sliding law alone would move away); none whose law is continuous across
+        its surface (``bondc_sliding_candidates``, the engine's one implementation)."""
+        if not self.switch_count:
+            return []
+        located = np.zeros(self.switch_count, dtype=np.intc)
+        located[np.asarray(self.event_switches, dtype=int)] = 1
+        slid = np.zeros(self.switch_count, dtype=np.intc)
+        slid[np.asarray(self.sliding_now, dtype=int)] = 1
+        return self.law().candidates(t, y, modes, chattering, self.scale_at(y), located, slid,
+                                     self.relevant(t, y, modes), self.vertices_now(), self.floors_c)
+
+    def scale_at(self, y):
+        """Each state's error tolerance at y: atol + rtol*|y|."""
+        return self.options["atol"] + self.options["rtol"] * np.abs(np.asarray(y, dtype=float))
+
+    def vertices_now(self):
+        """Each switch's vertex now: the model's, or 1 for a coulomb friction held between its
+        sliding forces (``vertex_override``)."""
+        return np.array([self.vertex_override.get(k, vertex) for k, vertex in enumerate(self.model.SWITCH_VERTICES)],
+                        dtype=float)
 
     def keeps_to(self, t, y, modes, k) -> bool:
-        """Whether the motion keeps to switch ``k``'s surface near (t, y): on the surface (where a
-        continuous law's two sides agree), g moves by less than its deadband over a thousandth of
-        the run."""
-        near = self.near_surface(t, y, modes, k)
-        if near is None:
-            return False
-        on, band, plus, minus, _ = near
-        with np.errstate(all="ignore"):
-            at = on(0.0)
-            rate = float(self.switch_rate(t, at, self.rhs(t, at, plus), plus, k))
-        return bool(np.isfinite(rate) and abs(rate) * 1e-3 * self.span <= band)
+        """Whether the motion keeps to switch ``k``'s surface near (t, y) (``bondc_keeps_to``): on
+        the surface (where a continuous law's two sides agree), g moves by less than its deadband
+        over a thousandth of the run."""
+        return self.law().near("keeps", t, y, modes, k, self.vertices_now()[k], self.scale_at(y), self.floors_c,
+                               self.probe, self.span)
 
     def continuous_across(self, t, y, modes, k) -> bool:
         """Whether the law is continuous across switch ``k``'s surface near (t, y), as a turbulent
-        orifice's sign(dp)*sqrt(abs(dp)) is at dp = 0: such a switch is crossed, never held, whatever
-        its frozen laws extended past the surface say (each side's law there gives the flow of the
-        other direction, and from a state a little off the surface the two seemed to push towards
-        it: a false sliding mode held the pressure drop away from 0 at a flow near none).
-
-        The jump between the two sides' right-hand sides (each state by its error tolerance), on
-        the side g > 0 at the distance of the switch's deadband (the integration noise of g) and at
-        100 times it: a discontinuity (a friction's) keeps its size as the surface nears, a
-        continuous law's jump vanishes there (as the square root of the distance for the orifice,
-        linearly for a kink). A switch whose modes give one right-hand side is left as it was."""
-        near = self.near_surface(t, y, modes, k)
-        if near is None:
-            return False
-        on, band, plus, minus, scale = near
-        with np.errstate(all="ignore"):
-            def jump(level):
-                at = on(level)
-                return float(np.max(np.abs(self.rhs(t, at, plus) - self.rhs(t, at, minus)) / scale))
-
-            near_jump, far_jump = jump(band), jump(100.0 * band)
-        return bool(np.isfinite(near_jump) and np.isfinite(far_jump) and far_jump > 0
-                    and near_jump <= 0.3 * far_jump)
-
-    def near_surface(self, t, y, modes, k):
-        """For a sign switch ``k`` whose g moves with the state: (the state moved along g's gradient
-        to where g has a given value, g's deadband there, the modes with k on its plus side, on its
-        minus side, each state's error tolerance), or None."""
-        vertex = self.vertex_override.get(k, self.model.SWITCH_VERTICES[k])
-        if vertex != 1.0 or self.model.floor_switches[k]:
-            return None
-        index = np.array([k])
-        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
-        with np.errstate(all="ignore"):
-            gradient = self.switch_differences(t, y, modes, index)[0] / scale
-            norm = float(gradient @ gradient)
-            g0 = float(self.switches_at(t, y, modes, index)[0])
-            band = float(self.deadbands(t, y, modes, index)[0])
-        if not (np.isfinite(norm) and norm > 0 and np.isfinite(g0) and np.isfinite(band) and band > 0):
-            return None
-        plus, minus = np.array(modes, dtype=float), np.array(modes, dtype=float)
-        plus[k], minus[k] = 1.0, -1.0
-        return (lambda level: y + (level - g0) * gradient / norm), band, plus, minus, scale
+        orifice's sign(dp)*sqrt(abs(dp)) is at dp = 0 (``bondc_continuous_across``): such a switch
+        is crossed, never held (each side's law past the surface gives the flow of the other
+        direction, and from a state a little off the surface the two seem to push towards it). A
+        discontinuity (a friction's) keeps its size as the surface nears; a continuous law's jump
+        vanishes there."""
+        return self.law().near("continuous", t, y, modes, k, self.vertices_now()[k], self.scale_at(y),
+                               self.floors_c)
 
     def switch_rate(self, t, y, slope, modes, k):
         """d g_k / dt along ``slope`` with the modes frozen (central difference over the probe step);

@@ -59,6 +59,7 @@ bondc_fmu *bondc_fmu_new(void)
     c->ts = (double *)zeros(CAPACITY, sizeof(double));
     c->ys = (double *)zeros((size_t)CAPACITY * NX, sizeof(double));
     c->slid = (int *)zeros(NS, sizeof(int));
+    c->relevant = (int *)zeros(NS, sizeof(int));
     c->flips = (int *)zeros(NS, sizeof(int));
     c->cm = (double *)zeros((size_t)MAX_CORNERS * NS, sizeof(double));
     c->weights = (double *)zeros(MAX_CORNERS, sizeof(double));
@@ -77,7 +78,7 @@ bondc_fmu *bondc_fmu_new(void)
     c->out = (double *)zeros(BONDC_N_OUTPUTS, sizeof(double));
     if (!c->p || !c->x || !c->m || !c->watch || !c->signs || !c->band || !c->g_old || !c->g
         || !c->old || !c->f || !c->conditions || !c->after || !c->values || !c->ts
-        || !c->ys || !c->slid || !c->flips || !c->cm || !c->weights || !c->law || !c->candidates || !c->held || !c->others
+        || !c->ys || !c->slid || !c->relevant || !c->flips || !c->cm || !c->weights || !c->law || !c->candidates || !c->held || !c->others
         || !c->scale || !c->vertices || !c->alpha || !c->alphas || !c->exits || !c->exits_old || !c->drift
         || !c->corner || !c->out) {
         bondc_fmu_free(c);
@@ -107,7 +108,7 @@ void bondc_fmu_free(bondc_fmu *c)
     free(c->p); free(c->x); free(c->m); free(c->watch); free(c->signs); free(c->band); free(c->g_old);
     free(c->g); free(c->old); free(c->f); free(c->conditions);
     free(c->after); free(c->values); free(c->ts); free(c->ys);
-    free(c->slid); free(c->flips); free(c->cm); free(c->weights); free(c->law); free(c->candidates); free(c->held);
+    free(c->slid); free(c->relevant); free(c->flips); free(c->cm); free(c->weights); free(c->law); free(c->candidates); free(c->held);
     free(c->others); free(c->scale); free(c->vertices); free(c->alpha); free(c->alphas); free(c->exits);
     free(c->exits_old); free(c->drift); free(c->corner); free(c->out);
     free(c);
@@ -126,7 +127,7 @@ void bondc_fmu_reset(bondc_fmu *c)
     c->message[0] = 0;
     c->holding = 0;
     c->chattering = 0;
-    for (int k = 0; k < BONDC_N_SWITCHES; k++) c->slid[k] = 0;
+    for (int k = 0; k < BONDC_N_SWITCHES; k++) { c->slid[k] = 0; c->vertices[k] = bondc_switch_vertices[k]; }
     bondc_x0(c->p, c->x);
     c->selected = 0;
 }
@@ -260,19 +261,17 @@ static int start_segment(bondc_fmu *c, double t_end)
    integrated (c->t advanced), -1: failed. */
 static int slide(bondc_fmu *c, double t_end)
 {
-    int count = 0, n = BONDC_N_STATES;
+    int count = 0, chattering = 0, n = BONDC_N_STATES;
     bondc_switches(c->t, c->x, c->p, c->m, c->g);
     for (int i = 0; i < n; i++) c->scale[i] = c->atol + c->rtol * fabs(c->x[i]);
-    for (int j = 0; j < c->watched; j++) {
-        int k = c->watch[j];
-        if (bondc_switch_floor[k]) continue;
-        if (c->chattering && c->flips[k]) { c->candidates[count++] = k; continue; }
-        if (bondc_switch_vertices[k] == 1.0 && !c->slid[k]) continue;
-        double band;
-        if (bondc_law_deadbands(c->law, c->t, c->x, c->m, c->scale, 1, &k, &band) != 0)
-            return fail(c, "out of memory", c->t);
-        if (fabs(c->g[k]) <= band) c->candidates[count++] = k;
+    /* the candidates as bondc simulate finds them (bondc_sliding_candidates), every switch relevant */
+    for (int k = 0; k < BONDC_N_SWITCHES; k++) {
+        c->relevant[k] = 1;
+        if (c->chattering && c->flips[k]) c->held[chattering++] = k;
     }
+    count = bondc_sliding_candidates(c->law, bondc_switch_floor, bondc_switch_located, c->slid, c->relevant,
+                                     c->vertices, c->t, c->x, c->m, c->held, chattering, c->scale, c->candidates);
+    if (count < 0) return fail(c, "out of memory", c->t);
     for (int k = 0; k < BONDC_N_SWITCHES; k++) c->slid[k] = 0;
     if (!count) return 0;
     int affine = 0;

@@ -23,7 +23,7 @@ struct bondc_fmu {
        mode vectors and weights, for the outputs (their combination); `slid` the switches the last
        sliding mode held; `chattering`: the modes selected last cycle (the switches slide) */
     int holding, corners, chattering;
-    int *slid, *flips;
+    int *slid, *flips, *relevant;
     double *cm, *weights;
     /* work space */
     struct bondc_driver *d;
