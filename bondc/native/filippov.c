@@ -779,3 +779,107 @@ done:
     free(mark); free(g); free(band); free(index);
     return found;
 }
+
+/* ---- back onto the surfaces at a sliding mode's end */
+
+/* Solve the k x k system a x = b (a row-major, destroyed; b becomes x) by Gaussian elimination with
+   partial pivoting: 0, or -1 where it is singular (a pivot of 0) */
+static int bondc_solve(int k, double *a, double *b)
+{
+    for (int col = 0; col < k; col++) {
+        int pivot = col;
+        for (int r = col + 1; r < k; r++)
+            if (fabs(a[r * k + col]) > fabs(a[pivot * k + col])) pivot = r;
+        if (a[pivot * k + col] == 0.0 || a[pivot * k + col] != a[pivot * k + col]) return -1;
+        if (pivot != col) {
+            for (int c = 0; c < k; c++) { double x = a[col * k + c]; a[col * k + c] = a[pivot * k + c]; a[pivot * k + c] = x; }
+            double x = b[col]; b[col] = b[pivot]; b[pivot] = x;
+        }
+        for (int r = col + 1; r < k; r++) {
+            double factor = a[r * k + col] / a[col * k + col];
+            for (int c = col; c < k; c++) a[r * k + c] -= factor * a[col * k + c];
+            b[r] -= factor * b[col];
+        }
+    }
+    for (int r = k - 1; r >= 0; r--) {
+        double sum = b[r];
+        for (int c = r + 1; c < k; c++) sum -= a[r * k + c] * b[c];
+        b[r] = sum / a[r * k + r];
+    }
+    return 0;
+}
+
+int bondc_onto_surfaces(const bondc_law *law, const int *floors, double t, double *y, const double *m,
+                        const int *held, int k, int affine, const double *vertices, const double *alpha,
+                        double probe, const double *scale)
+{
+    int n = law->n, switches = law->switches, code = 0;
+    if (k <= 0) return 0;
+    for (int i = 0; i < k; i++)
+        if (floors[held[i]]) return 0;
+    size_t nn = (size_t)(n > 0 ? n : 1), ns = (size_t)(switches > 0 ? switches : 1), nk = (size_t)k;
+    long corners = affine ? k + 1 : 1L << k;
+    bondc_corners s;
+    memset(&s, 0, sizeof s);
+    s.law = law; s.t = t; s.y = y; s.probe = probe; s.k = k; s.affine = affine; s.corners = corners;
+    s.sliding = held;
+    s.cm = (double *)malloc(sizeof(double) * (size_t)corners * ns);
+    s.values = (double *)malloc(sizeof(double) * (size_t)corners * nn);
+    s.rates = (double *)malloc(sizeof(double) * (size_t)corners * nk);
+    s.shifted = (double *)malloc(sizeof(double) * nn);
+    s.g = (double *)malloc(sizeof(double) * ns);
+    s.g2 = (double *)malloc(sizeof(double) * ns);
+    double *g = (double *)malloc(sizeof(double) * ns), *band = (double *)malloc(sizeof(double) * nk);
+    double *weights = (double *)malloc(sizeof(double) * nk), *jacobian = (double *)malloc(sizeof(double) * nk * nn);
+    double *normal = (double *)malloc(sizeof(double) * nk * nk), *multipliers = (double *)malloc(sizeof(double) * nk);
+    double *moved = (double *)malloc(sizeof(double) * ns), *corrected = (double *)malloc(sizeof(double) * nn);
+    if (!s.cm || !s.values || !s.rates || !s.shifted || !s.g || !s.g2 || !g || !band || !weights || !jacobian
+        || !normal || !multipliers || !moved || !corrected) { code = -1; goto done; }
+    law->switching(t, y, law->p, m, g);
+    if (bondc_law_deadbands(law, t, y, m, scale, k, held, band) != 0) { code = -1; goto done; }
+    int off = 0, far = 0;
+    for (int i = 0; i < k; i++) {
+        double value = g[held[i]];
+        if (!isfinite(value)) goto done;
+        off |= fabs(value) > band[i];
+        far |= fabs(value) > 1e6 * band[i];
+    }
+    if (!off || far) goto done;
+    /* the weights now: at a break-away (one at 0 or 1) the switch leaves its surface here */
+    corners_modes(&s, m, vertices);
+    corners_rates(&s, t, y);
+    bondc_filippov_alpha(k, affine, s.rates, alpha, weights);
+    for (int i = 0; i < k; i++)
+        if (!isfinite(weights[i]) || fmin(weights[i], 1.0 - weights[i]) <= 1e-6) goto done;
+    /* the held g's Jacobian over the states, each over its tolerance */
+    memcpy(s.shifted, y, sizeof(double) * (size_t)n);
+    for (int j = 0; j < n; j++) {
+        s.shifted[j] = y[j] + scale[j];
+        law->switching(t, s.shifted, law->p, m, moved);
+        s.shifted[j] = y[j];
+        for (int i = 0; i < k; i++) jacobian[(long)i * n + j] = (moved[held[i]] - g[held[i]]) / scale[j];
+    }
+    /* (J W J^T) multipliers = -g, W = scale^2; the correction W J^T multipliers */
+    for (int a = 0; a < k; a++) {
+        for (int b = 0; b < k; b++) {
+            double sum = 0.0;
+            for (int j = 0; j < n; j++)
+                sum += jacobian[(long)a * n + j] * (scale[j] * scale[j]) * jacobian[(long)b * n + j];
+            normal[a * k + b] = sum;
+        }
+        multipliers[a] = -g[held[a]];
+    }
+    if (bondc_solve(k, normal, multipliers) != 0) goto done;
+    for (int j = 0; j < n; j++) {
+        double sum = 0.0;
+        for (int i = 0; i < k; i++) sum += jacobian[(long)i * n + j] * multipliers[i];
+        corrected[j] = y[j] + (scale[j] * scale[j]) * sum;
+        if (!isfinite(corrected[j])) goto done;
+    }
+    memcpy(y, corrected, sizeof(double) * (size_t)n);
+    code = 1;
+done:
+    free(s.cm); free(s.values); free(s.rates); free(s.shifted); free(s.g); free(s.g2); free(g); free(band);
+    free(weights); free(jacobian); free(normal); free(multipliers); free(moved); free(corrected);
+    return code;
+}

@@ -108,3 +108,13 @@ int bondc_keeps_to(const bondc_law *law, const int *floors, double vertex, doubl
 int bondc_sliding_candidates(const bondc_law *law, const int *floors, const int *located, const int *slid,
                              const int *relevant, const double *vertices, double t, const double *y, const double *m,
                              const int *chattering, int count, const double *scale, int *out);
+
+/* The state at the end of a sliding mode on the `k` switches `held` (their corners at `vertices`,
+   affine or multilinear, their weights `alpha`), back on their surfaces where they are still held
+   there (as _Run.onto_surfaces): where they drifted off by more than their deadbands (at most 1e6 of
+   them) while every weight is still inside (0, 1), the smallest correction, each state weighted by
+   its tolerance `scale`, that makes every held g zero (one Newton step). y is corrected in place;
+   returns 1 where it was, 0 where not, -1 where memory ran out. */
+int bondc_onto_surfaces(const bondc_law *law, const int *floors, double t, double *y, const double *m,
+                        const int *held, int k, int affine, const double *vertices, const double *alpha,
+                        double probe, const double *scale);

@@ -533,18 +533,6 @@ class _EventLocation:
         scale = self.options["atol"] + self.options["rtol"] * np.abs(np.asarray(y, dtype=float))
         return self.law().deadbands(t, y, modes, index, scale)
 
-    def switch_differences(self, t, y, modes, index):
-        """How each switching function of ``index`` changes when state j alone moves by its error
-        tolerance ``atol + rtol*|x_j|``: a matrix (switches, states)."""
-        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
-        base = self.switches_at(t, y, modes, index)
-        differences = np.empty((index.size, y.size))
-        for j in range(y.size):
-            shifted = np.array(y, dtype=float)
-            shifted[j] += scale[j]
-            differences[:, j] = self.switches_at(t, shifted, modes, index) - base
-        return differences
-
     def crossing(self, solver, modes, index, signs, old, new, deadband):
         """The earliest switch crossing in the last step: (time, switch index), or None.
 

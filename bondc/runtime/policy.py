@@ -176,6 +176,26 @@ class SlidingLaw:
             raise MemoryError("bondc's look at a switch's surface ran out of memory")
         return bool(code)
 
+    def onto_surfaces(self, t, y, modes, held, affine, vertices, alpha, probe, scale, floors):
+        """``bondc_onto_surfaces``: the state at a sliding mode's end back on the held switches'
+        surfaces where they drifted off but are still held (a new array), else y itself."""
+        ffi = self.ffi
+        corrected = np.array(y, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        held = np.ascontiguousarray(held, dtype=np.intc)
+        vertices = np.ascontiguousarray(vertices, dtype=float)
+        alpha = np.ascontiguousarray(alpha, dtype=float)
+        scale = np.ascontiguousarray(np.broadcast_to(scale, corrected.shape), dtype=float)
+        code = self.lib.bondc_onto_surfaces(self.law, ffi.from_buffer("int[]", floors), float(t),
+                                            _doubles(ffi, corrected), _doubles(ffi, modes),
+                                            ffi.from_buffer("int[]", held), int(held.size), int(bool(affine)),
+                                            _doubles(ffi, vertices), _doubles(ffi, alpha), float(probe),
+                                            _doubles(ffi, scale))
+        self._raise_failure()
+        if code < 0:
+            raise MemoryError("bondc's return onto the surfaces ran out of memory")
+        return corrected if code == 1 else y
+
     def deadbands(self, t, y, modes, index, scale):
         """``bondc_law_deadbands``: how far each switching function of ``index`` moves when each
         state moves by its tolerance ``scale``, summed over the states (not finite: 0)."""

@@ -87,28 +87,10 @@ class _Sliding:
         friction held by its static limit would slide off at the next unrelated event. The
         smallest correction, each state weighted by its tolerance, that makes every held g zero
         (one Newton step; g is linear in the states for a velocity); only for a drift (at most 1e6
-        deadbands) and where every weight of the sliding combination is still inside (0, 1)."""
-        index = np.array([k for k in held if not self.model.floor_switches[k]], dtype=int)
-        if index.size == 0 or len(index) != len(held):
-            return y
-        g = self.switches_at(t, y, modes, index)
-        band = self.deadbands(t, y, modes, index)
-        if not np.all(np.isfinite(g)) or np.all(np.abs(g) <= band) or np.any(np.abs(g) > 1e6 * band):
-            return y
-        corners, sides = self.sliding_corners(modes, held)
-        _, rates = self.sliding_rates(t, y, corners, held)
-        weights_now = self.solve_alpha(rates, sides, alpha)
-        if not np.all(np.isfinite(weights_now)) or np.any(np.minimum(weights_now, 1.0 - weights_now) <= 1e-6):
-            return y            # at a break-away: the switch leaves its surface here
-        scale = self.options["atol"] + self.options["rtol"] * np.abs(y)
-        jacobian = self.switch_differences(t, y, modes, index) / scale
-        weights = scale ** 2
-        try:
-            multipliers = np.linalg.solve((jacobian * weights) @ jacobian.T, -g)
-        except np.linalg.LinAlgError:
-            return y
-        corrected = y + weights * (jacobian.T @ multipliers)
-        return corrected if np.all(np.isfinite(corrected)) else y
+        deadbands) and where every weight of the sliding combination is still inside (0, 1)
+        (``bondc_onto_surfaces``, the engine's one implementation)."""
+        return self.law().onto_surfaces(t, y, modes, held, self.affine_key(modes, held) in self.affine_sets,
+                                        self.vertices_now(), alpha, self.probe, self.scale_at(y), self.floors_c)
 
     def sliding_candidates(self, t, y, modes, chattering):
         """Switches that may slide at (t, y): those that chatter, and those on their surface that
@@ -123,6 +105,15 @@ class _Sliding:
         slid[np.asarray(self.sliding_now, dtype=int)] = 1
         return self.law().candidates(t, y, modes, chattering, self.scale_at(y), located, slid,
                                      self.relevant(t, y, modes), self.vertices_now(), self.floors_c)
+
+    def affine_key(self, modes, sliding):
+        """The key of ``affine_sets`` for the switches ``sliding`` held with the others' ``modes``:
+        the modes with each held switch on its minus side, and the held switches."""
+        base = np.array(modes, dtype=float)
+        vertices = self.vertices_now()
+        for k in sliding:
+            base[k] = -vertices[k]
+        return base.tobytes(), tuple(sliding)
 
     def scale_at(self, y):
         """Each state's error tolerance at y: atol + rtol*|y|."""
@@ -169,14 +160,10 @@ class _Sliding:
         :meth:`sliding_set` found that the laws combine so (the first corner, all minus, is the
         same in both).
         """
-        vertices = self.model.SWITCH_VERTICES
-        vertices = [self.vertex_override.get(k, vertices[k]) for k in range(len(vertices))]
+        vertices = self.vertices_now()
         count = len(sliding)
-        base = np.array(modes, dtype=float)
-        for k in sliding:
-            base[k] = -vertices[k]
         if affine is None:
-            affine = (base.tobytes(), tuple(sliding)) in self.affine_sets
+            affine = self.affine_key(modes, sliding) in self.affine_sets
         if affine:
             sides = np.vstack([-np.ones((1, count)), 2.0 * np.eye(count) - 1.0])
         else:
@@ -221,10 +208,7 @@ class _Sliding:
         given = self.model.SWITCH_VERTICES
         self.vertex_override = {k: float(vertices[k]) for k in range(self.switch_count) if vertices[k] != given[k]}
         if held:
-            base = np.array(modes, dtype=float)
-            for k in held:
-                base[k] = -vertices[k]
-            key = (base.tobytes(), tuple(held))
+            key = self.affine_key(modes, held)
             if affine:
                 self.affine_sets.add(key)
             else:

@@ -252,6 +252,17 @@ static int start_segment(bondc_fmu *c, double t_end)
     return 0;
 }
 
+/* The state at a sliding segment's end back on the held switches' surfaces where it drifted off
+   (bondc_onto_surfaces, as bondc simulate's run loop does at a sliding segment's end): 1, -1 (memory) */
+static int onto_surfaces(bondc_fmu *c, int held, int affine)
+{
+    for (int i = 0; i < BONDC_N_STATES; i++) c->scale[i] = c->atol + c->rtol * fabs(c->x[i]);
+    if (bondc_onto_surfaces(c->law, bondc_switch_floor, c->t, c->x, c->m, c->held, held, affine, c->vertices,
+                            c->alpha, c->probe, c->scale) < 0)
+        return fail(c, "out of memory", c->t);
+    return 1;
+}
+
 /* A Filippov sliding mode from (t, x), as bondc simulate's run loop makes it: the candidates (the
    switches that chatter, and those on their surfaces that are coulomb frictions or slid until now),
    the set that holds (bondc_consistent_sliding_set, which also chooses the other switches' modes along
@@ -346,7 +357,7 @@ static int slide(bondc_fmu *c, double t_end)
             for (int i = 0; i < held; i++) c->alpha[i] = a[i] < 0 ? 0.0 : (a[i] > 1 ? 1.0 : a[i]);
             bondc_corner_weights(held, affine, c->alpha, c->weights);
         }
-        if (code == 2) return 1;
+        if (code == 2) return onto_surfaces(c, held, affine);
         if (code == 0) continue;
         /* a possible end in the last step (t_prev, t_new]: located as bondc simulate does */
         double t_new = c->ts[steps - 1], t_hit;
@@ -360,12 +371,12 @@ static int slide(bondc_fmu *c, double t_end)
             c->t = t_hit;
             c->holding = 0;
             c->selected = 0;        /* the modes after it, at the next round */
-            return 1;
+            return onto_surfaces(c, held, affine);
         }
         c->t = t_new;
         memcpy(c->x, y_new, sizeof(double) * n);
         memcpy(c->exits_old, c->exits, sizeof(double) * watched);
-        if (t_new >= t_end) return 1;
+        if (t_new >= t_end) return onto_surfaces(c, held, affine);
     }
 }
 
