@@ -10,15 +10,19 @@ The modules, one job each, in the order each imports only earlier ones (``MODULE
 - ``kernels``: scipy's Brent root finder and QUADPACK without importing scipy; lazy scipy modules.
 - ``signals``: ``table``, ``step``, measured csv signals (the one data-file reader), external inputs.
 - ``loops``: nonlinear algebraic loops (hybr, then Newton from the guesses).
-- ``adapter``: the model adapter (:class:`_Model`), parameters, the modes of the unfrozen law,
-  :func:`evaluate`; filippov: Filippov's weights (``filippov_alpha``, ``corner_weights``) and the
-  sliding set, in C (bondc/native/filippov.c).
+- ``adapter``: the model adapter (:class:`_Model`), parameters, the modes of recorded points,
+  :func:`evaluate`.
 - ``results``: :class:`Result`, :class:`LazyRows`, the one writer of result files (:func:`result_bytes`:
   csv, npz, parquet, each with its columns' units; :func:`write_result`), the result's size limits,
   the typed failure of a run (:class:`RunFailure`, carried by ``_Stop``), the result builder
   (``_ResultBuilder``) and the diagnosis of a failure (``_Diagnosis``).
 - ``native``: bondc's C and C++ sources (``bondc/native``), compiler discovery (zig as the
-  fallback), the SUNDIALS link, the build cache, :func:`attach_native`.
+  fallback), the SUNDIALS link, the build cache, :func:`attach_native`, :func:`load_policy`.
+- ``policy``: the run loop's policy, whose one implementation is C (``bondc/native/policy.c``:
+  ``filippov.c`` and ``locate.c``, the texts the CVODE driver and an FMU's engine include too):
+  the modes at a restart, crossing location (humps inside a step too), the end of a sliding mode,
+  the candidates and sliding set (Filippov's weights, affine holds, coulomb limits), the return
+  onto the surfaces, the deadbands (:class:`SlidingLaw` gives them the model's laws).
 - ``solvers``: CVODE, IDA, DOPRI5, scipy's methods (:func:`solver_class`), finite-difference
   Jacobians, and the run's choice of solver (``_SolverChoice``).
 - ``steppers``: scipy's solvers (``Radau``, ``BDF``, ``LSODA``, ``RK45``, ...) as steppers of the C
@@ -27,8 +31,9 @@ The modules, one job each, in the order each imports only earlier ones (``MODULE
 - ``driver``: bondc's C driver of CVODE (:class:`_NativeDriver`) and the segments a run integrates
   with it (``_DriverSegments``).
 - ``events``: the known switching times and the roots of switches of time (``_KnownTimes``),
-  crossing location, restart modes, when clauses, Zeno (``_EventLocation``).
-- ``sliding``: Filippov sliding sets, corners, affine holds, sliding segments (``_Sliding``).
+  crossings and restarts (through ``policy``), when clauses, Zeno (``_EventLocation``).
+- ``sliding``: sliding segments and their recording, holding at a stall, through ``policy``
+  (``_Sliding``).
 - ``run``: the run specification (:class:`RunSpec`), :func:`simulate_model` and the step loop
   (:class:`_Run`).
 
