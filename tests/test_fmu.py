@@ -51,6 +51,7 @@ BUILDS = {
     "relay": (ROOT / "tests" / "fixtures" / "external" / "relay_external.bg", []),
     "flagship": (MODELS / "electro_pneumatic_hybrid.bg", []),
     "flagship_components": (MODELS / "electro_pneumatic_hybrid_components.bg", []),
+    "flagship_fmi3": (MODELS / "electro_pneumatic_hybrid.bg", ["--fmi", "3"]),
 }
 
 
@@ -118,6 +119,7 @@ def _compare(result, sim, names=None):
     ("flagship", "electro_pneumatic_hybrid.bg", {}),
     ("flagship", "electro_pneumatic_hybrid.bg", {"M": 45.0}),
     ("flagship_components", "electro_pneumatic_hybrid_components.bg", {}),
+    ("flagship_fmi3", "electro_pneumatic_hybrid.bg", {}),
 ))
 def test_co_simulation_matches_bondc_simulate(fmus, name, model, overrides):
     """FMPy's run of the Co-Simulation FMU (start_values for the parameter changes, in SI) against
