@@ -113,38 +113,6 @@ static void many_weights(const bondc_driver *d, const double *a, double *w)
     }
 }
 
-/* Solve the k x k system a x = b in place (b becomes x) by Gaussian elimination with partial
-   pivoting; -1 where a pivot is below 1e-12 of the largest entry (a switch whose own rate does not
-   depend on its weight: the step loop's least squares takes it). */
-static int many_solve(int k, double *a, double *b)
-{
-    double largest = 0.0;
-    for (int i = 0; i < k * k; i++) largest = fmax(largest, fabs(a[i]));
-    if (!(largest > 0)) return -1;
-    for (int col = 0; col < k; col++) {
-        int pivot = col;
-        for (int r = col + 1; r < k; r++)
-            if (fabs(a[r * k + col]) > fabs(a[pivot * k + col])) pivot = r;
-        if (!(fabs(a[pivot * k + col]) > 1e-12 * largest)) return -1;
-        if (pivot != col) {
-            for (int c = 0; c < k; c++) { double x = a[col * k + c]; a[col * k + c] = a[pivot * k + c]; a[pivot * k + c] = x; }
-            double x = b[col]; b[col] = b[pivot]; b[pivot] = x;
-        }
-        for (int r = col + 1; r < k; r++) {
-            double factor = a[r * k + col] / a[col * k + col];
-            if (factor == 0) continue;
-            for (int c = col; c < k; c++) a[r * k + c] -= factor * a[col * k + c];
-            b[r] -= factor * b[col];
-        }
-    }
-    for (int r = k - 1; r >= 0; r--) {
-        double sum = b[r];
-        for (int c = r + 1; c < k; c++) sum -= a[r * k + c] * b[c];
-        b[r] = sum / a[r * k + r];
-    }
-    return 0;
-}
-
 /* The sliding weights at (t, y) of a mode on several switches, as _Run.solve_alpha: Newton's
    method from the last weights (clipped) on the rates of the sliding switches, multilinear in the
    weights (exactly linear in the affine combination). Leaves the corners' right-hand sides in
@@ -201,7 +169,7 @@ static int many_alphas(bondc_driver *d, double t, const double *y)
             if (!isfinite(d->newton[j])) return -1;
         for (int j = 0; j < k; j++)
             if (!isfinite(d->residual[j])) return -1;
-        if (many_solve(k, d->newton, d->residual) != 0) return -1;
+        if (bondc_solve(k, d->newton, d->residual, 1e-12) != 0) return -1;     /* (filippov.c's) */
         double step = 0.0;
         for (int i = 0; i < k; i++) { a[i] += d->residual[i]; step = fmax(step, fabs(d->residual[i])); }
         if (step <= 1e-13) break;

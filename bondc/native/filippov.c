@@ -783,20 +783,25 @@ done:
 /* ---- back onto the surfaces at a sliding mode's end */
 
 /* Solve the k x k system a x = b (a row-major, destroyed; b becomes x) by Gaussian elimination with
-   partial pivoting: 0, or -1 where it is singular (a pivot of 0) */
-static int bondc_solve(int k, double *a, double *b)
+   partial pivoting: 0, or -1 where a pivot is not above `tiny` times the largest entry (0: where one
+   is 0, as LAPACK's gesv finds a system singular) */
+static int bondc_solve(int k, double *a, double *b, double tiny)
 {
+    double largest = 0.0;
+    for (int i = 0; i < k * k; i++) largest = fmax(largest, fabs(a[i]));
+    if (!(largest > 0)) return -1;
     for (int col = 0; col < k; col++) {
         int pivot = col;
         for (int r = col + 1; r < k; r++)
             if (fabs(a[r * k + col]) > fabs(a[pivot * k + col])) pivot = r;
-        if (a[pivot * k + col] == 0.0 || a[pivot * k + col] != a[pivot * k + col]) return -1;
+        if (!(fabs(a[pivot * k + col]) > tiny * largest)) return -1;
         if (pivot != col) {
             for (int c = 0; c < k; c++) { double x = a[col * k + c]; a[col * k + c] = a[pivot * k + c]; a[pivot * k + c] = x; }
             double x = b[col]; b[col] = b[pivot]; b[pivot] = x;
         }
         for (int r = col + 1; r < k; r++) {
             double factor = a[r * k + col] / a[col * k + col];
+            if (factor == 0) continue;
             for (int c = col; c < k; c++) a[r * k + c] -= factor * a[col * k + c];
             b[r] -= factor * b[col];
         }
@@ -869,7 +874,7 @@ int bondc_onto_surfaces(const bondc_law *law, const int *floors, double t, doubl
         }
         multipliers[a] = -g[held[a]];
     }
-    if (bondc_solve(k, normal, multipliers) != 0) goto done;
+    if (bondc_solve(k, normal, multipliers, 0.0) != 0) goto done;
     for (int j = 0; j < n; j++) {
         double sum = 0.0;
         for (int i = 0; i < k; i++) sum += jacobian[(long)i * n + j] * multipliers[i];
