@@ -778,9 +778,10 @@ def test_a_sliding_mode_on_one_switch_runs_in_the_driver_and_agrees_with_the_ste
     before_end = lambda run: [(t, label) for t, label in run.events if t < t_end - 1e-9]
     assert [label for _, label in before_end(ours)] == [label for _, label in before_end(loop)]
     np.testing.assert_allclose([t for t, _ in before_end(ours)], [t for t, _ in before_end(loop)], rtol=0, atol=1e-7)
+    atol = _compiled(path)[1].atol or 1e-9      # (the run's; a state held at 0 throughout spans rounding alone)
     for name, values in loop.states.items():
         scale = max(float(np.ptp(values)), 1e-300)
-        assert abs(ours.states[name][-1] - values[-1]) <= 1e-6 * scale, name
+        assert abs(ours.states[name][-1] - values[-1]) <= 1e-6 * scale + atol, name
 
 
 def _carts(count: int) -> str:

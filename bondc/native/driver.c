@@ -43,7 +43,7 @@ struct bondc_driver {
        d->switches long), affine (k + 1 corners) or multilinear (2^k): see bondc_driver_slide_many */
     int held, corners, affine;
     int *sliding;
-    double *cm, *cf, *rates, *alphas, *weights, *newton, *residual, *delta, *kept;
+    double *cm, *cf, *rates, *alphas, *weights, *newton, *delta, *kept;
     /* the unfrozen law (a chattering interval): the modes found again, from the last ones, at every
        evaluation (driver_modes_at with the floor switches `floors`): see bondc_driver_unfrozen_advance */
     int unfrozen;
@@ -85,33 +85,14 @@ static double slide_alpha(bondc_driver *d, double t, const double *y)
 {
     bondc_rhs(t, y, d->p, d->mp, d->fp);
     bondc_rhs(t, y, d->p, d->mm, d->fm);
-    double plus = slide_rate(d, t, y, d->fp, d->mp), minus = slide_rate(d, t, y, d->fm, d->mm);
-    if (!isfinite(plus) || !isfinite(minus)) return NAN;
-    double alpha = minus == plus ? fmin(fmax(d->alpha, 0.0), 1.0) : minus / (minus - plus);
+    double rates[2] = {slide_rate(d, t, y, d->fm, d->mm), slide_rate(d, t, y, d->fp, d->mp)}, alpha;
+    /* filippov.c's weight: corner 0 the minus side, 1 the plus side (one switch: no work space) */
+    if (bondc_filippov_alpha_in(1, 0, rates, &d->alpha, &alpha, NULL) != 0) return NAN;
     if (isfinite(alpha)) d->alpha = alpha;
     return alpha;
 }
 
 static double clip01(double a) { return a < 0 ? 0.0 : (a > 1 ? 1.0 : a); }
-
-/* The corners' weights for the sliding weights a (k of them), as _Run.corner_weights: affine,
-   1 - sum(a) and each a_i; multilinear, prod_i a_i (side +, bit i of the corner) or 1 - a_i. */
-static void many_weights(const bondc_driver *d, const double *a, double *w)
-{
-    int k = d->held;
-    if (d->affine) {
-        double sum = 0.0;
-        for (int i = 0; i < k; i++) sum += a[i];
-        w[0] = 1.0 - sum;
-        for (int i = 0; i < k; i++) w[1 + i] = a[i];
-        return;
-    }
-    for (int c = 0; c < d->corners; c++) {
-        double product = 1.0;
-        for (int i = 0; i < k; i++) product *= (c >> i) & 1 ? a[i] : 1.0 - a[i];
-        w[c] = product;
-    }
-}
 
 /* The sliding weights at (t, y) of a mode on several switches, as _Run.solve_alpha: Newton's
    method from the last weights (clipped) on the rates of the sliding switches, multilinear in the
@@ -138,48 +119,14 @@ static int many_alphas(bondc_driver *d, double t, const double *y)
             d->rates[c * k + j] = rate;
         }
     }
-    double *a = d->delta + k;       /* the weights being solved for */
-    for (int i = 0; i < k; i++) a[i] = clip01(d->alphas[i]);
-    int rounds = d->affine ? 3 : 20;
-    for (int round = 0; round < rounds; round++) {
-        many_weights(d, a, d->weights);
-        for (int j = 0; j < k; j++) {
-            double sum = 0.0;
-            for (int c = 0; c < d->corners; c++) sum += d->weights[c] * d->rates[c * k + j];
-            d->residual[j] = -sum;
-        }
-        /* d residual_j / d a_i: the weights' derivatives */
-        for (int i = 0; i < k; i++) {
-            for (int j = 0; j < k; j++) {
-                double sum = 0.0;
-                if (d->affine) {
-                    sum = d->rates[(1 + i) * k + j] - d->rates[j];
-                } else {
-                    for (int c = 0; c < d->corners; c++) {
-                        double product = (c >> i) & 1 ? 1.0 : -1.0;
-                        for (int q = 0; q < k; q++)
-                            if (q != i) product *= (c >> q) & 1 ? a[q] : 1.0 - a[q];
-                        sum += product * d->rates[c * k + j];
-                    }
-                }
-                d->newton[j * k + i] = sum;
-            }
-        }
-        for (int j = 0; j < k * k; j++)
-            if (!isfinite(d->newton[j])) return -1;
-        for (int j = 0; j < k; j++)
-            if (!isfinite(d->residual[j])) return -1;
-        if (bondc_solve(k, d->newton, d->residual, 1e-12) != 0) return -1;     /* (filippov.c's) */
-        double step = 0.0;
-        for (int i = 0; i < k; i++) { a[i] += d->residual[i]; step = fmax(step, fabs(d->residual[i])); }
-        if (step <= 1e-13) break;
-    }
+    double *a = d->delta + k;       /* the weights being solved for (filippov.c's Newton iteration) */
+    if (bondc_filippov_alpha_in(k, d->affine, d->rates, d->alphas, a, d->newton) != 0) return -1;
     for (int i = 0; i < k; i++) {
         if (!isfinite(a[i])) return -1;
         d->alphas[i] = a[i];
         d->delta[i] = clip01(a[i]);
     }
-    many_weights(d, d->delta, d->weights);
+    bondc_corner_weights(k, d->affine, d->delta, d->weights);
     return 0;
 }
 
@@ -668,20 +615,19 @@ int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corn
                             const double *alphas, double probe, int count, const int *others, const double *drift)
 {
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
-    free(d->newton); free(d->residual); free(d->delta); free(d->kept);
+    free(d->newton); free(d->delta); free(d->kept);
     d->sliding = (int *)calloc(k, sizeof(int));
     d->cm = (double *)calloc((long)corners * d->switches + 1, sizeof(double));
     d->cf = (double *)calloc((long)corners * d->n + 1, sizeof(double));
     d->rates = (double *)calloc((long)corners * k, sizeof(double));
     d->alphas = (double *)calloc(k, sizeof(double));
     d->weights = (double *)calloc(corners, sizeof(double));
-    d->newton = (double *)calloc((long)k * k, sizeof(double));
-    d->residual = (double *)calloc(k, sizeof(double));
+    d->newton = (double *)calloc(bondc_filippov_work(k, affine), sizeof(double));     /* its work space */
     d->delta = (double *)calloc(2 * k, sizeof(double));
     d->kept = (double *)calloc(k, sizeof(double));
     d->held = 0;
-    if (!d->sliding || !d->cm || !d->cf || !d->rates || !d->alphas || !d->weights || !d->newton || !d->residual
-        || !d->delta || !d->kept) return -1;
+    if (!d->sliding || !d->cm || !d->cf || !d->rates || !d->alphas || !d->weights || !d->newton || !d->delta
+        || !d->kept) return -1;
     for (int i = 0; i < k; i++) { d->sliding[i] = sliding[i]; d->alphas[i] = alphas[i]; }
     for (long i = 0; i < (long)corners * d->switches; i++) d->cm[i] = cm[i];
     d->held = k; d->corners = corners; d->affine = affine;
@@ -929,7 +875,7 @@ void bondc_driver_free(bondc_driver *d)
     free(d->m); free(d->g); free(d->values); free(d->extra); free(d->mp); free(d->mm);
     free(d->fp); free(d->fm); free(d->shifted); free(d->scratch); free(d->ahead); free(d->gmid);
     free(d->sliding); free(d->cm); free(d->cf); free(d->rates); free(d->alphas); free(d->weights);
-    free(d->newton); free(d->residual); free(d->delta); free(d->kept); free(d);
+    free(d->newton); free(d->delta); free(d->kept); free(d);
 }
 
 /* ---- the crossing after a possible one, and the modes after it: what an FMU's engine

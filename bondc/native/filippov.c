@@ -33,10 +33,9 @@ void bondc_corner_weights(int k, int affine, const double *alpha, double *w)
 /* The minimum-norm least-squares solution x of a x = b (a k x k, row-major, destroyed), singular
    values below rcond of the largest dropped: one-sided Jacobi SVD (a's columns orthogonalised by
    plane rotations accumulated in v). 0, or -1 where memory ran out. */
-static int bondc_least_squares(int k, double *a, const double *b, double rcond, double *x)
+static int bondc_least_squares(int k, double *a, const double *b, double rcond, double *x, double *v)
 {
-    double *v = (double *)calloc((size_t)k * k, sizeof(double));
-    if (!v) return -1;
+    for (int i = 0; i < k * k; i++) v[i] = 0.0;
     for (int i = 0; i < k; i++) v[i * k + i] = 1.0;
     for (int sweep = 0; sweep < 60; sweep++) {
         double off = 0.0;
@@ -77,11 +76,15 @@ static int bondc_least_squares(int k, double *a, const double *b, double rcond, 
         double coefficient = projection / (sigma * sigma);     /* (u_j . b) / sigma_j, u_j = a_j / sigma_j */
         for (int i = 0; i < k; i++) x[i] += coefficient * v[i * k + j];
     }
-    free(v);
     return 0;
 }
 
-int bondc_filippov_alpha(int k, int affine, const double *rates, const double *guess, double *alpha)
+size_t bondc_filippov_work(int k, int affine)
+{
+    return (size_t)(affine ? k + 1 : 1L << k) + 2 * (size_t)k * k + 2 * (size_t)k + 1;
+}
+
+int bondc_filippov_alpha_in(int k, int affine, const double *rates, const double *guess, double *alpha, double *work)
 {
     for (int i = 0; i < k; i++) alpha[i] = guess ? bondc_clip01(guess[i]) : 0.5;
     if (k == 1) {       /* alpha*r+ + (1 - alpha)*r- = 0 (corner 1 the plus side, 0 the minus) */
@@ -91,12 +94,9 @@ int bondc_filippov_alpha(int k, int affine, const double *rates, const double *g
         return 0;
     }
     long corners = affine ? k + 1 : 1L << k;
-    double *w = (double *)malloc(sizeof(double) * (size_t)corners);
-    double *jacobian = (double *)malloc(sizeof(double) * (size_t)k * k);
-    double *residual = (double *)malloc(sizeof(double) * (size_t)k);
-    double *delta = (double *)malloc(sizeof(double) * (size_t)k);
+    double *w = work, *jacobian = work + corners, *residual = jacobian + (long)k * k, *delta = residual + k;
+    double *v = delta + k;
     int code = 0;
-    if (!w || !jacobian || !residual || !delta) { code = -1; goto done; }
     for (int round = 0; round < (affine ? 3 : 20); round++) {
         bondc_corner_weights(k, affine, alpha, w);
         for (int j = 0; j < k; j++) {
@@ -126,15 +126,22 @@ int bondc_filippov_alpha(int k, int affine, const double *rates, const double *g
         for (int j = 0; j < k; j++)
             if (!isfinite(residual[j])) code = -1;
         if (code != 0) break;
-        if (bondc_least_squares(k, jacobian, residual, 1e-12, delta) != 0) { code = -1; break; }
+        bondc_least_squares(k, jacobian, residual, 1e-12, delta, v);
         double step = 0.0;
         for (int i = 0; i < k; i++) { alpha[i] += delta[i]; step = fmax(step, fabs(delta[i])); }
         if (step <= 1e-13) break;
     }
-done:
     if (code != 0)
         for (int i = 0; i < k; i++) alpha[i] = NAN;
-    free(w); free(jacobian); free(residual); free(delta);
+    return code;
+}
+
+int bondc_filippov_alpha(int k, int affine, const double *rates, const double *guess, double *alpha)
+{
+    double *work = (double *)malloc(sizeof(double) * bondc_filippov_work(k, affine));
+    if (!work) return -1;
+    int code = bondc_filippov_alpha_in(k, affine, rates, guess, alpha, work);
+    free(work);
     return code;
 }
 

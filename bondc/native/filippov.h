@@ -33,6 +33,10 @@ void bondc_corner_weights(int k, int affine, const double *alpha, double *w);
    dropped), so a switch whose rate does not depend on its own weight keeps its guess. 0, or -1
    where a rate or the Newton matrix is not finite (alpha then NaN). */
 int bondc_filippov_alpha(int k, int affine, const double *rates, const double *guess, double *alpha);
+/* The same with the caller's work space: bondc_filippov_work(k, affine) values (no allocation: the
+   CVODE driver solves the weights at every evaluation of a sliding mode's rates) */
+int bondc_filippov_alpha_in(int k, int affine, const double *rates, const double *guess, double *alpha, double *work);
+size_t bondc_filippov_work(int k, int affine);
 
 /* How far each switching function of `index` (count of them) moves when each state moves by its
    error tolerance scale[i] (atol + rtol*|y_i|), summed over the states: crossings shallower than
