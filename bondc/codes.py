@@ -862,7 +862,7 @@ STAGES = (  # (title, modules), in the order of the page
     ("Validation against measured data", "`bondc/analysis/validate.py`"),
     ("Export: C code and FMUs", "`bondc/export/`"),
     ("Calibration", "`bondc/analysis/fit.py`, `bondc/analysis/fit_write.py`"),
-    ("Command line and files", "`bondc/cli.py`, `bondc/io.py`, `bondc/errors.py`"),
+    ("Command line and files", "`bondc/cli.py`, `bondc/commands.py`, `bondc/io.py`, `bondc/errors.py`"),
 )
 
 
