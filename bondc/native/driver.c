@@ -425,14 +425,6 @@ static int driver_modes_at(bondc_driver *d, double t, const double *y, const dou
     return bondc_modes_at(&d->law, floors, t, y, guess, out, d->scratch);
 }
 
-/* The modes just after a restart at (t, y) from `guess` where it is simple (bondc_restart_modes):
-   1 then, 0 where the modes a probe ahead differ, -1 with `strict` where a value is not finite. */
-int bondc_driver_restart(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
-                         double probe, int strict, double *out)
-{
-    return bondc_restart_modes(&d->law, floors, t, y, guess, probe, strict, out);
-}
-
 int bondc_deadbands(bondc_driver *d, double t, const double *y, const double *m, double rtol, double atol,
                     int count, const int *index, double *out);
 

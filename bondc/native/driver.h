@@ -19,8 +19,6 @@ void bondc_driver_slide(bondc_driver *d, int k, const double *mp, const double *
                         int count, const int *others, const double *drift);
 int bondc_driver_slide_many(bondc_driver *d, int k, const int *sliding, int corners, int affine, const double *cm,
                             const double *alphas, double probe, int count, const int *others, const double *drift);
-int bondc_driver_restart(bondc_driver *d, double t, const double *y, const double *guess, const int *floors,
-                         double probe, int strict, double *out);
 int bondc_driver_slide_advance(bondc_driver *d, int capacity, double *old, double *exits, double *ts,
                                double *ys, double *alphas, int *count, const double *t_eval, int n_eval,
                                int *eval_next, int eval_capacity, double *et, double *ey, int *eval_count);

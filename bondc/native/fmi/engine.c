@@ -174,9 +174,9 @@ static int same_modes(const double *a, const double *b)
     return 1;
 }
 
-/* The modes just after (t, x), from the guess c->old, into c->m (the driver's bondc_driver_select:
-   bondc_driver_restart, then the modes a probe ahead until they agree, as _Run.restart_modes): 0,
-   1 where they cycle (switches that chatter: a sliding mode), -1 where memory ran out. */
+/* The modes just after (t, x), from the guess c->old, into c->m (the driver's bondc_driver_select,
+   filippov.c's bondc_select_modes, as bondc simulate chooses them): 0, 1 where they cycle (switches
+   that chatter: a sliding mode; c->flips marks them), -1 where memory ran out. */
 static int select_modes(bondc_fmu *c, double t, const double *x)
 {
     return bondc_driver_select(c->d, t, x, c->old, bondc_switch_floor, c->probe, c->m, c->flips);
@@ -249,6 +249,20 @@ static int start_segment(bondc_fmu *c, double t_end)
     }
     if (bondc_driver_start(c->d, c->t, c->x, c->m, t_end, c->rtol, c->atol, c->max_step, 0.0, MAX_STEPS) != 0)
         return fail(c, "CVODE could not start", c->t);
+    return 0;
+}
+
+/* The FMU's failure for a driver batch's code (3: a law not finite at a trial point, 4: the state
+   not finite, < 0: CVODE's flag), or 0 for the codes that go on */
+static int driver_failed(bondc_fmu *c, int code, const char *where)
+{
+    if (code == 3) return fail(c, "a law is not finite at a trial point of CVODE", c->t);
+    if (code == 4) return fail(c, "the state is not finite", c->t);
+    if (code < 0) {
+        char text[120];
+        snprintf(text, sizeof text, "CVODE failed%s (flag %d)", where, code);
+        return fail(c, text, c->t);
+    }
     return 0;
 }
 
@@ -342,13 +356,7 @@ static int slide(bondc_fmu *c, double t_end)
         double t_prev = c->t;
         int code = bondc_driver_slide_advance(c->d, CAPACITY, c->exits_old, c->exits, c->ts, c->ys, c->alphas,
                                               &steps, NULL, 0, NULL, 0, NULL, NULL, NULL);
-        if (code == 3) return fail(c, "a law is not finite at a trial point of CVODE", c->t);
-        if (code == 4) return fail(c, "the state is not finite", c->t);
-        if (code < 0) {
-            char text[120];
-            snprintf(text, sizeof text, "CVODE failed in a sliding mode (flag %d)", code);
-            return fail(c, text, c->t);
-        }
+        if (driver_failed(c, code, " in a sliding mode") != 0) return -1;
         int kept = code == 1 ? steps - 1 : steps;
         if (kept > 0) {
             t_prev = c->t = c->ts[kept - 1];
@@ -417,13 +425,7 @@ int bondc_fmu_advance(bondc_fmu *c, double t_end)
             double t_before = c->t;
             int code = bondc_driver_advance(c->d, CAPACITY, c->watched, c->watch, c->signs, c->band, c->g_old,
                                             c->ts, c->ys, &count, NULL, 0, NULL, 0, NULL, NULL, NULL);
-            if (code == 3) return fail(c, "a law is not finite at a trial point of CVODE", c->t);
-            if (code == 4) return fail(c, "the state is not finite", c->t);
-            if (code < 0) {
-                char text[120];
-                snprintf(text, sizeof text, "CVODE failed (flag %d)", code);
-                return fail(c, text, c->t);
-            }
+            if (driver_failed(c, code, "") != 0) return -1;
             int kept = code == 1 ? count - 1 : count;
             if (kept > 0) {
                 c->t = c->ts[kept - 1];
