@@ -393,3 +393,32 @@ def test_a_switch_on_an_external_input_switches_inside_the_fmu(fmus):
     t = result["time"]
     expected = np.where(t > 0.002, 6.0 * (1 - np.exp(-(t - 0.002) * 2000.0)), 0.0)
     assert np.max(np.abs(result["i"] - expected)) < 1e-3 * 6.0
+
+
+def test_an_fmus_when_clause_whose_firings_accumulate_stops_at_the_zeno_time(tmp_path):
+    """The ball of bouncing_ball.bg run to 6 s as a Co-Simulation FMU: past t_inf = t1 +
+    (2*v1/g)*e/(1 - e) its impacts accumulate. The FMU's engine runs the test bondc simulate runs
+    (events.c's bondc_zeno), so doStep fails there, saying where the impacts accumulate (the closed
+    form, as bondc simulate states it) and naming the when clause; the ball never falls through."""
+    model = tmp_path / "ball.bg"
+    model.write_text((ENGINE / "bouncing_ball.bg").read_text().replace("t_end = 3 [s]", "t_end = 6 [s]"))
+    fmu = tmp_path / "ball.fmu"
+    assert main(["fmu", str(model), "-o", str(fmu), "-q"]) == 0
+    messages = []
+
+    def logger(_environment, _instance, _status, _category, message):
+        messages.append(message.decode() if isinstance(message, bytes) else str(message))
+
+    with pytest.raises(Exception):
+        simulate_fmu(str(fmu), stop_time=6.0, output_interval=0.01, logger=logger)
+    said = [text for text in messages if "accumulate" in text]
+    assert said, messages
+    g, e, h0 = 9.81, 0.8, 1.0
+    t1, v1 = np.sqrt(2 * h0 / g), np.sqrt(2 * g * h0)
+    zeno = t1 + 2 * v1 / g * e / (1 - e)                                # 4.06371 s
+    stated = float(said[0].split("accumulate at t=")[1].split()[0])
+    assert stated == pytest.approx(zeno, rel=1e-5)
+    assert "when h < 0" in said[0] and "Zeno" in said[0]
+    # the same run to just before it: complete, the ball above the floor
+    result = simulate_fmu(str(fmu), stop_time=4.0, output_interval=0.01)
+    assert result["height"].min() > -1e-9 and result["time"][-1] == pytest.approx(4.0)

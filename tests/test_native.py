@@ -1294,25 +1294,25 @@ def test_the_engines_sources_are_files_of_the_package_and_are_built_with_their_h
     a build inlines their ``#include "..."`` headers, so the compiled text (what the cache key
     hashes) holds every file, and cffi's cdef reads driver.h as it is."""
     assert sorted(p.name for p in NATIVE.iterdir() if p.suffix in (".c", ".h", ".cpp")) == [
-        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "filippov.c", "filippov.h", "locate.c", "locate.h", "model.h",
-        "policy.c", "sundials.h"]
+        "driver.c", "driver.h", "erk.cpp", "erk_api.h", "events.c", "events.h", "filippov.c", "filippov.h", "locate.c",
+        "locate.h", "model.h", "policy.c", "sundials.h"]
     for name in ("driver.c", "erk.cpp"):
         built = runtime.native_build_text(name)
         assert not [line for line in built.splitlines() if line.startswith('#include "')], name
         assert built.count("typedef struct {\n    int version;") == 1, name     # erk_api.h's table, once
     driver = runtime.native_build_text("driver.c")
-    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.h", "locate.h"):
+    for header in ("driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.h", "events.h", "locate.h"):
         assert runtime.native_file(header) in driver, header
     import cffi
 
     # the run loop's functions are built into the driver, and alone (policy.c) for the Python run
     # loop: the same texts
-    for source in ("filippov.c", "locate.c"):
+    for source in ("filippov.c", "events.c", "locate.c"):
         assert runtime.native_build_text(source) in driver
         assert runtime.native_build_text(source) in runtime.native_build_text("policy.c")
-    for header in ("filippov.h", "locate.h"):
-        assert "#" not in runtime.native_file(header)
-        cffi.FFI().cdef(runtime.native_file(header))
+    for headers in (("filippov.h",), ("filippov.h", "events.h"), ("locate.h",)):     # events.h uses filippov.h's types
+        assert not ["#" for header in headers if "#" in runtime.native_file(header)]
+        cffi.FFI().cdef("".join(runtime.native_file(header) for header in headers))
     assert "bondc_driver_new" in runtime.native_file("driver.h")
     assert "#" not in runtime.native_file("driver.h")        # no preprocessor line: cffi's cdef reads it
     cffi.FFI().cdef(runtime.native_file("driver.h"))

@@ -328,6 +328,7 @@ def _tables(model: CModel) -> str:
         _array("int", "bondc_switch_floor", [str(v) for v in model.floors]),
         _array("int", "bondc_switch_located", [str(v) for v in model.located]),
         _array("double", "bondc_switch_vertices", [repr(float(v)) for v in model.vertices]),
+        _array("char *const", "bondc_when_labels", [c_string(label) for label, _ in model.whens]),
         _array("int", "bondc_when_target_start", [str(v) for v in starts]),
         _array("int", "bondc_when_targets", [str(v) for v in targets]),
         "const double bondc_experiment[4] = {" + ", ".join(
@@ -401,6 +402,7 @@ def _header(model: CModel) -> str:
         "extern const int bondc_switch_floor[], bondc_switch_located[];",
         "/* each switch's mode on its plus side where a sliding mode holds it: 1 (sign, if), 2 (coulomb) */",
         "extern const double bondc_switch_vertices[];",
+        "extern const char *const bondc_when_labels[];",
         "extern const int bondc_when_target_start[], bondc_when_targets[];",
         "/* the experiment's t_end [s], rtol, atol and max_step [s] (0: none) */",
         "extern const double bondc_experiment[4];",

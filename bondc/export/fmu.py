@@ -43,8 +43,8 @@ NATIVE = Path(__file__).resolve().parent.parent / "native"
 FMI_SOURCES = NATIVE / "fmi"
 PLATFORM = "linux64"
 #: The driver's own sources the FMU's library is compiled from (bondc/native)
-DRIVER_FILES = ("driver.c", "driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.c", "filippov.h", "locate.c",
-                "locate.h")
+DRIVER_FILES = ("driver.c", "driver.h", "model.h", "sundials.h", "erk_api.h", "filippov.c", "filippov.h", "events.c",
+                "events.h", "locate.c", "locate.h")
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 

@@ -14,6 +14,7 @@
 #include "erk_api.h"    /* the table of functions of bondc's explicit stepper (erk.cpp, a library of its own) */
 #include "driver.h"     /* this driver's functions, as Python calls them (through cffi) */
 #include "filippov.c"   /* Filippov sliding: the sliding set, the corners' weights, the deadbands */
+#include "events.c"     /* the when clauses: which fire, the state after them, Zeno */
 #include "locate.c"     /* where values that stay positive first fail to: exits, dips */
 
 struct bondc_driver {
@@ -497,9 +498,14 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
     int holding = 0;
     for (int j = 0; j < watched; j++)
         if (held[j]) sticky[holding++] = watch[j];
+    bondc_whens clauses = {whens, target_start, targets, bondc_when_conditions, bondc_when_actions};
     double *conditions = (double *)calloc(3 * (size_t)whens + 1, sizeof(double));
     double *values = (double *)calloc((size_t)(whens ? target_start[whens] : 0) + 1, sizeof(double));
-    if (!conditions || !values) { free(work); free(sticky); free(conditions); free(values); return 0; }
+    int *fired = (int *)calloc((size_t)whens + 1, sizeof(int));
+    if (!conditions || !values || !fired) {
+        free(work); free(sticky); free(conditions); free(values); free(fired);
+        return 0;
+    }
     double *before = conditions, *after = conditions + whens, *again = conditions + 2 * whens;
     for (int k = 0; k < switches; k++) modes[k] = m0[k];
     for (int q = 0; q < n; q++) starts[q] = y0[q];
@@ -510,30 +516,19 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
             for (int k = 0; k < switches; k++) guess[k] = m[k - switches];
             if (pieces_restart(d, t, y, guess, m, floors, probe, strict, rtol, atol, holding, sticky, near)) break;
             if (whens) {
-                /* the when clauses whose condition became true here (_Run.fire_when_clauses): their
-                   statements from the values just before, then the restart after them, as the
-                   runtime makes it; a restart where a clause fires again is left to the runtime */
+                /* the when clauses whose condition became true here (events.c, as the runtime fires
+                   them): their statements from the values just before, then the restart after them;
+                   a restart where a clause fires again is left to the runtime */
+                double *start = starts + (long)i * n;
                 bondc_when_conditions(t, y, d->p, guess, before);
-                bondc_when_conditions(t, y, d->p, m, after);
-                int firing = 0;
-                for (int k = 0; k < whens; k++)
-                    if (after[k] != 0 && !(before[k] != 0)) firing = 1;
+                int firing = bondc_when_round(&clauses, n, t, y, d->p, before, m, after, start, fired, values);
+                if (firing < 0) break;
                 if (firing) {
-                    double *start = starts + (long)i * n;
-                    bondc_when_actions(t, y, d->p, m, values);
-                    for (int q = 0; q < n; q++) start[q] = y[q];
-                    for (int k = 0; k < whens; k++)
-                        if (after[k] != 0 && !(before[k] != 0))
-                            for (int j = target_start[k]; j < target_start[k + 1]; j++) start[targets[j]] = values[j];
-                    if (!driver_finite(start, n)) break;
                     for (int k = 0; k < switches; k++) guess[k] = m[k];
                     if (pieces_restart(d, t, start, guess, m, floors, probe, strict, rtol, atol, holding, sticky,
                                        near)) break;
-                    bondc_when_conditions(t, start, d->p, m, again);
-                    int more = 0;
-                    for (int k = 0; k < whens; k++)
-                        if (again[k] != 0 && !(after[k] != 0)) more = 1;
-                    if (more) break;
+                    if (bondc_when_round(&clauses, n, t, start, d->p, after, m, again, d->shifted, fired, values))
+                        break;
                     y = start;
                 }
             }
@@ -574,6 +569,7 @@ int bondc_driver_pieces(bondc_driver *d, int pieces, const double *t_stops, doub
     free(sticky);
     free(conditions);
     free(values);
+    free(fired);
     return done;
 }
 

@@ -84,7 +84,7 @@ from bondc.runtime.adapter import (  # noqa: F401
 )
 from bondc.runtime.policy import (  # noqa: F401
     SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, _located, _values_callback, corner_weights,
-    filippov_alpha, first_crossing, first_dip, first_end
+    filippov_alpha, first_crossing, first_dip, first_end, when_rounds, zeno, zeno_firings
 )
 from bondc.runtime.results import (  # noqa: F401
     DIVERGED, LazyRows, MAX_POINTS, MAX_VALUES, Result, RunFailure, _CountedBlocks, _Deferred, _Diagnosis,
@@ -114,8 +114,8 @@ from bondc.runtime.driver import (  # noqa: F401
     _DriverSegments, _DriverStep, _NativeDriver, _Piece
 )
 from bondc.runtime.events import (  # noqa: F401
-    _EVENT_ROUNDS, _EventLocation, _HIDDEN_LEVELS, _HIDDEN_SPLIT, _HIDDEN_VALUES, _KnownTimes, _ZENO_FIRINGS,
-    _ZENO_INTERVAL, _ZENO_RATIO, _hidden_changes, _zero_touches, bracketed_roots
+    _EventLocation, _HIDDEN_LEVELS, _HIDDEN_SPLIT, _HIDDEN_VALUES, _KnownTimes, _hidden_changes, _zero_touches,
+    bracketed_roots
 )
 from bondc.runtime.sliding import (  # noqa: F401
     SLIDING_CHECKS, _MAX_HELD, _MAX_SLIDING, _Sliding

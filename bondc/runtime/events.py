@@ -8,7 +8,7 @@ import numpy as np
 from bondc.runtime.kernels import _EPS
 from bondc.runtime.loops import _BLOCK_SOLUTIONS, _ModeReader, _ReadingModes
 from bondc.runtime.adapter import mode_values
-from bondc.runtime.policy import first_crossing
+from bondc.runtime.policy import first_crossing, when_rounds, zeno, zeno_firings
 from bondc.runtime.results import RunFailure, _Stop
 
 
@@ -130,10 +130,6 @@ def _zero_touches(times, samples, ends):
         return (np.zeros(0),) * 4
     r, a, b = (np.array(column) for column in zip(*spans))
     return times[r, a], times[r, b], samples[r, a], samples[r, b]
-_EVENT_ROUNDS = 10       # rounds of when clauses firing at one instant
-_ZENO_FIRINGS = 16       # a when clause firing this often with ever shorter intervals ...
-_ZENO_INTERVAL = 1e-4    # ... the last shorter than this fraction of the run, accumulates (Zeno)
-_ZENO_RATIO = 0.98       # ... each at most this times the one before (a frequency sweep's shrink slower)
 
 
 class _KnownTimes:
@@ -401,30 +397,38 @@ class _EventLocation:
     def fire_when_clauses(self, t, y, before_modes, modes, chattering):
         """Run the ``when`` clauses whose condition became true at this restart (false with the modes
         before it, true with those just after), in the order written, every right-hand side with the
-        values just before; then evaluate the conditions again, up to ``_EVENT_ROUNDS`` times."""
+        values just before; then the restart's modes again and the conditions again, up to
+        ``bondc_when_rounds()`` times (``bondc_when_round``, events.c: the engine's one
+        implementation, as the CVODE driver and an FMU fire them)."""
         model = self.model
-        before = model.when_conditions(t, y, self.p, before_modes)
-        after = model.when_conditions(t, y, self.p, modes)
-        for _ in range(_EVENT_ROUNDS):
-            firing = [k for k in range(len(after)) if after[k] and not before[k]]
+        law = self.law()
+        before = law.when_conditions(t, y, before_modes)
+        rounds = when_rounds()
+        for round_ in range(rounds + 1):
+            firing, new, after = law.when_round(t, y, before, modes)
             if not firing:
                 return y, modes, chattering
-            new = np.array(y, dtype=float)
+            if round_ == rounds:
+                break
             for k in firing:
-                values = model.WHEN_ACTIONS[k](t, y, self.p, modes)
-                for index, value in zip(model.WHEN_TARGETS[k], values):
-                    new[index] = float(value)
                 self.note_event(t, model.WHEN_LABELS[k])
                 self.stats["when_fired"] = self.stats.get("when_fired", 0) + 1
                 self.check_zeno(k, t)
-            if not np.all(np.isfinite(new)):
-                raise _Stop(self.diagnosis.nonfinite(t, new, modes, f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
+            if new is None:
+                state = np.array(y, dtype=float)
+                for k in firing:        # the clauses' values as they came, for the diagnosis
+                    with np.errstate(all="ignore"):
+                        values = model.WHEN_ACTIONS[k](t, y, self.p, modes)
+                    for index, value in zip(model.WHEN_TARGETS[k], np.atleast_1d(values)):
+                        state[index] = float(value)
+                raise _Stop(self.diagnosis.nonfinite(t, state, modes,
+                                                     f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
             self.jumps.append((float(t), np.array(y, dtype=float), new.copy()))
             y = new
             modes, chattering = self.restart_modes(t, y, modes)
-            before, after = after, model.when_conditions(t, y, self.p, modes)
-        labels = "; ".join(model.WHEN_LABELS[k] for k in range(len(after)) if after[k] and not before[k])
-        raise _Stop(RunFailure(message=f"when clauses kept firing at t={t:.6g}: after {_EVENT_ROUNDS} rounds at "
+            before = after
+        labels = "; ".join(model.WHEN_LABELS[k] for k in firing)
+        raise _Stop(RunFailure(message=f"when clauses kept firing at t={t:.6g}: after {rounds} rounds at "
                                        f"the same instant, {labels} became true again",
                                time=float(t), kind="events",
                                cause="the statements of a when clause make another (or its own) condition true "
@@ -436,27 +440,21 @@ class _EventLocation:
         """Stop the run where the firings of when clause ``k`` accumulate (Zeno behaviour, a bouncing
         ball coming to rest): the model says nothing about what follows the accumulation point, and
         past it the events can no longer be told apart at the solver's precision (the ball would fall
-        through the floor). Detected when the clause fired ``_ZENO_FIRINGS`` times, each interval at
-        most ``_ZENO_RATIO`` times the one before (geometric: the cycles of a frequency sweep shorten
-        far more slowly), the last shorter than ``_ZENO_INTERVAL`` of the run, with the geometric
-        limit of the intervals before the end of the run."""
+        through the floor). The test is events.c's ``bondc_zeno`` (an FMU's engine runs the same):
+        the clause fired often enough with ever shorter intervals, geometrically (the cycles of a
+        frequency sweep shorten far more slowly), the last a small fraction of the run, and the
+        intervals' geometric limit before the end of the run."""
         times = self.when_times.setdefault(k, [])
         times.append(float(t))
-        del times[:-_ZENO_FIRINGS]
-        if len(times) < _ZENO_FIRINGS:
+        del times[:-zeno_firings()]
+        found = zeno(times, self.span, self.t_end)
+        if found is None:
             return
-        gaps = np.diff(times)
-        if not (np.all(gaps > 0) and np.all(gaps[1:] <= _ZENO_RATIO * gaps[:-1])) \
-                or gaps[-1] > _ZENO_INTERVAL * self.span:
-            return
-        ratio = (gaps[-1] / gaps[0]) ** (1.0 / (len(gaps) - 1))
-        limit = t + gaps[-1] * ratio / (1.0 - ratio)
-        if limit >= self.t_end:
-            return
+        limit, ratio = found
         label = self.model.WHEN_LABELS[k]
         raise _Stop(RunFailure(message=f"the events of '{label}' accumulate at t={limit:.6g} (Zeno behaviour): "
                                        f"{len(times)} firings, each interval about {ratio:.3g} times the one "
-                                       f"before, the last {gaps[-1]:.3g} s",
+                                       f"before, the last {times[-1] - times[-2]:.3g} s",
                                time=float(t), kind="events", when=label,
                                cause="infinitely many events before a finite time, as a bouncing ball coming to "
                                      "rest; the model does not say what happens after that time",

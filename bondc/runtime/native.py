@@ -367,7 +367,8 @@ _POLICY_LOADED: dict = {}       # cache folder -> (ffi, lib, "")
 
 def load_policy():
     """``(ffi, lib)`` of bondc's run-loop functions (``bondc/native/policy.c``: Filippov sliding,
-    ``filippov.h``, and the location of ends and dips, ``locate.h``) as a library of their own,
+    ``filippov.h``, the when clauses, ``events.h``, and the location of ends and dips, ``locate.h``)
+    as a library of their own,
     built once per machine and loaded once per process: the one implementation the Python run
     loop calls, whatever computes the model's laws (the CVODE driver and an FMU include the same
     files). Raises :class:`NativeUnavailable` where no C compiler builds it (bondc installs one,
@@ -377,7 +378,7 @@ def load_policy():
     known = _POLICY_LOADED.get(key)     # not kept, the next call tries again)
     if known is None:
         known = _engine_library(
-            "policy.c", "c", _POLICY_FLAGS, ("-lm",), "", native_file("filippov.h") + native_file("locate.h"),
+            "policy.c", "c", _POLICY_FLAGS, ("-lm",), "", native_file("filippov.h") + native_file("events.h") + native_file("locate.h"),
             "bondc's run-loop functions")
         if known[0] is None:
             raise NativeUnavailable(known[2])

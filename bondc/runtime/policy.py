@@ -73,6 +73,7 @@ class SlidingLaw:
         self.p = np.ascontiguousarray(p, dtype=float)
         self.vertices = np.ascontiguousarray(model.SWITCH_VERTICES, dtype=float)
         self.failure = None         # an exception a callback met (raised again after the call)
+        self._whens = None          # the when clauses' table (bondc_whens), made at the first use
 
         def callback(function, size):
             def evaluate(t, x, p, m, out):
@@ -99,6 +100,95 @@ class SlidingLaw:
         self.law.p = _doubles(ffi, self.p)
         self.law.rhs, self.law.switching = self._callbacks
         self.law.vertices = _doubles(ffi, self.vertices)
+
+    def _when_table(self):
+        """The model's when clauses as events.c calls them (``bondc_whens``), made at the first use:
+        its compiled ``bondc_when_conditions`` and ``bondc_when_actions`` where its library has them
+        and the run takes C's values as they come, else C callbacks of ``model.when_conditions`` and
+        of each clause's ``WHEN_ACTIONS`` (one whose statements cannot be evaluated gives NaN, which
+        the round reports as a state that is not finite)."""
+        if self._whens is not None:
+            return self._whens
+        ffi, model = self.ffi, self.model
+        count = len(model.WHEN_LABELS)
+        sizes = [len(targets) for targets in model.WHEN_TARGETS]
+        offsets = np.ascontiguousarray(np.concatenate(([0], np.cumsum(sizes))), dtype=np.intc)
+        targets = np.ascontiguousarray([i for clause in model.WHEN_TARGETS for i in clause] or [0], dtype=np.intc)
+        n, modes_count, total = self.n, self.count, int(offsets[-1])
+
+        def arguments(x, m):
+            state = np.frombuffer(ffi.buffer(x, 8 * n), dtype=float).copy() if n else np.zeros(0)
+            modes = np.frombuffer(ffi.buffer(m, 8 * modes_count), dtype=float).copy() if modes_count else np.zeros(0)
+            return state, modes
+
+        def conditions(t, x, p, m, out):
+            try:
+                state, modes = arguments(x, m)
+                with np.errstate(all="ignore"):
+                    values = np.asarray(model.when_conditions(float(t), state, self.p, modes), dtype=float)
+                ffi.buffer(out, 8 * count)[:] = values.reshape(-1).tobytes()
+            except Exception as error:      # C cannot take an exception: raised after the call
+                self.failure = self.failure or error
+                ffi.buffer(out, 8 * count)[:] = np.zeros(count).tobytes()
+
+        def actions(t, x, p, m, out):
+            state, modes = arguments(x, m)
+            values = np.full(max(total, 1), np.nan)
+            for k, action in enumerate(model.WHEN_ACTIONS):
+                try:
+                    with np.errstate(all="ignore"):
+                        values[offsets[k]:offsets[k + 1]] = np.asarray(action(float(t), state, self.p, modes),
+                                                                       dtype=float).reshape(-1)
+                except Exception:           # a clause that fires with it: a state not finite
+                    pass
+            ffi.buffer(out, 8 * total)[:] = values[:total].tobytes()
+
+        native = getattr(model, "native_functions", None)
+        if native is not None and getattr(model, "when_offsets", None) is not None:
+            model_ffi, model_lib = native
+            functions = tuple(ffi.cast("bondc_law_function", int(model_ffi.cast(
+                "uintptr_t", model_ffi.addressof(model_lib, name)))) for name in
+                ("bondc_when_conditions", "bondc_when_actions"))
+        else:
+            functions = (ffi.callback(_LAW_SIGNATURE, conditions), ffi.callback(_LAW_SIGNATURE, actions))
+        whens = ffi.new("bondc_whens *")
+        whens.count = count
+        whens.target_start, whens.targets = ffi.from_buffer("int[]", offsets), ffi.from_buffer("int[]", targets)
+        whens.conditions, whens.actions = functions
+        self._whens = whens
+        self._when_keep = (offsets, targets, functions, np.empty(max(total, 1)), np.empty(max(count, 1), dtype=np.intc))
+        return whens
+
+    def when_conditions(self, t, y, modes):
+        """Each when clause's condition at (t, y) with the modes frozen (not 0 where it holds)."""
+        whens = self._when_table()
+        y = np.ascontiguousarray(y, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        out = np.zeros(max(whens.count, 1))
+        if whens.count:
+            whens.conditions(float(t), _doubles(self.ffi, y), _doubles(self.ffi, self.p), _doubles(self.ffi, modes),
+                             _doubles(self.ffi, out))
+        self._raise_failure()
+        return out[:whens.count]
+
+    def when_round(self, t, y, before, modes):
+        """``bondc_when_round``, one round of the when clauses at (t, y): (the clauses that fired, the
+        state after them (None where it is not finite), the conditions now, with ``modes``: the next
+        round's ``before``)."""
+        whens = self._when_table()
+        ffi = self.ffi
+        y = np.ascontiguousarray(y, dtype=float)
+        before = np.ascontiguousarray(before, dtype=float)
+        modes = np.ascontiguousarray(modes, dtype=float)
+        after = np.zeros(max(whens.count, 1))
+        new = np.empty(max(self.n, 1))
+        values, fired = self._when_keep[3], self._when_keep[4]
+        code = self.lib.bondc_when_round(whens, self.n, float(t), _doubles(ffi, y), _doubles(ffi, self.p),
+                                         _doubles(ffi, before), _doubles(ffi, modes), _doubles(ffi, after),
+                                         _doubles(ffi, new), ffi.from_buffer("int[]", fired), _doubles(ffi, values))
+        self._raise_failure()
+        firing = [int(k) for k in np.flatnonzero(fired[:whens.count])] if code != 0 else []
+        return firing, (None if code < 0 else new[:self.n].copy()), after[:whens.count].copy()
 
     def _raise_failure(self):
         failure, self.failure = self.failure, None
@@ -343,3 +433,33 @@ def first_crossing(values_at, switches, index, floors, signs, band, old, new, t_
 
 class TooManyHeld(Exception):
     """More than 8 switches would be held whose laws do not combine affinely."""
+
+
+def when_rounds() -> int:
+    """The most rounds of when clauses at one instant (events.c's ``bondc_when_rounds``)."""
+    return int(load_policy()[1].bondc_when_rounds())
+
+
+def zeno(times, span, t_end):
+    """Where the firing ``times`` of one when clause (oldest first) accumulate (``bondc_zeno``: Zeno
+    behaviour, a bouncing ball coming to rest): (the accumulation time, the intervals' mean ratio),
+    or None. Only the last :func:`zeno_firings` times count.
+
+    >>> gaps = 0.5 ** np.arange(20) * 1e-3
+    >>> limit, ratio = zeno(np.cumsum(gaps), 10.0, 10.0)
+    >>> round(limit, 9), round(ratio, 9)
+    (0.002, 0.5)
+    >>> zeno(np.arange(20.0) * 1e-6, 10.0, 10.0) is None         # evenly spaced: a fast clock, not Zeno
+    True
+    """
+    ffi, lib = load_policy()
+    times = np.ascontiguousarray(times, dtype=float)
+    limit, ratio = ffi.new("double *"), ffi.new("double *")
+    if not lib.bondc_zeno(int(times.size), _doubles(ffi, times), float(span), float(t_end), limit, ratio):
+        return None
+    return float(limit[0]), float(ratio[0])
+
+
+def zeno_firings() -> int:
+    """How many of a when clause's last firing times :func:`zeno` looks at."""
+    return int(load_policy()[1].bondc_zeno_firings())

@@ -19,14 +19,15 @@
 #include "bondc_model.h"
 #include "driver.h"
 #include "filippov.h"
+#include "events.h"
 #include "engine.h"
 
 #define NS (BONDC_N_SWITCHES > 0 ? BONDC_N_SWITCHES : 1)
 #define NX (BONDC_N_STATES > 0 ? BONDC_N_STATES : 1)
 #define NP (BONDC_N_P > 0 ? BONDC_N_P : 1)
+#define NW (BONDC_N_WHENS > 0 ? BONDC_N_WHENS : 1)
 #define CAPACITY 256          /* steps of one batch of the driver */
 #define MAX_STEPS 100000L     /* CVODE's steps between two restarts */
-#define EVENT_ROUNDS 10       /* rounds of when clauses at one instant (as the runtime's _EVENT_ROUNDS) */
 #define STALL_EVENTS 100000   /* events in one call without time advancing: the run is stalled */
 #define SLIDING_CHECKS 1000   /* a sliding mode's exits are tested at least this often over the span */
 #define MAX_HELD 8            /* switches a sliding mode holds at once, here (2^8 corners) */
@@ -56,6 +57,10 @@ bondc_fmu *bondc_fmu_new(void)
     c->conditions = (double *)zeros(BONDC_N_WHENS, sizeof(double));
     c->after = (double *)zeros(BONDC_N_WHENS, sizeof(double));
     c->values = (double *)zeros(BONDC_N_WHEN_TARGETS, sizeof(double));
+    c->fired = (int *)zeros(NW, sizeof(int));
+    c->firing_count = (int *)zeros(NW, sizeof(int));
+    c->firings = (double *)zeros((size_t)NW * (size_t)bondc_zeno_firings(), sizeof(double));
+    c->whens = (bondc_whens *)zeros(1, sizeof(bondc_whens));
     c->ts = (double *)zeros(CAPACITY, sizeof(double));
     c->ys = (double *)zeros((size_t)CAPACITY * NX, sizeof(double));
     c->slid = (int *)zeros(NS, sizeof(int));
@@ -80,7 +85,7 @@ bondc_fmu *bondc_fmu_new(void)
         || !c->old || !c->f || !c->conditions || !c->after || !c->values || !c->ts
         || !c->ys || !c->slid || !c->relevant || !c->flips || !c->cm || !c->weights || !c->law || !c->candidates || !c->held || !c->others
         || !c->scale || !c->vertices || !c->alpha || !c->alphas || !c->exits || !c->exits_old || !c->drift
-        || !c->corner || !c->out) {
+        || !c->corner || !c->out || !c->fired || !c->firing_count || !c->firings || !c->whens) {
         bondc_fmu_free(c);
         return NULL;
     }
@@ -96,6 +101,9 @@ bondc_fmu *bondc_fmu_new(void)
         if (bondc_switch_located[k]) c->watch[c->watched++] = k;
     c->law->n = BONDC_N_STATES; c->law->switches = BONDC_N_SWITCHES; c->law->p = c->p;
     c->law->rhs = bondc_rhs; c->law->switching = bondc_switches; c->law->vertices = bondc_switch_vertices;
+    c->whens->count = BONDC_N_WHENS; c->whens->target_start = bondc_when_target_start;
+    c->whens->targets = bondc_when_targets;
+    c->whens->conditions = bondc_when_conditions; c->whens->actions = bondc_when_actions;
     bondc_fmu_reset(c);
     bondc_fmu_setup(c, bondc_experiment[1], 0.0, bondc_experiment[0]);
     return c;
@@ -108,6 +116,7 @@ void bondc_fmu_free(bondc_fmu *c)
     free(c->p); free(c->x); free(c->m); free(c->watch); free(c->signs); free(c->band); free(c->g_old);
     free(c->g); free(c->old); free(c->f); free(c->conditions);
     free(c->after); free(c->values); free(c->ts); free(c->ys);
+    free(c->fired); free(c->firing_count); free(c->firings); free(c->whens);
     free(c->slid); free(c->relevant); free(c->flips); free(c->cm); free(c->weights); free(c->law); free(c->candidates); free(c->held);
     free(c->others); free(c->scale); free(c->vertices); free(c->alpha); free(c->alphas); free(c->exits);
     free(c->exits_old); free(c->drift); free(c->corner); free(c->out);
@@ -128,6 +137,7 @@ void bondc_fmu_reset(bondc_fmu *c)
     c->holding = 0;
     c->chattering = 0;
     for (int k = 0; k < BONDC_N_SWITCHES; k++) { c->slid[k] = 0; c->vertices[k] = bondc_switch_vertices[k]; }
+    for (int k = 0; k < BONDC_N_WHENS; k++) c->firing_count[k] = 0;
     bondc_x0(c->p, c->x);
     c->selected = 0;
 }
@@ -141,6 +151,7 @@ void bondc_fmu_setup(bondc_fmu *c, double rtol, double t_start, double t_stop)
     c->max_step = bondc_experiment[3] > 0 ? bondc_experiment[3] : 0.0;
     c->t = t_start;
     c->span = t_stop > t_start ? t_stop - t_start : (bondc_experiment[0] > 0 ? bondc_experiment[0] : 1.0);
+    c->t_stop = t_start + c->span;
     /* as the runtime's probe: 1e-8 of the run's span */
     c->probe = 1e-8 * fmax(c->span, fabs(t_stop));
     c->selected = 0;
@@ -194,6 +205,41 @@ static int chattering(bondc_fmu *c, double t)
     return fail(c, text, t);
 }
 
+/* The failure of a run whose when clauses keep firing at one instant (as bondc simulate's) */
+static int when_again(bondc_fmu *c)
+{
+    char text[500];
+    int k = 0;
+    while (k < BONDC_N_WHENS - 1 && !c->fired[k]) k++;
+    snprintf(text, sizeof text, "when clauses kept firing at t=%.6g: after %d rounds at the same instant, %s "
+             "became true again; make the conditions exclusive (a hysteresis band), or the statements move the "
+             "state out of the condition", c->t, bondc_when_rounds(), bondc_when_labels[k]);
+    return fail(c, text, c->t);
+}
+
+/* Note a firing of when clause k at c->t; where its firings accumulate (events.c's bondc_zeno), the
+   run fails there, as bondc simulate's does: 1, else 0 */
+static int zeno(bondc_fmu *c, int k)
+{
+    int keep = bondc_zeno_firings();
+    double *times = c->firings + (size_t)k * keep;
+    int count = c->firing_count[k];
+    if (count == keep) {
+        memmove(times, times + 1, sizeof(double) * (size_t)(keep - 1));
+        count--;
+    }
+    times[count++] = c->t;
+    c->firing_count[k] = count;
+    double limit, ratio;
+    if (!bondc_zeno(count, times, c->span, c->t_stop, &limit, &ratio)) return 0;
+    char text[600];
+    snprintf(text, sizeof text, "the events of '%s' accumulate at t=%.6g (Zeno behaviour): %d firings, each "
+             "interval about %.3g times the one before, the last %.3g s; give the model a law for what follows",
+             bondc_when_labels[k], limit, count, ratio, times[count - 1] - times[count - 2]);
+    fail(c, text, c->t);
+    return 1;
+}
+
 int bondc_fmu_event(bondc_fmu *c, int *changed)
 {
     *changed = 0;
@@ -206,21 +252,18 @@ int bondc_fmu_event(bondc_fmu *c, int *changed)
     if (code < 0) return fail(c, "out of memory", c->t);
     c->chattering = code > 0;
     if (!same_modes(c->old, c->m)) c->events++;
-    /* the when clauses whose condition became true here: their statements from the values just
-       before, then the modes after them (as bondc_driver_pieces and _Run.fire_when_clauses) */
-    for (int round = 0; BONDC_N_WHENS > 0 && round < EVENT_ROUNDS; round++) {
-        bondc_when_conditions(c->t, c->x, c->p, c->old, c->conditions);
-        bondc_when_conditions(c->t, c->x, c->p, c->m, c->after);
-        int firing = 0;
+    /* the when clauses whose condition became true here (events.c, as bondc simulate fires them):
+       their statements from the values just before, then the modes after them, round after round */
+    if (BONDC_N_WHENS > 0) bondc_when_conditions(c->t, c->x, c->p, c->old, c->conditions);
+    for (int round = 0; BONDC_N_WHENS > 0; round++) {
+        int firing = bondc_when_round(c->whens, BONDC_N_STATES, c->t, c->x, c->p, c->conditions, c->m, c->after,
+                                      c->x, c->fired, c->values);
+        if (firing == 0) break;
+        if (firing < 0) return fail(c, "a when clause made the state not finite", c->t);
+        if (round == bondc_when_rounds()) return when_again(c);
         for (int k = 0; k < BONDC_N_WHENS; k++)
-            if (c->after[k] != 0 && !(c->conditions[k] != 0)) firing = 1;
-        if (!firing) break;
-        bondc_when_actions(c->t, c->x, c->p, c->m, c->values);
-        for (int k = 0; k < BONDC_N_WHENS; k++)
-            if (c->after[k] != 0 && !(c->conditions[k] != 0))
-                for (int j = bondc_when_target_start[k]; j < bondc_when_target_start[k + 1]; j++)
-                    c->x[bondc_when_targets[j]] = c->values[j];
-        if (!finite_all(c->x, BONDC_N_STATES)) return fail(c, "a when clause made the state not finite", c->t);
+            if (c->fired[k] && zeno(c, k)) return -1;
+        memcpy(c->conditions, c->after, sizeof(double) * NW);
         *changed = 1;
         c->events++;
         memcpy(c->old, c->m, sizeof(double) * NS);

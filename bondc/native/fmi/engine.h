@@ -11,6 +11,7 @@ typedef struct bondc_fmu bondc_fmu;
 struct bondc_fmu {
     double t;               /* the time the state x stands at */
     double rtol, atol, max_step, span, probe;
+    double t_stop;          /* the run's end (the importer's stop time, else start + the experiment's t_end) */
     double *p;              /* the parameters, then the external inputs' values (bondc_model.h's p) */
     double *x;              /* the state */
     double *m;              /* the modes, valid at (t, x) where `selected` */
@@ -28,6 +29,9 @@ struct bondc_fmu {
     /* work space */
     struct bondc_driver *d;
     struct bondc_law *law;
+    struct bondc_whens *whens;
+    int *fired, *firing_count;  /* the when clauses that fired last round; each one's firings kept */
+    double *firings;            /* each clause's last bondc_zeno_firings() firing times (Zeno) */
     int *candidates, *held, *others;
     double *scale, *vertices, *alpha, *alphas, *exits, *exits_old, *drift, *corner, *out;
     int watched;
