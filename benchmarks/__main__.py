@@ -207,6 +207,39 @@ def simulate_pump_relief(repeat: int) -> tuple[dict, dict]:
     return row, {"bondc_s": bondc_s, "hand_s": hand_s, "ratio": bondc_s / hand_s}
 
 
+DRIVE = ROOT / "models" / "dc_motor_gear_compliant.bg"
+
+
+def simulate_drive_radau(repeat: int) -> dict:
+    """The lightly damped drive (models/dc_motor_gear_compliant.bg) over 2 s at rtol 1e-10 with
+    ``solver = "Radau"``, the user's choice of scipy's Radau, against benchmarks/hand/drive.py
+    (scipy's Radau, analytic Jacobian), in this process."""
+    from benchmarks.hand import drive as hand
+
+    folder = Path(tempfile.mkdtemp(prefix="bondc-bench-"))
+    path = folder / "drive_radau.bg"
+    text = DRIVE.read_text(encoding="utf-8")
+    for old, new in (("t_end    = 0.3 [s]", "t_end = 2 [s]"), ("rtol     = 1e-8", 'rtol = 1e-10\n    solver = "Radau"'),
+                     ("atol     = 1e-10", "atol = 1e-12")):
+        assert old in text, old
+        text = text.replace(old, new)
+    path.write_text(text, encoding="utf-8")
+    ours, read_time, numpy_time, result, settings, hand_time, reference = _bondc_run(
+        path, repeat, lambda settings: hand.simulate(settings["t_end"], settings["rtol"], settings["atol"],
+                                                     settings["max_step"]))
+    dense = hand.simulate(settings["t_end"], settings["rtol"], settings["atol"], settings["max_step"], dense=True)
+    steps = sum(piece.t.size for piece in reference[2])
+    return {"benchmark": "lightly damped drive (2 s, rtol 1e-10), solver = \"Radau\"",
+            "hand": "Radau, analytic Jacobian, max_step, split at the step",
+            "hand_s": hand_time, "bondc_s": ours, "bondc_numpy_s": numpy_time, "ratio": ours / hand_time,
+            "bondc_read_s": read_time, "ratio_read": read_time / hand_time,
+            "hand_nfev": int(sum(piece.nfev for piece in reference[2])),
+            "hand_njev": int(sum(piece.njev for piece in reference[2])), "hand_steps": steps,
+            "bondc_nfev": int(result.stats["nfev"]), "bondc_njev": int(result.stats["njev"]),
+            "code": result.stats.get("code"), "solver": result.stats.get("solver"),
+            "difference": _difference(dense(result.t), result, list(result.states), settings["atol"])}
+
+
 # ------------------------------------------------------------------ 3. startup
 
 def startup(repeat: int) -> dict:
@@ -323,7 +356,7 @@ def main(argv=None) -> int:
     print("simulation against hand-written scipy code", file=sys.stderr, flush=True)
     rounds = 3 if args.quick else 5     # a run of either side takes 0.01-0.6 s: rounds are cheap
     relief, relief_process = simulate_pump_relief(rounds)
-    simulations = [simulate_flagship(rounds), relief, simulate_chain(100, rounds)]
+    simulations = [simulate_flagship(rounds), relief, simulate_drive_radau(rounds), simulate_chain(100, rounds)]
     if not args.quick:
         simulations.append(simulate_chain(1000, rounds))
     print("startup", file=sys.stderr, flush=True)
