@@ -75,31 +75,38 @@ class SlidingLaw:
         self.failure = None         # an exception a callback met (raised again after the call)
         self._whens = None          # the when clauses' table (bondc_whens), made at the first use
 
-        def callback(function, size):
-            def evaluate(t, x, p, m, out):
-                try:
-                    state = np.frombuffer(ffi.buffer(x, 8 * n), dtype=float).copy()
-                    modes = np.frombuffer(ffi.buffer(m, 8 * count), dtype=float).copy() if count else np.zeros(0)
-                    with np.errstate(all="ignore"):
-                        values = np.asarray(function(float(t), state, self.p, modes), dtype=float).reshape(-1)
-                    ffi.buffer(out, 8 * size)[:] = values.tobytes()
-                except Exception as error:      # C cannot take an exception: NaN, and raised after
-                    self.failure = self.failure or error
-                    ffi.buffer(out, 8 * size)[:] = np.full(size, np.nan).tobytes()
-            return ffi.callback(_LAW_SIGNATURE, evaluate)
-
-        native = getattr(model, "native_functions", None)
-        if native is not None:      # the model's compiled functions themselves: no Python per call
-            model_ffi, model_lib = native
-            self._callbacks = tuple(ffi.cast("bondc_law_function", int(model_ffi.cast(
-                "uintptr_t", model_ffi.addressof(model_lib, name)))) for name in ("bondc_rhs", "bondc_switches"))
+        if getattr(model, "native_functions", None) is not None:   # the model's compiled functions: no Python
+            self._callbacks = self._compiled("bondc_rhs", "bondc_switches")
         else:
-            self._callbacks = (callback(model.rhs, n), callback(model.switches, count))
+            self._callbacks = (self._callback(model.rhs, n), self._callback(model.switches, count))
         self.law = ffi.new("bondc_law *")
         self.law.n, self.law.switches = n, count
         self.law.p = _doubles(ffi, self.p)
         self.law.rhs, self.law.switching = self._callbacks
         self.law.vertices = _doubles(ffi, self.vertices)
+
+    def _compiled(self, *names):
+        """The model library's functions ``names`` as C ``bondc_law_function`` pointers."""
+        model_ffi, model_lib = self.model.native_functions
+        return tuple(self.ffi.cast("bondc_law_function", int(model_ffi.cast("uintptr_t", model_ffi.addressof(
+            model_lib, name)))) for name in names)
+
+    def _callback(self, function, size):
+        """``function(t, x, p, modes)`` (``size`` values) as a C ``bondc_law_function``: an exception
+        it raises gives NaN, and is raised again after the C call (``_raise_failure``)."""
+        ffi, n, count = self.ffi, self.n, self.count
+
+        def evaluate(t, x, p, m, out):
+            try:
+                state = np.frombuffer(ffi.buffer(x, 8 * n), dtype=float).copy()
+                modes = np.frombuffer(ffi.buffer(m, 8 * count), dtype=float).copy() if count else np.zeros(0)
+                with np.errstate(all="ignore"):
+                    values = np.asarray(function(float(t), state, self.p, modes), dtype=float).reshape(-1)
+                ffi.buffer(out, 8 * size)[:] = values.tobytes()
+            except Exception as error:      # C cannot take an exception: NaN, and raised after
+                self.failure = self.failure or error
+                ffi.buffer(out, 8 * size)[:] = np.full(size, np.nan).tobytes()
+        return ffi.callback(_LAW_SIGNATURE, evaluate)
 
     def _when_table(self):
         """The model's when clauses as events.c calls them (``bondc_whens``), made at the first use:
@@ -114,43 +121,21 @@ class SlidingLaw:
         sizes = [len(targets) for targets in model.WHEN_TARGETS]
         offsets = np.ascontiguousarray(np.concatenate(([0], np.cumsum(sizes))), dtype=np.intc)
         targets = np.ascontiguousarray([i for clause in model.WHEN_TARGETS for i in clause] or [0], dtype=np.intc)
-        n, modes_count, total = self.n, self.count, int(offsets[-1])
+        total = int(offsets[-1])
 
-        def arguments(x, m):
-            state = np.frombuffer(ffi.buffer(x, 8 * n), dtype=float).copy() if n else np.zeros(0)
-            modes = np.frombuffer(ffi.buffer(m, 8 * modes_count), dtype=float).copy() if modes_count else np.zeros(0)
-            return state, modes
-
-        def conditions(t, x, p, m, out):
-            try:
-                state, modes = arguments(x, m)
-                with np.errstate(all="ignore"):
-                    values = np.asarray(model.when_conditions(float(t), state, self.p, modes), dtype=float)
-                ffi.buffer(out, 8 * count)[:] = values.reshape(-1).tobytes()
-            except Exception as error:      # C cannot take an exception: raised after the call
-                self.failure = self.failure or error
-                ffi.buffer(out, 8 * count)[:] = np.zeros(count).tobytes()
-
-        def actions(t, x, p, m, out):
-            state, modes = arguments(x, m)
-            values = np.full(max(total, 1), np.nan)
+        def actions(t, x, p, m):
+            values = np.full(total, np.nan)
             for k, action in enumerate(model.WHEN_ACTIONS):
                 try:
-                    with np.errstate(all="ignore"):
-                        values[offsets[k]:offsets[k + 1]] = np.asarray(action(float(t), state, self.p, modes),
-                                                                       dtype=float).reshape(-1)
+                    values[offsets[k]:offsets[k + 1]] = np.asarray(action(t, x, p, m), dtype=float).reshape(-1)
                 except Exception:           # a clause that fires with it: a state not finite
                     pass
-            ffi.buffer(out, 8 * total)[:] = values[:total].tobytes()
+            return values
 
-        native = getattr(model, "native_functions", None)
-        if native is not None and getattr(model, "when_offsets", None) is not None:
-            model_ffi, model_lib = native
-            functions = tuple(ffi.cast("bondc_law_function", int(model_ffi.cast(
-                "uintptr_t", model_ffi.addressof(model_lib, name)))) for name in
-                ("bondc_when_conditions", "bondc_when_actions"))
+        if getattr(model, "native_functions", None) is not None and getattr(model, "when_offsets", None) is not None:
+            functions = self._compiled("bondc_when_conditions", "bondc_when_actions")
         else:
-            functions = (ffi.callback(_LAW_SIGNATURE, conditions), ffi.callback(_LAW_SIGNATURE, actions))
+            functions = (self._callback(model.when_conditions, count), self._callback(actions, total))
         whens = ffi.new("bondc_whens *")
         whens.count = count
         whens.target_start, whens.targets = ffi.from_buffer("int[]", offsets), ffi.from_buffer("int[]", targets)
