@@ -395,6 +395,7 @@ def test_a_switch_on_an_external_input_switches_inside_the_fmu(fmus):
     assert np.max(np.abs(result["i"] - expected)) < 1e-3 * 6.0
 
 
+@pytest.mark.slow
 def test_an_fmus_when_clause_whose_firings_accumulate_stops_at_the_zeno_time(tmp_path):
     """The ball of bouncing_ball.bg run to 6 s as a Co-Simulation FMU: past t_inf = t1 +
     (2*v1/g)*e/(1 - e) its impacts accumulate. The FMU's engine runs the test bondc simulate runs
