@@ -52,7 +52,7 @@ import weakref
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import CodeType
-from typing import TYPE_CHECKING, Any, BinaryIO, Iterable, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, BinaryIO, Iterable, Mapping, NoReturn, Sequence, TextIO, TypeVar
 
 import numpy as np
 
@@ -68,6 +68,54 @@ if TYPE_CHECKING:
 _COMPILED: dict[int, tuple[weakref.ref[Any], dict[str, Any]]] = {}
 
 
+_K = TypeVar("_K")
+_V = TypeVar("_V")
+
+
+class ReadOnlyDict(dict[_K, _V]):
+    """A dict that cannot be changed once made: the mappings a frozen :class:`SimResult` holds.
+
+    Every reader takes it for the dict it is (``json``, pandas, ``isinstance(x, dict)``, pickle,
+    ``==``); a write (``d[k] = v``, ``del``, ``update``, ``pop``, ...) raises TypeError. A changed
+    copy is ``dict(d)`` changed, or ``{**d, k: v}``.
+    """
+
+    __slots__ = ()
+
+    def _refuse(self) -> NoReturn:
+        raise TypeError(f"{type(self).__name__} cannot be changed: make a changed copy (dict(it), or {{**it, key: value}})")
+
+    def __setitem__(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    def __delitem__(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    # (mypy holds an in-place operator to the signature of its binary one, dict's | that returns a
+    # new dict; this one only refuses)
+    def __ior__(self, other: Any) -> NoReturn:  # type: ignore[misc]
+        self._refuse()
+
+    def update(self, *args: Any, **kwargs: Any) -> NoReturn:
+        self._refuse()
+
+    def setdefault(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    def pop(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    def popitem(self) -> NoReturn:
+        self._refuse()
+
+    def clear(self) -> NoReturn:
+        self._refuse()
+
+    def __reduce__(self) -> tuple[type[ReadOnlyDict[_K, _V]], tuple[dict[_K, _V]]]:
+        # (pickle and copy would otherwise fill the new one item by item, through __setitem__)
+        return type(self), (dict(self),)
+
+
 @dataclass(frozen=True)
 class SimResult:
     """The trajectories of one simulation run, arrays by name, SI units.
@@ -81,25 +129,26 @@ class SimResult:
     states); ``events`` is a list of ``(time, label)``; ``stats`` the solver's
     counts (nfev, njev, nlu, steps, segments, events, wall_time, ...).
 
-    A result is made once, complete, and not changed (a variant is ``dataclasses.replace``'s).
+    A result is made once, complete, and not changed (a variant is ``dataclasses.replace``'s): its
+    mappings are :class:`ReadOnlyDict` (those given as plain dicts are copied into one).
     """
 
     t: np.ndarray
-    states: dict[str, np.ndarray]
-    outputs: dict[str, np.ndarray]
-    bonds: dict[str, np.ndarray]
-    variables: dict[str, np.ndarray]
+    states: ReadOnlyDict[str, np.ndarray]
+    outputs: ReadOnlyDict[str, np.ndarray]
+    bonds: ReadOnlyDict[str, np.ndarray]
+    variables: ReadOnlyDict[str, np.ndarray]
     complete: bool
     message: str
     events: list[tuple[float, str]]
-    stats: dict[str, Any]
-    parameters: dict[str, float]
-    failure: dict[str, Any] | None = None
+    stats: ReadOnlyDict[str, Any]
+    parameters: ReadOnlyDict[str, float]
+    failure: ReadOnlyDict[str, Any] | None = None
     model: str = ""
     experiment: str | None = None
     diagnostics: tuple[Diagnostic, ...] = ()
     warnings: tuple[Diagnostic, ...] = ()
-    settings: dict[str, Any] = field(default_factory=dict)
+    settings: ReadOnlyDict[str, Any] = field(default_factory=ReadOnlyDict)
     # (t, states before, states after) of when clauses
     jumps: list[tuple[float, Any, Any]] = field(default_factory=list)
     # (t0, t1, corners, times, weights) of each Filippov sliding mode (see bondc.runtime.Result): the
@@ -107,10 +156,16 @@ class SimResult:
     sliding: list[tuple[Any, ...]] = field(default_factory=list)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
-    units: dict[str, tuple[str, float]] = field(default_factory=dict)
+    units: ReadOnlyDict[str, tuple[str, float]] = field(default_factory=ReadOnlyDict)
     # dependent states (storage in derivative causality), name -> values at every point (SI); they
     # are also in ``variables``, and are not in ``states`` (which the solver integrates)
-    dependent: dict[str, np.ndarray] = field(default_factory=dict)
+    dependent: ReadOnlyDict[str, np.ndarray] = field(default_factory=ReadOnlyDict)
+
+    def __post_init__(self) -> None:
+        for name in _MAPPINGS:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, ReadOnlyDict):
+                object.__setattr__(self, name, ReadOnlyDict(value))
 
     @property
     def t_reached(self) -> float:
@@ -119,7 +174,7 @@ class SimResult:
     @property
     def exit_status(self) -> int | None:
         """130 for a run stopped by Ctrl-C, 143 by SIGTERM (the shell's statuses), else None."""
-        failure = self.failure or {}
+        failure: Mapping[str, Any] = self.failure or {}
         if failure.get("kind") != "interrupted":
             return None
         return 143 if failure.get("terminated") else 130
@@ -156,6 +211,9 @@ class SimResult:
 
 
 _FIELDS = frozenset(f.name for f in fields(SimResult))
+#: The fields that are mappings (read-only once made).
+_MAPPINGS = ("states", "outputs", "bonds", "variables", "stats", "parameters", "failure", "settings", "units",
+             "dependent")
 _frozen_setattr = SimResult.__setattr__
 
 
@@ -509,14 +567,15 @@ def _result(ss: Any, experiment: ExperimentDef | None, namespace: Mapping[str, A
     warnings = [*notes, *_nonfinite_warnings(graph, t, outputs, bonds, raw.complete),
                 *_chattering_warnings(graph, events, raw.stats)]
     return SimResult(
-        t=t, states=dict(raw.states), outputs=outputs, bonds=bonds,
-        variables=dict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
-        events=events, stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
+        t=t, states=ReadOnlyDict(raw.states), outputs=ReadOnlyDict(outputs), bonds=ReadOnlyDict(bonds),
+        variables=ReadOnlyDict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
+        events=events, stats=ReadOnlyDict(raw.stats), parameters=ReadOnlyDict(raw.parameters),
+        failure=ReadOnlyDict(raw.failure) if raw.failure is not None else None,
         model=getattr(graph, "name", "") or "", experiment=experiment.name if experiment is not None else None,
         diagnostics=diagnostics, warnings=tuple(warnings),
-        settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
-        sliding=list(getattr(raw, "sliding", ())), units=result_units(graph),
-        dependent=dependent_states(ss, raw.variables),
+        settings=ReadOnlyDict({k: v for k, v in settings.items() if v is not None}),
+        jumps=list(getattr(raw, "jumps", ())), sliding=list(getattr(raw, "sliding", ())),
+        units=ReadOnlyDict(result_units(graph)), dependent=ReadOnlyDict(dependent_states(ss, raw.variables)),
     )
 
 
