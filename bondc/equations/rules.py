@@ -101,21 +101,15 @@ class NodeRules(Laws):
 
     def _resistor(self, element: ElementNode) -> None:
         bond = element.bond
-        e, f = self.e(bond), self.f(bond)
-        if self.causal.resistors[element.name] == CONDUCTANCE:
-            if "f" in element.laws:
-                rhs = self.law(element, "f")
-            else:
-                dummy = sympy.Dummy("f", real=True)
-                rhs = self.invert(self.law(element, "e", {"f": dummy}), dummy, e, element, "e", "f")
-            self.add(f, rhs, element.name, "resistor")
-        else:
-            if "e" in element.laws:
-                rhs = self.law(element, "e")
-            else:
-                dummy = sympy.Dummy("e", real=True)
-                rhs = self.invert(self.law(element, "f", {"e": dummy}), dummy, f, element, "f", "e")
-            self.add(e, rhs, element.name, "resistor")
+        port = {"e": self.e(bond), "f": self.f(bond)}
+        # conductance causality: the resistor computes its flow from its effort; resistance: the reverse
+        wanted, given = ("f", "e") if self.causal.resistors[element.name] == CONDUCTANCE else ("e", "f")
+        if wanted in element.laws:
+            rhs = self.law(element, wanted)
+        else:       # only the other form is written: inverted
+            dummy = sympy.Dummy(wanted, real=True)
+            rhs = self.invert(self.law(element, given, {wanted: dummy}), dummy, port[given], element, given, wanted)
+        self.add(port[wanted], rhs, element.name, "resistor")
 
     def _ports(self, element: ElementNode):
         (b1, b2), (s1, s2) = element.bonds, element.port_signs
