@@ -52,7 +52,7 @@ import weakref
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import CodeType
-from typing import TYPE_CHECKING, Any, BinaryIO, Iterable, Mapping, NoReturn, Sequence, TextIO, TypeVar
+from typing import TYPE_CHECKING, Any, BinaryIO, Callable, Iterable, Mapping, NoReturn, Sequence, TextIO, TypeVar
 
 import numpy as np
 
@@ -257,7 +257,7 @@ def compile_model(ss: StateSpace) -> dict[str, Any]:
         source = emit(ss, None, module_dir=module_dir)
         if entry is not None:
             entry.write_module(source)
-    from bondc.runtime import native_text, start_native
+    from bondc.runtime.native import native_text, start_native
 
     # a large model's C library compiles (in parallel units) while Python compiles its module
     start_native(native_text(source))
@@ -385,7 +385,10 @@ def external_inputs(ss: StateSpace, inputs: Any) -> dict[str, Any]:
     signals = dict(getattr(graph, "inputs", None) or {})
     external = [name for name, signal in signals.items() if getattr(signal, "external", False)]
     listed = ", ".join(external) if external else "none"
-    from bondc.runtime import InputError, external_inputs as prepare
+    from bondc.runtime.signals import InputError, external_inputs as untyped
+
+    # (the engine is not annotated: its function's contract, as it is called here)
+    prepare: Callable[[Mapping[str, Any], tuple[str, ...]], dict[str, Any]] = untyped
 
     for name in inputs:
         if name not in signals:
@@ -411,7 +414,9 @@ def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, A
     column besides time. Names are checked as :func:`external_inputs` does (E805, E806); a file
     or column that cannot be read is E807."""
     from bondc.numeric import csv_scales
-    from bondc.runtime import CsvError, csv_columns, load_csv
+    from bondc.runtime.signals import CsvError
+
+    columns_of, load_csv = _csv_readers()
 
     graph = getattr(ss, "graph", None)
     signals = dict(getattr(graph, "inputs", None) or {})
@@ -432,7 +437,7 @@ def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, A
             raise _input_error(codes.E807, f"--input {name}: no file '{path}'",
                                hint="the file is read relative to the current directory")
         try:
-            columns = [c for c, _ in csv_columns(path)]
+            columns = [c for c, _ in columns_of(path)]
         except (OSError, UnicodeDecodeError, ValueError) as error:
             raise _input_error(codes.E807, f"--input {name}: cannot read '{path}': {error}") from None
         if column is None:
@@ -461,13 +466,22 @@ def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, A
     return external_inputs(ss, tables)
 
 
+def _csv_readers() -> tuple[Callable[[str], list[tuple[str, str | None]]],
+                             Callable[[str, str], tuple[np.ndarray, np.ndarray]]]:
+    """The engine's readers of a csv file (not annotated there), with their contracts: its header's
+    ``[(name, unit or None), ...]``, and a column's (times, values)."""
+    from bondc.runtime.signals import csv_columns, load_csv
+
+    return csv_columns, load_csv
+
+
 def _check_header_unit(name: str, signal: Any, path: str, column: str) -> None:
     """E807 when the unit a file's header gives a column is not of the input's declared dimension."""
     from bondc.units import unit_of
-    from bondc.runtime import csv_columns
 
+    columns_of, _ = _csv_readers()
     declared = getattr(signal, "unit_text", None)
-    written = dict(csv_columns(path)).get(column)
+    written = dict(columns_of(path)).get(column)
     if not declared or not written:
         return
     have, want = unit_of(written), unit_of(declared)
@@ -652,7 +666,8 @@ def _when_span(graph: Any, label: str | None) -> Span | None:
     """The span of the when clause whose condition reads ``label``."""
     for when in getattr(graph, "whens", ()) if label else ():
         if when.text == label:
-            return when.span
+            span: Span = when.span
+            return span
     return None
 
 
@@ -673,7 +688,7 @@ def _solver_note(method: str | None) -> str | None:
     >>> _solver_note("CVODE") is None and _solver_note(None) is None
     True
     """
-    from bondc.runtime import SOLVER_NAMES
+    from bondc.runtime.solvers import SOLVER_NAMES
 
     scipy_solvers = SOLVER_NAMES[SOLVER_NAMES.index("DOPRI5") + 1:]
     name = next((known for known in scipy_solvers if str(method or "").lower() == known.lower()), None)
@@ -747,7 +762,7 @@ def _columns(result: SimResult, all_bonds: bool) -> tuple[list[str], list[np.nda
 def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     """The result as csv: a header of names with units (``t [s]``, ``P_kPa [kPa]``), then one row per
     point; each output in its declared unit, states and bond variables in SI."""
-    from bondc.runtime import result_bytes
+    from bondc.runtime.results import result_bytes
 
     names, columns = _columns(result, all_bonds)
     return result_bytes("csv", names, columns, result.units).decode("utf-8")
@@ -776,7 +791,7 @@ def write_parquet(result: SimResult, path: str | os.PathLike[str], all_bonds: bo
     """The csv's table as Parquet (needs pyarrow), atomically: each column in the csv's unit, with
     its ``unit`` and ``si_factor`` in the field's metadata; the model, experiment and status in the
     file's."""
-    from bondc.runtime import result_bytes
+    from bondc.runtime.results import result_bytes
 
     names, columns = _columns(result, all_bonds)
     try:
@@ -793,7 +808,7 @@ def write_npz(result: SimResult, path: str | os.PathLike[str], all_bonds: bool =
     ``si_factor/KEY`` of each (KEY / si_factor is in unit: an output's declared unit), then
     ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
     ``parameter_values``."""
-    from bondc.runtime import result_bytes
+    from bondc.runtime.results import result_bytes
 
     arrays = {"t": result.t}
     arrays.update({f"states/{k}": v for k, v in result.states.items()})
@@ -830,7 +845,7 @@ def check_result_path(path: str | os.PathLike[str]) -> None:
 def write(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """``.npz`` -> :func:`write_npz`, ``.parquet`` -> :func:`write_parquet`, anything else ->
     :func:`write_csv` (see :func:`check_result_path`); every format records each column's unit."""
-    from bondc.runtime import result_format
+    from bondc.runtime.results import result_format
 
     check_result_path(path)
     kind = result_format(path)
