@@ -114,7 +114,7 @@ class Assembly(Laws):
                     found = self.causal.reference(target.parts, None)
                     if found is None or found[0] != "state":
                         raise _error(codes.E701, f"'{target.dotted}' is not a state", target.span)
-                    name = found[1]
+                    name = str(found[1])        # (a state's qualified name)
                 actions.append((name, expand(self.translate(value))))
             events.append((when.text, expand(self.translate(when.condition)), tuple(actions)))
         return tuple(events)
