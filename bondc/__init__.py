@@ -12,6 +12,10 @@ the API and the analyses (its function in brackets)::
     simulate.simulate           StateSpace   -> SimResult     the engine, bondc.runtime [simulate_file]
     report.build.report_context PipelineRun  -> HTML report                             [run_pipeline]
 
+``bondc check``, :func:`check` and the language server run the stages up to the equations through
+``pipeline.diagnose_file`` (``-> Diagnoses``), which gathers every stage's diagnostics instead of
+raising the first error.
+
 The Python API (``docs/api.md``) is exported from here: :func:`load`, :func:`check`,
 :func:`equations`, :func:`linearize`, :func:`bode`, :func:`compile`, :func:`simulate`, :func:`fit` and their
 results :class:`Model`, :class:`CheckResult`, :class:`Simulation` (all defined in :mod:`bondc.api`).

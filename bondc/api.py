@@ -140,13 +140,12 @@ def load(path: PathLike | None = None, *, text: str | None = None, model: str | 
     >>> m.name, m.states, m.parameters["k"]
     ('MassSpringDamper', ['mass.p', 'spring.q'], 800.0)
     """
-    from bondc import semantic
-    from bondc.pipeline import parse_sets
+    from bondc.pipeline import check_file
 
     path, text = _source(path, text)
-    graph, warnings = semantic.load(path, model=model, experiment=experiment, sets=parse_sets(_sets(overrides)),
-                                    text=text)
-    return Model(graph, tuple(warnings))
+    checked = check_file(path, model=model, experiment=experiment, sets=_sets(overrides), text=text,
+                         first_experiment=False)
+    return Model(checked.graph, checked.warnings)
 
 
 @dataclass(frozen=True)
@@ -184,22 +183,13 @@ def check(path: PathLike | None = None, *, text: str | None = None, model: str |
     >>> check(text="model M\\n  R r : e = f\\n  r -> nowhere\\nend\\n").errors[0].code
     'E404'
     """
-    from bondc.causality import assign_causality
-    from bondc.quickcheck import equations_findings
+    from bondc.pipeline import diagnose
 
-    try:
-        loaded = load(path, text=text, model=model)
-        causal = assign_causality(loaded.graph)
-        (states, found), _ = equations_findings(causal)
-    except BondcError as error:
-        return CheckResult(False, tuple(error.diagnostics))
-    if states is None:
-        return CheckResult(False, found)
-    from bondc.model import external_input_notes
-
-    diagnostics = list(loaded.warnings) + external_input_notes(loaded.graph)
-    diagnostics += [d for d in list(causal.diagnostics) + list(found) if d not in diagnostics]
-    return CheckResult(not any(d.is_error for d in diagnostics), tuple(diagnostics), loaded)
+    path, text = _source(path, text)
+    diagnosis = diagnose(path, model=model, text=text, cache=False)
+    if diagnosis.failure is not None or diagnosis.checked is None:     # the failed stage's diagnostics alone
+        return CheckResult(False, diagnosis.failure or ())
+    return CheckResult(diagnosis.ok, diagnosis.diagnostics, Model(diagnosis.checked.graph, diagnosis.checked.warnings))
 
 
 def _derived(path: PathLike | None, text: str | None, model: str | None, experiment: str | None,

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import Union
+from typing import Iterator, Union
 
 from bondc.source import NO_SPAN, Source, Span
 
@@ -390,7 +390,7 @@ class SetValue:
     source: Source | None = field(default=None, compare=False, repr=False)  # the Source it was parsed from
 
 
-def walk(expr: Expr):
+def walk(expr: Expr) -> Iterator[Expr]:
     """Every sub-expression of ``expr``, depth first, ``expr`` first."""
     yield expr
     if isinstance(expr, Call):

@@ -39,7 +39,7 @@ them with those errors).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping
+from typing import Any, Hashable, Iterable, Mapping, Sequence, TypeVar
 
 from bondc import ast
 from bondc.kinds import GYRATOR, KINDS, RESISTOR, SOURCE, STORAGE, TRANSFORMER, WORDS
@@ -60,6 +60,12 @@ ONE_PORT_CAUSALITIES: Mapping[str, tuple[tuple[str, bool], ...]] = {
 
 INTEGRAL, DERIVATIVE = "integral", "derivative"
 RESISTANCE, CONDUCTANCE = "resistance", "conductance"
+
+#: What a dotted reference names: ``("e" | "f", bond number)`` or ``("state", qualified name)``.
+Reference = tuple[str, int] | tuple[str, str]
+#: A causal relation: (node, the variable it computes, the variables it reads); see causal_relations.
+Relation = tuple[str, str, tuple[str, ...]]
+_Node = TypeVar("_Node", bound=Hashable)
 
 
 # ------------------------------------------------------------------ results
@@ -136,7 +142,7 @@ class CausalGraph:
     def derivative_storage(self) -> tuple[str, ...]:
         return tuple(name for name, c in self.storage.items() if c == DERIVATIVE)
 
-    def reference(self, parts: tuple[str, ...], owner: str | None = None):
+    def reference(self, parts: tuple[str, ...], owner: str | None = None) -> Reference | None:
         """What a dotted reference names: ``("e"|"f", bond)`` or ``("state", qualified)``.
 
         ``owner`` is the element whose law holds the reference (a two-port may
@@ -146,7 +152,7 @@ class CausalGraph:
 
     # -- summaries
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         return {
             "integral": len(self.integral_storage),
             "derivative": len(self.derivative_storage),
@@ -179,7 +185,7 @@ def element_span(element: ElementNode) -> Span:
 
 
 def resolve_reference(graph: BondGraph, effort_setter: Mapping[int, str], parts: tuple[str, ...],
-                      owner: str | None = None):
+                      owner: str | None = None) -> Reference | None:
     """See :meth:`CausalGraph.reference`."""
     parts = tuple(parts)
     if owner is not None and owner in graph.elements and len(parts) == 2 and parts[0] in ("p1", "p2"):
@@ -278,7 +284,7 @@ class _Assignment:
                     return conflict
         return None
 
-    def _constrain(self, node: str):
+    def _constrain(self, node: str) -> _Conflict | list[tuple[int, str]]:
         if node in self.graph.junctions:
             junction = self.graph.junctions[node]
             return self._junction(junction)
@@ -287,7 +293,7 @@ class _Assignment:
             return self._two_port(element)
         return []
 
-    def _junction(self, junction: JunctionNode):
+    def _junction(self, junction: JunctionNode) -> _Conflict | list[tuple[int, str]]:
         name = junction.name
         # "marked": bonds on which the junction's single-source variable enters it.
         # 0-junction: the effort comes in on exactly one bond (its other end sets it).
@@ -320,7 +326,7 @@ class _Assignment:
     def _unmarked_setter(self, junction: JunctionNode, bond: int) -> str:
         return _setter_at(self.graph, junction, bond, junction.kind_info.common == "e")
 
-    def _two_port(self, element: ElementNode):
+    def _two_port(self, element: ElementNode) -> _Conflict | list[tuple[int, str]]:
         name = element.name
         first, second = element.bonds
         gyrator = element.kind_info.role == GYRATOR
@@ -396,7 +402,7 @@ class _Procedure:
                         for _, sets in _one_port_options(element, self.conductance.get(element.name)))
         self._decide(element.bond, options, subject=element)
 
-    def _decide(self, bond: int, options, subject: ElementNode | None) -> None:
+    def _decide(self, bond: int, options: Iterable[tuple[str, str]], subject: ElementNode | None) -> None:
         first_conflict: tuple[_Conflict, _Assignment, str] | None = None
         for setter, origin in options:
             # try the option in place; undo it on a conflict (a copy of the whole assignment per
@@ -545,7 +551,7 @@ def _law_references(graph: BondGraph, setter: Mapping[int, str], expr: ast.Expr,
     return out
 
 
-def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mapping[str, str]):
+def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mapping[str, str]) -> tuple[Relation, ...]:
     """Structural causal dependencies: ``(node, computed variable, variables it reads)``.
 
     Variables are keys ``e3``/``f3`` (bond 3), ``s:mass.p`` (a state), ``o:x``
@@ -613,17 +619,17 @@ def causal_relations(graph: BondGraph, setter: Mapping[int, str], storage: Mappi
     return tuple(relations)
 
 
-def strongly_connected(nodes: list, edges: Mapping[object, Iterable]) -> list[list]:
+def strongly_connected(nodes: Sequence[_Node], edges: Mapping[_Node, Iterable[_Node]]) -> list[list[_Node]]:
     """Tarjan's algorithm, iterative and deterministic (follows the given orders).
 
     Returns the components with every component after the ones it depends on
     (edges point from a node to what it depends on).
     """
-    index: dict = {}
-    low: dict = {}
-    on_stack: set = set()
-    stack: list = []
-    components: list[list] = []
+    index: dict[_Node, int] = {}
+    low: dict[_Node, int] = {}
+    on_stack: set[_Node] = set()
+    stack: list[_Node] = []
+    components: list[list[_Node]] = []
     order = {n: i for i, n in enumerate(nodes)}
     counter = 0
     for root in nodes:
@@ -673,13 +679,13 @@ def _variable_name(graph: BondGraph, key: str) -> str:
     return key.split(":", 1)[1]
 
 
-def _variable_order(key: str) -> tuple:
+def _variable_order(key: str) -> tuple[int, int, str]:
     if key[0] in "ef" and key[1:].isdigit():
         return (0, int(key[1:]), key[0])
     return (1, 0, key)
 
 
-def _find_loops(graph: BondGraph, relations) -> tuple[AlgebraicLoop, ...]:
+def _find_loops(graph: BondGraph, relations: Sequence[Relation]) -> tuple[AlgebraicLoop, ...]:
     computed_by = {output: node for node, output, _ in relations}
     edges = {output: [k for k in inputs if k in computed_by] for _, output, inputs in relations}
     nodes = [output for _, output, _ in relations]
@@ -730,7 +736,7 @@ def _loop_diagnostic(graph: BondGraph, loop: AlgebraicLoop, element_names: Mappi
         hint="a small storage element (or a resistor in the other causality) would break the loop")
 
 
-def _dependencies(graph: BondGraph, relations, storage: Mapping[str, str]) -> dict[str, tuple[str, ...]]:
+def _dependencies(graph: BondGraph, relations: Sequence[Relation], storage: Mapping[str, str]) -> dict[str, tuple[str, ...]]:
     """For each storage element in derivative causality: the integral storage
     elements and sources its port input is computed from."""
     computed = {output: (node, inputs) for node, output, inputs in relations}

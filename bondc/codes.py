@@ -144,7 +144,7 @@ d("W303", "name hidden inside element laws", "A parameter, input, output or stat
 d("W304", "resistor or store drawn with its bond leaving it", "An `R`, `C` or `I` element's bond points away from it. Its `e` and `f` follow the half-arrow, so `e*f` is the power it delivers: `e = b*f` then makes a resistor a source, and `der(q) = f` fills a capacitor while it discharges. The model still compiles as written.", "Draw the bond towards the element (`j -> tank`), which is what the law assumes.")
 d("W305", "a label that is another bond's default name", "A bond is labelled `b<N>` while bond number N has no label of its own. `b<N>.e` then means the labelled bond (labels win), and bond N is called `bond<N>` in equations, CSV columns and reports.", "Choose a label that does not look like a bond number (`b9_`, `motor_bond`).")
 
-# -- causality (bondc/causality.py; E605 and W604 are reported by bondc/equations.py)
+# -- causality (bondc/causality.py; E605 and W604 are reported by bondc/equations/)
 
 d("E601", "causal conflict",
   "Two elements impose the same variable, so no causality satisfies both: two flow sources on one 1-junction "
@@ -202,7 +202,7 @@ d("E605", "law cannot be inverted",
   "other). For a storage element, give an invertible law or add compliance or inertia so that it gets "
   "integral causality.")
 
-# -- equations (bondc/equations.py, bondc/symbolic.py)
+# -- equations (bondc/equations/, bondc/symbolic.py)
 
 d("E701", "expression cannot be translated",
   "The equations stage translates every law, rate, input, output, initial value and `when` clause to "
@@ -855,8 +855,8 @@ STAGES = (  # (title, modules), in the order of the page
     ("Names, expressions, files and experiments", "`bondc/semantic/`, `bondc/evaluate.py`"),
     ("Graph structure", "`bondc/semantic/`"),
     ("Element laws and states", "`bondc/semantic/`"),
-    ("Causality", "`bondc/causality.py`, `bondc/equations.py`"),
-    ("Equations", "`bondc/equations.py`, `bondc/symbolic.py`"),
+    ("Causality", "`bondc/causality.py`, `bondc/equations/`"),
+    ("Equations", "`bondc/equations/`, `bondc/symbolic.py`"),
     ("Simulation", "`bondc/simulate.py`, `bondc/runtime/`"),
     ("Analyses and data files", "`bondc/analysis/`"),
     ("Validation against measured data", "`bondc/analysis/validate.py`"),

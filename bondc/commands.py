@@ -9,7 +9,6 @@ import argparse
 import json
 import os
 import sys
-from dataclasses import dataclass
 from pathlib import Path
 
 from bondc.errors import BondcError, Diagnostic, UsageError, render_all
@@ -95,82 +94,6 @@ def _status(diagnostics) -> int:
 
 # ------------------------------------------------------------------ commands
 
-def _check_one(args, model: str | None, component: bool, loaded=None) -> tuple:
-    """Load and check one model (causality too, unless it is a component with ports); ``loaded``:
-    the file already parsed (``semantic.load_files``).
-
-    Returns (diagnostics, sources, graph, causal)."""
-    from bondc import semantic
-
-    diagnostics: list[Diagnostic] = []
-    graph = causal = state_space = None
-    sources = {}
-    try:
-        graph, warnings = semantic.load(Path(args.file), model=model, sets=_parse_sets(args.set), loaded=loaded)
-        diagnostics += warnings
-        if not component:       # I346: an external input that check sees nothing supply takes its default
-            from bondc.model import external_input_notes
-
-            diagnostics += external_input_notes(graph)
-        sources = graph.sources
-        if not component:
-            from bondc.causality import assign_causality
-
-            causal = assign_causality(graph)
-            diagnostics += [d for d in causal.diagnostics if d not in diagnostics]
-            # what simulate would reject about the model itself (a law that cannot be inverted,
-            # E605), and the states the equations keep
-            state_space, found = _equations_checked(args, model, graph, causal)
-            diagnostics += [d for d in found if d not in diagnostics]
-    except BondcError as error:
-        if error.stage in ("usage",):
-            raise
-        diagnostics += error.diagnostics
-        sources = error.sources or sources
-    return diagnostics, sources, graph, causal, state_space
-
-
-@dataclass(frozen=True)
-class _CheckedEquations:
-    """What ``check`` reports of the equations stage: the states they keep."""
-
-    states: tuple
-
-
-def _equations_checked(args, model, graph, causal) -> tuple:
-    """(the equations' states as :class:`_CheckedEquations`, or None where the stage failed; its
-    diagnostics). Taken from the check cache when bondc and every file the model read are
-    unchanged (``bondc.cache.check_key``), or differ only in parameter values that the equations
-    stage did not use (``bondc.cache.check_key_of_structure``): then sympy is not even imported."""
-    from bondc import cache
-
-    use_cache = cache.enabled() and not getattr(args, "no_cache", False)
-    key = cache.check_key(graph.sources, model, args.set) if use_cache else None
-    known = cache.load_check(key) if key else None
-    # after an edit of parameter values only: the equations stage of the same model with other
-    # values, when no value decided anything there
-    structural, value_lines = cache.check_key_of_structure(graph.sources, graph, model, args.set) \
-        if key and known is None else (None, frozenset())
-
-    def on_edited_lines(diagnostics) -> bool:     # their columns may have moved
-        return any((d.span.file, d.span.line) in value_lines for d in diagnostics)
-
-    if structural:
-        known = cache.load_check(structural)
-        if known is not None and on_edited_lines(known[1]):
-            known = None
-    if known is None:
-        from bondc.quickcheck import equations_findings
-
-        known, consulted = equations_findings(causal)
-        if key:
-            cache.store_check(key, known)
-        if structural and not consulted and not on_edited_lines(known[1]):
-            cache.store_check(structural, known)
-    states, diagnostics = known
-    return (None if states is None else _CheckedEquations(states)), list(diagnostics)
-
-
 def _switches_json(args, graph, loaded) -> list[dict]:
     """Every switch of a checked model's laws, a kink or a jump, with its law's file and line
     (``check --json``; :func:`bondc.pipeline.switches_of`)."""
@@ -178,27 +101,6 @@ def _switches_json(args, graph, loaded) -> list[dict]:
 
     use_cache = not getattr(args, "no_cache", False)
     return [dict(row) for row in switches_of(args.file, graph, loaded, sets=args.set, cache=use_cache)]
-
-
-def _models_to_check(args) -> tuple[list[tuple[str | None, bool]], tuple | None]:
-    """(model name, is a component) for each model ``check`` looks at: the one asked for, or every
-    model of the file (LANGUAGE.md section 11: a model with ports is a component); and the parsed
-    files (``semantic.load_files``), or None where they do not parse."""
-    from bondc import semantic
-    from bondc.flatten import ports_of
-
-    try:
-        loaded = semantic.load_files(Path(args.file))
-    except BondcError:
-        return [(args.model, False)], None      # the single run reports it
-    every = [m for f in loaded[0] for m in f.models]
-    if args.model is not None:
-        chosen = [m for m in every if m.name == args.model]
-        return [(args.model, bool(chosen and ports_of(chosen[0])))], loaded
-    own = loaded[0][0].models
-    if len(own) <= 1:
-        return [(None, bool(own and ports_of(own[0])))], loaded
-    return [(m.name, bool(ports_of(m))) for m in own], loaded
 
 
 def _cmd_check(args) -> int:
@@ -234,26 +136,28 @@ def _each_file(args, run) -> int:
 
 
 def _check_file(args) -> tuple[int, dict | None]:
-    diagnostics: list[Diagnostic] = []
-    sources: dict = {}
-    results = []
-    chosen, loaded = _models_to_check(args)
-    for name, component in chosen:
-        found, found_sources, graph, causal, state_space = _check_one(args, name, component, loaded)
-        diagnostics += [d for d in found if d not in diagnostics]
-        sources.update(found_sources or {})
-        results.append((graph, causal, component, state_space))
+    """Every model of one file through the stages up to the equations (:func:`bondc.pipeline.diagnose_file`)."""
+    from bondc.pipeline import diagnose_file
+
+    checks = diagnose_file(args.file, model=args.model, sets=args.set,
+                           cache=False if getattr(args, "no_cache", False) else None)
+    for diagnosis in checks.models:
+        if diagnosis.error is not None and diagnosis.error.stage in ("usage",):
+            raise diagnosis.error
+    diagnostics = list(checks.diagnostics)
     ok = not any(d.is_error for d in diagnostics)
+    results = [(d.checked.graph if d.checked is not None else None, d.causal, d.component, d.states)
+               for d in checks.models]
     if args.json:
         summaries = []
-        for graph, causal, component, state_space in results:
+        for graph, causal, component, states in results:
             summary = graph.summary() if graph is not None else None
             if summary is not None and causal is not None:
                 summary["causality"] = causal.summary()
-            if summary is not None and state_space is not None:
-                summary["states_kept"] = len(state_space.states)
+            if summary is not None and states is not None:
+                summary["states_kept"] = len(states)
                 if ok:
-                    summary["switches"] = _switches_json(args, graph, loaded)
+                    summary["switches"] = _switches_json(args, graph, checks.loaded)
             if summary is not None and component:
                 summary["component"] = True
             summaries.append(summary)
@@ -261,16 +165,16 @@ def _check_file(args) -> tuple[int, dict | None]:
         if len(summaries) > 1:
             data["models"] = summaries
         return _status(diagnostics), data
-    _print_diagnostics(diagnostics, sources)
-    for graph, causal, component, state_space in results:
+    _print_diagnostics(diagnostics, checks.sources)
+    for graph, causal, component, states in results:
         if graph is None or (_quiet() and not args.causality):
             continue
         counts = graph.summary()
         line = (f"{graph.name}: {counts['elements']} elements, {counts['junctions']} junctions, "
                 f"{counts['bonds']} bonds, {counts['storage_elements']} storage elements, "
                 f"{counts['states']} states")
-        if state_space is not None and len(state_space.states) != counts["states"]:
-            line += f" ({len(state_space.states)} kept by the equations)"
+        if states is not None and len(states) != counts["states"]:
+            line += f" ({len(states)} kept by the equations)"
         if causal is not None:
             line += f"; {causal.summary_text()}"
         if component:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Iterable, Mapping
+from typing import TYPE_CHECKING, Any, Iterable, Mapping
 
 from bondc.source import NO_SPAN, Source, Span
 from bondc import codes
@@ -52,10 +52,10 @@ class Hint(str):
         return made
 
     @classmethod
-    def join(cls, parts, separator: str = "; ") -> "Hint":
+    def join(cls, parts: Iterable[str], separator: str = "; ") -> "Hint":
         """The parts joined, with the suggestions of the first part that offers any."""
         parts = list(parts)
-        offered = next((p.suggestions for p in parts if getattr(p, "suggestions", ())), ())
+        offered = next((p.suggestions for p in parts if isinstance(p, Hint) and p.suggestions), ())
         return cls(separator.join(parts), offered)
 
 
@@ -75,7 +75,7 @@ class Diagnostic:
     def is_error(self) -> bool:
         return self.severity == "error"
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         data = {
             "severity": self.severity,
             "code": self.code,
@@ -170,7 +170,7 @@ class DataError(BondcError):
     io = False
 
 
-def sort_key(diagnostic: Diagnostic) -> tuple:
+def sort_key(diagnostic: Diagnostic) -> tuple[str, int, int, str, str, str]:
     span = diagnostic.span
     return (span.file, span.line, span.column, diagnostic.code, diagnostic.message, span.instance)
 

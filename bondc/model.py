@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING, Any, Collection, Mapping
 
 from bondc import ast
 from bondc.kinds import JUNCTION_KINDS, JUNCTIONS, KINDS, RESISTOR, STORAGE, JunctionKind, Kind
@@ -26,6 +26,7 @@ from bondc.source import NO_SPAN, Source, Span
 from bondc import codes
 
 if TYPE_CHECKING:       # (flatten builds the instances; the graph only carries them)
+    from bondc.errors import Diagnostic
     from bondc.flatten import Instance
 
 
@@ -218,7 +219,7 @@ class BondGraph:
     def storage_elements(self) -> tuple[ElementNode, ...]:
         return tuple(e for e in self.elements.values() if KINDS[e.kind].stores)
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         return {
             "name": self.name,
             "elements": len(self.elements),
@@ -233,7 +234,7 @@ class BondGraph:
         }
 
 
-def bond_alias(graph, variable: str | None) -> str | None:
+def bond_alias(graph: BondGraph | None, variable: str | None) -> str | None:
     """``b3.e`` -> ``damper.e`` (or ``screw.p1.e``): the element variable a bond variable is (the
     element that computes it, else every element at the bond's ends, joined by ", "); None for a
     bond between two junctions or a name that is no bond variable."""
@@ -248,7 +249,7 @@ def bond_alias(graph, variable: str | None) -> str | None:
     return None
 
 
-def _bond_alias(graph, bond, which: str) -> str | None:
+def _bond_alias(graph: BondGraph, bond: Bond, which: str) -> str | None:
     names, computing = [], []
     for end, port in ((bond.head, bond.head_port), (bond.tail, bond.tail_port)):
         if end in graph.elements:
@@ -261,10 +262,12 @@ def _bond_alias(graph, bond, which: str) -> str | None:
 _BOND_VARIABLE = re.compile(r"(?<![\w.'])(?:[A-Za-z_]\w*\.)*[A-Za-z_]\w*\.[ef]\b")
 
 
-def readable_names(graph) -> dict:
+def readable_names(graph: BondGraph | None) -> dict[str, str]:
     """{bond variable: the element variable it is} (``b14.e`` -> ``nut.e``, the element that computes
     it), for :func:`readable`; bonds between two junctions have none."""
-    names = {}
+    names: dict[str, str] = {}
+    if graph is None:
+        return names
     for bond in getattr(graph, "bonds", ()):
         for which in ("e", "f"):
             alias = _bond_alias(graph, bond, which)
@@ -273,7 +276,7 @@ def readable_names(graph) -> dict:
     return names
 
 
-def readable(names: Mapping[str, str], text):
+def readable(names: Mapping[str, str], text: str) -> str:
     """``text`` (a switch's label, a message) with every bond variable not in quotes named by the
     element variable it is (``names``, from :func:`readable_names`): ``coulomb(b5.f) in b5.e`` ->
     ``coulomb(fr1.f) in fr1.e``. A bond between two junctions keeps its name; quoted names
@@ -283,7 +286,7 @@ def readable(names: Mapping[str, str], text):
     return _BOND_VARIABLE.sub(lambda match: names.get(match.group(0), match.group(0)), text)
 
 
-def external_input_notes(graph, supplied=()) -> list:
+def external_input_notes(graph: BondGraph | None, supplied: Collection[str] = ()) -> list[Diagnostic]:
     """I346 for each external input of ``graph`` that nothing supplies (not in ``supplied``): its
     default is used. ``bondc check`` and ``bondc simulate`` print it once."""
     from bondc.errors import Diagnostic
@@ -302,7 +305,7 @@ def external_input_notes(graph, supplied=()) -> list:
     return notes
 
 
-def result_units(graph) -> dict:
+def result_units(graph: BondGraph | None) -> dict[str, tuple[str, float]]:
     """Each result column's unit and its factor (SI value / factor = value in that unit):
     ``{"t": ("s", 1.0), "P_kPa": ("kPa", 1000.0), "mass.p": ("kg*m/s", 1.0)}``.
 
@@ -318,16 +321,17 @@ def result_units(graph) -> dict:
     from bondc.units import lookup
 
     for state in graph.states:
-        declared = lookup(state.unit_text) if state.unit_text else None
-        if declared is not None and declared.is_coherent:       # "chamber.P [Pa]" rather than kg/(m*s^2)
-            units[state.qualified] = (state.unit_text, 1.0)
+        written = state.unit_text
+        declared = lookup(written) if written else None
+        if written and declared is not None and declared.is_coherent:   # "chamber.P [Pa]" rather than kg/(m*s^2)
+            units[state.qualified] = (written, 1.0)
     for name, output in graph.outputs.items():
         if output.unit_text:
             units[name] = (output.unit_text, output.display_factor or 1.0)
     return units
 
 
-def law_span(graph, variable: str | None):
+def law_span(graph: BondGraph | None, variable: str | None) -> Span | None:
     """The source span of the law that computes ``variable`` (a bond variable, input, output or state,
     ``der(x)`` for its rate), or None: where a diagnostic about that variable points."""
     if graph is None or not variable:
@@ -339,7 +343,8 @@ def law_span(graph, variable: str | None):
         return graph.outputs[name].span
     for state in getattr(graph, "states", ()):
         if state.qualified == name:
-            return state.span
+            span: Span = state.span
+            return span
     head, _, which = name.rpartition(".")
     for bond in getattr(graph, "bonds", ()):
         if bond.name == head:

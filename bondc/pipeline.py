@@ -2,6 +2,9 @@
 run their model through these::
 
     check_file    file (+ model, experiment, --set)  -> Checked      semantic: names, units, dimensions
+    diagnose      file (+ model, --set)              -> Diagnosis    ``bondc check``: the stages up to the
+                                                                     equations, every diagnostic they find
+    diagnose_file file ...                           -> Diagnoses    each model of the file, diagnosed
     derive        Checked                            -> Derived      causality, then the state equations
     derive_file   file ...                           -> Derived      both, through the compile cache
     compile_file  file ...                           -> str          codegen: the model's Python module
@@ -10,7 +13,9 @@ run their model through these::
     run_pipeline  file ...                           -> PipelineRun  what a report shows: every stage's value
 
 Each value is a frozen dataclass carrying what the later stages need of the earlier ones (a
-``Derived`` keeps the checked graph and its warnings). Values are bound late: ``--set`` values
+``Derived`` keeps the checked graph and its warnings). The stages raise a model's errors, except
+in a diagnosis (``bondc check``, ``bondc.api.check``, the language server), which keeps what each
+stage found, the warnings gathered before a failure too. Values are bound late: ``--set`` values
 reuse the ``Derived`` compiled without them (:func:`rebind`), and a sweep's points give theirs to
 the compiled module of its base model, so the model is not derived and compiled again.
 
@@ -31,7 +36,7 @@ import dataclasses
 import gc
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Iterator, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Mapping, Sequence
 
 from bondc import ast
 from bondc.errors import Diagnostic
@@ -41,14 +46,18 @@ if TYPE_CHECKING:
     import os
 
     from bondc.causality import CausalGraph
+    from bondc.errors import BondcError
     from bondc.model import BondGraph, ExperimentDef
     from bondc.simulate import SimResult
+    from bondc.source import Source
     from bondc.statespace import StateSpace
 
     #: A set value as a command gives it: ``"M=40 [kg]"``, or already parsed.
     SetText = str | ast.SetValue
     #: A model file's path.
     PathLike = str | os.PathLike[str]
+    #: A file and the files it imports, parsed: what :func:`bondc.semantic.load_files` returns.
+    Files = tuple[list[ast.File], dict[str, Source], list[Diagnostic]]
 
 
 @contextlib.contextmanager
@@ -101,6 +110,11 @@ def on_command_line(diagnostics: Sequence[Diagnostic]) -> bool:
                for d in diagnostics)
 
 
+def each_once(diagnostics: Iterable[Diagnostic]) -> tuple[Diagnostic, ...]:
+    """``diagnostics`` in order, each once (a stage may report what an earlier one did)."""
+    return tuple(dict.fromkeys(diagnostics))
+
+
 def chosen_experiment(graph: BondGraph, name: str | None) -> ExperimentDef | None:
     """The experiment called ``name``, or the model's first one (None if it has none)."""
     if not graph.experiments:
@@ -122,17 +136,192 @@ class Checked:
 
 
 def check_file(path: PathLike, *, model: str | None = None, experiment: str | None = None,
-               sets: Sequence[SetText] = (), text: str | None = None) -> Checked:
-    """Read and check ``path`` (``text``: its text, when it is not read from disk) with
-    ``experiment``'s overrides (default: the first experiment) and ``sets``; raises ModelError
-    (or UsageError for a ``--set`` text that does not parse)."""
+               sets: Sequence[SetText] = (), text: str | None = None, first_experiment: bool = True,
+               loaded: Files | None = None) -> Checked:
+    """Read and check ``path`` (``text``: its text, when it is not read from disk; ``loaded``: its
+    files as :func:`bondc.semantic.load_files` parsed them, when they are parsed already) with
+    ``experiment``'s overrides and ``sets``; raises ModelError (or UsageError for a ``--set`` text
+    that does not parse). ``experiment`` None: the model's first experiment's overrides apply, or
+    with ``first_experiment`` False none (the model as written: ``bondc check``, ``bondc.api.load``)."""
     from bondc import semantic
 
     parsed = parse_sets(sets)
-    graph, warnings = semantic.load(Path(path), model=model,
-                                    experiment=experiment if experiment is not None else semantic.FIRST,
-                                    sets=parsed, text=text)
-    return Checked(graph, tuple(warnings), chosen_experiment(graph, experiment), tuple(parsed))
+    applied = experiment if experiment is not None else semantic.FIRST if first_experiment else None
+    graph, warnings = semantic.load(Path(path), model=model, experiment=applied, sets=parsed, text=text,
+                                    loaded=loaded)
+    chosen = chosen_experiment(graph, experiment) if applied is not None else None
+    return Checked(graph, tuple(warnings), chosen, tuple(parsed))
+
+
+# ------------------------------------------------------------------ diagnose
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """What ``bondc check`` finds in one model: every stage's diagnostics and the values of the
+    stages that ran. A stage that fails stops the later ones; what the earlier ones found stays."""
+
+    diagnostics: tuple[Diagnostic, ...]     # every stage's, each once, in stage order
+    # the failed stage's own diagnostics (an error's, or those of equations that cannot be
+    # derived), None when no stage failed
+    failure: tuple[Diagnostic, ...] | None
+    error: BondcError | None                # what the failed stage raised (None: none raised)
+    sources: Mapping[str, Source]           # the texts the diagnostics point into
+    checked: Checked | None                 # the semantic stage's value (None: it failed)
+    causal: CausalGraph | None              # None: a component, the stage not reached, or failed
+    states: tuple[str, ...] | None          # the states the equations keep (None: not run, or failed)
+    component: bool                         # a model with ports: causality is checked where it is used
+
+    @property
+    def ok(self) -> bool:
+        """Whether no diagnostic is an error."""
+        return not any(d.is_error for d in self.diagnostics)
+
+
+def _nothing() -> None:
+    return None
+
+
+def diagnose(path: PathLike, *, model: str | None = None, sets: Sequence[SetText] = (), text: str | None = None,
+             loaded: Files | None = None, component: bool = False, editing: bool = False,
+             cache: bool | None = None, checkpoint: Callable[[], None] = _nothing) -> Diagnosis:
+    """Check one model of ``path`` as ``bondc check`` does, never raising for the model: the
+    semantic stage (:func:`check_file`, no experiment's overrides), then, unless it is a
+    ``component``, the I346 notes of its external inputs, causality and what the equations stage
+    would report (:func:`equations_checked`).
+
+    ``editing``: what an editor shows as the model is typed: semantic and causality only (neither
+    I346 nor the equations stage, which imports sympy). ``cache``: see :func:`equations_checked`.
+    ``checkpoint`` is called between stages (the language server stops a superseded analysis
+    there). ``loaded``, ``text``: see :func:`check_file`."""
+    from bondc.errors import BondcError
+
+    found: list[Diagnostic] = []       # every stage's, in order (each once: see the end)
+    checked: Checked | None = None
+    causal: CausalGraph | None = None
+    states: tuple[str, ...] | None = None
+    failure: tuple[Diagnostic, ...] | None = None
+    error: BondcError | None = None
+    sources: Mapping[str, Source] = {}
+    try:
+        checked = check_file(path, model=model, sets=sets, text=text, first_experiment=False, loaded=loaded)
+        graph = checked.graph
+        sources = graph.sources
+        found += checked.warnings
+        if not component:
+            if not editing:
+                from bondc.model import external_input_notes
+
+                found += external_input_notes(graph)
+            checkpoint()
+            from bondc.causality import assign_causality
+
+            causal = assign_causality(graph)
+            found += causal.diagnostics
+            if not editing:
+                states, notes = equations_checked(graph, causal, model=model, sets=sets, cache=cache)
+                found += notes
+                if states is None:
+                    failure = notes
+    except BondcError as raised:
+        error, failure = raised, tuple(raised.diagnostics)
+        found += raised.diagnostics
+        sources = raised.sources or sources
+    return Diagnosis(each_once(found), failure, error, sources, checked, causal, states, component)
+
+
+def _failed(error: BondcError) -> Diagnosis:
+    """The diagnosis of a file whose text does not parse or cannot be read."""
+    return Diagnosis(each_once(error.diagnostics), tuple(error.diagnostics), error, error.sources, None, None, None, False)
+
+
+@dataclass(frozen=True)
+class Diagnoses:
+    """Every model of a file diagnosed (:func:`diagnose_file`), and the file's parse."""
+
+    models: tuple[Diagnosis, ...]
+    loaded: Files | None                    # the parsed files (None: the file does not parse)
+
+    @property
+    def diagnostics(self) -> tuple[Diagnostic, ...]:
+        """Every model's diagnostics, each once, in the models' order."""
+        return each_once(d for diagnosis in self.models for d in diagnosis.diagnostics)
+
+    @property
+    def sources(self) -> dict[str, Source]:
+        """Every model's sources."""
+        return {name: source for diagnosis in self.models for name, source in diagnosis.sources.items()}
+
+
+def diagnose_file(path: PathLike, *, model: str | None = None, sets: Sequence[SetText] = (),
+                  text: str | None = None, editing: bool = False, cache: bool | None = None,
+                  checkpoint: Callable[[], None] = _nothing) -> Diagnoses:
+    """:func:`diagnose` each model ``bondc check`` looks at in ``path``, parsing it once: ``model``,
+    or every model the file defines (LANGUAGE.md section 11: one with ports is a component, its
+    causality checked where it is used). ``checkpoint`` is also called before each model."""
+    from bondc import semantic
+    from bondc.errors import BondcError
+    from bondc.flatten import ports_of
+
+    try:
+        loaded = semantic.load_files(Path(path), text)
+    except BondcError as error:
+        return Diagnoses((_failed(error),), None)
+    own = loaded[0][0].models
+    chosen: list[tuple[str | None, bool]]
+    if model is not None:
+        named = [m for file in loaded[0] for m in file.models if m.name == model]
+        chosen = [(model, bool(named and ports_of(named[0])))]
+    elif len(own) <= 1:
+        chosen = [(None, bool(own and ports_of(own[0])))]
+    else:
+        chosen = [(m.name, bool(ports_of(m))) for m in own]
+    found: list[Diagnosis] = []
+    for name, component in chosen:
+        checkpoint()
+        found.append(diagnose(path, model=name, sets=sets, text=text, loaded=loaded, component=component,
+                              editing=editing, cache=cache, checkpoint=checkpoint))
+    return Diagnoses(tuple(found), loaded)
+
+
+def equations_checked(graph: BondGraph, causal: CausalGraph, *, model: str | None = None,
+                      sets: Sequence[SetText] = (), cache: bool | None = None
+                      ) -> tuple[tuple[str, ...] | None, tuple[Diagnostic, ...]]:
+    """What the equations stage reports of a model, for ``check``: (the names of the states it
+    keeps, or None where it fails; its diagnostics), e.g. a law that cannot be inverted (E605).
+
+    Without sympy where :func:`bondc.quickcheck.equations_findings` is certain. ``cache`` (default:
+    on unless ``BONDC_CACHE=0``): taken from the check cache when bondc and every file the model
+    read are unchanged (``bondc.cache.check_key``), or differ only in parameter values that the
+    equations stage did not use (``bondc.cache.check_key_of_structure``); then sympy is not even
+    imported. ``model`` and ``sets`` (as given) are part of the key."""
+    from bondc import cache as check_cache
+
+    use_cache = check_cache.enabled() if cache is None else cache
+    key = check_cache.check_key(graph.sources, model, sets) if use_cache else None
+    known = check_cache.load_check(key) if key else None
+    # after an edit of parameter values only: the equations stage of the same model with other
+    # values, when no value decided anything there
+    structural, value_lines = check_cache.check_key_of_structure(graph.sources, graph, model, sets) \
+        if key and known is None else (None, frozenset())
+
+    def on_edited_lines(diagnostics: Sequence[Diagnostic]) -> bool:     # their columns may have moved
+        return any((d.span.file, d.span.line) in value_lines for d in diagnostics)
+
+    if structural:
+        known = check_cache.load_check(structural)
+        if known is not None and on_edited_lines(known[1]):
+            known = None
+    if known is None:
+        from bondc.quickcheck import equations_findings
+
+        known, consulted = equations_findings(causal)
+        if key:
+            check_cache.store_check(key, known)
+        if structural and not consulted and not on_edited_lines(known[1]):
+            check_cache.store_check(structural, known)
+    states, diagnostics = known
+    return (None if states is None else tuple(states)), tuple(diagnostics)
 
 
 # ------------------------------------------------------------------ derive
@@ -154,11 +343,7 @@ class Derived:
     @property
     def notes(self) -> tuple[Diagnostic, ...]:
         """Every warning and note of the three stages, each once, in stage order."""
-        notes: list[Diagnostic] = []
-        for diagnostic in (*self.warnings, *self.causal.diagnostics, *self.state_space.diagnostics):
-            if diagnostic not in notes:
-                notes.append(diagnostic)
-        return tuple(notes)
+        return each_once((*self.warnings, *self.causal.diagnostics, *self.state_space.diagnostics))
 
 
 def derive(checked: Checked) -> Derived:

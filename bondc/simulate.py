@@ -52,7 +52,7 @@ import weakref
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import CodeType
-from typing import TYPE_CHECKING, Any, BinaryIO, Iterable, Mapping, Sequence, TextIO
+from typing import TYPE_CHECKING, Any, BinaryIO, Callable, Iterable, Mapping, NoReturn, Sequence, TextIO, TypeVar
 
 import numpy as np
 
@@ -68,6 +68,54 @@ if TYPE_CHECKING:
 _COMPILED: dict[int, tuple[weakref.ref[Any], dict[str, Any]]] = {}
 
 
+_K = TypeVar("_K")
+_V = TypeVar("_V")
+
+
+class ReadOnlyDict(dict[_K, _V]):
+    """A dict that cannot be changed once made: the mappings a frozen :class:`SimResult` holds.
+
+    Every reader takes it for the dict it is (``json``, pandas, ``isinstance(x, dict)``, pickle,
+    ``==``); a write (``d[k] = v``, ``del``, ``update``, ``pop``, ...) raises TypeError. A changed
+    copy is ``dict(d)`` changed, or ``{**d, k: v}``.
+    """
+
+    __slots__ = ()
+
+    def _refuse(self) -> NoReturn:
+        raise TypeError(f"{type(self).__name__} cannot be changed: make a changed copy (dict(it), or {{**it, key: value}})")
+
+    def __setitem__(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    def __delitem__(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    # (mypy holds an in-place operator to the signature of its binary one, dict's | that returns a
+    # new dict; this one only refuses)
+    def __ior__(self, other: Any) -> NoReturn:  # type: ignore[misc]
+        self._refuse()
+
+    def update(self, *args: Any, **kwargs: Any) -> NoReturn:
+        self._refuse()
+
+    def setdefault(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    def pop(self, *args: Any) -> NoReturn:
+        self._refuse()
+
+    def popitem(self) -> NoReturn:
+        self._refuse()
+
+    def clear(self) -> NoReturn:
+        self._refuse()
+
+    def __reduce__(self) -> tuple[type[ReadOnlyDict[_K, _V]], tuple[dict[_K, _V]]]:
+        # (pickle and copy would otherwise fill the new one item by item, through __setitem__)
+        return type(self), (dict(self),)
+
+
 @dataclass(frozen=True)
 class SimResult:
     """The trajectories of one simulation run, arrays by name, SI units.
@@ -81,25 +129,26 @@ class SimResult:
     states); ``events`` is a list of ``(time, label)``; ``stats`` the solver's
     counts (nfev, njev, nlu, steps, segments, events, wall_time, ...).
 
-    A result is made once, complete, and not changed (a variant is ``dataclasses.replace``'s).
+    A result is made once, complete, and not changed (a variant is ``dataclasses.replace``'s): its
+    mappings are :class:`ReadOnlyDict` (those given as plain dicts are copied into one).
     """
 
     t: np.ndarray
-    states: dict[str, np.ndarray]
-    outputs: dict[str, np.ndarray]
-    bonds: dict[str, np.ndarray]
-    variables: dict[str, np.ndarray]
+    states: ReadOnlyDict[str, np.ndarray]
+    outputs: ReadOnlyDict[str, np.ndarray]
+    bonds: ReadOnlyDict[str, np.ndarray]
+    variables: ReadOnlyDict[str, np.ndarray]
     complete: bool
     message: str
     events: list[tuple[float, str]]
-    stats: dict[str, Any]
-    parameters: dict[str, float]
-    failure: dict[str, Any] | None = None
+    stats: ReadOnlyDict[str, Any]
+    parameters: ReadOnlyDict[str, float]
+    failure: ReadOnlyDict[str, Any] | None = None
     model: str = ""
     experiment: str | None = None
     diagnostics: tuple[Diagnostic, ...] = ()
     warnings: tuple[Diagnostic, ...] = ()
-    settings: dict[str, Any] = field(default_factory=dict)
+    settings: ReadOnlyDict[str, Any] = field(default_factory=ReadOnlyDict)
     # (t, states before, states after) of when clauses
     jumps: list[tuple[float, Any, Any]] = field(default_factory=list)
     # (t0, t1, corners, times, weights) of each Filippov sliding mode (see bondc.runtime.Result): the
@@ -107,10 +156,16 @@ class SimResult:
     sliding: list[tuple[Any, ...]] = field(default_factory=list)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
-    units: dict[str, tuple[str, float]] = field(default_factory=dict)
+    units: ReadOnlyDict[str, tuple[str, float]] = field(default_factory=ReadOnlyDict)
     # dependent states (storage in derivative causality), name -> values at every point (SI); they
     # are also in ``variables``, and are not in ``states`` (which the solver integrates)
-    dependent: dict[str, np.ndarray] = field(default_factory=dict)
+    dependent: ReadOnlyDict[str, np.ndarray] = field(default_factory=ReadOnlyDict)
+
+    def __post_init__(self) -> None:
+        for name in _MAPPINGS:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, ReadOnlyDict):
+                object.__setattr__(self, name, ReadOnlyDict(value))
 
     @property
     def t_reached(self) -> float:
@@ -119,7 +174,7 @@ class SimResult:
     @property
     def exit_status(self) -> int | None:
         """130 for a run stopped by Ctrl-C, 143 by SIGTERM (the shell's statuses), else None."""
-        failure = self.failure or {}
+        failure: Mapping[str, Any] = self.failure or {}
         if failure.get("kind") != "interrupted":
             return None
         return 143 if failure.get("terminated") else 130
@@ -156,6 +211,9 @@ class SimResult:
 
 
 _FIELDS = frozenset(f.name for f in fields(SimResult))
+#: The fields that are mappings (read-only once made).
+_MAPPINGS = ("states", "outputs", "bonds", "variables", "stats", "parameters", "failure", "settings", "units",
+             "dependent")
 _frozen_setattr = SimResult.__setattr__
 
 
@@ -199,7 +257,7 @@ def compile_model(ss: StateSpace) -> dict[str, Any]:
         source = emit(ss, None, module_dir=module_dir)
         if entry is not None:
             entry.write_module(source)
-    from bondc.runtime import native_text, start_native
+    from bondc.runtime.native import native_text, start_native
 
     # a large model's C library compiles (in parallel units) while Python compiles its module
     start_native(native_text(source))
@@ -327,7 +385,10 @@ def external_inputs(ss: StateSpace, inputs: Any) -> dict[str, Any]:
     signals = dict(getattr(graph, "inputs", None) or {})
     external = [name for name, signal in signals.items() if getattr(signal, "external", False)]
     listed = ", ".join(external) if external else "none"
-    from bondc.runtime import InputError, external_inputs as prepare
+    from bondc.runtime.signals import InputError, external_inputs as untyped
+
+    # (the engine is not annotated: its function's contract, as it is called here)
+    prepare: Callable[[Mapping[str, Any], tuple[str, ...]], dict[str, Any]] = untyped
 
     for name in inputs:
         if name not in signals:
@@ -353,7 +414,9 @@ def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, A
     column besides time. Names are checked as :func:`external_inputs` does (E805, E806); a file
     or column that cannot be read is E807."""
     from bondc.numeric import csv_scales
-    from bondc.runtime import CsvError, csv_columns, load_csv
+    from bondc.runtime.signals import CsvError
+
+    columns_of, load_csv = _csv_readers()
 
     graph = getattr(ss, "graph", None)
     signals = dict(getattr(graph, "inputs", None) or {})
@@ -374,7 +437,7 @@ def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, A
             raise _input_error(codes.E807, f"--input {name}: no file '{path}'",
                                hint="the file is read relative to the current directory")
         try:
-            columns = [c for c, _ in csv_columns(path)]
+            columns = [c for c, _ in columns_of(path)]
         except (OSError, UnicodeDecodeError, ValueError) as error:
             raise _input_error(codes.E807, f"--input {name}: cannot read '{path}': {error}") from None
         if column is None:
@@ -403,13 +466,22 @@ def read_input_files(ss: StateSpace, specs: Sequence[str] | None) -> dict[str, A
     return external_inputs(ss, tables)
 
 
+def _csv_readers() -> tuple[Callable[[str], list[tuple[str, str | None]]],
+                             Callable[[str, str], tuple[np.ndarray, np.ndarray]]]:
+    """The engine's readers of a csv file (not annotated there), with their contracts: its header's
+    ``[(name, unit or None), ...]``, and a column's (times, values)."""
+    from bondc.runtime.signals import csv_columns, load_csv
+
+    return csv_columns, load_csv
+
+
 def _check_header_unit(name: str, signal: Any, path: str, column: str) -> None:
     """E807 when the unit a file's header gives a column is not of the input's declared dimension."""
     from bondc.units import unit_of
-    from bondc.runtime import csv_columns
 
+    columns_of, _ = _csv_readers()
     declared = getattr(signal, "unit_text", None)
-    written = dict(csv_columns(path)).get(column)
+    written = dict(columns_of(path)).get(column)
     if not declared or not written:
         return
     have, want = unit_of(written), unit_of(declared)
@@ -509,14 +581,15 @@ def _result(ss: Any, experiment: ExperimentDef | None, namespace: Mapping[str, A
     warnings = [*notes, *_nonfinite_warnings(graph, t, outputs, bonds, raw.complete),
                 *_chattering_warnings(graph, events, raw.stats)]
     return SimResult(
-        t=t, states=dict(raw.states), outputs=outputs, bonds=bonds,
-        variables=dict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
-        events=events, stats=dict(raw.stats), parameters=dict(raw.parameters), failure=raw.failure,
+        t=t, states=ReadOnlyDict(raw.states), outputs=ReadOnlyDict(outputs), bonds=ReadOnlyDict(bonds),
+        variables=ReadOnlyDict(raw.variables), complete=raw.complete, message=readable(names, raw.message),
+        events=events, stats=ReadOnlyDict(raw.stats), parameters=ReadOnlyDict(raw.parameters),
+        failure=ReadOnlyDict(raw.failure) if raw.failure is not None else None,
         model=getattr(graph, "name", "") or "", experiment=experiment.name if experiment is not None else None,
         diagnostics=diagnostics, warnings=tuple(warnings),
-        settings={k: v for k, v in settings.items() if v is not None}, jumps=list(getattr(raw, "jumps", ())),
-        sliding=list(getattr(raw, "sliding", ())), units=result_units(graph),
-        dependent=dependent_states(ss, raw.variables),
+        settings=ReadOnlyDict({k: v for k, v in settings.items() if v is not None}),
+        jumps=list(getattr(raw, "jumps", ())), sliding=list(getattr(raw, "sliding", ())),
+        units=ReadOnlyDict(result_units(graph)), dependent=ReadOnlyDict(dependent_states(ss, raw.variables)),
     )
 
 
@@ -593,7 +666,8 @@ def _when_span(graph: Any, label: str | None) -> Span | None:
     """The span of the when clause whose condition reads ``label``."""
     for when in getattr(graph, "whens", ()) if label else ():
         if when.text == label:
-            return when.span
+            span: Span = when.span
+            return span
     return None
 
 
@@ -614,7 +688,7 @@ def _solver_note(method: str | None) -> str | None:
     >>> _solver_note("CVODE") is None and _solver_note(None) is None
     True
     """
-    from bondc.runtime import SOLVER_NAMES
+    from bondc.runtime.solvers import SOLVER_NAMES
 
     scipy_solvers = SOLVER_NAMES[SOLVER_NAMES.index("DOPRI5") + 1:]
     name = next((known for known in scipy_solvers if str(method or "").lower() == known.lower()), None)
@@ -688,7 +762,7 @@ def _columns(result: SimResult, all_bonds: bool) -> tuple[list[str], list[np.nda
 def csv_text(result: SimResult, all_bonds: bool = False) -> str:
     """The result as csv: a header of names with units (``t [s]``, ``P_kPa [kPa]``), then one row per
     point; each output in its declared unit, states and bond variables in SI."""
-    from bondc.runtime import result_bytes
+    from bondc.runtime.results import result_bytes
 
     names, columns = _columns(result, all_bonds)
     return result_bytes("csv", names, columns, result.units).decode("utf-8")
@@ -717,7 +791,7 @@ def write_parquet(result: SimResult, path: str | os.PathLike[str], all_bonds: bo
     """The csv's table as Parquet (needs pyarrow), atomically: each column in the csv's unit, with
     its ``unit`` and ``si_factor`` in the field's metadata; the model, experiment and status in the
     file's."""
-    from bondc.runtime import result_bytes
+    from bondc.runtime.results import result_bytes
 
     names, columns = _columns(result, all_bonds)
     try:
@@ -734,7 +808,7 @@ def write_npz(result: SimResult, path: str | os.PathLike[str], all_bonds: bool =
     ``si_factor/KEY`` of each (KEY / si_factor is in unit: an output's declared unit), then
     ``complete``, ``message``, ``event_times``, ``event_labels``, ``parameter_names``,
     ``parameter_values``."""
-    from bondc.runtime import result_bytes
+    from bondc.runtime.results import result_bytes
 
     arrays = {"t": result.t}
     arrays.update({f"states/{k}": v for k, v in result.states.items()})
@@ -771,7 +845,7 @@ def check_result_path(path: str | os.PathLike[str]) -> None:
 def write(result: SimResult, path: str | os.PathLike[str], all_bonds: bool = False) -> None:
     """``.npz`` -> :func:`write_npz`, ``.parquet`` -> :func:`write_parquet`, anything else ->
     :func:`write_csv` (see :func:`check_result_path`); every format records each column's unit."""
-    from bondc.runtime import result_format
+    from bondc.runtime.results import result_format
 
     check_result_path(path)
     kind = result_format(path)

@@ -243,7 +243,8 @@ class NumericModel:
         parameter_names = {symbol: f"_p{index}" for index, symbol in enumerate(values)}
         names.update((symbol, name) for symbol, name in parameter_names.items() if symbol not in names)
 
-        class _Printer(NumPyPrinter):
+        # sympy's printers are not annotated: the base class is Any to mypy, nothing to check against
+        class _Printer(NumPyPrinter):  # type: ignore[misc]
             def _print_Symbol(self, symbol: sympy.Symbol) -> str:
                 return names[symbol]
 
@@ -311,9 +312,11 @@ class NumericModel:
     def _solve_block(self, number: int, residual: Callable[[np.ndarray], Sequence[float]]) -> tuple[float, ...]:
         import numpy
 
-        from bondc.runtime import solve_loop
+        from bondc.runtime.loops import solve_loop
 
-        x = solve_loop(lambda z: numpy.asarray(residual(z), dtype=float), self._guesses[number],
+        # (the engine's loop solver is not annotated: its contract, as this model calls it)
+        solve: Callable[[Callable[[np.ndarray], np.ndarray], np.ndarray, np.ndarray], np.ndarray | None] = solve_loop
+        x = solve(lambda z: numpy.asarray(residual(z), dtype=float), self._guesses[number],
                        self._first_guesses[number])
         if x is None:
             from bondc.errors import AnalysisError, Diagnostic
@@ -332,7 +335,7 @@ class NumericModel:
         import numpy
 
         from bondc.errors import AnalysisError, DataError, Diagnostic
-        from bondc.runtime import CsvError
+        from bondc.runtime.signals import CsvError
 
         # numpy evaluates every branch of a Piecewise: the unused ones may warn.
         with numpy.errstate(all="ignore"):

@@ -694,3 +694,39 @@ def test_w821_brackets_where_a_quantity_stops_being_finite_and_claims_nothing_of
     assert not result.complete
     assert [w for w in result.warnings if w.code == "W821"] and \
         all("unaffected" not in w.hint for w in result.warnings if w.code == "W821")
+
+
+def test_a_result_cannot_be_changed_after_it_is_made():
+    """A SimResult is frozen, its mappings too: a write raises, a changed copy is a new dict;
+    the result still pickles (a sweep's workers send theirs) and its summary is JSON."""
+    import dataclasses
+    import pickle
+
+    result = run(SIM / "rc.bg", dt=0.5e-3)
+    final = float(result.outputs["v"][-1])
+    for mapping in (result.outputs, result.states, result.bonds, result.variables, result.stats, result.parameters,
+                    result.settings, result.units, result.dependent):
+        with pytest.raises(TypeError):
+            mapping["new"] = 1
+        with pytest.raises(TypeError):
+            mapping.update({"new": 1})
+        with pytest.raises(TypeError):
+            mapping.clear()
+    with pytest.raises(TypeError):
+        del result.outputs["v"]
+    with pytest.raises(TypeError):
+        result.outputs.pop("v")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        result.outputs = {}
+    assert float(result.outputs["v"][-1]) == final and "new" not in result.stats
+    changed = {**result.parameters, "R": 2.0}      # a changed copy leaves the result as it was: R = 1 kOhm
+    assert changed["R"] == 2.0 and result.parameters["R"] == 1000.0
+    # a variant made with plain dicts holds read-only ones too
+    variant = dataclasses.replace(result, outputs={"v": result.outputs["v"]})
+    with pytest.raises(TypeError):
+        variant.outputs["w"] = result.outputs["v"]
+    back = pickle.loads(pickle.dumps(result))
+    assert back.outputs.keys() == result.outputs.keys() and np.array_equal(back.outputs["v"], result.outputs["v"])
+    with pytest.raises(TypeError):
+        back.outputs["new"] = 1
+    assert json.loads(json.dumps(result.summary()))["settings"] == dict(result.settings)

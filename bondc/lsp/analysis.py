@@ -1,7 +1,7 @@
 """The analysis of a buffer, off the server's event loop.
 
-:func:`analyse` parses the buffer once (:func:`bondc.semantic.load_files`), checks each of its
-models from that parse (``semantic.load(loaded=...)``), assigns causality, builds the index and
+:func:`analyse` parses the buffer once and checks each of its models from that parse, assigning
+causality (:func:`bondc.pipeline.diagnose_file`, as ``bondc check`` but the equations), builds the index and
 turns the diagnostics into the LSP's, with ranges mapped through one line table of that version
 (:class:`~bondc.lsp.positions.Lines`). The result (:class:`Analysis`) is what hover, completion,
 definition and rename answer from, so that they answer at once whatever is being analysed.
@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 from lsprotocol import types as lsp
 
-from bondc.errors import BondcError, Diagnostic
+from bondc.errors import Diagnostic
 from bondc.lsp.index import Index, build_index
 from bondc.lsp.positions import Lines, Positions, path_of
 from bondc import codes
@@ -81,35 +81,16 @@ def _nothing() -> None:
 
 def check(path: Path, text: str, checkpoint=_nothing):
     """Every diagnostic of the buffer (all its models), the graph of its runnable model (or None),
-    its causality, and the parsed files (None where the buffer does not parse). One parse."""
-    from bondc import semantic
-    from bondc.causality import assign_causality
-    from bondc.flatten import ports_of
+    its causality, and the parsed files (None where the buffer does not parse). One parse, and
+    the stages of ``bondc check`` but the equations (:func:`bondc.pipeline.diagnose_file`, editing)."""
+    from bondc.pipeline import diagnose_file
 
-    found: list[Diagnostic] = []
-    graph = causal = None
-    try:
-        loaded = semantic.load_files(path, text)
-    except BondcError as error:
-        return list(error.diagnostics), None, None, None
-    files = loaded[0]
-    own = files[0].models
-    names = [None] if len(own) <= 1 else [m.name for m in own]
-    for name in names:
-        checkpoint()
-        try:
-            model, warnings = semantic.load(path, model=name, text=text, loaded=loaded)
-            found += [d for d in warnings if d not in found]
-            component = any(m.name == model.name and ports_of(m) for m in own)
-            if not component:
-                checkpoint()
-                assigned = assign_causality(model)
-                found += [d for d in assigned.diagnostics if d not in found]
-                if graph is None:
-                    graph, causal = model, assigned
-        except BondcError as error:
-            found += [d for d in error.diagnostics if d not in found]
-    return found, graph, causal, files
+    checks = diagnose_file(path, text=text, editing=True, checkpoint=checkpoint)
+    runnable = next((d for d in checks.models if d.causal is not None and d.checked is not None), None)
+    graph = runnable.checked.graph if runnable is not None and runnable.checked is not None else None
+    causal = runnable.causal if runnable is not None else None
+    files = checks.loaded[0] if checks.loaded is not None else None
+    return list(checks.diagnostics), graph, causal, files
 
 
 def check_text(path: Path, text: str) -> tuple[list[Diagnostic], BondGraph | None]:
@@ -333,6 +314,6 @@ class Worker:
     def _warm() -> None:
         """The modules an analysis imports, imported before any analysis can be interrupted."""
         try:
-            from bondc import causality, fmt, scope, semantic, units  # noqa: F401
+            from bondc import causality, fmt, pipeline, scope, semantic, units  # noqa: F401
         except Exception:       # noqa: BLE001
             logger.exception("importing the checker failed")
