@@ -383,12 +383,24 @@ def _settle(rates, start):
     from scipy.integrate import solve_ivp
 
     z = np.array(start, dtype=float)
+    origin = z.copy()
+    limit = 1e9 * (1.0 + float(np.max(np.abs(z), initial=0.0)))
+
+    def runaway(tau, y):
+        """Positive while the state stays within ``limit`` of the start (the runaway test of
+        ``_equilibrium``'s solve); a terminal event where it leaves: a blow-up in finite time (a
+        plate snapping through its gap past pull-in), which LSODA would otherwise follow with ever
+        shorter steps, through inf and nan, without end."""
+        size = float(np.max(np.abs(y - origin)))
+        return limit - size if np.isfinite(size) else -1.0
+
+    runaway.terminal = True
     horizon = 1.0
     for _ in range(7):
         with np.errstate(all="ignore"):
             solution = solve_ivp(lambda tau, y: rates(y), (0.0, horizon), z, method="LSODA", rtol=1e-10,
-                                 atol=1e-14 * (1.0 + np.abs(z)))
-        if not solution.success or not np.all(np.isfinite(solution.y[:, -1])):
+                                 atol=1e-14 * (1.0 + np.abs(z)), events=runaway)
+        if solution.status != 0 or not np.all(np.isfinite(solution.y[:, -1])):
             return None
         end = solution.y[:, -1]
         if np.max(np.abs(end - z)) <= 1e-12 * (1.0 + np.max(np.abs(end))):
