@@ -278,15 +278,11 @@ def test_a_constant_flow_supplies_the_closed_form_polytropic_work_in_short_steps
     assert window.element("gas").stored_change == pytest.approx(work, rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "bondc bug: the energy account integrates each solver step's powers with one 5-point Lobatto "
-    "rule; a constant flow into the gas is integrated exactly in 4 steps (the last 4.45 s long), "
-    "over which the power p(V(t))*Q (82 to 475 bar) is not a degree-7 polynomial: the source's "
-    "supplied energy is 9380.71 J, 2.0e-4 above the closed form, and the balance's residual "
-    "(1.0e-4 of the throughput) is the quadrature's, not the solver's"))
 def test_a_constant_flow_supplies_the_closed_form_polytropic_work_in_the_solvers_own_steps():
     """Third route: the closed-form polytropic work W(0.8 L) - W(0.3 L) = 9378.81 J, as above, in the
-    run's own steps (DOPRI5 takes four, the rate being constant)."""
+    run's own steps (DOPRI5 takes four, the rate being constant, the last 4.45 s long, over which the
+    power p(V(t)) Q, 82 to 475 bar, is no polynomial: one 5-point Lobatto rule over it gave
+    9380.71 J, 2.0e-4 high; the account halves such steps until the rule agrees with Simpson's)."""
     result, window = _account("accumulator_direct_flow_plain.bg", "charge")
     work = gas_energy(0.8e-3) - gas_energy(0.3e-3)
     supplied = window.element("feed")
@@ -298,9 +294,10 @@ def test_a_constant_flow_supplies_the_closed_form_polytropic_work_in_the_solvers
 @pytest.mark.xfail(strict=True, reason=(
     "bondc bug: the statistics of `bondc simulate` (output_statistics of dense_steps) integrate y^2 "
     "by the trapezoid rule through the steps and their three interior Lobatto nodes; over the 4.45 s "
-    "last step of a constant charging flow the pressure (82 to 475 bar) is too curved for it: rms "
-    "223.63 bar for the closed form's 212.26 (+5.4 %), mean likewise; the Lobatto weights of each "
-    "step (exact to degree 7), or splitting long steps, would resolve it"))
+    "last step of a constant charging flow the pressure (82 to 475 bar) was too curved for it: rms "
+    "223.63 bar for the closed form's 212.26 (+5.4 %). The energy account's halving of long steps "
+    "brings it to 3.4e-5; the trapezoid rule through the nodes is the rest (the Lobatto weights of "
+    "each step would be exact)"))
 def test_the_pressures_mean_and_rms_over_a_constant_charge_are_the_closed_forms():
     """Third route: the closed form, the time averages of p(t) = p_pre (V_gas/(V_gas - V0 - Q0 t))^n
     over 0..5 s by scipy's quad: the mean and the rms, against the statistics `bondc

@@ -30,9 +30,61 @@ _FINE_GRID = np.linspace(-1.0, 1.0, 65)
 _FINE_FROM_NODES = np.vander(_FINE_GRID, 5, increasing=True) @ _FROM_NODES
 
 
-METHOD = ("5-point Gauss-Lobatto quadrature per solver step, states from the cubic Hermite interpolant refined "
+METHOD = ("5-point Gauss-Lobatto quadrature per solver step, a step halved where the rule and Simpson's on its "
+          "ends and middle disagree, states from the cubic Hermite interpolant refined "
           "by deferred correction (rates with the step's modes frozen); sliding-mode steps: a cubic spline "
           "through the recorded values of each sliding span")
+# Simpson's rule on the nodes -1, 0, 1 (the first, middle and last Lobatto nodes): exact to degree 3
+_SIMPSON_WEIGHTS = np.array([1.0 / 3.0, 0.0, 4.0 / 3.0, 0.0, 1.0 / 3.0])
+#: a step is halved where the two rules differ by more than this share of the run's integral of |v|
+RESOLUTION = 1e-6
+#: ... at most this many times over (a kink inside a step: each halving quarters its difference) ...
+HALVINGS = 8
+#: ... adding at most this share of the run's steps (or BUDGET_FLOOR steps), the worst steps first:
+#: a kink that the solver's noise crosses in step after step (a turbulent orifice at rest) stays within it
+BUDGET_SHARE, BUDGET_FLOOR = 0.1, 64
+
+
+def resolution_totals(times: np.ndarray, values) -> dict:
+    """Per variable, the run's integrals of its magnitude and its square's (the 5-point Lobatto rule
+    over every step): the scales :func:`under_resolved` measures a step's quadrature against."""
+    half = 0.5 * (times[:, -1] - times[:, 0])
+    totals = {}
+    with np.errstate(all="ignore"):
+        for name, samples in values.items():
+            samples = np.asarray(samples, dtype=float)
+            totals[name] = tuple(float(np.sum(np.abs(lobatto)[np.isfinite(lobatto)])) for lobatto in
+                                 (half * (samples @ _LOBATTO_WEIGHTS), half * ((samples * samples) @ _LOBATTO_WEIGHTS)))
+    return totals
+
+
+def under_resolved(times: np.ndarray, values, totals: dict, skip: np.ndarray, budget: int) -> np.ndarray:
+    """The steps (sorted indices, at most ``budget`` of them, the worst first) over which some
+    variable's or its square's 5-point Lobatto integral and Simpson's differ by more than
+    ``RESOLUTION`` of the run's integral of its magnitude (``totals``, :func:`resolution_totals`): a
+    step long for the curvature of a law of its states (an explicit solver's step over a constant flow
+    into a gas spring, whose pressure is p0 (V0/V)^n: exact for the states and 4 s long) or with a
+    kink inside. ``values``: name -> (steps, 5) at the nodes ``times``; ``skip`` marks steps not to
+    split (sliding).
+
+    >>> times = np.array([[0.0, 0.17, 0.5, 0.83, 1.0], [1.0, 1.17, 1.5, 1.83, 2.0]])
+    >>> values = {"v": np.array([[1.0, 1.0, 1.0, 1.0, 1.0], [0.0, 0.1, 4.0, 0.1, 0.0]])}
+    >>> under_resolved(times, values, resolution_totals(times, values), np.zeros(2, dtype=bool), 10).tolist()
+    [1]
+    """
+    half = 0.5 * (times[:, -1] - times[:, 0])
+    worst = np.zeros(times.shape[0])
+    with np.errstate(all="ignore"):
+        for name, samples in values.items():
+            samples = np.asarray(samples, dtype=float)
+            for v, total in zip((samples, samples * samples), totals[name]):
+                share = np.abs(half * (v @ _LOBATTO_WEIGHTS) - half * (v @ _SIMPSON_WEIGHTS)) / max(total, 1e-300)
+                worst = np.fmax(worst, share)
+    worst[skip] = 0.0
+    coarse = np.flatnonzero(worst > RESOLUTION)
+    if coarse.size > budget:
+        coarse = coarse[np.argsort(-worst[coarse], kind="stable")[:max(budget, 0)]]
+    return np.sort(coarse)
 
 
 def _integrals(times: np.ndarray, power: np.ndarray):

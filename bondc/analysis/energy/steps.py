@@ -11,6 +11,8 @@ import numpy as np
 
 from bondc.analysis.energy.cycles import cycle_windows, experiment_cycle
 from bondc.analysis.energy.model import _Model
+from bondc.analysis.energy.quadrature import (BUDGET_FLOOR, BUDGET_SHARE, HALVINGS, resolution_totals,
+                                              under_resolved)
 from bondc.analysis.energy.trajectory import _Trajectory
 from bondc.errors import AnalysisError
 
@@ -68,6 +70,22 @@ def _run_nodes(ss, steps, boundaries):
         model = _Model(namespace, steps.parameters)
         trajectory = _Trajectory(model, steps, boundaries)
         times, values = trajectory.samples()
+        totals = resolution_totals(times, values)
+        budget = max(BUDGET_FLOOR, int(BUDGET_SHARE * times.shape[0]))
+        # a step whose interpolant is not the corrected one (a stiff mode the solver stepped over, in
+        # equilibrium there: the law's rate at a state between its ends is far off) is not halved
+        coarse = under_resolved(times, values, totals, ~trajectory.corrected, budget)
+        for _ in range(HALVINGS):       # steps too long for their quadrature, halved (only theirs evaluated)
+            if coarse.size == 0:
+                break
+            budget -= coarse.size
+            halves = trajectory.bisect(coarse)
+            new = trajectory.samples_of(halves)
+            times = trajectory.node_times()
+            values = {name: np.insert(v, coarse + 1, 0.0, axis=0) for name, v in values.items()}
+            for name, v in values.items():
+                v[halves] = new[name]
+            coarse = halves[under_resolved(times[halves], new, totals, ~trajectory.corrected[halves], budget)]
         memo[key] = (model, trajectory, times, values)
     return memo[key]
 

@@ -245,6 +245,60 @@ class _Trajectory:
         self.sliding = np.concatenate([self.sliding[:k], [self.sliding[k]] * 2, self.sliding[k + 1:]])
         self.block = np.concatenate([self.block[:k], [self.block[k]] * 2, self.block[k + 1:]])
 
+    def bisect(self, steps: np.ndarray) -> np.ndarray:
+        """Split each of ``steps`` (sorted indices of steps that do not slide) at its middle, where its
+        state is the step's corrected interpolant (:meth:`state_at`, for all of them at once) and its
+        rate the law's in the step's modes: for a step too long for its quadrature
+        (:func:`under_resolved`). Returns the indices of the halves among the steps now."""
+        k = np.asarray(steps, dtype=int)
+        if k.size == 0:
+            return k
+        ta, tb = self.ta[k], self.tb[k]
+        h, mid = tb - ta, 0.5 * (self.ta[k] + self.tb[k])
+        xa, xb, fa, fb = self.xa[:, k], self.xb[:, k], self.fa[:, k], self.fb[:, k]
+        _, rates, corrected = _corrected_nodes(self.model, ta, tb, xa, xb, fa, fb, self.modes[k], self.scale,
+                                               with_rates=True)
+        to_middle = np.array([-((-1.0) ** (m + 1)) / (m + 1) for m in range(5)]) @ _FROM_NODES     # s: -1 to 0
+        total = 0.5 * h * (rates @ _LOBATTO_WEIGHTS)
+        x_mid = np.where(corrected, xa + 0.5 * h * (rates @ to_middle) + 0.5 * (xb - xa - total),
+                         _hermite(0.5, h, xa, xb, fa, fb))
+        f_mid = self.model.rhs(mid, x_mid, self.modes[k])
+        after = k + 1
+        self.ta = np.insert(self.ta, after, mid)
+        self.tb[k] = mid
+        self.tb = np.insert(self.tb, after, tb)
+        self.xa = np.insert(self.xa, after, x_mid, axis=1)
+        self.xb[:, k] = x_mid
+        self.xb = np.insert(self.xb, after, xb, axis=1)
+        self.fa = np.insert(self.fa, after, f_mid, axis=1)
+        self.fb[:, k] = f_mid
+        self.fb = np.insert(self.fb, after, fb, axis=1)
+        self.modes = np.insert(self.modes, after, self.modes[k], axis=0)
+        self.sliding = np.insert(self.sliding, after, self.sliding[k])
+        self.block = np.insert(self.block, after, self.block[k])
+        halves = np.sort(np.concatenate([k + np.arange(k.size), k + np.arange(k.size) + 1]))
+        # each half's modes as a step's are chosen (__init__): a kink inside the step lies in one half
+        modes = self.model.modes(0.5 * (self.ta[halves] + self.tb[halves]), 0.5 * (self.xa[:, halves] + self.xb[:, halves]))
+        at_start, at_end = self.model.modes(self.ta[halves], self.xa[:, halves]), self.model.modes(self.tb[halves],
+                                                                                               self.xb[:, halves])
+        agree = np.all(at_start == at_end, axis=1)
+        modes[agree] = at_start[agree]
+        changed = np.flatnonzero(np.any(modes != self.modes[halves], axis=1))
+        if changed.size:
+            rows = halves[changed]
+            self.modes[rows] = modes[changed]
+            self.fa[:, rows] = self.model.rhs(self.ta[rows], self.xa[:, rows], self.modes[rows])
+            self.fb[:, rows] = self.model.rhs(self.tb[rows], self.xb[:, rows], self.modes[rows])
+        if getattr(self, "_node_states", None) is not None:     # the halves' nodes, the others' kept
+            states, _, corrected = _corrected_nodes(self.model, self.ta[halves], self.tb[halves], self.xa[:, halves],
+                                                    self.xb[:, halves], self.fa[:, halves], self.fb[:, halves],
+                                                    self.modes[halves], self.scale)
+            self._node_states = np.insert(self._node_states, after, 0.0, axis=1)
+            self._node_states[:, halves] = states
+            self.corrected = np.insert(self.corrected, after, False)
+            self.corrected[halves] = corrected & ~self.sliding[halves]
+        return halves
+
     def node_times(self) -> np.ndarray:
         """The times (steps, 5) of each step's Lobatto nodes, its ends exactly."""
         tau = (_LOBATTO_NODES + 1.0) / 2.0
@@ -277,6 +331,32 @@ class _Trajectory:
             states[:, sliding, 0], states[:, sliding, -1] = self.xa[:, sliding], self.xb[:, sliding]
         return states
 
+    def _at_nodes(self, evaluate, rows: int, times: np.ndarray, states: np.ndarray, modes: np.ndarray) -> np.ndarray:
+        """``evaluate`` (outputs or variables, ``rows`` of them) at the nodes ``times`` (steps, 5) with
+        the ``states`` (n, steps, 5) there and each step's ``modes``: (rows, steps, 5)."""
+        n, steps = states.shape[0], times.shape[0]
+        values = evaluate(times.ravel(), states.reshape(n, steps * 5), np.repeat(modes, 5, axis=0))
+        values = values.reshape(rows, steps, 5)
+        outside = ~np.all(np.isfinite(values), axis=0)
+        if np.any(outside):
+            # a node whose interpolated state is a little outside its step's branch (a level that
+            # reaches 0 with zero slope, interpolated to -1e-20 under its law's sqrt): the laws'
+            # own branches at that node, as the unfrozen law evaluates them
+            at, columns = np.nonzero(outside)
+            node_t, node_x = times[at, columns], states[:, at, columns]
+            with np.errstate(all="ignore"):
+                again = evaluate(node_t, node_x, self.model.modes(node_t, node_x))
+            values[:, at, columns] = np.where(np.isfinite(again), again, values[:, at, columns])
+        return values
+
+    def samples_of(self, steps: np.ndarray) -> dict:
+        """Every variable at the Lobatto nodes of ``steps`` (indices of steps that do not slide):
+        name -> (len(steps), 5), as :meth:`samples` evaluates them."""
+        names = self.model.variable_names
+        values = self._at_nodes(self.model.variables, len(names), self.node_times()[steps],
+                                self.node_states()[:, steps], self.modes[steps])
+        return {name: values[i] for i, name in enumerate(names)}
+
     def samples(self, kind: str = "variables") -> tuple[np.ndarray, dict]:
         """Times (steps, 5) of the Lobatto nodes and every variable there (``kind`` "outputs": every
         output): name -> (steps, 5)."""
@@ -285,21 +365,7 @@ class _Trajectory:
         tau = (_LOBATTO_NODES + 1.0) / 2.0
         h = self.tb - self.ta
         times = self.node_times()
-        states = self.node_states()
-        n, steps = states.shape[0], times.shape[0]
-        flat_modes = np.repeat(self.modes, 5, axis=0)
-        values = evaluate(times.ravel(), states.reshape(n, steps * 5), flat_modes)
-        values = values.reshape(len(names), steps, 5)
-        outside = ~np.all(np.isfinite(values), axis=0)
-        if np.any(outside):
-            # a node whose interpolated state is a little outside its step's branch (a level that
-            # reaches 0 with zero slope, interpolated to -1e-20 under its law's sqrt): the laws'
-            # own branches at that node, as the unfrozen law evaluates them
-            rows, columns = np.nonzero(outside)
-            node_t, node_x = times[rows, columns], states[:, rows, columns]
-            with np.errstate(all="ignore"):
-                again = evaluate(node_t, node_x, self.model.modes(node_t, node_x))
-            values[:, rows, columns] = np.where(np.isfinite(again), again, values[:, rows, columns])
+        values = self._at_nodes(evaluate, len(names), times, self.node_states(), self.modes)
         for b in np.unique(self.block[self.block >= 0]):
             # a recorded sliding mode: its combination at the nodes, the states there from the cubic
             # Hermite interpolant of its rates
