@@ -296,7 +296,7 @@ def test_a_constant_flow_supplies_the_closed_form_polytropic_work_in_the_solvers
     "by the trapezoid rule through the steps and their three interior Lobatto nodes; over the 4.45 s "
     "last step of a constant charging flow the pressure (82 to 475 bar) was too curved for it: rms "
     "223.63 bar for the closed form's 212.26 (+5.4 %). The energy account's halving of long steps "
-    "brings it to 3.4e-5; the trapezoid rule through the nodes is the rest (the Lobatto weights of "
+    "brings it to 1.9e-4; the trapezoid rule through the nodes is the rest (the Lobatto weights of "
     "each step would be exact)"))
 def test_the_pressures_mean_and_rms_over_a_constant_charge_are_the_closed_forms():
     """Third route: the closed form, the time averages of p(t) = p_pre (V_gas/(V_gas - V0 - Q0 t))^n
