@@ -49,7 +49,10 @@ interpolant of the states and rates at both ends and are refined by
 deferred-correction sweeps at the 5 Gauss-Lobatto nodes (see
 :func:`_corrected_nodes`; steps where the sweeps would not contract, stiff
 modes stepped over, keep the Hermite states); the powers there are
-integrated with the 5-point Lobatto rule (exact for degree 7). The
+integrated with the 5-point Lobatto rule (exact for degree 7), a step halved
+where that rule and Simpson's on its ends and middle disagree
+(:func:`~bondc.analysis.energy.quadrature.under_resolved`: a long explicit
+step over a law curved in its states). The
 quadrature's own error is then far below the solver's: the residual follows
 the solver tolerance down to about 1e-12 of the throughput (see
 ``tests/test_energy.py``). A window edge inside a step splits the step at the
