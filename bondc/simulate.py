@@ -116,6 +116,24 @@ class ReadOnlyDict(dict[_K, _V]):
         return type(self), (dict(self),)
 
 
+class ReadOnlyList(list[_V]):
+    """A list that cannot be changed once made: the event, jump and sliding lists a frozen
+    :class:`SimResult` holds. Every reader takes it for the list it is (``==``, ``+``, json, pickle);
+    a write (``append``, ``l[i] = v``, ``sort``, ...) raises TypeError."""
+
+    __slots__ = ()
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> NoReturn:
+        raise TypeError(f"{type(self).__name__} cannot be changed: make a changed copy (list(it))")
+
+    __setitem__ = __delitem__ = append = extend = insert = remove = pop = clear = sort = reverse = _refuse
+    __iadd__ = __imul__ = _refuse
+
+    def __reduce__(self) -> tuple[type[ReadOnlyList[_V]], tuple[list[_V]]]:
+        # (pickle and copy would otherwise fill the new one item by item, through append)
+        return type(self), (list(self),)
+
+
 @dataclass(frozen=True)
 class SimResult:
     """The trajectories of one simulation run, arrays by name, SI units.
@@ -140,7 +158,7 @@ class SimResult:
     variables: ReadOnlyDict[str, np.ndarray]
     complete: bool
     message: str
-    events: list[tuple[float, str]]
+    events: Sequence[tuple[float, str]]
     stats: ReadOnlyDict[str, Any]
     parameters: ReadOnlyDict[str, float]
     failure: ReadOnlyDict[str, Any] | None = None
@@ -150,10 +168,10 @@ class SimResult:
     warnings: tuple[Diagnostic, ...] = ()
     settings: ReadOnlyDict[str, Any] = field(default_factory=ReadOnlyDict)
     # (t, states before, states after) of when clauses
-    jumps: list[tuple[float, Any, Any]] = field(default_factory=list)
+    jumps: Sequence[tuple[float, Any, Any]] = field(default_factory=ReadOnlyList)
     # (t0, t1, corners, times, weights) of each Filippov sliding mode (see bondc.runtime.Result): the
     # energy account evaluates the combination between the points from them
-    sliding: list[tuple[Any, ...]] = field(default_factory=list)
+    sliding: Sequence[tuple[Any, ...]] = field(default_factory=ReadOnlyList)
     # the unit of a column as result files show it: name -> (unit text, scale); shown = SI value / scale.
     # Outputs in their declared unit, states and bond variables in SI (as dimensions), t in s.
     units: ReadOnlyDict[str, tuple[str, float]] = field(default_factory=ReadOnlyDict)
@@ -166,6 +184,10 @@ class SimResult:
             value = getattr(self, name)
             if value is not None and not isinstance(value, ReadOnlyDict):
                 object.__setattr__(self, name, ReadOnlyDict(value))
+        for name in _LISTS:
+            value = getattr(self, name)
+            if not isinstance(value, ReadOnlyList):
+                object.__setattr__(self, name, ReadOnlyList(value))
 
     @property
     def t_reached(self) -> float:
@@ -212,6 +234,7 @@ class SimResult:
 
 _FIELDS = frozenset(f.name for f in fields(SimResult))
 #: The fields that are mappings (read-only once made).
+_LISTS = ("events", "jumps", "sliding")
 _MAPPINGS = ("states", "outputs", "bonds", "variables", "stats", "parameters", "failure", "settings", "units",
              "dependent")
 _frozen_setattr = SimResult.__setattr__

@@ -730,3 +730,13 @@ def test_a_result_cannot_be_changed_after_it_is_made():
     with pytest.raises(TypeError):
         back.outputs["new"] = 1
     assert json.loads(json.dumps(result.summary()))["settings"] == dict(result.settings)
+    # its lists (events, when clauses' jumps, sliding modes) too, still equal to the lists they hold
+    events = list(result.events)
+    for listed in (result.events, result.jumps, result.sliding, back.events):
+        with pytest.raises(TypeError):
+            listed.append((0.0, "new"))
+        with pytest.raises(TypeError):
+            listed += [(0.0, "new")]
+        with pytest.raises(TypeError):
+            listed.sort()
+    assert result.events == events and back.events == events and isinstance(result.events, list)
