@@ -21,6 +21,16 @@ def _hermite(tau, h, xa, xb, fa, fb):
             + (-2 * tau3 + 3 * tau2) * xb + (tau3 - tau2) * h * fb)
 
 
+def _corrected_at(tau, h, xa, xb, rates):
+    """The corrected interpolant of steps (:func:`_corrected_nodes`) at the fraction ``tau`` of each
+    (length ``h``, ends ``xa``, ``xb``, rates at the Lobatto nodes ``rates`` (..., 5)): the integral
+    of the rates' degree-4 interpolant from the start, plus the share ``tau`` of the step's defect."""
+    s = 2.0 * tau - 1.0
+    weights = np.array([(s ** (m + 1) - (-1.0) ** (m + 1)) / (m + 1) for m in range(5)]) @ _FROM_NODES
+    total = 0.5 * h * (rates @ _LOBATTO_WEIGHTS)
+    return xa + 0.5 * h * (rates @ weights) + tau * (xb - xa - total)
+
+
 def _inside(values, increasing, start, end, closed=False):
     """Indices of ``values`` in (start, end) (``closed``: [start, end]), by bisection where the
     values increase (a run with thousands of sliding spans: not a pass over all of them per span)."""
@@ -215,10 +225,7 @@ class _Trajectory:
                                                self.scale, with_rates=True)
         if not corrected[0]:
             return _hermite(tau, h, xa, xb, self.fa[:, k], self.fb[:, k])
-        s = 2.0 * tau - 1.0
-        weights = np.array([(s ** (m + 1) - (-1.0) ** (m + 1)) / (m + 1) for m in range(5)]) @ _FROM_NODES
-        total = 0.5 * h * (rates[:, 0, :] @ _LOBATTO_WEIGHTS)
-        return xa + 0.5 * h * (rates[:, 0, :] @ weights) + tau * (xb - xa - total)
+        return _corrected_at(tau, h, xa, xb, rates[:, 0, :])
 
     def _split(self, time: float) -> None:
         span = max(abs(self.tb[-1]), abs(self.ta[0]), 1.0) if self.ta.size else 1.0
@@ -258,10 +265,7 @@ class _Trajectory:
         xa, xb, fa, fb = self.xa[:, k], self.xb[:, k], self.fa[:, k], self.fb[:, k]
         _, rates, corrected = _corrected_nodes(self.model, ta, tb, xa, xb, fa, fb, self.modes[k], self.scale,
                                                with_rates=True)
-        to_middle = np.array([-((-1.0) ** (m + 1)) / (m + 1) for m in range(5)]) @ _FROM_NODES     # s: -1 to 0
-        total = 0.5 * h * (rates @ _LOBATTO_WEIGHTS)
-        x_mid = np.where(corrected, xa + 0.5 * h * (rates @ to_middle) + 0.5 * (xb - xa - total),
-                         _hermite(0.5, h, xa, xb, fa, fb))
+        x_mid = np.where(corrected, _corrected_at(0.5, h, xa, xb, rates), _hermite(0.5, h, xa, xb, fa, fb))
         f_mid = self.model.rhs(mid, x_mid, self.modes[k])
         after = k + 1
         self.ta = np.insert(self.ta, after, mid)
