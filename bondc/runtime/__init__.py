@@ -83,7 +83,7 @@ from bondc.runtime.adapter import (  # noqa: F401
     param_array, pattern_arrays
 )
 from bondc.runtime.policy import (  # noqa: F401
-    SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, _located, _values_callback, corner_weights,
+    SlidingLaw, TooManyHeld, _LAW_SIGNATURE, _doubles, _is_affine, _locate, _values_callback, corner_weights,
     filippov_alpha, first_crossing, first_dip, first_end, when_rounds, zeno, zeno_firings
 )
 from bondc.runtime.results import (  # noqa: F401

@@ -414,15 +414,8 @@ class _EventLocation:
                 self.note_event(t, model.WHEN_LABELS[k])
                 self.stats["when_fired"] = self.stats.get("when_fired", 0) + 1
                 self.check_zeno(k, t)
-            if new is None:
-                state = np.array(y, dtype=float)
-                for k in firing:        # the clauses' values as they came, for the diagnosis
-                    with np.errstate(all="ignore"):
-                        values = model.WHEN_ACTIONS[k](t, y, self.p, modes)
-                    for index, value in zip(model.WHEN_TARGETS[k], np.atleast_1d(values)):
-                        state[index] = float(value)
-                raise _Stop(self.diagnosis.nonfinite(t, state, modes,
-                                                     f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
+            if not np.all(np.isfinite(new)):
+                raise _Stop(self.diagnosis.nonfinite(t, new, modes, f"after {model.WHEN_LABELS[firing[0]]} at t={t:.6g}, "))
             self.jumps.append((float(t), np.array(y, dtype=float), new.copy()))
             y = new
             modes, chattering = self.restart_modes(t, y, modes)

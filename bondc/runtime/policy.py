@@ -158,8 +158,8 @@ class SlidingLaw:
 
     def when_round(self, t, y, before, modes):
         """``bondc_when_round``, one round of the when clauses at (t, y): (the clauses that fired, the
-        state after them (None where it is not finite), the conditions now, with ``modes``: the next
-        round's ``before``)."""
+        state after them (maybe not finite: the caller's diagnosis), the conditions now, with
+        ``modes``: the next round's ``before``)."""
         whens = self._when_table()
         ffi = self.ffi
         y = np.ascontiguousarray(y, dtype=float)
@@ -173,7 +173,7 @@ class SlidingLaw:
                                          _doubles(ffi, new), ffi.from_buffer("int[]", fired), _doubles(ffi, values))
         self._raise_failure()
         firing = [int(k) for k in np.flatnonzero(fired[:whens.count])] if code != 0 else []
-        return firing, (None if code < 0 else new[:self.n].copy()), after[:whens.count].copy()
+        return firing, new[:self.n].copy(), after[:whens.count].copy()
 
     def _raise_failure(self):
         failure, self.failure = self.failure, None
@@ -349,7 +349,15 @@ def _values_callback(ffi, values_at, count):
     return ffi.callback("int(void *, double, double *)", values), failures
 
 
-def _located(code, t_end, failures):
+def _locate(name, values_at, a, b, left, right, *rest):
+    """locate.c's ``name`` (``bondc_first_end``, ``bondc_first_dip``) over (a, b] for the values
+    ``values_at(t)``, ``left`` and ``right`` at the ends: the time found, or None."""
+    ffi, lib = load_policy()
+    left, right = (np.ascontiguousarray(v, dtype=float) for v in (left, right))
+    callback, failures = _values_callback(ffi, values_at, left.size)
+    t_end = ffi.new("double *")
+    code = getattr(lib, name)(callback, ffi.NULL, left.size, a, b, _doubles(ffi, left), _doubles(ffi, right),
+                              *rest, t_end)
     if failures:
         raise failures[0]
     if code < 0:
@@ -366,13 +374,8 @@ def first_end(values_at, t_old, t_new, old, new, longest):
     >>> first_end(lambda t: [1.0 - t], 0.0, 2.0, [1.0], [-1.0], 0.0)
     1.0
     """
-    ffi, lib = load_policy()
-    old, new = (np.ascontiguousarray(v, dtype=float) for v in (old, new))
-    callback, failures = _values_callback(ffi, values_at, old.size)
-    t_end = ffi.new("double *")
-    code = lib.bondc_first_end(callback, ffi.NULL, old.size, float(t_old), float(t_new), _doubles(ffi, old),
-                               _doubles(ffi, new), float(longest) if np.isfinite(longest) else 0.0, t_end)
-    return _located(code, t_end, failures)
+    return _locate("bondc_first_end", values_at, float(t_old), float(t_new), old, new,
+                   float(longest) if np.isfinite(longest) else 0.0)
 
 
 def first_dip(values_at, a, b, left, right):
@@ -382,13 +385,7 @@ def first_dip(values_at, a, b, left, right):
     >>> round(first_dip(lambda t: [abs(t - 0.3) - 0.01], 0.0, 1.0, [0.29], [0.69]), 6)
     0.29
     """
-    ffi, lib = load_policy()
-    left, right = (np.ascontiguousarray(v, dtype=float) for v in (left, right))
-    callback, failures = _values_callback(ffi, values_at, left.size)
-    t_end = ffi.new("double *")
-    code = lib.bondc_first_dip(callback, ffi.NULL, left.size, float(a), float(b), _doubles(ffi, left),
-                               _doubles(ffi, right), t_end)
-    return _located(code, t_end, failures)
+    return _locate("bondc_first_dip", values_at, float(a), float(b), left, right)
 
 
 def first_crossing(values_at, switches, index, floors, signs, band, old, new, t_old, t_new):
